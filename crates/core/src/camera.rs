@@ -1,0 +1,354 @@
+//! VTK-compatible cameras (DESIGN.md §3).
+//!
+//! A [`Camera`] holds exactly the numbers a `vtkCamera` holds, so the same JSON file reproduces a
+//! view in volsplat, VTK and ParaView. [`ViewFrame`] is the derived orthonormal camera frame and
+//! [`OrthoProjection`] maps world points to raster (pixel) coordinates for a given image size.
+
+use crate::error::{CoreError, Result};
+use glam::{DMat3, DVec3};
+use serde::{Deserialize, Serialize};
+
+fn default_view_angle() -> f64 {
+    30.0
+}
+fn default_parallel_scale() -> f64 {
+    1.0
+}
+
+/// A camera with VTK's semantics. All positions in world units.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// Eye position, world units.
+    pub position: [f64; 3],
+    /// The point looked at, world units; the image centre.
+    pub focal_point: [f64; 3],
+    /// Approximate up direction of the image (need not be orthogonal to the view direction).
+    pub view_up: [f64; 3],
+    /// Vertical field of view in degrees, in (0, 180); used by perspective projection. VTK's
+    /// default is 30.
+    #[serde(default = "default_view_angle")]
+    pub view_angle: f64,
+    /// `true` for an orthographic (parallel) projection.
+    #[serde(default)]
+    pub parallel_projection: bool,
+    /// Orthographic only: half the image height in world units. VTK's default is 1.
+    #[serde(default = "default_parallel_scale")]
+    pub parallel_scale: f64,
+}
+
+impl Default for Camera {
+    /// VTK's default camera: at (0,0,1) looking at the origin with +y up, perspective 30°.
+    fn default() -> Self {
+        Camera {
+            position: [0.0, 0.0, 1.0],
+            focal_point: [0.0; 3],
+            view_up: [0.0, 1.0, 0.0],
+            view_angle: 30.0,
+            parallel_projection: false,
+            parallel_scale: 1.0,
+        }
+    }
+}
+
+/// The orthonormal frame of a camera, in world coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewFrame {
+    /// Eye position (world units).
+    pub eye: DVec3,
+    /// Focal point (world units).
+    pub focal: DVec3,
+    /// Unit vector to the right in the image.
+    pub right: DVec3,
+    /// Unit vector up in the image (view-up orthogonalised).
+    pub up: DVec3,
+    /// Unit direction of projection: from the eye towards the focal point (into the screen).
+    pub forward: DVec3,
+}
+
+impl ViewFrame {
+    /// `camera_from_world` rotation: rows are right, up and −forward (VTK camera coordinates,
+    /// looking down −z).
+    pub fn camera_from_world_rotation(&self) -> DMat3 {
+        DMat3::from_cols(self.right, self.up, -self.forward).transpose()
+    }
+}
+
+impl Camera {
+    /// Checks every field: finite numbers, eye ≠ focal point, view-up not parallel to the view
+    /// direction, `view_angle` in (0, 180), `parallel_scale` > 0.
+    pub fn validate(&self) -> Result<()> {
+        let fields: [(&str, &[f64; 3]); 3] = [
+            ("position", &self.position),
+            ("focal_point", &self.focal_point),
+            ("view_up", &self.view_up),
+        ];
+        for (name, v) in fields {
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(CoreError::invalid(name, v, "must be three finite numbers"));
+            }
+        }
+        let dop = DVec3::from(self.focal_point) - DVec3::from(self.position);
+        if dop.length() < 1e-12 {
+            return Err(CoreError::invalid(
+                "position",
+                self.position,
+                "must differ from focal_point",
+            ));
+        }
+        let up = DVec3::from(self.view_up);
+        if up.length() < 1e-12 || dop.normalize().cross(up.normalize()).length() < 1e-9 {
+            return Err(CoreError::invalid(
+                "view_up",
+                self.view_up,
+                "must be non-zero and not parallel to the view direction",
+            ));
+        }
+        if !(self.view_angle > 0.0 && self.view_angle < 180.0) {
+            return Err(CoreError::invalid(
+                "view_angle",
+                self.view_angle,
+                "must be in (0, 180) degrees",
+            ));
+        }
+        if !(self.parallel_scale.is_finite() && self.parallel_scale > 0.0) {
+            return Err(CoreError::invalid(
+                "parallel_scale",
+                self.parallel_scale,
+                "must be a positive finite number (world units)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The camera's orthonormal frame. Call [`Camera::validate`] first; degenerate cameras give
+    /// NaNs.
+    pub fn frame(&self) -> ViewFrame {
+        let eye = DVec3::from(self.position);
+        let focal = DVec3::from(self.focal_point);
+        let forward = (focal - eye).normalize();
+        let right = forward.cross(DVec3::from(self.view_up)).normalize();
+        let up = right.cross(forward);
+        ViewFrame {
+            eye,
+            focal,
+            right,
+            up,
+            forward,
+        }
+    }
+
+    /// VTK's `vtkRenderer::ResetCamera` for the given world bounds, starting from the default
+    /// direction (looking down −z, +y up): the focal point at the bounds' centre, the eye at
+    /// `radius / sin(view_angle/2)` along +z, `parallel_scale = radius`, where `radius` is half the
+    /// bounds' diagonal.
+    pub fn reset_to_bounds(lo: DVec3, hi: DVec3, parallel_projection: bool) -> Camera {
+        let center = (lo + hi) * 0.5;
+        let mut radius = (hi - lo).length();
+        if radius == 0.0 {
+            radius = 1.0;
+        }
+        radius *= 0.5;
+        let view_angle = 30.0f64;
+        let distance = radius / (view_angle.to_radians() * 0.5).sin();
+        Camera {
+            position: (center + DVec3::Z * distance).to_array(),
+            focal_point: center.to_array(),
+            view_up: [0.0, 1.0, 0.0],
+            view_angle,
+            parallel_projection,
+            parallel_scale: radius,
+        }
+    }
+
+    /// VTK's `Azimuth`: rotates the eye about the view-up vector centred at the focal point
+    /// (degrees, counter-clockwise seen from the tip of view-up).
+    pub fn azimuth(&mut self, degrees: f64) {
+        let axis = DVec3::from(self.view_up).normalize();
+        self.rotate_eye(axis, degrees);
+    }
+
+    /// VTK's `Elevation`: rotates the eye about the axis `−right` centred at the focal point
+    /// (degrees; positive moves the eye up). View-up is kept, as in VTK; call
+    /// [`Camera::orthogonalize_view_up`] afterwards, as VTK users do.
+    pub fn elevation(&mut self, degrees: f64) {
+        let axis = -self.frame().right;
+        self.rotate_eye(axis, degrees);
+    }
+
+    /// VTK's `Roll`: rotates view-up about the direction of projection (degrees).
+    pub fn roll(&mut self, degrees: f64) {
+        let f = self.frame();
+        let rot = DMat3::from_axis_angle(f.forward, -degrees.to_radians());
+        self.view_up = (rot * DVec3::from(self.view_up)).to_array();
+    }
+
+    /// VTK's `OrthogonalizeViewUp`: replaces view-up by the frame's orthogonal up vector.
+    pub fn orthogonalize_view_up(&mut self) {
+        self.view_up = self.frame().up.to_array();
+    }
+
+    /// VTK's `Zoom`: divides `parallel_scale` (orthographic) or `view_angle` (perspective) by
+    /// `factor` (> 0).
+    pub fn zoom(&mut self, factor: f64) {
+        if self.parallel_projection {
+            self.parallel_scale /= factor;
+        } else {
+            self.view_angle /= factor;
+        }
+    }
+
+    fn rotate_eye(&mut self, axis: DVec3, degrees: f64) {
+        let fp = DVec3::from(self.focal_point);
+        let rot = DMat3::from_axis_angle(axis, degrees.to_radians());
+        self.position = (fp + rot * (DVec3::from(self.position) - fp)).to_array();
+    }
+}
+
+/// Orthographic projection of a camera onto a `width × height` raster.
+///
+/// Raster coordinates: x to the right, y down, row 0 at the top, pixel `(x, y)` centred at
+/// `(x + 0.5, y + 0.5)`. Square pixels of [`OrthoProjection::pixel_size`] world units.
+/// Depth is the distance along the direction of projection from the eye, in world units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OrthoProjection {
+    /// The camera frame.
+    pub frame: ViewFrame,
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// World units per pixel (`2·parallel_scale / height`).
+    pub pixel_size: f64,
+}
+
+impl OrthoProjection {
+    /// Builds the projection; errors if the camera is invalid, not orthographic, or the image
+    /// is empty.
+    pub fn new(camera: &Camera, width: usize, height: usize) -> Result<Self> {
+        camera.validate()?;
+        if !camera.parallel_projection {
+            return Err(CoreError::invalid(
+                "parallel_projection",
+                false,
+                "this renderer supports orthographic cameras only (set parallel_projection: true)",
+            ));
+        }
+        if width == 0 || height == 0 {
+            return Err(CoreError::invalid(
+                "image size",
+                (width, height),
+                "must be non-zero",
+            ));
+        }
+        Ok(OrthoProjection {
+            frame: camera.frame(),
+            width,
+            height,
+            pixel_size: 2.0 * camera.parallel_scale / height as f64,
+        })
+    }
+
+    /// The 3×3 linear map from world displacements to (raster x, raster y, depth) displacements.
+    pub fn raster_from_world_linear(&self) -> DMat3 {
+        let inv = 1.0 / self.pixel_size;
+        DMat3::from_cols(
+            self.frame.right * inv,
+            -self.frame.up * inv,
+            self.frame.forward,
+        )
+        .transpose()
+    }
+
+    /// Raster position `(x, y)` in pixels and depth in world units of a world point.
+    pub fn raster_from_world(&self, p_world: DVec3) -> DVec3 {
+        let d = p_world - self.frame.focal;
+        let inv = 1.0 / self.pixel_size;
+        DVec3::new(
+            self.width as f64 * 0.5 + d.dot(self.frame.right) * inv,
+            self.height as f64 * 0.5 - d.dot(self.frame.up) * inv,
+            (p_world - self.frame.eye).dot(self.frame.forward),
+        )
+    }
+
+    /// World point on the image plane through the focal point at raster position `(x, y)`
+    /// (pixels; pixel centres at half-integers).
+    pub fn world_from_raster(&self, x: f64, y: f64) -> DVec3 {
+        self.frame.focal
+            + self.frame.right * ((x - self.width as f64 * 0.5) * self.pixel_size)
+            + self.frame.up * ((self.height as f64 * 0.5 - y) * self.pixel_size)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn approx(a: DVec3, b: DVec3) -> bool {
+        (a - b).length() < 1e-9
+    }
+
+    #[test]
+    fn reset_camera_matches_vtk() {
+        let c = Camera::reset_to_bounds(DVec3::ZERO, DVec3::new(2.0, 2.0, 1.0), true);
+        // radius = |(2,2,1)|/2 = 1.5, distance = 1.5 / sin 15°.
+        assert!((c.parallel_scale - 1.5).abs() < 1e-12);
+        let d = 1.5 / 15f64.to_radians().sin();
+        assert!(approx(
+            DVec3::from(c.position),
+            DVec3::new(1.0, 1.0, 0.5 + d)
+        ));
+    }
+
+    #[test]
+    fn azimuth_and_elevation_rotate_like_vtk() {
+        let mut c = Camera::reset_to_bounds(DVec3::splat(-1.0), DVec3::splat(1.0), true);
+        let r = DVec3::from(c.position).length();
+        c.azimuth(90.0);
+        // Rotating (0,0,r) by +90° about +y gives (r,0,0).
+        assert!(approx(DVec3::from(c.position), DVec3::new(r, 0.0, 0.0)));
+        c.elevation(90.0);
+        c.orthogonalize_view_up();
+        assert!(approx(DVec3::from(c.position), DVec3::new(0.0, r, 0.0)));
+        let f = c.frame();
+        assert!(approx(f.forward, -DVec3::Y));
+    }
+
+    #[test]
+    fn projection_centres_focal_point_and_flips_y() {
+        let mut c = Camera::reset_to_bounds(DVec3::splat(-1.0), DVec3::splat(1.0), true);
+        c.parallel_scale = 2.0;
+        let p = OrthoProjection::new(&c, 200, 100).unwrap();
+        let centre = p.raster_from_world(DVec3::ZERO);
+        assert!((centre.x - 100.0).abs() < 1e-9 && (centre.y - 50.0).abs() < 1e-9);
+        // +y world is up in the image, i.e. smaller raster y. Pixel size = 4/100.
+        let up = p.raster_from_world(DVec3::new(0.0, 1.0, 0.0));
+        assert!((up.y - 25.0).abs() < 1e-9);
+        let w = p.world_from_raster(130.5, 20.5);
+        let back = p.raster_from_world(w);
+        assert!((back.x - 130.5).abs() < 1e-9 && (back.y - 20.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn invalid_cameras_name_the_field() {
+        let mut c = Camera {
+            parallel_projection: true,
+            ..Camera::default()
+        };
+        c.view_up = [0.0, 0.0, 1.0];
+        assert!(c.validate().unwrap_err().to_string().contains("view_up"));
+        let mut c = Camera {
+            parallel_projection: true,
+            ..Camera::default()
+        };
+        c.parallel_scale = -1.0;
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("parallel_scale")
+        );
+        let c = Camera::default();
+        let e = OrthoProjection::new(&c, 10, 10).unwrap_err();
+        assert!(e.to_string().contains("parallel_projection"));
+    }
+}

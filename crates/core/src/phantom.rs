@@ -1,0 +1,1 @@
+//! Analytic phantoms (placeholder; being written).

@@ -1,0 +1,381 @@
+//! Transfer functions in VTK's terms (`vtkVolumeProperty`), with built-in presets.
+//!
+//! A [`TransferFunction`] is what users write in a transfer-function JSON file (DESIGN.md §3):
+//! piecewise-linear colour and scalar-opacity points over the data's own units, optional
+//! gradient-opacity points over gradient magnitude (data units per world unit), shading
+//! coefficients, and `scalar_opacity_unit_distance`. It compiles into Westover's four CRIO tables
+//! with [`crate::crio::CrioTables::from_transfer_function`].
+
+use crate::error::{CoreError, Result};
+use serde::{Deserialize, Serialize};
+
+fn one() -> f64 {
+    1.0
+}
+fn default_diffuse() -> f64 {
+    0.7
+}
+fn default_specular() -> f64 {
+    0.2
+}
+fn default_specular_power() -> f64 {
+    10.0
+}
+
+/// A VTK-style volume property. Values (`x` of every point) are in the data's own units, e.g.
+/// Hounsfield units for CT.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransferFunction {
+    /// Colour points `[value, r, g, b]`, colour components in [0, 1]. At least one point.
+    pub color: Vec<[f64; 4]>,
+    /// Scalar-opacity points `[value, alpha]`, alpha in [0, 1] for a path of
+    /// `scalar_opacity_unit_distance`. At least one point.
+    pub scalar_opacity: Vec<[f64; 2]>,
+    /// Optional gradient-opacity points `[gradient magnitude, factor]`, magnitude in data units
+    /// per world unit, factor in [0, 1]; multiplies the (step-corrected) scalar opacity.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gradient_opacity: Option<Vec<[f64; 2]>>,
+    /// Path length in world units for which `scalar_opacity` is defined (> 0); opacity is
+    /// corrected for the actual step Δs as `α' = 1 − (1 − α)^(Δs/unit)`. VTK's default is 1.
+    #[serde(default = "one")]
+    pub scalar_opacity_unit_distance: f64,
+    /// Whether gradient (Phong/Blinn) shading is applied.
+    #[serde(default)]
+    pub shade: bool,
+    /// Ambient coefficient in [0, 1] (VTK default 0).
+    #[serde(default)]
+    pub ambient: f64,
+    /// Diffuse coefficient in [0, 1] (VTK default 0.7).
+    #[serde(default = "default_diffuse")]
+    pub diffuse: f64,
+    /// Specular coefficient in [0, 1] (VTK default 0.2).
+    #[serde(default = "default_specular")]
+    pub specular: f64,
+    /// Specular exponent ≥ 0 (VTK default 10).
+    #[serde(default = "default_specular_power")]
+    pub specular_power: f64,
+}
+
+/// The field names a transfer-function file may contain (others are ignored with a warning).
+pub const TRANSFER_FUNCTION_FIELDS: &[&str] = &[
+    "color",
+    "scalar_opacity",
+    "gradient_opacity",
+    "scalar_opacity_unit_distance",
+    "shade",
+    "ambient",
+    "diffuse",
+    "specular",
+    "specular_power",
+];
+
+/// Evaluates a piecewise-linear function given by points `(x, y…)` sorted by x; values outside
+/// the points' range are clamped to the end points (VTK's default clamping).
+pub fn piecewise_linear<const N: usize>(points: &[(f64, [f64; N])], x: f64) -> [f64; N] {
+    let Some(first) = points.first() else {
+        return [0.0; N];
+    };
+    if x <= first.0 {
+        return first.1;
+    }
+    let last = points[points.len() - 1];
+    if x >= last.0 {
+        return last.1;
+    }
+    // First point with p.x > x; it exists and is not the first.
+    let hi = points.partition_point(|p| p.0 <= x);
+    let (x0, y0) = points[hi - 1];
+    let (x1, y1) = points[hi];
+    let t = if x1 > x0 { (x - x0) / (x1 - x0) } else { 1.0 };
+    let mut out = [0.0; N];
+    for c in 0..N {
+        out[c] = y0[c] + t * (y1[c] - y0[c]);
+    }
+    out
+}
+
+impl TransferFunction {
+    /// Checks every field and sorts the points by value (as VTK does). Errors name the field and
+    /// the point index.
+    pub fn validate(&mut self) -> Result<()> {
+        if self.color.is_empty() {
+            return Err(CoreError::invalid(
+                "color",
+                "[]",
+                "needs at least one point",
+            ));
+        }
+        if self.scalar_opacity.is_empty() {
+            return Err(CoreError::invalid(
+                "scalar_opacity",
+                "[]",
+                "needs at least one point",
+            ));
+        }
+        for (n, p) in self.color.iter().enumerate() {
+            check_point(&format!("color[{n}]"), p)?;
+        }
+        for (n, p) in self.scalar_opacity.iter().enumerate() {
+            check_point(&format!("scalar_opacity[{n}]"), p)?;
+        }
+        if let Some(g) = &self.gradient_opacity {
+            if g.is_empty() {
+                return Err(CoreError::invalid(
+                    "gradient_opacity",
+                    "[]",
+                    "needs at least one point (or leave the field out)",
+                ));
+            }
+            for (n, p) in g.iter().enumerate() {
+                check_point(&format!("gradient_opacity[{n}]"), p)?;
+            }
+        }
+        let positive = [(
+            "scalar_opacity_unit_distance",
+            self.scalar_opacity_unit_distance,
+        )];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(CoreError::invalid(
+                    name,
+                    v,
+                    "must be a positive finite number (world units)",
+                ));
+            }
+        }
+        for (name, v) in [
+            ("ambient", self.ambient),
+            ("diffuse", self.diffuse),
+            ("specular", self.specular),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(CoreError::invalid(name, v, "must be in [0, 1]"));
+            }
+        }
+        if !(self.specular_power.is_finite() && self.specular_power >= 0.0) {
+            return Err(CoreError::invalid(
+                "specular_power",
+                self.specular_power,
+                "must be ≥ 0",
+            ));
+        }
+        self.color.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        self.scalar_opacity.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        if let Some(g) = &mut self.gradient_opacity {
+            g.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        }
+        Ok(())
+    }
+
+    /// Colour (r, g, b in [0, 1]) at a data value.
+    pub fn color_at(&self, value: f64) -> [f64; 3] {
+        let pts: Vec<(f64, [f64; 3])> = self
+            .color
+            .iter()
+            .map(|p| (p[0], [p[1], p[2], p[3]]))
+            .collect();
+        piecewise_linear(&pts, value)
+    }
+
+    /// Scalar opacity (per unit distance) at a data value.
+    pub fn opacity_at(&self, value: f64) -> f64 {
+        let pts: Vec<(f64, [f64; 1])> =
+            self.scalar_opacity.iter().map(|p| (p[0], [p[1]])).collect();
+        piecewise_linear(&pts, value)[0]
+    }
+
+    /// Gradient-opacity factor at a gradient magnitude (1 when there is no gradient opacity).
+    pub fn gradient_opacity_at(&self, magnitude: f64) -> f64 {
+        match &self.gradient_opacity {
+            None => 1.0,
+            Some(g) => {
+                let pts: Vec<(f64, [f64; 1])> = g.iter().map(|p| (p[0], [p[1]])).collect();
+                piecewise_linear(&pts, magnitude)[0]
+            }
+        }
+    }
+
+    /// A grey ramp over `[lo, hi]`: colour black → white, opacity 0 → `max_opacity`, unshaded.
+    /// Used when the user gives no transfer function.
+    pub fn ramp(lo: f64, hi: f64, max_opacity: f64) -> Self {
+        let hi = if hi > lo { hi } else { lo + 1.0 };
+        TransferFunction {
+            color: vec![[lo, 0.0, 0.0, 0.0], [hi, 1.0, 1.0, 1.0]],
+            scalar_opacity: vec![[lo, 0.0], [hi, max_opacity]],
+            gradient_opacity: None,
+            scalar_opacity_unit_distance: 1.0,
+            shade: false,
+            ambient: 0.0,
+            diffuse: 0.7,
+            specular: 0.2,
+            specular_power: 10.0,
+        }
+    }
+
+    /// Names of the built-in presets.
+    pub const PRESETS: &'static [&'static str] = &["ct-bone", "ct-skin", "mr", "ramp"];
+
+    /// A built-in preset. `ct-bone`, `ct-skin` are in Hounsfield units; `mr` is for 8-bit MR
+    /// intensities (0–255); `ramp` spans `data_range`.
+    ///
+    /// `ct-bone` and `mr` follow 3D Slicer's `CT-Bone` and `MR-Default` presets; `ct-skin` is ours
+    /// (translucent skin over opaque bone).
+    pub fn preset(name: &str, data_range: (f64, f64)) -> Result<Self> {
+        let base = TransferFunction::ramp(data_range.0, data_range.1, 0.5);
+        let tf = match name {
+            "ct-bone" => TransferFunction {
+                color: vec![
+                    [-3024.0, 0.0, 0.0, 0.0],
+                    [-16.4458, 0.729412, 0.254902, 0.301961],
+                    [641.385, 0.905882, 0.815686, 0.552941],
+                    [3071.0, 1.0, 1.0, 1.0],
+                ],
+                scalar_opacity: vec![
+                    [-3024.0, 0.0],
+                    [-16.4458, 0.0],
+                    [641.385, 0.715686],
+                    [3071.0, 0.705882],
+                ],
+                shade: true,
+                ambient: 0.1,
+                diffuse: 0.9,
+                specular: 0.2,
+                specular_power: 10.0,
+                ..base
+            },
+            "ct-skin" => TransferFunction {
+                color: vec![
+                    [-1024.0, 0.0, 0.0, 0.0],
+                    [-500.0, 0.55, 0.25, 0.15],
+                    [-100.0, 0.93, 0.77, 0.63],
+                    [200.0, 0.95, 0.80, 0.68],
+                    [400.0, 1.0, 0.98, 0.92],
+                    [3071.0, 1.0, 1.0, 1.0],
+                ],
+                scalar_opacity: vec![
+                    [-1024.0, 0.0],
+                    [-500.0, 0.0],
+                    [-200.0, 0.04],
+                    [200.0, 0.04],
+                    [400.0, 0.8],
+                    [3071.0, 0.9],
+                ],
+                shade: true,
+                ambient: 0.15,
+                diffuse: 0.85,
+                specular: 0.25,
+                specular_power: 15.0,
+                ..base
+            },
+            "mr" => TransferFunction {
+                color: vec![
+                    [0.0, 0.0, 0.0, 0.0],
+                    [20.0, 0.168627, 0.0, 0.0],
+                    [40.0, 0.403922, 0.145098, 0.0784314],
+                    [120.0, 0.780392, 0.607843, 0.380392],
+                    [220.0, 0.847059, 0.835294, 0.788235],
+                    [1024.0, 1.0, 1.0, 1.0],
+                ],
+                scalar_opacity: vec![
+                    [0.0, 0.0],
+                    [20.0, 0.0],
+                    [40.0, 0.15],
+                    [120.0, 0.3],
+                    [220.0, 0.375],
+                    [1024.0, 0.5],
+                ],
+                shade: true,
+                ambient: 0.2,
+                diffuse: 1.0,
+                specular: 0.0,
+                specular_power: 1.0,
+                ..base
+            },
+            "ramp" => base,
+            _ => {
+                return Err(CoreError::UnknownName {
+                    kind: "preset".into(),
+                    name: name.into(),
+                    known: Self::PRESETS.join(", "),
+                });
+            }
+        };
+        Ok(tf)
+    }
+}
+
+fn check_point<const N: usize>(field: &str, p: &[f64; N]) -> Result<()> {
+    if p.iter().any(|v| !v.is_finite()) {
+        return Err(CoreError::invalid(field, p, "all entries must be finite"));
+    }
+    if p[1..].iter().any(|v| !(0.0..=1.0).contains(v)) {
+        return Err(CoreError::invalid(
+            field,
+            p,
+            "colour and opacity entries must be in [0, 1]",
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn piecewise_interpolates_and_clamps() {
+        let pts = [(0.0, [0.0]), (10.0, [1.0]), (20.0, [0.5])];
+        assert_eq!(piecewise_linear(&pts, -5.0), [0.0]);
+        assert_eq!(piecewise_linear(&pts, 5.0), [0.5]);
+        assert_eq!(piecewise_linear(&pts, 15.0), [0.75]);
+        assert_eq!(piecewise_linear(&pts, 25.0), [0.5]);
+        assert_eq!(piecewise_linear(&pts, 10.0), [1.0]);
+    }
+
+    #[test]
+    fn json_defaults_follow_vtk() {
+        let mut tf: TransferFunction =
+            serde_json::from_str(r#"{"color": [[0,1,1,1]], "scalar_opacity": [[10,0.5],[0,0]]}"#)
+                .unwrap();
+        tf.validate().unwrap();
+        assert_eq!(tf.scalar_opacity_unit_distance, 1.0);
+        assert_eq!(
+            (tf.ambient, tf.diffuse, tf.specular, tf.specular_power),
+            (0.0, 0.7, 0.2, 10.0)
+        );
+        assert!(!tf.shade);
+        // Sorted on validation.
+        assert_eq!(tf.scalar_opacity[0][0], 0.0);
+        assert_eq!(tf.opacity_at(5.0), 0.25);
+    }
+
+    #[test]
+    fn missing_and_bad_fields_are_named() {
+        let e = serde_json::from_str::<TransferFunction>(r#"{"color": [[0,1,1,1]]}"#).unwrap_err();
+        assert!(e.to_string().contains("scalar_opacity"), "{e}");
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+        tf.color[1][2] = 1.5;
+        let e = tf.validate().unwrap_err();
+        assert!(e.to_string().contains("color[1]"), "{e}");
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+        tf.scalar_opacity_unit_distance = 0.0;
+        assert!(
+            tf.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("unit_distance")
+        );
+    }
+
+    #[test]
+    fn presets_validate_and_unknown_is_an_error() {
+        for name in TransferFunction::PRESETS {
+            TransferFunction::preset(name, (0.0, 255.0))
+                .unwrap()
+                .validate()
+                .unwrap();
+        }
+        let e = TransferFunction::preset("nope", (0.0, 1.0)).unwrap_err();
+        assert!(e.to_string().contains("ct-bone"));
+    }
+}

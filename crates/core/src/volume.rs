@@ -1,0 +1,487 @@
+//! Scalar volumes on rectilinear grids, in VTK's world-space convention.
+//!
+//! Voxel `(i, j, k)` has its centre at `origin + D · (i·sx, j·sy, k·sz)` where `D` is the
+//! direction (orientation) matrix whose *columns* are the world directions of the grid's
+//! i, j and k axes (DESIGN.md §3). Data are stored with `i` fastest, then `j`, then `k`.
+
+use crate::error::{CoreError, Result};
+use glam::{DMat3, DVec3};
+
+/// Largest number of voxels a volume may hold (2³⁴ ≈ 17 G samples). Readers check their headers
+/// against this before allocating.
+pub const MAX_VOXELS: u128 = 1 << 34;
+
+/// The geometry of a rectilinear grid: dimensions, spacing, origin and orientation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid {
+    /// Number of samples along i, j, k (each ≥ 1).
+    pub dims: [usize; 3],
+    /// Distance between neighbouring samples along i, j, k in world units (usually mm), each > 0.
+    pub spacing: [f64; 3],
+    /// World position of the centre of voxel (0, 0, 0), world units.
+    pub origin: [f64; 3],
+    /// Direction matrix: column `c` is the unit world-space direction of grid axis `c`.
+    /// Must be orthonormal (a rotation or a reflection).
+    pub direction: DMat3,
+}
+
+impl Grid {
+    /// A grid with unit spacing, zero origin and identity orientation.
+    pub fn with_dims(dims: [usize; 3]) -> Result<Self> {
+        Grid::new(dims, [1.0; 3], [0.0; 3], DMat3::IDENTITY)
+    }
+
+    /// Builds and validates a grid.
+    ///
+    /// Errors if a dimension is zero, the voxel count exceeds [`MAX_VOXELS`], a spacing is not a
+    /// positive finite number, the origin is not finite, or the direction matrix is not orthonormal
+    /// (columns of unit length, mutually perpendicular, to 1e-3).
+    pub fn new(
+        dims: [usize; 3],
+        spacing: [f64; 3],
+        origin: [f64; 3],
+        direction: DMat3,
+    ) -> Result<Self> {
+        for (a, &d) in dims.iter().enumerate() {
+            if d == 0 {
+                return Err(CoreError::invalid(
+                    format!("dims[{a}]"),
+                    d,
+                    "must be at least 1",
+                ));
+            }
+        }
+        let count = dims.iter().map(|&d| d as u128).product::<u128>();
+        if count > MAX_VOXELS {
+            return Err(CoreError::TooLarge {
+                what: "voxel count".into(),
+                value: count,
+                limit: MAX_VOXELS,
+            });
+        }
+        for (a, &s) in spacing.iter().enumerate() {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(CoreError::invalid(
+                    format!("spacing[{a}]"),
+                    s,
+                    "must be a positive finite number",
+                ));
+            }
+        }
+        for (a, &o) in origin.iter().enumerate() {
+            if !o.is_finite() {
+                return Err(CoreError::invalid(
+                    format!("origin[{a}]"),
+                    o,
+                    "must be finite",
+                ));
+            }
+        }
+        let gram = direction.transpose() * direction;
+        let err = (gram - DMat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        if !(err < 1e-3) {
+            return Err(CoreError::invalid(
+                "direction",
+                direction.to_cols_array_2d(),
+                "columns must be orthonormal unit vectors",
+            ));
+        }
+        Ok(Grid {
+            dims,
+            spacing,
+            origin,
+            direction,
+        })
+    }
+
+    /// Total number of voxels.
+    pub fn voxel_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    /// Linear index of voxel (i, j, k) in the data array (i fastest).
+    #[inline]
+    pub fn linear_index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// The 3×3 linear part of `world_from_index`: `D · diag(spacing)`. Column `c` is the world
+    /// displacement of one step along grid axis `c`.
+    pub fn world_from_index_linear(&self) -> DMat3 {
+        self.direction * DMat3::from_diagonal(DVec3::from(self.spacing))
+    }
+
+    /// World position (world units) of a continuous index position (voxel units; integers are
+    /// voxel centres).
+    pub fn world_from_index(&self, p_index: DVec3) -> DVec3 {
+        DVec3::from(self.origin) + self.world_from_index_linear() * p_index
+    }
+
+    /// Continuous index position of a world point; inverse of [`Grid::world_from_index`].
+    pub fn index_from_world(&self, p_world: DVec3) -> DVec3 {
+        let inv =
+            DMat3::from_diagonal(DVec3::from(self.spacing).recip()) * self.direction.transpose();
+        inv * (p_world - DVec3::from(self.origin))
+    }
+
+    /// The eight world-space corners of the box spanned by the first and last voxel centres.
+    pub fn corners_world(&self) -> [DVec3; 8] {
+        let hi = DVec3::new(
+            (self.dims[0] - 1) as f64,
+            (self.dims[1] - 1) as f64,
+            (self.dims[2] - 1) as f64,
+        );
+        let mut out = [DVec3::ZERO; 8];
+        for (n, c) in out.iter_mut().enumerate() {
+            let p = DVec3::new(
+                if n & 1 != 0 { hi.x } else { 0.0 },
+                if n & 2 != 0 { hi.y } else { 0.0 },
+                if n & 4 != 0 { hi.z } else { 0.0 },
+            );
+            *c = self.world_from_index(p);
+        }
+        out
+    }
+
+    /// Axis-aligned world bounds `(min, max)` of the voxel centres (VTK's `GetBounds`).
+    pub fn bounds_world(&self) -> (DVec3, DVec3) {
+        let c = self.corners_world();
+        let mut lo = c[0];
+        let mut hi = c[0];
+        for p in &c[1..] {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        (lo, hi)
+    }
+
+    /// World-space centre of the grid (midpoint of the first and last voxel centres).
+    pub fn center_world(&self) -> DVec3 {
+        let (lo, hi) = self.bounds_world();
+        (lo + hi) * 0.5
+    }
+}
+
+/// The sample types a volume may hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ScalarType {
+    /// Unsigned 8-bit integer.
+    U8,
+    /// Signed 8-bit integer.
+    I8,
+    /// Unsigned 16-bit integer.
+    U16,
+    /// Signed 16-bit integer (e.g. CT in Hounsfield units).
+    I16,
+    /// 32-bit IEEE float.
+    F32,
+}
+
+impl ScalarType {
+    /// Bytes per sample.
+    pub fn size_bytes(self) -> usize {
+        match self {
+            ScalarType::U8 | ScalarType::I8 => 1,
+            ScalarType::U16 | ScalarType::I16 => 2,
+            ScalarType::F32 => 4,
+        }
+    }
+
+    /// Lower-case name (`u8`, `i16`, ...), as used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            ScalarType::U8 => "u8",
+            ScalarType::I8 => "i8",
+            ScalarType::U16 => "u16",
+            ScalarType::I16 => "i16",
+            ScalarType::F32 => "f32",
+        }
+    }
+
+    /// Parses a name as accepted by [`ScalarType::name`], plus common aliases
+    /// (`uint8`, `uchar`, `short`, `float`, ...).
+    pub fn from_name(name: &str) -> Result<Self> {
+        Ok(match name.trim().to_ascii_lowercase().as_str() {
+            "u8" | "uint8" | "uchar" | "unsigned char" | "uint8_t" => ScalarType::U8,
+            "i8" | "int8" | "char" | "signed char" | "int8_t" => ScalarType::I8,
+            "u16" | "uint16" | "ushort" | "unsigned short" | "uint16_t" => ScalarType::U16,
+            "i16" | "int16" | "short" | "signed short" | "int16_t" => ScalarType::I16,
+            "f32" | "float" | "float32" => ScalarType::F32,
+            _ => {
+                return Err(CoreError::UnknownName {
+                    kind: "scalar type".into(),
+                    name: name.into(),
+                    known: "u8, i8, u16, i16, f32".into(),
+                });
+            }
+        })
+    }
+}
+
+/// A sample type that volumes can hold. Implemented for `u8`, `i8`, `u16`, `i16` and `f32`.
+pub trait Scalar: Copy + Send + Sync + PartialOrd + std::fmt::Debug + 'static {
+    /// The runtime tag of this type.
+    const TYPE: ScalarType;
+    /// Converts to `f32` (exact for every integer type here).
+    fn to_f32(self) -> f32;
+}
+
+macro_rules! impl_scalar {
+    ($t:ty, $tag:ident) => {
+        impl Scalar for $t {
+            const TYPE: ScalarType = ScalarType::$tag;
+            #[inline(always)]
+            fn to_f32(self) -> f32 {
+                self as f32
+            }
+        }
+    };
+}
+impl_scalar!(u8, U8);
+impl_scalar!(i8, I8);
+impl_scalar!(u16, U16);
+impl_scalar!(i16, I16);
+impl_scalar!(f32, F32);
+
+/// A scalar volume: a [`Grid`] and one sample per voxel, `i` fastest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Volume<T> {
+    grid: Grid,
+    data: Vec<T>,
+}
+
+impl<T: Scalar> Volume<T> {
+    /// Wraps `data` (length `dims.x·dims.y·dims.z`, i fastest) on `grid`.
+    ///
+    /// Errors if the length does not match, or if `T` is `f32` and a sample is not finite.
+    pub fn new(grid: Grid, data: Vec<T>) -> Result<Self> {
+        let expected = grid.voxel_count();
+        if data.len() != expected {
+            return Err(CoreError::DataLength {
+                dims: grid.dims,
+                expected,
+                actual: data.len(),
+            });
+        }
+        if T::TYPE == ScalarType::F32
+            && let Some(pos) = data.iter().position(|v| !v.to_f32().is_finite())
+        {
+            return Err(CoreError::invalid(
+                format!("sample #{pos}"),
+                data[pos],
+                "float samples must be finite",
+            ));
+        }
+        Ok(Volume { grid, data })
+    }
+
+    /// Builds a volume by evaluating `f(i, j, k)` at every voxel.
+    pub fn from_fn(grid: Grid, mut f: impl FnMut(usize, usize, usize) -> T) -> Result<Self> {
+        let [nx, ny, nz] = grid.dims;
+        let mut data = Vec::with_capacity(grid.voxel_count());
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    data.push(f(i, j, k));
+                }
+            }
+        }
+        Volume::new(grid, data)
+    }
+
+    /// The grid geometry.
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    /// Replaces the geometry (same dims required).
+    pub fn set_grid(&mut self, grid: Grid) -> Result<()> {
+        if grid.dims != self.grid.dims {
+            return Err(CoreError::invalid("dims", grid.dims, "must match the data"));
+        }
+        self.grid = grid;
+        Ok(())
+    }
+
+    /// The samples, i fastest.
+    pub fn data(&self) -> &[T] {
+        &self.data
+    }
+
+    /// Consumes the volume, returning its samples.
+    pub fn into_data(self) -> Vec<T> {
+        self.data
+    }
+
+    /// Sample at voxel (i, j, k). Panics if out of range (callers index within `dims`).
+    #[inline]
+    pub fn get(&self, i: usize, j: usize, k: usize) -> T {
+        self.data[self.grid.linear_index(i, j, k)]
+    }
+
+    /// Smallest and largest sample, in data units.
+    pub fn value_range(&self) -> (f64, f64) {
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for v in &self.data {
+            let x = v.to_f32();
+            lo = lo.min(x);
+            hi = hi.max(x);
+        }
+        (lo as f64, hi as f64)
+    }
+
+    /// A copy converted to `f32` samples.
+    pub fn to_f32(&self) -> Volume<f32> {
+        Volume {
+            grid: self.grid.clone(),
+            data: self.data.iter().map(|v| v.to_f32()).collect(),
+        }
+    }
+}
+
+/// A volume whose sample type is known only at run time (what readers return).
+#[derive(Debug, Clone, PartialEq)]
+pub enum AnyVolume {
+    /// Unsigned 8-bit samples.
+    U8(Volume<u8>),
+    /// Signed 8-bit samples.
+    I8(Volume<i8>),
+    /// Unsigned 16-bit samples.
+    U16(Volume<u16>),
+    /// Signed 16-bit samples.
+    I16(Volume<i16>),
+    /// 32-bit float samples.
+    F32(Volume<f32>),
+}
+
+/// Calls `$body` with `$v` bound to the typed volume inside an [`AnyVolume`].
+#[macro_export]
+macro_rules! with_volume {
+    ($any:expr, $v:ident => $body:expr) => {
+        match $any {
+            $crate::volume::AnyVolume::U8($v) => $body,
+            $crate::volume::AnyVolume::I8($v) => $body,
+            $crate::volume::AnyVolume::U16($v) => $body,
+            $crate::volume::AnyVolume::I16($v) => $body,
+            $crate::volume::AnyVolume::F32($v) => $body,
+        }
+    };
+}
+
+impl AnyVolume {
+    /// The runtime sample type.
+    pub fn scalar_type(&self) -> ScalarType {
+        with_volume!(self, v => scalar_type_of(v))
+    }
+
+    /// The grid geometry.
+    pub fn grid(&self) -> &Grid {
+        with_volume!(self, v => v.grid())
+    }
+
+    /// Replaces the geometry (same dims required).
+    pub fn set_grid(&mut self, grid: Grid) -> Result<()> {
+        with_volume!(self, v => v.set_grid(grid))
+    }
+
+    /// Smallest and largest sample, in data units.
+    pub fn value_range(&self) -> (f64, f64) {
+        with_volume!(self, v => v.value_range())
+    }
+
+    /// A copy converted to `f32` samples.
+    pub fn to_f32(&self) -> Volume<f32> {
+        with_volume!(self, v => v.to_f32())
+    }
+}
+
+fn scalar_type_of<T: Scalar>(_: &Volume<T>) -> ScalarType {
+    T::TYPE
+}
+
+macro_rules! impl_from_volume {
+    ($t:ty, $tag:ident) => {
+        impl From<Volume<$t>> for AnyVolume {
+            fn from(v: Volume<$t>) -> Self {
+                AnyVolume::$tag(v)
+            }
+        }
+    };
+}
+impl_from_volume!(u8, U8);
+impl_from_volume!(i8, I8);
+impl_from_volume!(u16, U16);
+impl_from_volume!(i16, I16);
+impl_from_volume!(f32, F32);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn world_index_round_trip_with_rotation_and_spacing() {
+        let rot = DMat3::from_rotation_z(0.3) * DMat3::from_rotation_x(-1.1);
+        let g = Grid::new([4, 5, 6], [0.5, 2.0, 1.5], [10.0, -3.0, 7.0], rot).unwrap();
+        let p = DVec3::new(1.25, 3.5, -0.75);
+        let w = g.world_from_index(p);
+        assert!((g.index_from_world(w) - p).length() < 1e-12);
+        // One step along k moves by spacing z along the third direction column.
+        let step = g.world_from_index(DVec3::Z) - g.world_from_index(DVec3::ZERO);
+        assert!((step - rot.z_axis * 1.5).length() < 1e-12);
+    }
+
+    #[test]
+    fn bounds_span_first_to_last_voxel_centre() {
+        let g = Grid::new([3, 2, 5], [2.0, 1.0, 0.5], [1.0, 1.0, 1.0], DMat3::IDENTITY).unwrap();
+        let (lo, hi) = g.bounds_world();
+        assert_eq!(lo, DVec3::new(1.0, 1.0, 1.0));
+        assert_eq!(hi, DVec3::new(5.0, 2.0, 3.0));
+    }
+
+    #[test]
+    fn invalid_grids_are_rejected_with_field_names() {
+        let e = Grid::new([0, 1, 1], [1.0; 3], [0.0; 3], DMat3::IDENTITY).unwrap_err();
+        assert!(e.to_string().contains("dims[0]"), "{e}");
+        let e = Grid::new([1, 1, 1], [1.0, -1.0, 1.0], [0.0; 3], DMat3::IDENTITY).unwrap_err();
+        assert!(e.to_string().contains("spacing[1]"), "{e}");
+        let e = Grid::new(
+            [1, 1, 1],
+            [1.0; 3],
+            [0.0; 3],
+            DMat3::from_diagonal(DVec3::splat(2.0)),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("direction"), "{e}");
+        let e = Grid::new(
+            [1 << 20, 1 << 20, 1 << 20],
+            [1.0; 3],
+            [0.0; 3],
+            DMat3::IDENTITY,
+        )
+        .unwrap_err();
+        assert!(matches!(e, CoreError::TooLarge { .. }));
+    }
+
+    #[test]
+    fn data_length_and_non_finite_floats_are_rejected() {
+        let g = Grid::with_dims([2, 2, 2]).unwrap();
+        assert!(Volume::<u8>::new(g.clone(), vec![0; 7]).is_err());
+        let mut d = vec![0.0f32; 8];
+        d[3] = f32::NAN;
+        let e = Volume::new(g, d).unwrap_err();
+        assert!(e.to_string().contains("sample #3"), "{e}");
+    }
+
+    #[test]
+    fn any_volume_reports_type_and_range() {
+        let g = Grid::with_dims([3, 1, 1]).unwrap();
+        let v: AnyVolume = Volume::new(g, vec![-5i16, 7, 2]).unwrap().into();
+        assert_eq!(v.scalar_type(), ScalarType::I16);
+        assert_eq!(v.value_range(), (-5.0, 7.0));
+        assert_eq!(v.to_f32().data(), &[-5.0, 7.0, 2.0]);
+    }
+}
