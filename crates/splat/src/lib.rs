@@ -1,1 +1,31 @@
-//! placeholder
+//! # volsplat-splat
+//!
+//! Westover's splatting (Westover 1991, *Splatting: a parallel, feed-forward volume rendering
+//! algorithm*), orthographic, with the corrections recorded in `docs/papers.md`.
+//!
+//! - [`render`] / [`render_any`]: one frame → [`Rendered`] (premultiplied image, optional float
+//!   values, [`RenderStats`] per stage like Table 4.02), controlled by [`RenderSettings`]
+//!   ([`RenderMode`] composite / MIP / MinIP / X-ray, [`Visibility`] sheet buffer or
+//!   composite-every-sample, [`Order`] FTB/BTF, kernel, subsampling).
+//! - [`render_with_progress`]: the same with a callback after each batch of sheets (successive
+//!   refinement, §4.2.1), which can cancel.
+//! - [`refine`]: the preview ladder of subsampled renders with cheaper kernels (§4.2.2–4.2.4).
+//! - [`footprint`]: per-frame footprint tables with exact elliptical mapping (§3.7).
+//! - [`geometry`]: incremental view transform, sheet choice and traversal order (§3.5).
+//!
+//! Output is bit-identical for any rayon thread count.
+#![deny(missing_docs)]
+
+pub mod error;
+pub mod footprint;
+pub mod geometry;
+pub mod refine;
+pub mod render;
+
+pub use error::{Result, SplatError};
+pub use footprint::{FootprintSettings, FootprintTable};
+pub use geometry::{Order, SplatGeometry};
+pub use render::{
+    Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render, render_any,
+    render_with_progress,
+};

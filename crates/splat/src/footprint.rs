@@ -1,0 +1,654 @@
+//! Footprint tables (Westover 1991, §3.7.1–3.7.4, with the corrections of
+//! `research/seed-westover.md` §1.8).
+//!
+//! The footprint of a sample is the line integral of its reconstruction kernel along the view,
+//! `footprint(x, y) = ∫ h(x, y, z) dz` (§3.7.1). In an orthographic view of a rectilinear lattice
+//! every sample has the same footprint up to a sub-pixel offset, so it is tabulated once per
+//! frame (§3.7.2) at `P × P` sub-pixel phases; each phase stores the weights at the pixel centres
+//! a sample with that phase covers, contiguously, so splatting reads one small dense block.
+//!
+//! **Radial kernels** (the Gaussian): the ray through raster offset `δ` passes the kernel centre
+//! at lattice distance `ρ = ‖L δ‖`, where `LᵀL = Q = Bᵀ(I − ĝĝᵀ)B`, `B` maps raster offsets to
+//! lattice offsets and `ĝ` is the view direction in lattice space. `L = Λ^{1/2} Uᵀ` comes from the
+//! symmetric eigen-decomposition `Q = U Λ Uᵀ` (DESIGN.md §4.3): the projected ellipse maps
+//! exactly onto the circle of the generic radial footprint, with no 45° singularity and no shape
+//! error (the thesis's §3.7.4 formulas are inconsistent; §5.4's anisotropy error disappears).
+//!
+//! **Separable kernels** (tent, Mitchell–Netravali, box): the line integral is evaluated per table
+//! entry by splitting the ray at every knot of the piecewise-cubic kernel and integrating each
+//! polynomial piece exactly with 5-point Gauss–Legendre quadrature.
+//!
+//! **Normalisation** (DESIGN.md §4.1): weights are `∫h ds / Δs` where `Δs` is the world path
+//! between sheets, so the footprints of one constant sheet sum to the constant (partition of
+//! unity over the projected sheet lattice); multiplying by `Δs` gives the world-space line
+//! integral used by X-ray mode.
+
+use crate::geometry::SplatGeometry;
+use volsplat_core::Kernel;
+use volsplat_core::glam::{DMat2, DVec2, DVec3};
+
+/// How the per-frame footprint table is sized.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FootprintSettings {
+    /// Target number of table entries along one side of the footprint (Westover: about 128).
+    pub table_side: usize,
+    /// Largest number of sub-pixel phases per axis (Westover used at most 9).
+    pub max_phases: usize,
+}
+
+impl Default for FootprintSettings {
+    /// 128 entries per side, at most 16 phases per axis (finer than the thesis's 9: the placement
+    /// error is at most 1/32 pixel, and the table stays small).
+    fn default() -> Self {
+        FootprintSettings {
+            table_side: 128,
+            max_phases: 16,
+        }
+    }
+}
+
+/// The pixel block shared by all phases.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PhaseBlock {
+    /// Pixel offset of the block's first column relative to the sample's base pixel.
+    pub kx0: i32,
+    /// Pixel offset of the block's first row relative to the sample's base pixel.
+    pub ky0: i32,
+    /// Block width in pixels.
+    pub width: u32,
+    /// Block height in pixels.
+    pub height: u32,
+    /// Start of the first block in the table's entries (0).
+    pub offset: u32,
+}
+
+/// The per-frame footprint table: weights at pixel centres for `(P + 1)²` sub-pixel phases,
+/// each a dense block of the same shape.
+#[derive(Debug, Clone)]
+pub struct FootprintTable {
+    /// Sub-pixel phases per axis (`P`).
+    pub phases: usize,
+    /// Whether neighbouring phases are blended (all kernels but single-point).
+    interpolate: bool,
+    /// Half-widths of the footprint's axis-aligned extent, pixels (x, y).
+    pub half_extent: [f64; 2],
+    /// Weights of all phases, block after block, row-major inside a block.
+    entries: Vec<f32>,
+    block: PhaseBlock,
+}
+
+/// The continuous footprint of one frame, before tabulation.
+pub(crate) struct FootprintFunction {
+    kind: Kind,
+    /// 1 / (|g| Δs): converts an index-length line integral into a sheet-normalised weight.
+    scale: f64,
+    half_extent: [f64; 2],
+}
+
+enum Kind {
+    Radial {
+        #[cfg_attr(not(test), allow(dead_code))]
+        kernel: Kernel,
+        l: DMat2,
+        radial_table: Vec<f64>,
+        radius2: f64,
+    },
+    Separable {
+        kernel: Kernel,
+        b: [DVec3; 2],
+        g_hat: DVec3,
+    },
+    Nearest {
+        inv_cell: DMat2,
+    },
+    Point {
+        weight: f64,
+    },
+}
+
+const RADIAL_TABLE_LEN: usize = 4096;
+
+impl FootprintFunction {
+    pub(crate) fn new(kernel: &Kernel, geom: &SplatGeometry) -> Self {
+        // Raster offsets (dx, dy) → lattice offsets: columns of J⁻¹ for x and y at fixed depth.
+        let j_inv = geom.jacobian.inverse();
+        let b = [j_inv.col(0), j_inv.col(1)];
+        // View direction in lattice space: a unit depth step at fixed (x, y).
+        let g = j_inv.col(2);
+        let g_len = g.length();
+        let g_hat = g / g_len;
+        let scale = 1.0 / (g_len * geom.sheet_spacing);
+        let ju = geom.jacobian.col(geom.in_sheet_axes[0]);
+        let jv = geom.jacobian.col(geom.in_sheet_axes[1]);
+        match *kernel {
+            Kernel::Gaussian { radius, .. } => {
+                // Q = Bᵀ (I − ĝĝᵀ) B, the projected ellipse's quadratic form.
+                let perp = |v: DVec3| v - g_hat * v.dot(g_hat);
+                let (p0, p1) = (perp(b[0]), perp(b[1]));
+                let q = DMat2::from_cols(
+                    DVec2::new(p0.dot(p0), p0.dot(p1)),
+                    DVec2::new(p1.dot(p0), p1.dot(p1)),
+                );
+                let l = ellipse_to_circle(q);
+                let qi = q.inverse();
+                let half_extent = [radius * qi.col(0).x.sqrt(), radius * qi.col(1).y.sqrt()];
+                let radius2 = radius * radius;
+                let radial_table = (0..RADIAL_TABLE_LEN)
+                    .map(|n| {
+                        let r2 = radius2 * n as f64 / (RADIAL_TABLE_LEN - 1) as f64;
+                        kernel.line_integral_radial(r2.sqrt()).unwrap_or(0.0)
+                    })
+                    .collect();
+                FootprintFunction {
+                    kind: Kind::Radial {
+                        kernel: *kernel,
+                        l,
+                        radial_table,
+                        radius2,
+                    },
+                    scale,
+                    half_extent,
+                }
+            }
+            Kernel::SinglePoint => FootprintFunction {
+                kind: Kind::Point {
+                    weight: geom.cell_volume
+                        / (geom.pixel_size * geom.pixel_size * geom.sheet_spacing),
+                },
+                scale: 1.0,
+                half_extent: [0.0, 0.0],
+            },
+            Kernel::Nearest => {
+                let cell = DMat2::from_cols(DVec2::new(ju.x, ju.y), DVec2::new(jv.x, jv.y));
+                FootprintFunction {
+                    kind: Kind::Nearest {
+                        inv_cell: cell.inverse(),
+                    },
+                    scale: 1.0,
+                    half_extent: [
+                        0.5 * (ju.x.abs() + jv.x.abs()),
+                        0.5 * (ju.y.abs() + jv.y.abs()),
+                    ],
+                }
+            }
+            Kernel::Tent | Kernel::MitchellNetravali { .. } => {
+                let r = kernel.radius();
+                let jac = geom.jacobian;
+                let half_extent = [
+                    r * (jac.col(0).x.abs() + jac.col(1).x.abs() + jac.col(2).x.abs()),
+                    r * (jac.col(0).y.abs() + jac.col(1).y.abs() + jac.col(2).y.abs()),
+                ];
+                FootprintFunction {
+                    kind: Kind::Separable {
+                        kernel: *kernel,
+                        b,
+                        g_hat,
+                    },
+                    scale,
+                    half_extent,
+                }
+            }
+        }
+    }
+
+    /// The sheet-normalised weight at raster offset `(dx, dy)` pixels from the sample's centre.
+    pub(crate) fn weight(&self, dx: f64, dy: f64) -> f64 {
+        match &self.kind {
+            Kind::Radial {
+                l,
+                radial_table,
+                radius2,
+                ..
+            } => {
+                let u = *l * DVec2::new(dx, dy);
+                let r2 = u.length_squared();
+                if r2 >= *radius2 {
+                    return 0.0;
+                }
+                let t = r2 / radius2 * (RADIAL_TABLE_LEN - 1) as f64;
+                let i = (t as usize).min(RADIAL_TABLE_LEN - 2);
+                let f = t - i as f64;
+                (radial_table[i] * (1.0 - f) + radial_table[i + 1] * f) * self.scale
+            }
+            Kind::Separable { kernel, b, g_hat } => {
+                let o = b[0] * dx + b[1] * dy;
+                separable_line_integral(kernel, o, *g_hat) * self.scale
+            }
+            Kind::Nearest { inv_cell } => {
+                let ab = *inv_cell * DVec2::new(dx, dy);
+                let inside = |v: f64| (-0.5..0.5).contains(&v);
+                if inside(ab.x) && inside(ab.y) {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Kind::Point { weight } => {
+                if dx == 0.0 && dy == 0.0 {
+                    *weight
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// The exact (untabulated) weight, for tests: radial kernels use the closed form directly.
+    #[cfg(test)]
+    pub(crate) fn exact_weight(&self, dx: f64, dy: f64) -> f64 {
+        match &self.kind {
+            Kind::Radial { kernel, l, .. } => {
+                let rho = (*l * DVec2::new(dx, dy)).length();
+                kernel.line_integral_radial(rho).unwrap_or(0.0) * self.scale
+            }
+            _ => self.weight(dx, dy),
+        }
+    }
+}
+
+/// `L` with `LᵀL = Q` for a symmetric positive-definite 2×2 `Q`, from its eigen-decomposition
+/// `Q = U Λ Uᵀ`: `L = Λ^{1/2} Uᵀ`. Maps the ellipse `δᵀQδ = 1` onto the unit circle.
+pub fn ellipse_to_circle(q: DMat2) -> DMat2 {
+    let (a, b, c) = (q.col(0).x, 0.5 * (q.col(1).x + q.col(0).y), q.col(1).y);
+    let mean = 0.5 * (a + c);
+    let diff = 0.5 * (a - c);
+    let disc = (diff * diff + b * b).sqrt();
+    let (l1, l2) = (mean + disc, (mean - disc).max(0.0));
+    // Eigenvector of l1, robust for b → 0 (no singular angle).
+    let e1 = if disc == 0.0 {
+        DVec2::X
+    } else if a >= c {
+        DVec2::new(a - l2, b).normalize()
+    } else {
+        DVec2::new(b, c - l2).normalize()
+    };
+    let e2 = DVec2::new(-e1.y, e1.x);
+    // Rows of L are √λᵢ eᵢᵀ.
+    DMat2::from_cols(
+        DVec2::new(l1.sqrt() * e1.x, l2.sqrt() * e2.x),
+        DVec2::new(l1.sqrt() * e1.y, l2.sqrt() * e2.y),
+    )
+}
+
+/// ∫ h(o + t·ĝ) dt over all t (index-length units) for a separable piecewise-polynomial kernel,
+/// exact up to rounding: the line is split at every knot and each piece is integrated with
+/// 5-point Gauss–Legendre, exact for polynomials up to degree 9.
+fn separable_line_integral(kernel: &Kernel, o: DVec3, g: DVec3) -> f64 {
+    let r = kernel.radius();
+    // Clip the line to the support cube |o + t g|∞ ≤ r.
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for c in 0..3 {
+        if g[c].abs() < 1e-12 {
+            if o[c].abs() > r {
+                return 0.0;
+            }
+        } else {
+            let a = (-r - o[c]) / g[c];
+            let b = (r - o[c]) / g[c];
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
+    }
+    if t1 <= t0 {
+        return 0.0;
+    }
+    // Knots: where a coordinate crosses an integer multiple of ... the kernel's breakpoints
+    // (integers for tent and BC cubics).
+    let mut knots = vec![t0, t1];
+    for c in 0..3 {
+        if g[c].abs() >= 1e-12 {
+            let lo = (-r).ceil() as i32;
+            let hi = r.floor() as i32;
+            for m in lo..=hi {
+                let t = (m as f64 - o[c]) / g[c];
+                if t > t0 && t < t1 {
+                    knots.push(t);
+                }
+            }
+        }
+    }
+    knots.sort_by(f64::total_cmp);
+    const X: [f64; 5] = [
+        0.0,
+        -0.538_469_310_105_683_1,
+        0.538_469_310_105_683_1,
+        -0.906_179_845_938_664,
+        0.906_179_845_938_664,
+    ];
+    const W: [f64; 5] = [
+        0.568_888_888_888_888_9,
+        0.478_628_670_499_366_5,
+        0.478_628_670_499_366_5,
+        0.236_926_885_056_189_1,
+        0.236_926_885_056_189_1,
+    ];
+    let mut sum = 0.0;
+    for w in knots.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if b - a <= 0.0 {
+            continue;
+        }
+        let (m, h) = (0.5 * (a + b), 0.5 * (b - a));
+        for q in 0..5 {
+            let p = o + g * (m + h * X[q]);
+            sum += W[q] * h * kernel.eval_1d(p.x) * kernel.eval_1d(p.y) * kernel.eval_1d(p.z);
+        }
+    }
+    sum
+}
+
+impl FootprintTable {
+    /// Tabulates the footprint of `kernel` for the frame `geom`.
+    pub fn build(kernel: &Kernel, geom: &SplatGeometry, settings: &FootprintSettings) -> Self {
+        let f = FootprintFunction::new(kernel, geom);
+        Self::from_function(&f, settings)
+    }
+
+    pub(crate) fn from_function(f: &FootprintFunction, settings: &FootprintSettings) -> Self {
+        let [hx, hy] = f.half_extent;
+        let point = matches!(f.kind, Kind::Point { .. });
+        let phases = if point {
+            1
+        } else {
+            let extent = 2.0 * hx.max(hy).max(0.5);
+            ((settings.table_side as f64 / extent).round() as usize)
+                .clamp(1, settings.max_phases.max(1))
+        };
+        // Phases 0..=P per axis (phase P is phase 0 one pixel on), all on one common block of
+        // pixel offsets k ∈ [−⌈h⌉, ⌈h⌉ + 1], so neighbouring phases can be blended.
+        let n = if point { 1 } else { phases + 1 };
+        let p = phases as f64;
+        let (kx0, ky0) = (-(hx.ceil() as i32), -(hy.ceil() as i32));
+        let (width, height) = ((2 * hx.ceil() as usize) + 2, (2 * hy.ceil() as usize) + 2);
+        let mut raw = vec![0f32; n * n * width * height];
+        for py in 0..n {
+            for px in 0..n {
+                let (ox, oy) = (px as f64 / p, py as f64 / p);
+                let base = (py * n + px) * width * height;
+                for r in 0..height {
+                    for c in 0..width {
+                        let (kx, ky) = (kx0 + c as i32, ky0 + r as i32);
+                        raw[base + r * width + c] = f.weight(kx as f64 - ox, ky as f64 - oy) as f32;
+                    }
+                }
+            }
+        }
+        // Trim the border rows and columns that are zero in every phase.
+        let (mut c0, mut c1, mut r0, mut r1) = (width, 0, height, 0);
+        for b in 0..n * n {
+            for r in 0..height {
+                for c in 0..width {
+                    if raw[b * width * height + r * width + c] != 0.0 {
+                        c0 = c0.min(c);
+                        c1 = c1.max(c + 1);
+                        r0 = r0.min(r);
+                        r1 = r1.max(r + 1);
+                    }
+                }
+            }
+        }
+        if c1 <= c0 || r1 <= r0 {
+            (c0, c1, r0, r1) = (0, 0, 0, 0);
+        }
+        let (tw, th) = (c1 - c0, r1 - r0);
+        let mut entries = Vec::with_capacity(n * n * tw * th);
+        for b in 0..n * n {
+            for r in r0..r1 {
+                let row = b * width * height + r * width;
+                entries.extend_from_slice(&raw[row + c0..row + c1]);
+            }
+        }
+        FootprintTable {
+            phases,
+            interpolate: !point,
+            half_extent: [hx, hy],
+            entries,
+            block: PhaseBlock {
+                kx0: kx0 + c0 as i32,
+                ky0: ky0 + r0 as i32,
+                width: tw as u32,
+                height: th as u32,
+                offset: 0,
+            },
+        }
+    }
+
+    /// A table from raw parts (tests): one block per phase, no blending.
+    #[cfg(test)]
+    pub(crate) fn from_raw(half_extent: [f64; 2], entries: Vec<f32>, block: PhaseBlock) -> Self {
+        FootprintTable {
+            phases: 1,
+            interpolate: false,
+            half_extent,
+            entries,
+            block,
+        }
+    }
+
+    /// Total number of stored weights (Westover's "about 128 × 128").
+    pub fn entry_count(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// The shape shared by every phase's block of weights.
+    pub fn block(&self) -> PhaseBlock {
+        self.block
+    }
+
+    /// Writes into `out` (resized to `width × height` of [`FootprintTable::block`]) the weights
+    /// of a sample projected at raster `(x, y)` (pixels; pixel centres at half-integers), and
+    /// returns the pixel `(x, y)` of the block's first entry.
+    ///
+    /// The four tabulated phases around the sample's sub-pixel position are blended bilinearly,
+    /// so placement is exact up to the blend's O(1/P²) error (the thesis's nearest phase has an
+    /// O(1/P) placement error). The single-point kernel takes the nearest pixel.
+    #[inline]
+    pub fn weights_at(&self, x: f32, y: f32, out: &mut Vec<f32>) -> (i32, i32) {
+        let b = self.block;
+        let len = (b.width * b.height) as usize;
+        out.clear();
+        let (cx, cy) = (x - 0.5, y - 0.5);
+        if !self.interpolate {
+            let (bx, by) = (cx.round() as i32, cy.round() as i32);
+            out.extend_from_slice(&self.entries[..len]);
+            return (bx + b.kx0, by + b.ky0);
+        }
+        let p = self.phases as f32;
+        let n = self.phases + 1;
+        let (bx, by) = (cx.floor(), cy.floor());
+        let (tx, ty) = ((cx - bx) * p, (cy - by) * p);
+        let (ix, iy) = (
+            (tx as usize).min(self.phases - 1),
+            (ty as usize).min(self.phases - 1),
+        );
+        let (fx, fy) = (tx - ix as f32, ty - iy as f32);
+        let block = |px: usize, py: usize| &self.entries[(py * n + px) * len..][..len];
+        let (b00, b10, b01, b11) = (
+            block(ix, iy),
+            block(ix + 1, iy),
+            block(ix, iy + 1),
+            block(ix + 1, iy + 1),
+        );
+        let (w00, w10, w01, w11) = (
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        );
+        out.extend(
+            b00.iter()
+                .zip(b10)
+                .zip(b01.iter().zip(b11))
+                .map(|((a, b), (c, d))| w00 * a + w10 * b + w01 * c + w11 * d),
+        );
+        (bx as i32 + b.kx0, by as i32 + b.ky0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Order, SplatGeometry};
+    use volsplat_core::glam::{DMat3, DVec3};
+    use volsplat_core::{Camera, Grid, OrthoProjection};
+
+    fn geometry(spacing: [f64; 3], az: f64, el: f64, scale: f64) -> SplatGeometry {
+        let grid = Grid::new([16, 16, 16], spacing, [0.0; 3], DMat3::IDENTITY).unwrap();
+        let mut c = Camera::reset_to_bounds(DVec3::ZERO, DVec3::splat(15.0), true);
+        c.azimuth(az);
+        c.elevation(el);
+        c.orthogonalize_view_up();
+        c.parallel_scale = 32.0 / scale;
+        let proj = OrthoProjection::new(&c, 64, 64).unwrap();
+        SplatGeometry::new(&grid, &proj, 1, Order::FrontToBack).unwrap()
+    }
+
+    /// Numerically integrates the 3-D kernel along the view ray through raster offset δ,
+    /// normalised like the table (divided by Δs), straight from the definition.
+    fn brute_force(kernel: &Kernel, geom: &SplatGeometry, dx: f64, dy: f64) -> f64 {
+        let j_inv = geom.jacobian.inverse();
+        let o = j_inv * DVec3::new(dx, dy, 0.0);
+        let g = j_inv.col(2); // lattice displacement per world unit of depth
+        let n = 40000;
+        let range = 8.0 / g.length();
+        let h = 2.0 * range / n as f64;
+        let mut s = 0.0;
+        for i in 0..n {
+            let t = -range + (i as f64 + 0.5) * h;
+            s += kernel.eval_3d(o + g * t) * h;
+        }
+        s / geom.sheet_spacing
+    }
+
+    /// F-W16/F-W18: the ellipse-mapped generic footprint equals the numerical z-integral of the
+    /// transformed kernel, including Westover's Fig 5.03 worst case (x-spacing 2× z, 45° about y).
+    #[test]
+    fn gaussian_footprint_matches_numerical_integration() {
+        let k = Kernel::default();
+        for (spacing, az, el) in [
+            ([2.0, 1.0, 1.0], 45.0, 0.0),
+            ([1.0, 1.3, 2.0], 33.0, 27.0),
+            ([1.0; 3], 0.0, 0.0),
+        ] {
+            let g = geometry(spacing, az, el, 2.0);
+            let f = FootprintFunction::new(&k, &g);
+            for (dx, dy) in [(0.0, 0.0), (0.7, -0.3), (1.5, 1.1), (-2.2, 0.4)] {
+                let a = f.exact_weight(dx, dy);
+                let t = f.weight(dx, dy);
+                let b = brute_force(&k, &g, dx, dy);
+                assert!(
+                    (a - b).abs() < 1e-5 * (1.0 + b),
+                    "{spacing:?} {az} {el} ({dx},{dy}): {a} vs {b}"
+                );
+                assert!(
+                    (t - a).abs() < 2e-4 * (1.0 + a),
+                    "table interpolation: {t} vs {a}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn separable_footprints_match_numerical_integration() {
+        for k in [
+            Kernel::Tent,
+            Kernel::MitchellNetravali { b: 1.0, c: 0.0 },
+            Kernel::MitchellNetravali { b: 0.0, c: 0.5 },
+        ] {
+            let g = geometry([1.0, 1.0, 1.5], 28.0, 17.0, 1.7);
+            let f = FootprintFunction::new(&k, &g);
+            for (dx, dy) in [(0.0, 0.0), (0.9, -0.35), (2.1, 1.3)] {
+                let a = f.weight(dx, dy);
+                let b = brute_force(&k, &g, dx, dy);
+                assert!(
+                    (a - b).abs() < 2e-4 * (1.0 + b),
+                    "{} ({dx},{dy}): {a} vs {b}",
+                    k.name()
+                );
+            }
+        }
+    }
+
+    /// The ellipse→circle map sends the ellipse boundary to the unit circle, with no singular
+    /// angle (F-W20; the thesis needed a 0.01° fudge at 45°).
+    #[test]
+    fn ellipse_maps_onto_unit_circle_at_every_angle() {
+        for deg in [0.0f64, 10.0, 45.0, 90.0, 135.0, 200.0] {
+            let th = deg.to_radians();
+            let u = DMat2::from_cols(
+                DVec2::new(th.cos(), th.sin()),
+                DVec2::new(-th.sin(), th.cos()),
+            );
+            let q = u * DMat2::from_diagonal(DVec2::new(4.0, 0.25)) * u.transpose();
+            let l = ellipse_to_circle(q);
+            for n in 0..360 {
+                let a = (n as f64).to_radians();
+                // Boundary of δᵀQδ = 1: δ = U diag(1/2, 2) (cos a, sin a).
+                let d = u * DVec2::new(0.5 * a.cos(), 2.0 * a.sin());
+                assert!(((l * d).length() - 1.0).abs() < 1e-12, "deg {deg}");
+            }
+        }
+        let iso = ellipse_to_circle(DMat2::from_diagonal(DVec2::splat(9.0)));
+        assert!((iso.col(0).x.abs() - 3.0).abs() < 1e-12 && iso.col(0).y.abs() < 1e-12);
+    }
+
+    /// F-W22: extents of 9 px at scale 2 and 13 px at scale 3 (2⌊s·r⌋+1), and 9×17 with a
+    /// 2× spaced axis in the image plane.
+    #[test]
+    fn gaussian_extents_match_the_thesis() {
+        let k = Kernel::default();
+        let width = |h: f64| 2 * (h + 1e-9).floor() as i32 + 1;
+        let f = FootprintFunction::new(&k, &geometry([1.0; 3], 0.0, 0.0, 2.0));
+        assert_eq!((width(f.half_extent[0]), width(f.half_extent[1])), (9, 9));
+        let f = FootprintFunction::new(&k, &geometry([1.0; 3], 0.0, 0.0, 3.0));
+        assert_eq!(width(f.half_extent[0]), 13);
+        let f = FootprintFunction::new(&k, &geometry([1.0, 2.0, 1.0], 0.0, 0.0, 2.0));
+        assert_eq!((width(f.half_extent[0]), width(f.half_extent[1])), (9, 17));
+    }
+
+    /// Table size follows the thesis: about 128 entries per side, phases clamped.
+    #[test]
+    fn table_resolution_rule() {
+        let k = Kernel::default();
+        let g = geometry([1.0; 3], 0.0, 0.0, 2.0);
+        let t = FootprintTable::build(&k, &g, &FootprintSettings::default());
+        assert_eq!(t.phases, 16); // 128 / 8 px
+        let t9 = FootprintTable::build(
+            &k,
+            &g,
+            &FootprintSettings {
+                table_side: 128,
+                max_phases: 9,
+            },
+        );
+        assert_eq!(t9.phases, 9);
+        let side = (t.entry_count() as f64).sqrt();
+        assert!(side > 100.0 && side < 200.0, "{side}");
+    }
+
+    /// A sample's table weights reproduce the continuous footprint at the pixel centres
+    /// (F-W21), to the bilinear phase-blend error.
+    #[test]
+    fn weights_at_pixel_centres_match_the_footprint() {
+        let k = Kernel::default();
+        let g = geometry([1.0; 3], 20.0, 10.0, 2.0);
+        let f = FootprintFunction::new(&k, &g);
+        let t = FootprintTable::from_function(&f, &FootprintSettings::default());
+        let peak = f.weight(0.0, 0.0);
+        let mut out = Vec::new();
+        for (x, y) in [(10.25f32, 7.8125f32), (3.1234, 9.87), (5.5, 5.5)] {
+            let (px0, py0) = t.weights_at(x, y, &mut out);
+            let b = t.block();
+            for r in 0..b.height as i32 {
+                for c in 0..b.width as i32 {
+                    let w = out[(r * b.width as i32 + c) as usize] as f64;
+                    let expect = f.weight(
+                        (px0 + c) as f64 + 0.5 - x as f64,
+                        (py0 + r) as f64 + 0.5 - y as f64,
+                    );
+                    assert!((w - expect).abs() < 2e-3 * peak, "{w} vs {expect}");
+                }
+            }
+        }
+    }
+}

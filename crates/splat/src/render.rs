@@ -1,0 +1,1170 @@
+//! The orthographic Westover splatting renderer (Westover 1991, Ch. 3–5).
+//!
+//! Pipeline per frame (§3.3): transform → CRIO (classify + shade, culling zero opacity) →
+//! reconstruct (footprint table) → visibility (sheet buffer or composite-every-sample), sheet by
+//! sheet in front-to-back or back-to-front order.
+//!
+//! **Parallel and deterministic** (§4.3.2 "multiple independent sheet buffers", DESIGN.md §4.6):
+//! the image is cut into fixed bands of scanlines, each owning its slice of the sheet buffer and
+//! of the accumulation buffer. Sheets are processed in batches: the sheets of a batch are
+//! classified in parallel (one thread per sheet, samples in a fixed order, each splat routed to
+//! the bands its footprint touches), then the bands splat and composite the batch's sheets in
+//! parallel. Every pixel therefore receives its contributions in the same order whatever the
+//! thread count, and the output is bit-identical for any number of threads.
+
+use crate::error::{Result, SplatError};
+use crate::footprint::{FootprintSettings, FootprintTable};
+use crate::geometry::{Order, SplatGeometry};
+use rayon::prelude::*;
+use std::time::Instant;
+use volsplat_core::crio::FrameClassifier;
+use volsplat_core::glam::{Mat3, Vec3};
+use volsplat_core::image::{Rgba, over_back_to_front, over_front_to_back};
+use volsplat_core::{
+    AnyVolume, Camera, CrioTables, Image, Kernel, OrthoProjection, SampleInput, Scalar,
+    ScalarImage, Volume, with_volume,
+};
+
+/// What is computed along each view ray.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RenderMode {
+    /// Emission–absorption compositing of classified, shaded samples (Westover's renderer).
+    #[default]
+    Composite,
+    /// Maximum intensity projection of the reconstructed data (beyond the thesis).
+    Mip,
+    /// Minimum intensity projection of the reconstructed data.
+    Minip,
+    /// The line integral `∫ρ ds` of the reconstructed data, data units × world units.
+    Xray,
+}
+
+/// How reconstruction and visibility are combined (Westover §3.8.1, §5.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Visibility {
+    /// Sum each sheet's footprints in a sheet buffer, then composite the sheet (default).
+    #[default]
+    SheetBuffer,
+    /// Composite every footprint directly (Westover 1989); bleeds, kept for comparison.
+    EverySample,
+}
+
+/// Everything that controls one render.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderSettings {
+    /// Image width, pixels (≥ 1).
+    pub width: usize,
+    /// Image height, pixels (≥ 1).
+    pub height: usize,
+    /// Ray function.
+    pub mode: RenderMode,
+    /// Sheet buffer or composite-every-sample (composite mode only).
+    pub visibility: Visibility,
+    /// Traversal order.
+    pub order: Order,
+    /// Reconstruction kernel (default: Westover's Gaussian σ = 0.6, radius 2).
+    pub kernel: Kernel,
+    /// Use every `subsample`-th voxel per axis (1, 2, 4, ...: successive refinement, §4.2.3).
+    pub subsample: usize,
+    /// Front-to-back composite only: pixels whose opacity reaches this value receive no further
+    /// splats (early splat termination). `1.0` or more disables it. The default `1 − 2⁻²⁰`
+    /// changes no pixel by more than 1e-6.
+    pub opacity_cutoff: f32,
+    /// Cull samples of zero opacity before reconstruction (Westover §5.2). Turning it off only
+    /// costs time; the image is the same.
+    pub cull_transparent: bool,
+    /// Footprint table sizing.
+    pub footprint: FootprintSettings,
+    /// Scanlines per band of the parallel decomposition (fixed, so output does not depend on the
+    /// thread count).
+    pub band_height: usize,
+    /// Sheets classified together before the bands splat them.
+    pub sheets_per_batch: usize,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            width: 512,
+            height: 512,
+            mode: RenderMode::Composite,
+            visibility: Visibility::SheetBuffer,
+            order: Order::FrontToBack,
+            kernel: Kernel::default(),
+            subsample: 1,
+            opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
+            cull_transparent: true,
+            footprint: FootprintSettings::default(),
+            band_height: 16,
+            sheets_per_batch: 8,
+        }
+    }
+}
+
+/// Per-stage timings and counters of one render (Westover Table 4.02).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RenderStats {
+    /// Frame set-up: geometry, footprint table, classifier tables (ms).
+    pub setup_ms: f64,
+    /// Transform + CRIO (classification and shading) wall time (ms).
+    pub classify_ms: f64,
+    /// Splatting into sheet buffers (ms; the splat/composite phase's wall time split in
+    /// proportion to the CPU time of each).
+    pub splat_ms: f64,
+    /// Compositing sheets onto the accumulation buffer (ms; see `splat_ms`).
+    pub composite_ms: f64,
+    /// Whole render excluding file loading (ms).
+    pub total_ms: f64,
+    /// Lattice points visited.
+    pub voxels: u64,
+    /// Samples that survived culling and were splatted.
+    pub splats: u64,
+    /// Samples skipped because their whole footprint was already opaque.
+    pub splats_terminated: u64,
+    /// Pixel updates (multiply–adds of one RGBA weight) — Westover's kernel cost (§4.2.2).
+    pub pixel_updates: u64,
+    /// Number of sheets.
+    pub sheets: usize,
+    /// Sheet-normal axis (0 = i, 1 = j, 2 = k).
+    pub sheet_axis: usize,
+    /// World path length between sheets along the view.
+    pub sheet_spacing: f64,
+    /// Footprint table entries.
+    pub footprint_entries: usize,
+    /// Footprint sub-pixel phases per axis.
+    pub footprint_phases: usize,
+    /// Footprint half-extent in pixels (x, y).
+    pub footprint_half_extent: [f64; 2],
+    /// Threads in the rayon pool that ran the render.
+    pub threads: usize,
+}
+
+impl RenderStats {
+    /// Average pixels touched per splat.
+    pub fn kernel_cost(&self) -> f64 {
+        if self.splats == 0 {
+            0.0
+        } else {
+            self.pixel_updates as f64 / self.splats as f64
+        }
+    }
+}
+
+/// The result of a render.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    /// Premultiplied RGBA image (no background). For MIP/MinIP, the projected value mapped through
+    /// the emission and opacity tables (as VTK does); for X-ray, grey scaled to the maximum.
+    pub image: Image,
+    /// X-ray line integrals (data units × world units) or MIP/MinIP values (data units; NaN where
+    /// no sample covers the pixel). `None` in composite mode.
+    pub values: Option<ScalarImage>,
+    /// Timings and counters.
+    pub stats: RenderStats,
+}
+
+/// State passed to a progress callback after each batch of sheets (Westover §4.2.1).
+pub struct Progress<'a> {
+    /// Sheets finished so far.
+    pub sheets_done: usize,
+    /// Sheets in the frame.
+    pub sheets_total: usize,
+    /// The accumulation buffer so far (premultiplied; row-major, width × height). In X-ray mode
+    /// channel 0 holds the partial line integral; in MIP/MinIP channel 0 holds the running
+    /// extreme (NaN where not yet covered).
+    pub accumulation: &'a [Rgba],
+}
+
+/// One classified sample on its way to reconstruction (Westover's tuple D, §3.4).
+#[derive(Debug, Clone, Copy)]
+struct Splat {
+    x: f32,
+    y: f32,
+    /// Premultiplied RGBA (composite); `[ρ·Δs, ..]` (X-ray); `[ρ, 1, 0, 0]` (MIP/MinIP).
+    v: Rgba,
+}
+
+struct SheetSplats {
+    buckets: Vec<Vec<Splat>>,
+    visited: u64,
+    splatted: u64,
+}
+
+struct BandState {
+    sheet: Vec<Rgba>,
+    scratch: Vec<f32>,
+    opaque_tiles: Vec<bool>,
+    pixel_updates: u64,
+    terminated: u64,
+    splat_s: f64,
+    composite_s: f64,
+}
+
+const TILE: usize = 16;
+
+/// Renders any volume; see [`render`].
+pub fn render_any(
+    volume: &AnyVolume,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+) -> Result<Rendered> {
+    with_volume!(volume, v => render(v, camera, tables, settings))
+}
+
+/// Renders `volume` seen by the orthographic `camera`, classified and shaded by `tables`.
+pub fn render<T: Scalar>(
+    volume: &Volume<T>,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+) -> Result<Rendered> {
+    render_with_progress(volume, camera, tables, settings, &mut |_| true)
+}
+
+/// Like [`render`], calling `progress` after each batch of sheets; returning `false` from it
+/// cancels the render with [`SplatError::Cancelled`].
+pub fn render_with_progress<T: Scalar>(
+    volume: &Volume<T>,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+    progress: &mut dyn FnMut(&Progress) -> bool,
+) -> Result<Rendered> {
+    let t_start = Instant::now();
+    validate(settings)?;
+    settings.kernel.validate()?;
+    let proj = OrthoProjection::new(camera, settings.width, settings.height)?;
+    let geom = SplatGeometry::new(volume.grid(), &proj, settings.subsample, settings.order)?;
+    let table = FootprintTable::build(&settings.kernel, &geom, &settings.footprint);
+    let classifier = FrameClassifier::new(tables, &proj.frame, geom.sheet_spacing);
+    let (w, h) = (settings.width, settings.height);
+    let band_h = settings.band_height;
+    let n_bands = h.div_ceil(band_h);
+    let init: Rgba = match settings.mode {
+        RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
+        _ => [0.0; 4],
+    };
+    let mut acc = vec![init; w * h];
+    let n_tiles = w.div_ceil(TILE);
+    let mut bands: Vec<BandState> = (0..n_bands)
+        .map(|b| {
+            let rows = band_h.min(h - b * band_h);
+            BandState {
+                sheet: vec![[0.0; 4]; rows * w],
+                scratch: Vec::new(),
+                opaque_tiles: vec![false; n_tiles],
+                pixel_updates: 0,
+                terminated: 0,
+                splat_s: 0.0,
+                composite_s: 0.0,
+            }
+        })
+        .collect();
+    let mut stats = RenderStats {
+        sheets: geom.sheet_order.len(),
+        sheet_axis: geom.sheet_axis,
+        sheet_spacing: geom.sheet_spacing,
+        footprint_entries: table.entry_count(),
+        footprint_phases: table.phases,
+        footprint_half_extent: table.half_extent,
+        threads: rayon::current_num_threads(),
+        ..RenderStats::default()
+    };
+    stats.setup_ms = ms(t_start);
+    let ctx = ClassifyContext::new(volume, &geom, &classifier, settings, &table, n_bands);
+    let batch = settings.sheets_per_batch;
+    let mut done = 0;
+    for sheets in geom.sheet_order.chunks(batch) {
+        let t0 = Instant::now();
+        let classified: Vec<SheetSplats> =
+            sheets.par_iter().map(|&s| ctx.classify_sheet(s)).collect();
+        stats.classify_ms += ms(t0);
+        for c in &classified {
+            stats.voxels += c.visited;
+            stats.splats += c.splatted;
+        }
+        let t1 = Instant::now();
+        let band_ctx = BandContext {
+            table: &table,
+            settings,
+            width: w,
+            band_h,
+        };
+        acc.par_chunks_mut(band_h * w)
+            .zip(bands.par_iter_mut())
+            .enumerate()
+            .for_each(|(b, (acc_band, state))| {
+                for sheet in &classified {
+                    band_ctx.process(b, acc_band, state, &sheet.buckets[b]);
+                }
+            });
+        let phase = ms(t1);
+        stats.splat_ms += phase; // split below
+        done += sheets.len();
+        let p = Progress {
+            sheets_done: done,
+            sheets_total: geom.sheet_order.len(),
+            accumulation: &acc,
+        };
+        if !progress(&p) {
+            return Err(SplatError::Cancelled);
+        }
+    }
+    // Split the splat/composite phase's wall time in proportion to the CPU time of each stage.
+    let (splat_cpu, comp_cpu) = bands
+        .iter()
+        .fold((0.0, 0.0), |(s, c), b| (s + b.splat_s, c + b.composite_s));
+    let phase_ms = stats.splat_ms;
+    let total_cpu = splat_cpu + comp_cpu;
+    if total_cpu > 0.0 {
+        stats.splat_ms = phase_ms * splat_cpu / total_cpu;
+        stats.composite_ms = phase_ms * comp_cpu / total_cpu;
+    }
+    stats.pixel_updates = bands.iter().map(|b| b.pixel_updates).sum();
+    stats.splats_terminated = bands.iter().map(|b| b.terminated).sum();
+    let (image, values) = finish(acc, settings, tables);
+    stats.total_ms = ms(t_start);
+    Ok(Rendered {
+        image,
+        values,
+        stats,
+    })
+}
+
+fn validate(s: &RenderSettings) -> Result<()> {
+    let bad = |m: &str| Err(SplatError::Settings(m.into()));
+    if s.width == 0 || s.height == 0 {
+        return bad("image width and height must be ≥ 1");
+    }
+    if (s.width as u128) * (s.height as u128) > 1 << 28 {
+        return bad("image larger than 2^28 pixels");
+    }
+    if s.subsample == 0 {
+        return bad("subsample must be ≥ 1");
+    }
+    if s.band_height == 0 || s.sheets_per_batch == 0 {
+        return bad("band_height and sheets_per_batch must be ≥ 1");
+    }
+    if !(s.opacity_cutoff > 0.0) {
+        return bad("opacity_cutoff must be > 0");
+    }
+    if s.footprint.table_side == 0 || s.footprint.max_phases == 0 {
+        return bad("footprint table_side and max_phases must be ≥ 1");
+    }
+    Ok(())
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Read-only state for classifying sheets.
+struct ClassifyContext<'a, T> {
+    data: &'a [T],
+    dims_full: [usize; 3],
+    /// Grid direction matrix (columns: world directions of the i, j, k axes).
+    direction: Mat3,
+    inv_spacing_full: [f32; 3],
+    geom: &'a SplatGeometry,
+    classifier: &'a FrameClassifier,
+    mode: RenderMode,
+    cull: bool,
+    needs_gradient: bool,
+    half_y: f32,
+    band_h: usize,
+    n_bands: usize,
+    height: usize,
+    depth_scale: f64,
+}
+
+impl<'a, T: Scalar> ClassifyContext<'a, T> {
+    fn new(
+        volume: &'a Volume<T>,
+        geom: &'a SplatGeometry,
+        classifier: &'a FrameClassifier,
+        settings: &RenderSettings,
+        table: &FootprintTable,
+        n_bands: usize,
+    ) -> Self {
+        let grid = volume.grid();
+        let (dlo, dhi) = geom.depth_range;
+        ClassifyContext {
+            data: volume.data(),
+            dims_full: grid.dims,
+            direction: grid.direction.as_mat3(),
+            inv_spacing_full: grid.spacing.map(|s| (1.0 / s) as f32),
+            geom,
+            classifier,
+            mode: settings.mode,
+            cull: settings.cull_transparent,
+            needs_gradient: settings.mode == RenderMode::Composite && classifier.needs_gradient,
+            half_y: table.half_extent[1] as f32 + 1.0,
+            band_h: settings.band_height,
+            n_bands,
+            height: settings.height,
+            depth_scale: if dhi > dlo { 1.0 / (dhi - dlo) } else { 0.0 },
+        }
+    }
+
+    /// World-space gradient at full-resolution voxel `p`: central differences divided by
+    /// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
+    /// by the direction matrix (DESIGN.md §4.4). Data units per world unit.
+    #[inline]
+    fn gradient(&self, p: [usize; 3]) -> Vec3 {
+        let [nx, ny, _] = self.dims_full;
+        let lin = p[0] + nx * (p[1] + ny * p[2]);
+        let strides = [1, nx, nx * ny];
+        let mut g = Vec3::ZERO;
+        for c in 0..3 {
+            let n = self.dims_full[c];
+            if n < 2 {
+                continue;
+            }
+            let s = strides[c];
+            let (lo, hi, half) = if p[c] == 0 {
+                (lin, lin + s, 1.0)
+            } else if p[c] == n - 1 {
+                (lin - s, lin, 1.0)
+            } else {
+                (lin - s, lin + s, 0.5)
+            };
+            g[c] =
+                (self.data[hi].to_f32() - self.data[lo].to_f32()) * half * self.inv_spacing_full[c];
+        }
+        self.direction * g
+    }
+
+    fn classify_sheet(&self, sheet: usize) -> SheetSplats {
+        let geom = self.geom;
+        let [ua, va] = geom.in_sheet_axes;
+        let sa = geom.sheet_axis;
+        let (nu, nv) = (geom.dims[ua], geom.dims[va]);
+        let stride = geom.stride;
+        let ju = geom.jacobian.col(ua);
+        let jv = geom.jacobian.col(va);
+        let mut base = [0usize; 3];
+        base[sa] = sheet;
+        let sheet_origin = geom.raster_of(base);
+        let mut buckets: Vec<Vec<Splat>> = (0..self.n_bands).map(|_| Vec::new()).collect();
+        let mut splatted = 0u64;
+        let dlo = geom.depth_range.0;
+        let [nx, ny, _] = self.dims_full;
+        let ds = geom.sheet_spacing as f32;
+        for vi in 0..nv {
+            let v = if geom.in_sheet_reversed[1] {
+                nv - 1 - vi
+            } else {
+                vi
+            };
+            // Incremental transform (Westover §3.5.1): one full position per row, then adds.
+            let row = sheet_origin + jv * v as f64;
+            for ui in 0..nu {
+                let u = if geom.in_sheet_reversed[0] {
+                    nu - 1 - ui
+                } else {
+                    ui
+                };
+                let mut l = [0usize; 3];
+                l[sa] = sheet * stride;
+                l[ua] = u * stride;
+                l[va] = v * stride;
+                let lin = l[0] + nx * (l[1] + ny * l[2]);
+                let density = self.data[lin].to_f32();
+                let value: Rgba = match self.mode {
+                    RenderMode::Composite => {
+                        if self.cull
+                            && let Some(a) = self.classifier.density_opacity(density)
+                            && !(a > 0.0)
+                        {
+                            continue;
+                        }
+                        let p = row + ju * u as f64;
+                        let gradient = if self.needs_gradient {
+                            self.gradient(l)
+                        } else {
+                            Vec3::ZERO
+                        };
+                        let depth = ((p.z - dlo) * self.depth_scale) as f32;
+                        match self.classifier.classify(&SampleInput {
+                            density,
+                            gradient,
+                            depth,
+                        }) {
+                            Some(c) => c,
+                            None if self.cull => continue,
+                            None => [0.0; 4],
+                        }
+                    }
+                    RenderMode::Xray => {
+                        if density == 0.0 && self.cull {
+                            continue;
+                        }
+                        [density * ds, 0.0, 0.0, 0.0]
+                    }
+                    RenderMode::Mip | RenderMode::Minip => [density, 1.0, 0.0, 0.0],
+                };
+                let p = row + ju * u as f64;
+                let (x, y) = (p.x as f32, p.y as f32);
+                // Route to every band the footprint may touch.
+                let y0 = ((y - self.half_y).max(0.0) as usize) / self.band_h;
+                let y1f = y + self.half_y;
+                if y1f < 0.0 {
+                    continue;
+                }
+                let y1 = ((y1f as usize).min(self.height.saturating_sub(1))) / self.band_h;
+                if y0 >= self.n_bands {
+                    continue;
+                }
+                splatted += 1;
+                let s = Splat { x, y, v: value };
+                for b in &mut buckets[y0..=y1.min(self.n_bands - 1)] {
+                    b.push(s);
+                }
+            }
+        }
+        SheetSplats {
+            buckets,
+            visited: (nu * nv) as u64,
+            splatted,
+        }
+    }
+}
+
+struct BandContext<'a> {
+    table: &'a FootprintTable,
+    settings: &'a RenderSettings,
+    width: usize,
+    band_h: usize,
+}
+
+impl BandContext<'_> {
+    /// Splats one sheet's samples into band `b` and composites them (Westover §3.8.1).
+    fn process(&self, b: usize, acc: &mut [Rgba], st: &mut BandState, splats: &[Splat]) {
+        if splats.is_empty() {
+            return;
+        }
+        let w = self.width;
+        let rows = acc.len() / w;
+        let y_lo = (b * self.band_h) as i32;
+        let mode = self.settings.mode;
+        let every =
+            mode == RenderMode::Composite && self.settings.visibility == Visibility::EverySample;
+        let ftb = self.settings.order == Order::FrontToBack;
+        let cutoff = self.settings.opacity_cutoff;
+        let terminate = mode == RenderMode::Composite && ftb && cutoff < 1.0;
+        let t0 = Instant::now();
+        let (mut tx0, mut tx1) = (w, 0usize);
+        let blk = self.table.block();
+        let (bw, bh) = (blk.width as i32, blk.height as i32);
+        if bw == 0 {
+            return;
+        }
+        let mut weights = std::mem::take(&mut st.scratch);
+        for sp in splats {
+            // Clip the footprint block to the band and the image before blending weights.
+            let px0 = (sp.x - 0.5).floor() as i32 + blk.kx0;
+            let py0 = (sp.y - 0.5).floor() as i32 + blk.ky0;
+            let cx0 = (-px0).max(0);
+            let cx1 = (w as i32 - px0).min(bw + 1);
+            let cy0 = (y_lo - py0).max(0);
+            let cy1 = (y_lo + rows as i32 - py0).min(bh + 1);
+            if cx0 >= cx1 || cy0 >= cy1 {
+                continue;
+            }
+            let (px0, py0) = self.table.weights_at(sp.x, sp.y, &mut weights);
+            let cx0 = (-px0).max(0);
+            let cx1 = (w as i32 - px0).min(bw);
+            let cy0 = (y_lo - py0).max(0);
+            let cy1 = (y_lo + rows as i32 - py0).min(bh);
+            if cx0 >= cx1 || cy0 >= cy1 {
+                continue;
+            }
+            let xa = (px0 + cx0) as usize;
+            let xb = (px0 + cx1) as usize;
+            if terminate
+                && st.opaque_tiles[xa / TILE..=(xb - 1) / TILE]
+                    .iter()
+                    .all(|&o| o)
+            {
+                st.terminated += 1;
+                continue;
+            }
+            tx0 = tx0.min(xa);
+            tx1 = tx1.max(xb);
+            let v = sp.v;
+            let n = (cx1 - cx0) as usize;
+            for r in cy0..cy1 {
+                let wrow = &weights[(r * bw + cx0) as usize..][..n];
+                let prow = (py0 + r - y_lo) as usize * w + xa;
+                if every {
+                    let arow = &mut acc[prow..prow + n];
+                    for (a, &wt) in arow.iter_mut().zip(wrow) {
+                        let mut src = [wt * v[0], wt * v[1], wt * v[2], wt * v[3]];
+                        if src[3] > 1.0 {
+                            let k = 1.0 / src[3];
+                            src = [src[0] * k, src[1] * k, src[2] * k, 1.0];
+                        }
+                        if ftb {
+                            over_front_to_back(a, src)
+                        } else {
+                            over_back_to_front(a, src)
+                        }
+                    }
+                } else if mode == RenderMode::Xray {
+                    for (a, &wt) in acc[prow..prow + n].iter_mut().zip(wrow) {
+                        a[0] += wt * v[0];
+                    }
+                } else {
+                    for (s, &wt) in st.sheet[prow..prow + n].iter_mut().zip(wrow) {
+                        s[0] += wt * v[0];
+                        s[1] += wt * v[1];
+                        s[2] += wt * v[2];
+                        s[3] += wt * v[3];
+                    }
+                }
+            }
+            st.pixel_updates += (n * (cy1 - cy0) as usize) as u64;
+        }
+        st.scratch = weights;
+        let t1 = Instant::now();
+        st.splat_s += (t1 - t0).as_secs_f64();
+        if every || mode == RenderMode::Xray || tx0 >= tx1 {
+            return;
+        }
+        // Composite the touched columns of the sheet buffer, then clear them.
+        for r in 0..rows {
+            let range = r * w + tx0..r * w + tx1;
+            let (srow, arow) = (&mut st.sheet[range.clone()], &mut acc[range]);
+            match mode {
+                RenderMode::Composite => {
+                    for (s, a) in srow.iter_mut().zip(arow) {
+                        if s[3] > 0.0 {
+                            let mut src = *s;
+                            // Clamp consistently: opacity ≤ 1 with colour scaled alike
+                            // (DESIGN.md §4.2).
+                            if src[3] > 1.0 {
+                                let k = 1.0 / src[3];
+                                src = [src[0] * k, src[1] * k, src[2] * k, 1.0];
+                            }
+                            if ftb {
+                                over_front_to_back(a, src)
+                            } else {
+                                over_back_to_front(a, src)
+                            }
+                        }
+                        *s = [0.0; 4];
+                    }
+                }
+                RenderMode::Mip | RenderMode::Minip => {
+                    let max = mode == RenderMode::Mip;
+                    for (s, a) in srow.iter_mut().zip(arow) {
+                        // Normalised reconstruction where the sheet covers the pixel.
+                        if s[1] >= 0.5 {
+                            let val = s[0] / s[1];
+                            if a[0].is_nan() || (max && val > a[0]) || (!max && val < a[0]) {
+                                a[0] = val;
+                            }
+                        }
+                        *s = [0.0; 4];
+                    }
+                }
+                RenderMode::Xray => {}
+            }
+        }
+        if terminate {
+            for t in tx0 / TILE..=(tx1 - 1) / TILE {
+                if st.opaque_tiles[t] {
+                    continue;
+                }
+                let (c0, c1) = (t * TILE, ((t + 1) * TILE).min(w));
+                st.opaque_tiles[t] =
+                    (0..rows).all(|r| acc[r * w + c0..r * w + c1].iter().all(|p| p[3] >= cutoff));
+            }
+        }
+        st.composite_s += t1.elapsed().as_secs_f64();
+    }
+}
+
+fn finish(
+    acc: Vec<Rgba>,
+    settings: &RenderSettings,
+    tables: &CrioTables,
+) -> (Image, Option<ScalarImage>) {
+    let (w, h) = (settings.width, settings.height);
+    match settings.mode {
+        RenderMode::Composite => {
+            let img = Image::from_pixels(w, h, acc).unwrap_or_else(|| Image::new(w, h));
+            (img, None)
+        }
+        RenderMode::Xray => {
+            let values: Vec<f32> = acc.iter().map(|p| p[0]).collect();
+            let max = values.iter().fold(0.0f32, |m, &v| m.max(v));
+            let k = if max > 0.0 { 1.0 / max } else { 0.0 };
+            let pixels = values.iter().map(|&v| {
+                let g = (v * k).clamp(0.0, 1.0);
+                [g, g, g, 1.0]
+            });
+            let img =
+                Image::from_pixels(w, h, pixels.collect()).unwrap_or_else(|| Image::new(w, h));
+            (img, ScalarImage::from_values(w, h, values))
+        }
+        RenderMode::Mip | RenderMode::Minip => {
+            let values: Vec<f32> = acc.iter().map(|p| p[0]).collect();
+            let pixels = values
+                .iter()
+                .map(|&v| {
+                    if v.is_nan() {
+                        return [0.0; 4];
+                    }
+                    let c = tables.emission.lookup(v);
+                    let a = tables.opacity.lookup(v)[0].clamp(0.0, 1.0);
+                    [
+                        c[0].clamp(0.0, 1.0) * a,
+                        c[1].clamp(0.0, 1.0) * a,
+                        c[2].clamp(0.0, 1.0) * a,
+                        a,
+                    ]
+                })
+                .collect();
+            let img = Image::from_pixels(w, h, pixels).unwrap_or_else(|| Image::new(w, h));
+            (img, ScalarImage::from_values(w, h, values))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::footprint::PhaseBlock;
+    use volsplat_core::glam::{DMat3, DVec3};
+    use volsplat_core::{Grid, TransferFunction};
+
+    fn camera_for(grid: &Grid, az: f64, el: f64, roll: f64) -> Camera {
+        let (lo, hi) = grid.bounds_world();
+        let mut c = Camera::reset_to_bounds(lo, hi, true);
+        c.azimuth(az);
+        c.elevation(el);
+        c.orthogonalize_view_up();
+        c.roll(roll);
+        c
+    }
+
+    fn smooth_volume(n: usize) -> Volume<f32> {
+        let grid = Grid::with_dims([n, n, n]).unwrap();
+        let c = (n as f64 - 1.0) / 2.0;
+        Volume::from_fn(grid, |i, j, k| {
+            let d = DVec3::new(i as f64 - c, j as f64 - c * 0.8, k as f64 - c * 1.1) / c;
+            (1.0 - d.length()).clamp(0.0, 1.0) as f32
+        })
+        .unwrap()
+    }
+
+    fn tables() -> CrioTables {
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.6);
+        tf.color = vec![
+            [0.0, 0.1, 0.3, 1.0],
+            [0.5, 1.0, 0.5, 0.2],
+            [1.0, 1.0, 1.0, 1.0],
+        ];
+        tf.shade = true;
+        tf.ambient = 0.2;
+        CrioTables::from_transfer_function(&tf, 1024).unwrap()
+    }
+
+    /// A table that gives every splat weight 0.5 on its base pixel.
+    fn half_weight_table() -> FootprintTable {
+        FootprintTable::from_raw(
+            [0.0, 0.0],
+            vec![0.5],
+            PhaseBlock {
+                kx0: 0,
+                ky0: 0,
+                width: 1,
+                height: 1,
+                offset: 0,
+            },
+        )
+    }
+
+    /// Westover Fig 5.02: two opaque red samples each weighing 0.5 at a pixel over blue.
+    #[test]
+    fn fig_5_02_sheet_buffer_vs_every_sample() {
+        let table = half_weight_table();
+        let red = Splat {
+            x: 0.5,
+            y: 0.5,
+            v: [1.0, 0.0, 0.0, 1.0],
+        };
+        for (vis, expect) in [
+            (Visibility::SheetBuffer, [1.0, 0.0, 0.0]),
+            (Visibility::EverySample, [0.75, 0.0, 0.25]),
+        ] {
+            let settings = RenderSettings {
+                width: 1,
+                height: 1,
+                visibility: vis,
+                ..RenderSettings::default()
+            };
+            let ctx = BandContext {
+                table: &table,
+                settings: &settings,
+                width: 1,
+                band_h: 16,
+            };
+            let mut acc = vec![[0.0f32; 4]];
+            let mut st = BandState {
+                sheet: vec![[0.0; 4]],
+                scratch: Vec::new(),
+                opaque_tiles: vec![false],
+                pixel_updates: 0,
+                terminated: 0,
+                splat_s: 0.0,
+                composite_s: 0.0,
+            };
+            ctx.process(0, &mut acc, &mut st, &[red, red]);
+            let img = Image::from_pixels(1, 1, acc)
+                .unwrap()
+                .over_background([0.0, 0.0, 1.0]);
+            let p = img.get(0, 0);
+            for c in 0..3 {
+                assert!((p[c] - expect[c]).abs() < 1e-6, "{vis:?}: {p:?}");
+            }
+        }
+    }
+
+    /// A constant one-voxel-thick sheet reconstructs the constant within 1 % (Gaussian σ = 0.6,
+    /// r = 2), for axis-aligned and oblique views, scale 1 and 2.
+    #[test]
+    fn constant_sheet_reconstructs_the_constant() {
+        let grid = Grid::new([40, 40, 1], [1.0, 1.0, 1.0], [0.0; 3], DMat3::IDENTITY).unwrap();
+        let vol = Volume::new(grid.clone(), vec![1.0f32; 1600]).unwrap();
+        for (az, el, roll, zoom) in [
+            (0.0, 0.0, 0.0, 1.0),
+            (20.0, 15.0, 33.0, 1.0),
+            (0.0, 0.0, 45.0, 2.0),
+        ] {
+            let mut cam = camera_for(&grid, az, el, roll);
+            cam.parallel_scale = 10.0 / zoom;
+            let settings = RenderSettings {
+                width: 64,
+                height: 64,
+                mode: RenderMode::Mip,
+                ..RenderSettings::default()
+            };
+            // Sheet sum of weights: use X-ray on a single sheet divided by Δs.
+            let xr = RenderSettings {
+                mode: RenderMode::Xray,
+                ..settings.clone()
+            };
+            let tf = CrioTables::from_transfer_function(&TransferFunction::ramp(0.0, 1.0, 1.0), 16)
+                .unwrap();
+            let out = render(&vol, &cam, &tf, &xr).unwrap();
+            let ds = out.stats.sheet_spacing as f32;
+            let vals = out.values.unwrap();
+            let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+            for y in 24..40 {
+                for x in 24..40 {
+                    let v = vals.get(x, y) / ds;
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
+            }
+            assert!(
+                lo > 0.99 && hi < 1.01,
+                "view {az},{el},{roll} zoom {zoom}: [{lo}, {hi}]"
+            );
+        }
+    }
+
+    /// A single voxel's X-ray image is its integrated kernel: the footprint at the pixel
+    /// centres, and its total equals density × voxel volume / pixel area.
+    #[test]
+    fn single_voxel_yields_the_integrated_kernel() {
+        let grid = Grid::new([5, 5, 5], [1.0, 1.0, 2.0], [0.0; 3], DMat3::IDENTITY).unwrap();
+        let mut data = vec![0.0f32; 125];
+        data[grid.linear_index(2, 2, 2)] = 3.0;
+        let vol = Volume::new(grid.clone(), data).unwrap();
+        let mut cam = camera_for(&grid, 35.0, 25.0, 10.0);
+        cam.parallel_scale = 4.0;
+        let settings = RenderSettings {
+            width: 48,
+            height: 48,
+            mode: RenderMode::Xray,
+            ..RenderSettings::default()
+        };
+        let tf =
+            CrioTables::from_transfer_function(&TransferFunction::ramp(0.0, 1.0, 1.0), 16).unwrap();
+        let out = render(&vol, &cam, &tf, &settings).unwrap();
+        let vals = out.values.unwrap();
+        let pix = 8.0 / 48.0;
+        let total: f64 = vals.values().iter().map(|&v| v as f64).sum::<f64>() * pix * pix;
+        let expect = 3.0 * 2.0; // density × voxel volume (1·1·2)
+        assert!(
+            (total - expect).abs() < 0.01 * expect,
+            "total {total} vs {expect}"
+        );
+        // Peak against the closed form: ρ · L(0) / |g| where the ray through the centre.
+        let proj = OrthoProjection::new(&cam, 48, 48).unwrap();
+        let geom = SplatGeometry::new(&grid, &proj, 1, Order::FrontToBack).unwrap();
+        let f = crate::footprint::FootprintFunction::new(&Kernel::default(), &geom);
+        let c = geom.raster_of([2, 2, 2]);
+        let mut max_err = 0.0f64;
+        for y in 0..48 {
+            for x in 0..48 {
+                let expect = 3.0
+                    * geom.sheet_spacing
+                    * f.exact_weight(x as f64 + 0.5 - c.x, y as f64 + 0.5 - c.y);
+                max_err = max_err.max((vals.get(x, y) as f64 - expect).abs());
+            }
+        }
+        let peak = vals.values().iter().fold(0.0f32, |m, &v| m.max(v)) as f64;
+        assert!(max_err < 0.03 * peak, "max error {max_err} vs peak {peak}");
+    }
+
+    #[test]
+    fn ftb_equals_btf_and_threads_do_not_change_bits() {
+        let vol = smooth_volume(24);
+        let cam = camera_for(vol.grid(), 30.0, 20.0, 0.0);
+        let t = tables();
+        for vis in [Visibility::SheetBuffer, Visibility::EverySample] {
+            let s = RenderSettings {
+                width: 64,
+                height: 48,
+                visibility: vis,
+                opacity_cutoff: 1.0,
+                ..RenderSettings::default()
+            };
+            let ftb = render(&vol, &cam, &t, &s).unwrap().image;
+            let btf = render(
+                &vol,
+                &cam,
+                &t,
+                &RenderSettings {
+                    order: Order::BackToFront,
+                    ..s.clone()
+                },
+            )
+            .unwrap()
+            .image;
+            let d = ftb
+                .pixels()
+                .iter()
+                .zip(btf.pixels())
+                .flat_map(|(a, b)| (0..4).map(move |c| (a[c] - b[c]).abs()))
+                .fold(0.0f32, f32::max);
+            if vis == Visibility::SheetBuffer {
+                assert!(d <= 1e-5, "sheet buffer FTB vs BTF differ by {d}");
+            }
+            let mut images = Vec::new();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                images.push(pool.install(|| render(&vol, &cam, &t, &s).unwrap().image));
+            }
+            assert!(
+                images.windows(2).all(|w| w[0] == w[1]),
+                "{vis:?}: thread count changed the image"
+            );
+        }
+    }
+
+    #[test]
+    fn early_termination_changes_nothing_visible() {
+        let vol = smooth_volume(24);
+        let mut cam = camera_for(vol.grid(), 30.0, 20.0, 0.0);
+        cam.parallel_scale = 6.0;
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+        tf.scalar_opacity = vec![[0.0, 0.0], [0.05, 1.0]];
+        let t = CrioTables::from_transfer_function(&tf, 256).unwrap();
+        let s = RenderSettings {
+            width: 64,
+            height: 64,
+            ..RenderSettings::default()
+        };
+        let with = render(&vol, &cam, &t, &s).unwrap();
+        let without = render(
+            &vol,
+            &cam,
+            &t,
+            &RenderSettings {
+                opacity_cutoff: 1.0,
+                ..s
+            },
+        )
+        .unwrap();
+        assert!(
+            with.stats.splats_terminated > 0,
+            "nothing was terminated early"
+        );
+        for (a, b) in with.image.pixels().iter().zip(without.image.pixels()) {
+            for c in 0..4 {
+                assert!((a[c] - b[c]).abs() <= 2e-6, "{a:?} vs {b:?}");
+            }
+        }
+    }
+
+    /// F-W13: culling zero-opacity samples changes the splat count, not the image.
+    #[test]
+    fn culling_is_invisible() {
+        let vol = smooth_volume(20);
+        let cam = camera_for(vol.grid(), 10.0, 50.0, 0.0);
+        let t = tables();
+        let s = RenderSettings {
+            width: 40,
+            height: 40,
+            ..RenderSettings::default()
+        };
+        let a = render(&vol, &cam, &t, &s).unwrap();
+        let b = render(
+            &vol,
+            &cam,
+            &t,
+            &RenderSettings {
+                cull_transparent: false,
+                ..s
+            },
+        )
+        .unwrap();
+        assert_eq!(a.image, b.image);
+        assert!(a.stats.splats < b.stats.splats);
+        let nonzero = vol.data().iter().filter(|&&v| v > 0.0).count() as u64;
+        assert_eq!(a.stats.splats, nonzero);
+        assert_eq!(b.stats.splats, vol.data().len() as u64);
+    }
+
+    /// F-W32: progress after every batch; FTB opacity never decreases; the last equals the image.
+    #[test]
+    fn progress_reports_monotone_partial_images() {
+        let vol = smooth_volume(20);
+        let cam = camera_for(vol.grid(), 0.0, 0.0, 0.0);
+        let t = tables();
+        let s = RenderSettings {
+            width: 32,
+            height: 32,
+            sheets_per_batch: 1,
+            ..RenderSettings::default()
+        };
+        let mut calls = 0;
+        let mut last: Vec<Rgba> = vec![[0.0; 4]; 32 * 32];
+        let out = render_with_progress(&vol, &cam, &t, &s, &mut |p| {
+            calls += 1;
+            for (a, b) in p.accumulation.iter().zip(&last) {
+                assert!(a[3] >= b[3]);
+            }
+            last = p.accumulation.to_vec();
+            true
+        })
+        .unwrap();
+        assert_eq!(calls, 20);
+        assert_eq!(out.image.pixels(), &last[..]);
+        let cancelled = render_with_progress(&vol, &cam, &t, &s, &mut |p| p.sheets_done < 5);
+        assert!(matches!(cancelled, Err(SplatError::Cancelled)));
+    }
+
+    /// F-W33: subsampling by 2 and 4 visits 8× and 64× fewer samples.
+    #[test]
+    fn subsampling_reduces_samples() {
+        let vol = smooth_volume(32);
+        let cam = camera_for(vol.grid(), 0.0, 0.0, 0.0);
+        let t = tables();
+        let counts: Vec<u64> = [1, 2, 4]
+            .iter()
+            .map(|&sub| {
+                let s = RenderSettings {
+                    width: 32,
+                    height: 32,
+                    subsample: sub,
+                    ..RenderSettings::default()
+                };
+                render(&vol, &cam, &t, &s).unwrap().stats.voxels
+            })
+            .collect();
+        assert_eq!(counts, vec![32768, 4096, 512]);
+    }
+
+    /// F-W29: an all-transparent volume gives exactly the background.
+    #[test]
+    fn transparent_volume_is_background() {
+        let grid = Grid::with_dims([8, 8, 8]).unwrap();
+        let vol = Volume::new(grid.clone(), vec![0u8; 512]).unwrap();
+        let cam = camera_for(&grid, 10.0, 10.0, 0.0);
+        let out = render(
+            &vol,
+            &cam,
+            &tables(),
+            &RenderSettings {
+                width: 16,
+                height: 16,
+                ..RenderSettings::default()
+            },
+        )
+        .unwrap();
+        assert!(out.image.pixels().iter().all(|p| *p == [0.0; 4]));
+        assert_eq!(out.stats.splats, 0);
+    }
+
+    /// F-W25: kernel cost per splat grows from single-point to nearest to Gaussian; at scale 2,
+    /// axis-aligned, single-point touches 1 pixel and the Gaussian at most 9×9.
+    #[test]
+    fn kernel_costs_follow_the_thesis() {
+        let grid = Grid::with_dims([16, 16, 16]).unwrap();
+        let vol = Volume::new(grid.clone(), vec![200u8; 4096]).unwrap();
+        let mut cam = camera_for(&grid, 0.0, 0.0, 0.0);
+        cam.parallel_scale = 16.0; // 64 px for 32 world units: scale 2
+        let cost = |k: Kernel| {
+            let s = RenderSettings {
+                width: 64,
+                height: 64,
+                kernel: k,
+                opacity_cutoff: 1.0,
+                ..RenderSettings::default()
+            };
+            render(&vol, &cam, &tables(), &s)
+                .unwrap()
+                .stats
+                .kernel_cost()
+        };
+        let (p, n, g) = (
+            cost(Kernel::SinglePoint),
+            cost(Kernel::Nearest),
+            cost(Kernel::default()),
+        );
+        assert_eq!(p, 1.0);
+        assert!(n > 3.0 && n <= 9.0, "nearest {n}");
+        assert!(g > 50.0 && g <= 81.0, "gaussian {g}");
+    }
+
+    #[test]
+    fn bad_settings_are_errors() {
+        let vol = smooth_volume(4);
+        let cam = camera_for(vol.grid(), 0.0, 0.0, 0.0);
+        for s in [
+            RenderSettings {
+                width: 0,
+                ..RenderSettings::default()
+            },
+            RenderSettings {
+                subsample: 0,
+                ..RenderSettings::default()
+            },
+            RenderSettings {
+                kernel: Kernel::Gaussian {
+                    sigma: -1.0,
+                    radius: 2.0,
+                },
+                ..RenderSettings::default()
+            },
+        ] {
+            assert!(render(&vol, &cam, &tables(), &s).is_err());
+        }
+        let persp = Camera {
+            parallel_projection: false,
+            ..cam
+        };
+        let e = render(&vol, &persp, &tables(), &RenderSettings::default()).unwrap_err();
+        assert!(e.to_string().contains("parallel_projection"), "{e}");
+    }
+}
