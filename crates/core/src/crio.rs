@@ -99,7 +99,7 @@ impl<const N: usize> LookupTable<N> {
             return self.values[0];
         }
         let t = (x - self.lo) * self.scale;
-        if !(t > 0.0) {
+        if t.is_nan() || t <= 0.0 {
             return self.values[0];
         }
         let i = t as usize;
@@ -413,7 +413,7 @@ impl FrameClassifier {
     #[inline]
     pub fn classify(&self, s: &SampleInput) -> Option<[f32; 4]> {
         let a = self.opacity(s);
-        if !(a > 0.0) {
+        if a.is_nan() || a <= 0.0 {
             return None;
         }
         let a = a.min(1.0);

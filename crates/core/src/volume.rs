@@ -82,7 +82,7 @@ impl Grid {
             .to_cols_array()
             .iter()
             .fold(0.0f64, |m, v| m.max(v.abs()));
-        if !(err < 1e-3) {
+        if err.is_nan() || err >= 1e-3 {
             return Err(CoreError::invalid(
                 "direction",
                 direction.to_cols_array_2d(),

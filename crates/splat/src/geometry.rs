@@ -84,7 +84,7 @@ impl SplatGeometry {
         };
         let in_sheet_reversed = in_sheet_axes.map(|a| !increasing(a));
         let cos_a = cosines[sheet_axis];
-        if !(cos_a > 1e-9) {
+        if cos_a.is_nan() || cos_a <= 1e-9 {
             return Err(SplatError::Settings("degenerate view direction".into()));
         }
         let sheet_spacing = spacing[sheet_axis] / cos_a;

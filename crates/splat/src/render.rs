@@ -346,7 +346,7 @@ fn validate(s: &RenderSettings) -> Result<()> {
     if s.band_height == 0 || s.sheets_per_batch == 0 {
         return bad("band_height and sheets_per_batch must be ≥ 1");
     }
-    if !(s.opacity_cutoff > 0.0) {
+    if s.opacity_cutoff.is_nan() || s.opacity_cutoff <= 0.0 {
         return bad("opacity_cutoff must be > 0");
     }
     if s.footprint.table_side == 0 || s.footprint.max_phases == 0 {
@@ -475,7 +475,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     RenderMode::Composite => {
                         if self.cull
                             && let Some(a) = self.classifier.density_opacity(density)
-                            && !(a > 0.0)
+                            && (a.is_nan() || a <= 0.0)
                         {
                             continue;
                         }

@@ -1,1 +1,35 @@
-//! placeholder
+//! # volsplat-testkit
+//!
+//! Dev-only test oracles for volsplat (DESIGN.md §6.5: oracle tests before golden images).
+//!
+//! - [`reference`](mod@reference): the brute-force orthographic ray integrator — X-ray
+//!   ([`reference_xray`]), MIP / MinIP ([`reference_mip`], [`reference_minip`]) and CRIO
+//!   compositing ([`reference_composite`]) by marching each pixel's ray through the trilinear
+//!   field — and the closed-form X-ray image of a phantom ([`analytic_xray`]). It shares no code
+//!   with the splatting renderer beyond the core types and the CRIO classifier.
+//! - [`metrics`](mod@metrics): [`mse`], [`psnr`], [`relative_l2`], [`ssim_gray`] and helpers
+//!   that turn a premultiplied [`Image`](volsplat_core::Image) into comparable channels
+//!   ([`image_rgb_over`], [`image_psnr`], [`luminance`]).
+//! - [`phantom`](mod@phantom): re-export of [`volsplat_core::phantom`] (Gaussian blobs, the
+//!   3-D Shepp–Logan phantom, a CT head, Marschner–Lobb; closed-form line integrals; sampling
+//!   into volumes).
+//!
+//! Frames and units follow DESIGN.md §3: world units are the volume's (usually mm), images have
+//! row 0 at the top and pixel centres at half integers, colour is premultiplied. Everything is
+//! deterministic: parallel loops (rayon, over image rows) compute each pixel independently.
+#![deny(missing_docs)]
+
+pub mod metrics;
+pub mod reference;
+
+pub use volsplat_core::phantom;
+
+pub use metrics::{image_psnr, image_rgb_over, luminance, mse, psnr, relative_l2, ssim_gray};
+pub use reference::{
+    ReferenceSettings, analytic_xray, ray_box_interval, reference_composite, reference_minip,
+    reference_mip, reference_xray, trilinear, voxel_gradients,
+};
+pub use volsplat_core::phantom::{
+    Blob, Ellipsoid, EllipsoidPhantom, GaussianBlobs, MarschnerLobb, Phantom, ct_head_volume,
+    sample, sample_on_grid,
+};

@@ -1,0 +1,214 @@
+//! Command-line arguments.
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// Volume rendering by splatting (Westover 1991).
+#[derive(Debug, Parser)]
+#[command(name = "volsplat", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Render a volume (or the built-in demo phantom) to a PNG or .npy image.
+    Render(Box<RenderArgs>),
+    /// Print a volume's dimensions, type, spacing, orientation and value range.
+    Info(InfoArgs),
+    /// Write a built-in phantom as an NRRD file.
+    Phantom(PhantomArgs),
+    /// Time repeated renders of an orbit around the volume; prints the median per frame.
+    Bench(Box<BenchArgs>),
+}
+
+/// Built-in phantoms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PhantomKind {
+    /// CT-like head in Hounsfield units (i16), face towards +z, top towards +y.
+    Head,
+    /// 3-D modified Shepp–Logan phantom (f32).
+    SheppLogan,
+    /// Gaussian blobs (f32) with closed-form line integrals.
+    Blobs,
+    /// Marschner–Lobb test function (f32, f_M = 6, α = 0.25).
+    MarschnerLobb,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    Composite,
+    Mip,
+    Minip,
+    Xray,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum VisibilityArg {
+    /// Sheet buffers (Westover 1990/91).
+    Sheet,
+    /// Composite every sample (Westover 1989; bleeds).
+    Every,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OrderArg {
+    Ftb,
+    Btf,
+}
+
+/// Where the volume comes from.
+#[derive(Debug, Args)]
+pub struct InputArgs {
+    /// Volume file (.nrrd, .nhdr, .mha, .mhd, or raw with --raw-dims). Omit for the demo phantom.
+    pub input: Option<PathBuf>,
+    /// Built-in phantom to use when no INPUT is given.
+    #[arg(long, value_enum, default_value = "head")]
+    pub phantom: PhantomKind,
+    /// Phantom grid size: N (cube) or X,Y,Z.
+    #[arg(long, value_name = "N|X,Y,Z")]
+    pub phantom_size: Option<String>,
+    /// Headerless raw input: dimensions X,Y,Z.
+    #[arg(long, value_name = "X,Y,Z")]
+    pub raw_dims: Option<String>,
+    /// Headerless raw input: sample type (u8, i8, u16, i16, f32).
+    #[arg(long, default_value = "u8")]
+    pub raw_type: String,
+    /// Headerless raw input: spacing X,Y,Z in world units.
+    #[arg(long, value_name = "X,Y,Z", default_value = "1,1,1")]
+    pub raw_spacing: String,
+    /// Headerless raw input: big-endian samples.
+    #[arg(long)]
+    pub raw_big_endian: bool,
+    /// Headerless raw input: bytes to skip at the start of the file.
+    #[arg(long, default_value_t = 0)]
+    pub raw_skip: u64,
+}
+
+/// Camera and view.
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// Camera JSON file (VTK semantics; DESIGN.md §3). Overrides --azimuth/--elevation/--zoom.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Degrees about the view-up axis, from VTK's reset view (looking down −z, +y up).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub azimuth: f64,
+    /// Degrees up over the focal point (VTK's Elevation).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub elevation: f64,
+    /// Degrees about the view direction (VTK's Roll).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub roll: f64,
+    /// Magnification (VTK's Zoom: divides the parallel scale).
+    #[arg(long, default_value_t = 1.0)]
+    pub zoom: f64,
+    /// Write the camera actually used to this JSON file.
+    #[arg(long)]
+    pub save_camera: Option<PathBuf>,
+}
+
+/// Classification and rendering options.
+#[derive(Debug, Args)]
+pub struct RenderOptions {
+    /// Image size WxH in pixels.
+    #[arg(long, default_value = "512x512")]
+    pub size: String,
+    /// Ray function.
+    #[arg(long, value_enum, default_value = "composite")]
+    pub mode: ModeArg,
+    /// Transfer-function JSON file (VTK terms; DESIGN.md §3).
+    #[arg(long, conflicts_with = "preset")]
+    pub tf: Option<PathBuf>,
+    /// Built-in transfer function: ct-bone, ct-skin, mr, ramp. Default: ct-skin for the demo
+    /// head, otherwise a ramp over the data range.
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Reconstruction kernel: gaussian, point, nearest, tent, bspline, catmull-rom, mitchell.
+    #[arg(long, default_value = "gaussian")]
+    pub kernel: String,
+    /// Sheet buffers or composite-every-sample.
+    #[arg(long, value_enum, default_value = "sheet")]
+    pub visibility: VisibilityArg,
+    /// Traversal order.
+    #[arg(long, value_enum, default_value = "ftb")]
+    pub order: OrderArg,
+    /// Splat every N-th voxel per axis (successive refinement preview).
+    #[arg(long, default_value_t = 1)]
+    pub subsample: usize,
+    /// Surface enhancement: modulate opacity by a 0→1 ramp on gradient magnitude LO:HI
+    /// (data units per world unit). Replaces gradient opacity.
+    #[arg(long, value_name = "LO:HI")]
+    pub surface_enhance: Option<String>,
+    /// Depth cueing: modulate opacity from NEAR (front) to FAR (back), both in [0, 1].
+    #[arg(long, value_name = "NEAR:FAR")]
+    pub depth_cue: Option<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Output image: .png (8-bit sRGB, or 16-bit with --bits 16) or .npy (float32 H×W×4,
+    /// premultiplied; H×W line integrals for --mode xray).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub view: ViewArgs,
+    #[command(flatten)]
+    pub options: RenderOptions,
+    /// PNG bit depth (8 or 16).
+    #[arg(long, default_value_t = 8)]
+    pub bits: u8,
+    /// Write linear values to PNG instead of sRGB-encoding them.
+    #[arg(long)]
+    pub linear: bool,
+    /// Background colour R,G,B in [0, 1] (linear), composited under the image.
+    #[arg(long, default_value = "0,0,0")]
+    pub background: String,
+    /// Also write the successive-refinement previews (every 4th and 2nd voxel) next to OUTPUT.
+    #[arg(long)]
+    pub ladder: bool,
+    /// Print per-stage timings and counters as one JSON object on stdout.
+    #[arg(long)]
+    pub stats: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct InfoArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct PhantomArgs {
+    /// Which phantom.
+    #[arg(value_enum)]
+    pub kind: PhantomKind,
+    /// Output NRRD file.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Grid size: N (cube) or X,Y,Z.
+    #[arg(long, default_value = "128")]
+    pub size: String,
+    /// Gzip the payload.
+    #[arg(long)]
+    pub gzip: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    #[command(flatten)]
+    pub view: ViewArgs,
+    #[command(flatten)]
+    pub options: RenderOptions,
+    /// Frames to time (orbiting by 360/frames degrees of azimuth each), after one warm-up frame.
+    #[arg(long, default_value_t = 8)]
+    pub frames: usize,
+}

@@ -1,0 +1,436 @@
+//! The subcommands: glue between arguments and the libraries.
+
+use crate::args::*;
+use anyhow::{Context, Result, anyhow, bail};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use volsplat_core::phantom::{self, EllipsoidPhantom, GaussianBlobs, MarschnerLobb};
+use volsplat_core::{AnyVolume, Camera, CrioTables, Kernel, ScalarType, TransferFunction};
+use volsplat_io::{PngBitDepth, PngSettings, RawSpec};
+use volsplat_splat::refine::{default_ladder, render_ladder};
+use volsplat_splat::{Order, RenderMode, RenderSettings, Rendered, Visibility, render_any};
+
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Render(a) => render_cmd(*a),
+        Command::Info(a) => info_cmd(a),
+        Command::Phantom(a) => phantom_cmd(a),
+        Command::Bench(a) => bench_cmd(*a),
+    }
+}
+
+/// Parses "A,B,C" into three numbers, naming the flag on error.
+fn triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        bail!("{flag}: expected three comma-separated values, got `{s}`");
+    }
+    let mut out = Vec::with_capacity(3);
+    for p in parts {
+        out.push(
+            p.parse::<T>()
+                .map_err(|_| anyhow!("{flag}: `{p}` is not a valid number"))?,
+        );
+    }
+    out.try_into()
+        .map_err(|_| anyhow!("{flag}: expected three values"))
+}
+
+fn pair(s: &str, sep: char, flag: &str) -> Result<(f64, f64)> {
+    let (a, b) = s
+        .split_once(sep)
+        .ok_or_else(|| anyhow!("{flag}: expected A{sep}B, got `{s}`"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .map_err(|_| anyhow!("{flag}: `{v}` is not a number"))
+    };
+    Ok((p(a)?, p(b)?))
+}
+
+fn grid_size(s: &str, flag: &str) -> Result<[usize; 3]> {
+    let dims = if s.contains(',') {
+        triple::<usize>(s, flag)?
+    } else {
+        let n: usize = s
+            .trim()
+            .parse()
+            .map_err(|_| anyhow!("{flag}: `{s}` is not a size"))?;
+        [n; 3]
+    };
+    if dims.iter().any(|d| !(2..=4096).contains(d)) {
+        bail!("{flag}: each size must be in 2..=4096, got {dims:?}");
+    }
+    Ok(dims)
+}
+
+fn make_phantom(kind: PhantomKind, size: Option<&str>) -> Result<AnyVolume> {
+    let dims = match size {
+        Some(s) => grid_size(s, "--phantom-size")?,
+        None => match kind {
+            PhantomKind::Head => [128, 160, 144],
+            _ => [128; 3],
+        },
+    };
+    Ok(match kind {
+        PhantomKind::Head => phantom::ct_head_volume(dims)?.into(),
+        PhantomKind::SheppLogan => {
+            phantom::sample(&EllipsoidPhantom::shepp_logan_3d(), dims, 2)?.into()
+        }
+        PhantomKind::Blobs => phantom::sample(&GaussianBlobs::demo(), dims, 1)?.into(),
+        PhantomKind::MarschnerLobb => phantom::sample(
+            &MarschnerLobb {
+                f_m: 6.0,
+                alpha: 0.25,
+            },
+            dims,
+            1,
+        )?
+        .into(),
+    })
+}
+
+/// Loads the input volume; returns it with a label for messages.
+fn load_volume(a: &InputArgs) -> Result<(AnyVolume, String)> {
+    match &a.input {
+        None => Ok((
+            make_phantom(a.phantom, a.phantom_size.as_deref())?,
+            format!("demo phantom `{:?}`", a.phantom),
+        )),
+        Some(path) => {
+            let vol = if let Some(dims) = &a.raw_dims {
+                let spec = RawSpec {
+                    dims: triple::<usize>(dims, "--raw-dims")?,
+                    scalar_type: ScalarType::from_name(&a.raw_type).context("--raw-type")?,
+                    spacing: triple::<f64>(&a.raw_spacing, "--raw-spacing")?,
+                    origin: [0.0; 3],
+                    big_endian: a.raw_big_endian,
+                    header_bytes: a.raw_skip,
+                };
+                volsplat_io::read_raw(path, &spec)?
+            } else {
+                volsplat_io::read_volume(path)?
+            };
+            Ok((vol, path.display().to_string()))
+        }
+    }
+}
+
+fn build_camera(v: &ViewArgs, vol: &AnyVolume) -> Result<Camera> {
+    if let Some(path) = &v.camera {
+        let (cam, warnings) = volsplat_io::load_camera(path)?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        return Ok(cam);
+    }
+    if !(v.zoom.is_finite() && v.zoom > 0.0) {
+        bail!("--zoom must be a positive number, got {}", v.zoom);
+    }
+    for (flag, x) in [
+        ("--azimuth", v.azimuth),
+        ("--elevation", v.elevation),
+        ("--roll", v.roll),
+    ] {
+        if !x.is_finite() {
+            bail!("{flag} must be a finite number of degrees");
+        }
+    }
+    let (lo, hi) = vol.grid().bounds_world();
+    let mut cam = Camera::reset_to_bounds(lo, hi, true);
+    cam.azimuth(v.azimuth);
+    cam.elevation(v.elevation);
+    cam.orthogonalize_view_up();
+    cam.roll(v.roll);
+    cam.zoom(v.zoom);
+    Ok(cam)
+}
+
+fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTables> {
+    let range = vol.value_range();
+    let tf = if let Some(path) = &o.tf {
+        let (tf, warnings) = volsplat_io::load_transfer_function(path)?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        tf
+    } else {
+        let name = o.preset.clone().unwrap_or_else(|| {
+            if demo {
+                "ct-skin".into()
+            } else {
+                "ramp".into()
+            }
+        });
+        TransferFunction::preset(&name, range)?
+    };
+    let mut tables =
+        CrioTables::from_transfer_function(&tf, volsplat_core::crio::DEFAULT_TABLE_LEN)?;
+    if let Some(s) = &o.surface_enhance {
+        let (lo, hi) = pair(s, ':', "--surface-enhance")?;
+        tables = tables.with_surface_enhancement(lo, hi)?;
+    }
+    if let Some(s) = &o.depth_cue {
+        let (near, far) = pair(s, ':', "--depth-cue")?;
+        tables = tables.with_depth_cue(near, far)?;
+    }
+    Ok(tables)
+}
+
+fn build_settings(o: &RenderOptions) -> Result<RenderSettings> {
+    let (w, h) = o
+        .size
+        .split_once(['x', 'X'])
+        .ok_or_else(|| anyhow!("--size: expected WxH, got `{}`", o.size))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<usize>()
+            .map_err(|_| anyhow!("--size: `{v}` is not a pixel count"))
+    };
+    let (width, height) = (parse(w)?, parse(h)?);
+    if width == 0 || height == 0 || width > 16384 || height > 16384 {
+        bail!("--size: width and height must be in 1..=16384, got {width}x{height}");
+    }
+    if !matches!(o.subsample, 1..=64) {
+        bail!("--subsample must be in 1..=64, got {}", o.subsample);
+    }
+    Ok(RenderSettings {
+        width,
+        height,
+        mode: match o.mode {
+            ModeArg::Composite => RenderMode::Composite,
+            ModeArg::Mip => RenderMode::Mip,
+            ModeArg::Minip => RenderMode::Minip,
+            ModeArg::Xray => RenderMode::Xray,
+        },
+        visibility: match o.visibility {
+            VisibilityArg::Sheet => Visibility::SheetBuffer,
+            VisibilityArg::Every => Visibility::EverySample,
+        },
+        order: match o.order {
+            OrderArg::Ftb => Order::FrontToBack,
+            OrderArg::Btf => Order::BackToFront,
+        },
+        kernel: Kernel::from_name(&o.kernel)?,
+        subsample: o.subsample,
+        ..RenderSettings::default()
+    })
+}
+
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        if n == 0 || n > 1024 {
+            bail!("--threads must be in 1..=1024, got {n}");
+        }
+        b = b.num_threads(n);
+    }
+    Ok(b.build()?)
+}
+
+fn write_output(path: &Path, out: &Rendered, a: &RenderArgs) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("png") => {
+            let bits = PngBitDepth::from_bits(a.bits as u32)
+                .ok_or_else(|| anyhow!("--bits must be 8 or 16, got {}", a.bits))?;
+            if let (RenderMode::Xray, Some(values)) = (out_mode(a), &out.values) {
+                let max = values.values().iter().fold(0.0f32, |m, &v| m.max(v));
+                volsplat_io::write_png_gray(path, values, 0.0, max.max(f32::MIN_POSITIVE), bits)?;
+            } else {
+                let settings = PngSettings {
+                    bits,
+                    srgb: !a.linear,
+                    background: triple::<f32>(&a.background, "--background")?,
+                };
+                volsplat_io::write_png(path, &out.image, &settings)?;
+            }
+        }
+        Some("npy") => match (out_mode(a), &out.values) {
+            (RenderMode::Xray, Some(values)) => volsplat_io::write_npy_scalar(path, values)?,
+            _ => volsplat_io::write_npy_rgba(path, &out.image)?,
+        },
+        _ => bail!(
+            "output `{}`: unknown extension; use .png or .npy",
+            path.display()
+        ),
+    }
+    Ok(())
+}
+
+fn out_mode(a: &RenderArgs) -> RenderMode {
+    match a.options.mode {
+        ModeArg::Composite => RenderMode::Composite,
+        ModeArg::Mip => RenderMode::Mip,
+        ModeArg::Minip => RenderMode::Minip,
+        ModeArg::Xray => RenderMode::Xray,
+    }
+}
+
+fn stats_json(out: &Rendered, settings: &RenderSettings, load_ms: f64) -> serde_json::Value {
+    let s = &out.stats;
+    json!({
+        "load_ms": load_ms,
+        "setup_ms": s.setup_ms,
+        "classify_ms": s.classify_ms,
+        "splat_ms": s.splat_ms,
+        "composite_ms": s.composite_ms,
+        "total_ms": s.total_ms,
+        "voxels": s.voxels,
+        "splats": s.splats,
+        "splats_terminated": s.splats_terminated,
+        "pixel_updates": s.pixel_updates,
+        "kernel_cost": s.kernel_cost(),
+        "kernel": settings.kernel.name(),
+        "sheets": s.sheets,
+        "sheet_axis": (["i", "j", "k"].get(s.sheet_axis).copied().unwrap_or("?")),
+        "sheet_spacing": s.sheet_spacing,
+        "footprint_entries": s.footprint_entries,
+        "footprint_phases": s.footprint_phases,
+        "footprint_half_extent_px": s.footprint_half_extent,
+        "threads": s.threads,
+        "width": settings.width,
+        "height": settings.height,
+    })
+}
+
+fn render_cmd(a: RenderArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let (vol, label) = load_volume(&a.input)?;
+    let load_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let demo = a.input.input.is_none() && a.input.phantom == PhantomKind::Head;
+    let camera = build_camera(&a.view, &vol)?;
+    if let Some(p) = &a.view.save_camera {
+        volsplat_io::save_camera(p, &camera)?;
+    }
+    let tables = build_tables(&a.options, &vol, demo)?;
+    let settings = build_settings(&a.options)?;
+    let pool = thread_pool(a.options.threads)?;
+    let out = pool.install(|| -> Result<Rendered> {
+        if a.ladder {
+            let ladder = default_ladder(settings.kernel);
+            let last = ladder.len() - 1;
+            let mut err = None;
+            let out = volsplat_core::with_volume!(&vol, v => render_ladder(v, &camera, &tables, &settings, &ladder, &mut |n, r| {
+                if n < last {
+                    let p = preview_path(&a.output, ladder[n].subsample);
+                    if let Err(e) = write_output(&p, r, &a) {
+                        err = Some(e);
+                        return false;
+                    }
+                    eprintln!("preview {}: {} ({:.1} ms)", n + 1, p.display(), r.stats.total_ms);
+                }
+                true
+            }))?;
+            if let Some(e) = err {
+                return Err(e);
+            }
+            Ok(out)
+        } else {
+            Ok(render_any(&vol, &camera, &tables, &settings)?)
+        }
+    })
+    .with_context(|| format!("rendering {label}"))?;
+    write_output(&a.output, &out, &a).with_context(|| format!("writing {}", a.output.display()))?;
+    if a.stats {
+        println!("{}", stats_json(&out, &settings, load_ms));
+    }
+    Ok(())
+}
+
+fn preview_path(output: &Path, subsample: usize) -> PathBuf {
+    let stem = output.file_stem().and_then(|s| s.to_str()).unwrap_or("out");
+    let ext = output.extension().and_then(|s| s.to_str()).unwrap_or("png");
+    output.with_file_name(format!("{stem}.preview-s{subsample}.{ext}"))
+}
+
+fn info_cmd(a: InfoArgs) -> Result<()> {
+    let (vol, label) = load_volume(&a.input)?;
+    let g = vol.grid();
+    let (lo, hi) = vol.value_range();
+    let (blo, bhi) = g.bounds_world();
+    let d = g.direction;
+    println!("source:    {label}");
+    println!("type:      {}", vol.scalar_type().name());
+    println!(
+        "dims:      {} x {} x {} ({} voxels)",
+        g.dims[0],
+        g.dims[1],
+        g.dims[2],
+        g.voxel_count()
+    );
+    println!(
+        "spacing:   {} {} {}",
+        g.spacing[0], g.spacing[1], g.spacing[2]
+    );
+    println!("origin:    {} {} {}", g.origin[0], g.origin[1], g.origin[2]);
+    for (n, c) in ["i", "j", "k"].iter().enumerate() {
+        let col = d.col(n);
+        println!("axis {c}:    ({:.6}, {:.6}, {:.6})", col.x, col.y, col.z);
+    }
+    println!(
+        "bounds:    ({:.3}, {:.3}, {:.3}) .. ({:.3}, {:.3}, {:.3})",
+        blo.x, blo.y, blo.z, bhi.x, bhi.y, bhi.z
+    );
+    println!("range:     {lo} .. {hi}");
+    Ok(())
+}
+
+fn phantom_cmd(a: PhantomArgs) -> Result<()> {
+    let dims = grid_size(&a.size, "--size")?;
+    let vol = make_phantom(
+        a.kind,
+        Some(&format!("{},{},{}", dims[0], dims[1], dims[2])),
+    )?;
+    volsplat_io::write_nrrd(&a.output, &vol, a.gzip)?;
+    let g = vol.grid();
+    eprintln!(
+        "wrote {} ({:?}, {} {:?})",
+        a.output.display(),
+        g.dims,
+        vol.scalar_type().name(),
+        g.spacing
+    );
+    Ok(())
+}
+
+fn bench_cmd(a: BenchArgs) -> Result<()> {
+    if a.frames == 0 {
+        bail!("--frames must be ≥ 1");
+    }
+    let (vol, label) = load_volume(&a.input)?;
+    let demo = a.input.input.is_none() && a.input.phantom == PhantomKind::Head;
+    let mut camera = build_camera(&a.view, &vol)?;
+    let tables = build_tables(&a.options, &vol, demo)?;
+    let settings = build_settings(&a.options)?;
+    let pool = thread_pool(a.options.threads)?;
+    let mut times = Vec::with_capacity(a.frames);
+    let mut last = None;
+    pool.install(|| -> Result<()> {
+        render_any(&vol, &camera, &tables, &settings)?; // warm-up
+        for _ in 0..a.frames {
+            camera.azimuth(360.0 / a.frames as f64);
+            let out = render_any(&vol, &camera, &tables, &settings)?;
+            times.push(out.stats.total_ms);
+            last = Some(out);
+        }
+        Ok(())
+    })?;
+    let mut sorted = times.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let mut j = last
+        .map(|o| stats_json(&o, &settings, 0.0))
+        .unwrap_or(json!({}));
+    j["input"] = json!(label);
+    j["frames_ms"] = json!(times);
+    j["median_ms"] = json!(median);
+    j["min_ms"] = json!(sorted[0]);
+    j["max_ms"] = json!(sorted[sorted.len() - 1]);
+    println!("{j}");
+    Ok(())
+}

@@ -1,0 +1,123 @@
+//! Atomic file replacement: write a temporary file in the target's directory, then rename it over
+//! the target. Readers never see a half-written file; on error the temporary file is removed and
+//! an existing target is left untouched.
+
+use crate::error::{IoError, Result};
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Creates a fresh temporary file next to `path` (same directory, so the final rename stays on one
+/// file system).
+fn create_temp(path: &Path) -> Result<(PathBuf, File)> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| IoError::invalid_argument(path, "output path", "has no file name"))?;
+    let pid = std::process::id();
+    let mut last_err = None;
+    for _ in 0..16 {
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let tmp = dir.join(format!(".{name}.tmp-{pid}-{n}"));
+        match OpenOptions::new().write(true).create_new(true).open(&tmp) {
+            Ok(f) => return Ok((tmp, f)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => last_err = Some(e),
+            Err(e) => return Err(IoError::os(path, "create temporary file", e)),
+        }
+    }
+    Err(IoError::os(
+        path,
+        "create temporary file",
+        last_err.unwrap_or_else(|| std::io::Error::other("no free temporary name")),
+    ))
+}
+
+/// Writes `path` atomically: `write` fills a buffered temporary file, which is flushed, synced and
+/// renamed over `path`. On any error the temporary file is removed and `path` is unchanged.
+pub(crate) fn write_atomic<F>(path: &Path, write: F) -> Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> Result<()>,
+{
+    let (tmp, file) = create_temp(path)?;
+    let result = (|| {
+        let mut w = BufWriter::new(file);
+        write(&mut w)?;
+        w.flush().map_err(|e| IoError::os(path, "write", e))?;
+        let file = w
+            .into_inner()
+            .map_err(|e| IoError::os(path, "write", e.into_error()))?;
+        file.sync_all().map_err(|e| IoError::os(path, "sync", e))?;
+        drop(file);
+        std::fs::rename(&tmp, path).map_err(|e| IoError::os(path, "rename temporary file", e))
+    })();
+    if result.is_err() {
+        // Best effort: the temporary file may not exist any more if the rename half-succeeded.
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Maps a write error inside [`write_atomic`]'s closure.
+pub(crate) fn write_err(path: &Path) -> impl Fn(std::io::Error) -> IoError + '_ {
+    move |e| IoError::os(path, "write", e)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn missing_directory_fails_and_leaves_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("no_such_dir").join("out.bin");
+        let e =
+            write_atomic(&target, |w| w.write_all(b"x").map_err(write_err(&target))).unwrap_err();
+        assert!(e.to_string().contains("out.bin"), "{e}");
+        assert!(!target.exists());
+        assert!(entries(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn existing_file_is_replaced_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.bin");
+        std::fs::write(&target, vec![7u8; 1000]).unwrap();
+        write_atomic(&target, |w| {
+            w.write_all(b"short").map_err(write_err(&target))
+        })
+        .unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"short");
+        assert_eq!(entries(dir.path()), vec!["out.bin".to_string()]);
+    }
+
+    #[test]
+    fn failing_writer_keeps_old_content_and_removes_temp() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.bin");
+        std::fs::write(&target, b"old").unwrap();
+        let e = write_atomic(&target, |w| {
+            w.write_all(b"partial").map_err(write_err(&target))?;
+            Err(IoError::invalid_argument(&target, "test", "forced failure"))
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("forced failure"));
+        assert_eq!(std::fs::read(&target).unwrap(), b"old");
+        assert_eq!(entries(dir.path()), vec!["out.bin".to_string()]);
+    }
+}

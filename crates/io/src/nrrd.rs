@@ -1,0 +1,1446 @@
+//! NRRD volumes (Teem's "nearly raw raster data", <http://teem.sourceforge.net/nrrd/format.html>):
+//! reading attached (`.nrrd`) and detached (`.nhdr`) headers, and writing attached files.
+//!
+//! # What is read
+//!
+//! - Magic `NRRD0001` … `NRRD0005`; `#` comments and `key:=value` pairs are ignored, as are
+//!   informational fields (`content`, `kinds`, `centers`, `units`, `labels`, `min`, `max`, …).
+//! - `dimension` must be 3; `sizes` gives the grid dimensions (i fastest, as in NRRD).
+//! - `type`: `uint8`/`uchar`/`unsigned char`, `int8`/`signed char`, `uint16`/`ushort`/
+//!   `unsigned short`, `int16`/`short`, `float` and their other Teem spellings are read as is.
+//!   `int32`/`int`, `uint32`/`uint` and `double` are **converted to `f32`** (integers above
+//!   2²⁴ in magnitude and doubles lose precision; doubles outside the `f32` range are an error).
+//!   64-bit integers and `block` are rejected.
+//! - `encoding`: `raw`, `gzip`/`gz`, and `ascii`/`text`/`txt`. Others (`bzip2`, `hex`, …) are
+//!   rejected. `endian` (`little`/`big`) is required for multi-byte binary types.
+//! - Geometry: `space directions` (vectors such as `(1,0,0)`, or `none`) give per-axis spacing
+//!   (the vector's length, world units) and direction (the normalised vector, one column of
+//!   [`Grid::direction`]); `spacings` is used for axes without a direction vector (`nan` → 1);
+//!   `space origin` gives the world position of voxel (0,0,0) (default 0). The world frame is the
+//!   file's `space` as written: **no LPS/RAS flip is applied** (as in VTK's NRRD reader). The
+//!   directions must be orthogonal (sheared grids are rejected). Only 3-D spaces are accepted
+//!   (`space` such as `RAS`, `LPS`, `scanner-xyz`, `3D-right-handed`, or `space dimension: 3`).
+//! - Data: attached after the blank line ending the header, or in `data file` (`datafile`),
+//!   resolved relative to the header's directory; `LIST` and numbered multi-file forms are
+//!   rejected. `line skip` counts lines of the data file (before decompression); `byte skip`
+//!   counts bytes after them (after decompression for gzip); `byte skip: -1` (raw only) means
+//!   the samples are the last bytes of the file. Trailing data after the samples is ignored.
+//!
+//! # Limits
+//!
+//! Header at most [`crate::MAX_HEADER_BYTES`]; voxel count at most
+//! [`volsplat_core::volume::MAX_VOXELS`] (checked from `sizes` before anything is allocated); a raw
+//! payload must hold at least the needed bytes (checked against the file size before
+//! allocating); a gzip payload is never inflated past the needed size.
+
+use crate::atomic::{write_atomic, write_err};
+use crate::error::{IoError, Result};
+use crate::header::{
+    LineAction, normalize_words, parse_finite, parse_numbers, read_header, resolve_data_path,
+};
+use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use volsplat_core::glam::{DMat3, DVec3};
+use volsplat_core::volume::MAX_VOXELS;
+use volsplat_core::{AnyVolume, CoreError, Grid, with_volume};
+
+/// The `type` spellings accepted, for error messages.
+const SUPPORTED_TYPES: &str = "uint8 (uchar, unsigned char), int8 (signed char), \
+     uint16 (ushort, unsigned short), int16 (short), float; converted to float: \
+     int32 (int), uint32 (uint), double";
+const SUPPORTED_ENCODINGS: &str = "raw, gzip (gz), ascii (text, txt)";
+
+/// One `field: value` line.
+struct Field {
+    line: usize,
+    /// The field name as written (trimmed), for messages.
+    name: String,
+    value: String,
+}
+
+/// Reads a NRRD volume (attached `.nrrd` or detached `.nhdr` header) into a runtime-typed volume.
+///
+/// World space is the file's space as written (see the [module documentation](self) for the
+/// fields, conversions and limits). Errors name the file, the header field and its value.
+pub fn read_nrrd(path: impl AsRef<Path>) -> Result<AnyVolume> {
+    let path = path.as_ref();
+    let header = read_header(path, |n, line| {
+        if n > 1 && line.trim().is_empty() {
+            LineAction::EndBefore
+        } else {
+            LineAction::Keep
+        }
+    })?;
+    let mut lines = header.lines.iter();
+    match lines.next() {
+        Some((_, magic)) if is_nrrd_magic(magic) => {}
+        Some((n, magic)) => {
+            return Err(IoError::Syntax {
+                path: path.to_path_buf(),
+                line: *n,
+                text: crate::error::clip(magic),
+                reason: "not a NRRD file (expected magic NRRD0001 … NRRD0005)".into(),
+            });
+        }
+        None => {
+            return Err(IoError::Syntax {
+                path: path.to_path_buf(),
+                line: 1,
+                text: String::new(),
+                reason: "empty file; not a NRRD file".into(),
+            });
+        }
+    }
+
+    let mut fields: HashMap<String, Field> = HashMap::new();
+    for (n, text) in lines {
+        if text.starts_with('#') || text.trim().is_empty() {
+            continue;
+        }
+        let key_value = text.find(":=");
+        let colon = text.find(':');
+        let Some(colon) = colon else {
+            return Err(IoError::Syntax {
+                path: path.to_path_buf(),
+                line: *n,
+                text: crate::error::clip(text),
+                reason: "expected `field: value`, `key:=value` or a `#` comment".into(),
+            });
+        };
+        if key_value == Some(colon) {
+            continue; // key:=value pair: free-form metadata, ignored.
+        }
+        let name = text[..colon].trim().to_string();
+        let value = text[colon + 1..].trim().to_string();
+        if name.is_empty() {
+            return Err(IoError::Syntax {
+                path: path.to_path_buf(),
+                line: *n,
+                text: crate::error::clip(text),
+                reason: "empty field name".into(),
+            });
+        }
+        let canon = canonical_field(&name);
+        if let Some(prev) = fields.get(&canon) {
+            return Err(IoError::Syntax {
+                path: path.to_path_buf(),
+                line: *n,
+                text: crate::error::clip(text),
+                reason: format!("field `{name}` given twice (first on line {})", prev.line),
+            });
+        }
+        fields.insert(
+            canon,
+            Field {
+                line: *n,
+                name,
+                value,
+            },
+        );
+    }
+    let get = |canon: &str| fields.get(canon);
+    let require = |canon: &str, name: &str| get(canon).ok_or_else(|| IoError::missing(path, name));
+
+    // dimension
+    let dim = require("dimension", "dimension")?;
+    let d: usize = dim
+        .value
+        .parse()
+        .map_err(|_| IoError::field(path, &dim.name, &dim.value, "not a whole number"))?;
+    if d != 3 {
+        return Err(IoError::field(
+            path,
+            &dim.name,
+            &dim.value,
+            "only 3-D volumes are supported (dimension must be 3)",
+        ));
+    }
+
+    // sizes, checked against the voxel limit before anything else.
+    let sizes_f = require("sizes", "sizes")?;
+    let sizes: [u64; 3] = parse_numbers(
+        path,
+        &sizes_f.name,
+        &sizes_f.value,
+        "a whole number ≥ 1",
+        |t| t.parse::<u64>().ok().filter(|&v| v > 0),
+    )?;
+    let count: u128 = sizes.iter().map(|&s| s as u128).product();
+    if count > MAX_VOXELS {
+        return Err(IoError::TooLarge {
+            path: path.to_path_buf(),
+            what: format!("voxel count from field `sizes` ({})", sizes_f.value),
+            value: count,
+            limit: MAX_VOXELS,
+        });
+    }
+    // Each size is ≤ MAX_VOXELS, so it fits in usize on 64-bit targets; check anyway.
+    let mut dims = [0usize; 3];
+    for (d, &s) in dims.iter_mut().zip(&sizes) {
+        *d = usize::try_from(s).map_err(|_| {
+            IoError::field(
+                path,
+                &sizes_f.name,
+                &sizes_f.value,
+                "too large for this platform",
+            )
+        })?;
+    }
+
+    // type
+    let type_f = require("type", "type")?;
+    let file_type = parse_type(&type_f.value)
+        .ok_or_else(|| IoError::unsupported(path, &type_f.name, &type_f.value, SUPPORTED_TYPES))?;
+
+    // encoding
+    let enc_f = require("encoding", "encoding")?;
+    let encoding = match normalize_words(&enc_f.value).as_str() {
+        "raw" => Encoding::Raw,
+        "gzip" | "gz" => Encoding::Gzip,
+        "ascii" | "text" | "txt" => Encoding::Ascii,
+        _ => {
+            return Err(IoError::unsupported(
+                path,
+                &enc_f.name,
+                &enc_f.value,
+                SUPPORTED_ENCODINGS,
+            ));
+        }
+    };
+
+    // endian
+    let big_endian = match get("endian") {
+        Some(f) => match normalize_words(&f.value).as_str() {
+            "little" => false,
+            "big" => true,
+            _ => {
+                return Err(IoError::field(
+                    path,
+                    &f.name,
+                    &f.value,
+                    "must be `little` or `big`",
+                ));
+            }
+        },
+        None if file_type.size_bytes() > 1 && encoding != Encoding::Ascii => {
+            return Err(IoError::missing(path, "endian"));
+        }
+        None => false,
+    };
+
+    let grid = parse_geometry(path, &fields, dims)?;
+
+    // skips
+    let line_skip = match get("lineskip") {
+        Some(f) => f
+            .value
+            .parse::<u64>()
+            .map_err(|_| IoError::field(path, &f.name, &f.value, "not a whole number ≥ 0"))?,
+        None => 0,
+    };
+    let (byte_skip, skip_field) = match get("byteskip") {
+        Some(f) => {
+            let v: i64 = f
+                .value
+                .parse()
+                .map_err(|_| IoError::field(path, &f.name, &f.value, "not a whole number"))?;
+            let skip = match v {
+                -1 => ByteSkip::FromEnd,
+                v if v >= 0 => ByteSkip::Bytes(v as u64),
+                _ => {
+                    return Err(IoError::field(
+                        path,
+                        &f.name,
+                        &f.value,
+                        "must be ≥ 0, or -1 for data at the end of the file",
+                    ));
+                }
+            };
+            (skip, f.name.as_str())
+        }
+        None => (ByteSkip::Bytes(0), "byte skip"),
+    };
+    if byte_skip == ByteSkip::FromEnd && encoding != Encoding::Raw {
+        return Err(IoError::field(
+            path,
+            skip_field,
+            "-1",
+            "-1 (data at the end of the file) is only allowed with raw encoding",
+        ));
+    }
+
+    // data location
+    let (data_path, start): (PathBuf, u64) = match get("datafile") {
+        Some(f) => (parse_data_file(path, f)?, 0),
+        None => {
+            let detached = path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("nhdr"));
+            if detached {
+                return Err(IoError::missing(path, "data file"));
+            }
+            (path.to_path_buf(), header.end)
+        }
+    };
+
+    let spec = PayloadSpec {
+        data_path: &data_path,
+        start,
+        line_skip,
+        byte_skip,
+        skip_field,
+        encoding,
+        file_type,
+        big_endian,
+        exact: false,
+    };
+    read_payload(&spec, grid)
+}
+
+fn is_nrrd_magic(line: &str) -> bool {
+    matches!(
+        line.trim_end(),
+        "NRRD0001" | "NRRD0002" | "NRRD0003" | "NRRD0004" | "NRRD0005"
+    )
+}
+
+/// Field names are matched case-insensitively and without spaces (`data file` = `datafile`).
+fn canonical_field(name: &str) -> String {
+    name.chars()
+        .filter(|c| !c.is_whitespace())
+        .collect::<String>()
+        .to_ascii_lowercase()
+}
+
+/// Teem's spellings of the scalar types.
+fn parse_type(value: &str) -> Option<FileType> {
+    Some(match normalize_words(value).as_str() {
+        "uchar" | "unsigned char" | "uint8" | "uint8_t" => FileType::U8,
+        "signed char" | "char" | "int8" | "int8_t" => FileType::I8,
+        "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => FileType::U16,
+        "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
+            FileType::I16
+        }
+        "int" | "signed int" | "int32" | "int32_t" => FileType::I32,
+        "uint" | "unsigned int" | "uint32" | "uint32_t" => FileType::U32,
+        "float" => FileType::F32,
+        "double" => FileType::F64,
+        _ => return None,
+    })
+}
+
+/// `data file: NAME`; `LIST` and numbered multi-file forms are rejected.
+fn parse_data_file(path: &Path, f: &Field) -> Result<PathBuf> {
+    let tokens: Vec<&str> = f.value.split_whitespace().collect();
+    if tokens.is_empty() {
+        return Err(IoError::field(path, &f.name, &f.value, "empty file name"));
+    }
+    if tokens[0] == "LIST" {
+        return Err(IoError::unsupported(
+            path,
+            &f.name,
+            &f.value,
+            "a single data file name (LIST is not supported)",
+        ));
+    }
+    if tokens.len() >= 4 && tokens[0].contains('%') {
+        return Err(IoError::unsupported(
+            path,
+            &f.name,
+            &f.value,
+            "a single data file name (numbered multi-file data are not supported)",
+        ));
+    }
+    Ok(resolve_data_path(path, &f.value))
+}
+
+/// The number of world dimensions from `space` / `space dimension`, if given.
+fn space_dimension(path: &Path, fields: &HashMap<String, Field>) -> Result<Option<usize>> {
+    let mut dim = None;
+    if let Some(f) = fields.get("space") {
+        let d = match normalize_words(&f.value).as_str() {
+            "right-anterior-superior"
+            | "ras"
+            | "left-anterior-superior"
+            | "las"
+            | "left-posterior-superior"
+            | "lps"
+            | "scanner-xyz"
+            | "3d-right-handed"
+            | "3d-left-handed" => 3,
+            "right-anterior-superior-time"
+            | "rast"
+            | "left-anterior-superior-time"
+            | "last"
+            | "left-posterior-superior-time"
+            | "lpst"
+            | "scanner-xyz-time"
+            | "3d-right-handed-time"
+            | "3d-left-handed-time" => 4,
+            _ => {
+                return Err(IoError::unsupported(
+                    path,
+                    &f.name,
+                    &f.value,
+                    "RAS, LAS, LPS, scanner-xyz, 3D-right-handed, 3D-left-handed \
+                     (and their long forms)",
+                ));
+            }
+        };
+        if d != 3 {
+            return Err(IoError::unsupported(
+                path,
+                &f.name,
+                &f.value,
+                "a 3-D space (spaces with time are not supported)",
+            ));
+        }
+        dim = Some(d);
+    }
+    if let Some(f) = fields.get("spacedimension") {
+        let d: usize = f
+            .value
+            .parse()
+            .map_err(|_| IoError::field(path, &f.name, &f.value, "not a whole number"))?;
+        if d != 3 {
+            return Err(IoError::field(
+                path,
+                &f.name,
+                &f.value,
+                "only 3-D world spaces are supported",
+            ));
+        }
+        dim = Some(d);
+    }
+    Ok(dim)
+}
+
+/// Parses a vector `(x,y,z)`; errors name `field`.
+fn parse_vector(path: &Path, f: &Field, text: &str) -> Result<DVec3> {
+    let inner = text
+        .trim()
+        .strip_prefix('(')
+        .and_then(|t| t.strip_suffix(')'))
+        .ok_or_else(|| {
+            IoError::field(
+                path,
+                &f.name,
+                &f.value,
+                format!("`{text}` is not a vector like (1,0,0)"),
+            )
+        })?;
+    let comps: Vec<&str> = inner.split(',').map(str::trim).collect();
+    if comps.len() != 3 {
+        return Err(IoError::field(
+            path,
+            &f.name,
+            &f.value,
+            format!(
+                "vector `{text}` has {} components; the space is 3-D",
+                comps.len()
+            ),
+        ));
+    }
+    let mut v = [0.0; 3];
+    for (o, c) in v.iter_mut().zip(&comps) {
+        *o = parse_finite(c).ok_or_else(|| {
+            IoError::field(
+                path,
+                &f.name,
+                &f.value,
+                format!("`{c}` is not a finite number"),
+            )
+        })?;
+    }
+    Ok(DVec3::from(v))
+}
+
+/// Splits `space directions` into per-axis items: `(…)` vectors (which may contain spaces) or
+/// words such as `none`.
+fn split_vectors(value: &str) -> Vec<String> {
+    let mut items = Vec::new();
+    let mut cur = String::new();
+    let mut depth = 0usize;
+    for c in value.chars() {
+        match c {
+            '(' => {
+                depth += 1;
+                cur.push(c);
+            }
+            ')' => {
+                depth = depth.saturating_sub(1);
+                cur.push(c);
+                if depth == 0 {
+                    items.push(std::mem::take(&mut cur));
+                }
+            }
+            c if c.is_whitespace() && depth == 0 => {
+                if !cur.is_empty() {
+                    items.push(std::mem::take(&mut cur));
+                }
+            }
+            c => cur.push(c),
+        }
+    }
+    if !cur.is_empty() {
+        items.push(cur);
+    }
+    items
+}
+
+/// Builds the grid from `space directions`, `spacings` and `space origin`.
+fn parse_geometry(path: &Path, fields: &HashMap<String, Field>, dims: [usize; 3]) -> Result<Grid> {
+    // Validates `space` / `space dimension` (3-D only). Without either, `space directions` are
+    // still accepted as 3-vectors (lenient; Teem requires a space).
+    space_dimension(path, fields)?;
+    // Per-axis world step vectors where known.
+    let mut steps: [Option<DVec3>; 3] = [None; 3];
+    let mut spacings: [Option<f64>; 3] = [None; 3];
+    if let Some(f) = fields.get("spacings") {
+        let vals: [f64; 3] =
+            parse_numbers(path, &f.name, &f.value, "a non-zero number or nan", |t| {
+                let v = t.parse::<f64>().ok()?;
+                (v.is_nan() || (v.is_finite() && v != 0.0)).then_some(v)
+            })?;
+        for (s, v) in spacings.iter_mut().zip(vals) {
+            *s = (!v.is_nan()).then_some(v);
+        }
+    }
+    let dirs_field = fields.get("spacedirections");
+    if let Some(f) = dirs_field {
+        let items = split_vectors(&f.value);
+        if items.len() != 3 {
+            return Err(IoError::field(
+                path,
+                &f.name,
+                &f.value,
+                format!("expected 3 vectors or `none`, found {}", items.len()),
+            ));
+        }
+        for (axis, item) in items.iter().enumerate() {
+            if item.eq_ignore_ascii_case("none") {
+                continue;
+            }
+            let v = parse_vector(path, f, item)?;
+            if v.length() < 1e-300 {
+                return Err(IoError::field(
+                    path,
+                    &f.name,
+                    &f.value,
+                    format!("axis {axis} has a zero direction vector"),
+                ));
+            }
+            steps[axis] = Some(v);
+        }
+    } else {
+        for axis in 0..3 {
+            if let Some(s) = spacings[axis] {
+                let mut e = DVec3::ZERO;
+                e[axis] = s;
+                steps[axis] = Some(e);
+            }
+        }
+    }
+
+    let mut spacing = [1.0f64; 3];
+    let mut cols: [Option<DVec3>; 3] = [None; 3];
+    for axis in 0..3 {
+        match steps[axis] {
+            Some(v) => {
+                let len = v.length();
+                spacing[axis] = len;
+                // Exact for axis-aligned steps: then len == |component| exactly.
+                cols[axis] = Some(v / len);
+            }
+            None => {
+                spacing[axis] = spacings[axis].map(f64::abs).unwrap_or(1.0);
+            }
+        }
+    }
+    let direction = complete_basis(cols);
+
+    let origin = match fields.get("spaceorigin") {
+        Some(f) => parse_vector(path, f, &f.value)?.to_array(),
+        None => [0.0; 3],
+    };
+
+    Grid::new(dims, spacing, origin, direction).map_err(|e| match (&e, dirs_field) {
+        (CoreError::InvalidField { field, .. }, Some(f)) if field == "direction" => IoError::field(
+            path,
+            &f.name,
+            &f.value,
+            "axis directions must be mutually orthogonal \
+                 (sheared grids are not supported)",
+        ),
+        (CoreError::InvalidField { field, .. }, _) if field.starts_with("spacing") => {
+            let name = dirs_field.or(fields.get("spacings"));
+            match name {
+                Some(f) => IoError::field(path, &f.name, &f.value, e.to_string()),
+                None => IoError::core(path, e),
+            }
+        }
+        _ => IoError::core(path, e),
+    })
+}
+
+/// Fills missing direction columns: each missing axis `c` gets the first of `e_c, e_{c+1},
+/// e_{c+2}` that stays clearly independent after Gram–Schmidt against the columns already set.
+fn complete_basis(cols: [Option<DVec3>; 3]) -> DMat3 {
+    let mut out = [DVec3::ZERO; 3];
+    let mut set = [false; 3];
+    for axis in 0..3 {
+        if let Some(c) = cols[axis] {
+            out[axis] = c;
+            set[axis] = true;
+        }
+    }
+    for axis in 0..3 {
+        if set[axis] {
+            continue;
+        }
+        let mut chosen = None;
+        for k in 0..3 {
+            let mut v = DVec3::ZERO;
+            v[(axis + k) % 3] = 1.0;
+            for other in 0..3 {
+                if set[other] {
+                    v -= out[other] * out[other].dot(v);
+                }
+            }
+            if v.length() > 0.1 {
+                chosen = Some(v.normalize());
+                break;
+            }
+        }
+        // Three unit columns always leave one standard axis independent of the others, unless
+        // the given ones are degenerate; Grid::new then rejects the matrix.
+        out[axis] = chosen.unwrap_or(DVec3::ZERO);
+        set[axis] = true;
+    }
+    DMat3::from_cols(out[0], out[1], out[2])
+}
+
+/// Writes `volume` as an attached-header NRRD (`NRRD0004`, little-endian, raw or gzip encoding).
+///
+/// The header records `space dimension: 3`, `sizes`, `space directions` (column `c` of the
+/// direction matrix times `spacing[c]`, world units) and `space origin` (world position of voxel
+/// (0,0,0)), so [`read_nrrd`] restores the grid: exactly for axis-aligned directions (including
+/// flips and permutations), and to within a few ulps for general rotations (the spacing is
+/// recovered as a vector length). Numbers are written in shortest round-trip form. The file is
+/// written atomically (temporary file in the same directory, then rename).
+pub fn write_nrrd(path: impl AsRef<Path>, volume: &AnyVolume, gzip: bool) -> Result<()> {
+    let path = path.as_ref();
+    let grid = volume.grid();
+    let ft = FileType::from_scalar(volume.scalar_type());
+    let vec = |v: DVec3| format!("({:?},{:?},{:?})", v.x, v.y, v.z);
+    let cols = grid.world_from_index_linear();
+    let header = format!(
+        "NRRD0004\n\
+         # Written by volsplat-io {version}\n\
+         type: {ty}\n\
+         dimension: 3\n\
+         space dimension: 3\n\
+         sizes: {nx} {ny} {nz}\n\
+         space directions: {d0} {d1} {d2}\n\
+         kinds: domain domain domain\n\
+         endian: little\n\
+         encoding: {enc}\n\
+         space origin: {origin}\n\n",
+        version = env!("CARGO_PKG_VERSION"),
+        ty = ft.name(),
+        nx = grid.dims[0],
+        ny = grid.dims[1],
+        nz = grid.dims[2],
+        d0 = vec(cols.x_axis),
+        d1 = vec(cols.y_axis),
+        d2 = vec(cols.z_axis),
+        enc = if gzip { "gzip" } else { "raw" },
+        origin = vec(DVec3::from(grid.origin)),
+    );
+    write_atomic(path, |w| {
+        w.write_all(header.as_bytes()).map_err(write_err(path))?;
+        if gzip {
+            let mut enc = flate2::write::GzEncoder::new(&mut *w, flate2::Compression::default());
+            write_samples_le(&mut enc, volume).map_err(write_err(path))?;
+            enc.finish().map_err(write_err(path))?;
+        } else {
+            write_samples_le(w, volume).map_err(write_err(path))?;
+        }
+        Ok(())
+    })
+}
+
+/// Writes the samples little-endian, i fastest.
+fn write_samples_le<W: Write + ?Sized>(w: &mut W, volume: &AnyVolume) -> std::io::Result<()> {
+    trait LeBytes: Copy {
+        fn put(self, out: &mut Vec<u8>);
+    }
+    macro_rules! le {
+        ($($t:ty),*) => {$(impl LeBytes for $t {
+            fn put(self, out: &mut Vec<u8>) { out.extend_from_slice(&self.to_le_bytes()); }
+        })*};
+    }
+    le!(u8, i8, u16, i16, f32);
+    fn write_all<T: LeBytes, W: Write + ?Sized>(w: &mut W, data: &[T]) -> std::io::Result<()> {
+        let mut buf = Vec::with_capacity(64 * 1024);
+        for chunk in data.chunks(16 * 1024) {
+            buf.clear();
+            for &v in chunk {
+                v.put(&mut buf);
+            }
+            w.write_all(&buf)?;
+        }
+        Ok(())
+    }
+    with_volume!(volume, v => write_all(w, v.data()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+    use volsplat_core::{ScalarType, Volume};
+
+    fn file(dir: &Path, name: &str, header: &str, data: &[u8]) -> PathBuf {
+        let p = dir.join(name);
+        let mut bytes = header.as_bytes().to_vec();
+        bytes.extend_from_slice(data);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    }
+
+    pub(crate) fn gz(data: &[u8]) -> Vec<u8> {
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        e.write_all(data).unwrap();
+        e.finish().unwrap()
+    }
+
+    fn err_of(dir: &Path, header: &str, data: &[u8]) -> String {
+        let p = file(dir, "bad.nrrd", header, data);
+        match read_nrrd(&p) {
+            Ok(_) => panic!("expected an error for header:\n{header}"),
+            Err(e) => {
+                let s = e.to_string();
+                assert!(s.contains("bad.nrrd"), "error does not name the file: {s}");
+                if std::env::var_os("VOLSPLAT_SHOW_ERRORS").is_some() {
+                    eprintln!("{s}");
+                }
+                s
+            }
+        }
+    }
+
+    /// A minimal valid u8 header for 2×2×2 with one field replaced or removed.
+    fn header_with(replace: &str, with: Option<&str>) -> String {
+        let fields = [
+            ("type", "type: uint8"),
+            ("dimension", "dimension: 3"),
+            ("sizes", "sizes: 2 2 2"),
+            ("encoding", "encoding: raw"),
+            ("endian", "endian: little"),
+        ];
+        let mut h = String::from("NRRD0004\n");
+        for (name, line) in fields {
+            if name == replace {
+                if let Some(w) = with {
+                    h.push_str(w);
+                    h.push('\n');
+                }
+            } else {
+                h.push_str(line);
+                h.push('\n');
+            }
+        }
+        h.push('\n');
+        h
+    }
+
+    fn grids() -> Vec<Grid> {
+        let rot = DMat3::from_rotation_z(0.4) * DMat3::from_rotation_x(-0.7);
+        vec![
+            Grid::new(
+                [3, 4, 5],
+                [0.5, 2.0, 1.25],
+                [-10.5, 3.0, 0.1],
+                DMat3::IDENTITY,
+            )
+            .unwrap(),
+            Grid::new([3, 4, 5], [0.3, 0.7, 1.1], [1.0, 2.0, 3.0], rot).unwrap(),
+            // A flip and a permutation: still exact.
+            Grid::new(
+                [3, 4, 5],
+                [0.1, 0.2, 0.3],
+                [0.0; 3],
+                DMat3::from_cols(DVec3::Y, -DVec3::X, DVec3::Z),
+            )
+            .unwrap(),
+        ]
+    }
+
+    fn volumes(grid: &Grid) -> Vec<AnyVolume> {
+        let g = grid.clone();
+        let n = |i: usize, j: usize, k: usize| (i + 3 * j + 12 * k) as i64;
+        vec![
+            Volume::from_fn(g.clone(), |i, j, k| (n(i, j, k) * 4) as u8)
+                .unwrap()
+                .into(),
+            Volume::from_fn(g.clone(), |i, j, k| (n(i, j, k) * 2 - 60) as i8)
+                .unwrap()
+                .into(),
+            Volume::from_fn(g.clone(), |i, j, k| (n(i, j, k) * 1000) as u16)
+                .unwrap()
+                .into(),
+            Volume::from_fn(g.clone(), |i, j, k| (n(i, j, k) * 500 - 15000) as i16)
+                .unwrap()
+                .into(),
+            Volume::from_fn(g, |i, j, k| n(i, j, k) as f32 * -0.37 + 1e-3)
+                .unwrap()
+                .into(),
+        ]
+    }
+
+    #[test]
+    fn round_trip_every_type_raw_and_gzip() {
+        let dir = tempfile::tempdir().unwrap();
+        for (gi, grid) in grids().iter().enumerate() {
+            for vol in volumes(grid) {
+                for gzip in [false, true] {
+                    let p = dir.path().join(format!("v{gi}.nrrd"));
+                    write_nrrd(&p, &vol, gzip).unwrap();
+                    let back = read_nrrd(&p).unwrap();
+                    assert_eq!(back.scalar_type(), vol.scalar_type());
+                    let (a, b) = (vol.grid(), back.grid());
+                    if gi == 1 {
+                        // General rotation: spacing is recovered as a vector length.
+                        assert_eq!(a.dims, b.dims);
+                        assert_eq!(a.origin, b.origin);
+                        for c in 0..3 {
+                            assert!((a.spacing[c] - b.spacing[c]).abs() < 1e-14);
+                        }
+                        assert!(a.direction.abs_diff_eq(b.direction, 1e-14));
+                        let mut fixed = back.clone();
+                        fixed.set_grid(a.clone()).unwrap();
+                        assert_eq!(fixed, vol);
+                    } else {
+                        assert_eq!(back, vol, "grid {gi}, gzip {gzip}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn writes_are_atomic() {
+        let dir = tempfile::tempdir().unwrap();
+        let vol = volumes(&grids()[0]).remove(0);
+        let p = dir.path().join("missing").join("v.nrrd");
+        let e = write_nrrd(&p, &vol, true).unwrap_err();
+        assert!(e.to_string().contains("v.nrrd"), "{e}");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        // An existing (larger) file is replaced whole.
+        let p = dir.path().join("v.nrrd");
+        std::fs::write(&p, vec![b'x'; 100_000]).unwrap();
+        write_nrrd(&p, &vol, false).unwrap();
+        assert_eq!(read_nrrd(&p).unwrap(), vol);
+        assert!(std::fs::metadata(&p).unwrap().len() < 1000);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn written_header_is_standard() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("h.nrrd");
+        let vol = volumes(&grids()[0]).remove(3);
+        write_nrrd(&p, &vol, false).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let text = String::from_utf8_lossy(&bytes[..300]);
+        assert!(text.starts_with("NRRD0004\n"));
+        assert!(text.contains("type: int16\n"));
+        assert!(text.contains("space directions: (0.5,0.0,0.0) (0.0,2.0,0.0) (0.0,0.0,1.25)\n"));
+        assert!(text.contains("space origin: (-10.5,3.0,0.1)\n\n"));
+        assert_eq!(bytes.len(), text.find("\n\n").unwrap() + 2 + 60 * 2);
+    }
+
+    #[test]
+    fn hand_written_big_and_little_endian() {
+        let dir = tempfile::tempdir().unwrap();
+        let vals16: [u16; 2] = [0x0102, 0xfffe];
+        let valsf: [f32; 2] = [1.5, -2.25e-3];
+        for big in [false, true] {
+            let endian = if big { "big" } else { "little" };
+            for (ty, bytes, expect) in [
+                (
+                    "unsigned short",
+                    vals16
+                        .iter()
+                        .flat_map(|v| {
+                            if big {
+                                v.to_be_bytes()
+                            } else {
+                                v.to_le_bytes()
+                            }
+                        })
+                        .collect::<Vec<u8>>(),
+                    AnyVolume::from(
+                        Volume::new(Grid::with_dims([2, 1, 1]).unwrap(), vals16.to_vec()).unwrap(),
+                    ),
+                ),
+                (
+                    "short",
+                    vals16
+                        .iter()
+                        .flat_map(|v| {
+                            if big {
+                                v.to_be_bytes()
+                            } else {
+                                v.to_le_bytes()
+                            }
+                        })
+                        .collect(),
+                    Volume::new(
+                        Grid::with_dims([2, 1, 1]).unwrap(),
+                        vals16.iter().map(|&v| v as i16).collect(),
+                    )
+                    .unwrap()
+                    .into(),
+                ),
+                (
+                    "float",
+                    valsf
+                        .iter()
+                        .flat_map(|v| {
+                            if big {
+                                v.to_be_bytes()
+                            } else {
+                                v.to_le_bytes()
+                            }
+                        })
+                        .collect(),
+                    Volume::new(Grid::with_dims([2, 1, 1]).unwrap(), valsf.to_vec())
+                        .unwrap()
+                        .into(),
+                ),
+            ] {
+                for (enc, payload) in [("raw", bytes.clone()), ("gzip", gz(&bytes))] {
+                    let h = format!(
+                        "NRRD0001\ntype: {ty}\ndimension: 3\nsizes: 2 1 1\nendian: {endian}\n\
+                         encoding: {enc}\n\n"
+                    );
+                    let p = file(dir.path(), "e.nrrd", &h, &payload);
+                    assert_eq!(read_nrrd(&p).unwrap(), expect, "{ty} {endian} {enc}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn type_spellings_and_conversions() {
+        let dir = tempfile::tempdir().unwrap();
+        for (ty, st) in [
+            ("uchar", ScalarType::U8),
+            ("unsigned char", ScalarType::U8),
+            ("uint8_t", ScalarType::U8),
+            ("signed char", ScalarType::I8),
+            ("int8", ScalarType::I8),
+            ("ushort", ScalarType::U16),
+            ("uint16", ScalarType::U16),
+            ("unsigned  short int", ScalarType::U16),
+            ("short", ScalarType::I16),
+            ("int16_t", ScalarType::I16),
+            ("signed short", ScalarType::I16),
+            ("float", ScalarType::F32),
+        ] {
+            let h = format!(
+                "NRRD0004\ntype: {ty}\ndimension: 3\nsizes: 1 1 1\nendian: little\nencoding: raw\n\n"
+            );
+            let p = file(dir.path(), "t.nrrd", &h, &[0; 4]);
+            assert_eq!(read_nrrd(&p).unwrap().scalar_type(), st, "{ty}");
+        }
+        // int32 and double are converted to f32.
+        let h =
+            "NRRD0004\ntype: int\ndimension: 3\nsizes: 2 1 1\nendian: little\nencoding: raw\n\n";
+        let data: Vec<u8> = [-70000i32, 5]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let v = read_nrrd(file(dir.path(), "i.nrrd", h, &data)).unwrap();
+        assert_eq!(v.to_f32().data(), &[-70000.0, 5.0]);
+        let h =
+            "NRRD0004\ntype: double\ndimension: 3\nsizes: 2 1 1\nendian: big\nencoding: raw\n\n";
+        let data: Vec<u8> = [0.125f64, -3.5]
+            .iter()
+            .flat_map(|v| v.to_be_bytes())
+            .collect();
+        let v = read_nrrd(file(dir.path(), "d.nrrd", h, &data)).unwrap();
+        assert_eq!(v.scalar_type(), ScalarType::F32);
+        assert_eq!(v.to_f32().data(), &[0.125, -3.5]);
+        // A double outside the f32 range is an error, not infinity.
+        let data: Vec<u8> = [1e300f64, 0.0]
+            .iter()
+            .flat_map(|v| v.to_be_bytes())
+            .collect();
+        let e = read_nrrd(file(dir.path(), "d.nrrd", h, &data)).unwrap_err();
+        assert!(e.to_string().contains("sample #0"), "{e}");
+    }
+
+    #[test]
+    fn detached_headers_with_data_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let data: Vec<u8> = (0..24).collect();
+        std::fs::write(dir.path().join("d.raw"), &data).unwrap();
+        std::fs::write(dir.path().join("d.raw.gz"), gz(&data)).unwrap();
+        let expect: AnyVolume = Volume::new(Grid::with_dims([2, 3, 4]).unwrap(), data.clone())
+            .unwrap()
+            .into();
+        for (field, enc, name) in [
+            ("data file", "raw", "d.raw"),
+            ("datafile", "raw", "./d.raw"),
+            ("data file", "gzip", "d.raw.gz"),
+            ("data file", "gz", "d.raw.gz"),
+        ] {
+            let h = format!(
+                "NRRD0004\n# detached\ntype: uint8\ndimension: 3\nsizes: 2 3 4\nencoding: {enc}\n\
+                 {field}: {name}\n"
+            );
+            let p = file(dir.path(), "d.nhdr", &h, b"");
+            assert_eq!(read_nrrd(&p).unwrap(), expect, "{field} {enc} {name}");
+            assert_eq!(crate::read_volume(&p).unwrap(), expect);
+        }
+        // The data file is resolved relative to the header, not the working directory.
+        let sub = dir.path().join("sub");
+        std::fs::create_dir(&sub).unwrap();
+        std::fs::write(sub.join("x.raw"), &data).unwrap();
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 3 4\nencoding: raw\ndata file: sub/x.raw\n";
+        assert_eq!(
+            read_nrrd(file(dir.path(), "s.nhdr", h, b"")).unwrap(),
+            expect
+        );
+        // An absolute path works too.
+        let h = format!(
+            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 3 4\nencoding: raw\ndata file: {}\n",
+            sub.join("x.raw").display()
+        );
+        assert_eq!(
+            read_nrrd(file(dir.path(), "a.nhdr", &h, b"")).unwrap(),
+            expect
+        );
+    }
+
+    #[test]
+    fn space_directions_anisotropic_and_rotated() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = "NRRD0005\ntype: uint8\ndimension: 3\nspace: left-posterior-superior\nsizes: 2 2 2\n\
+                 space directions: (0,2,0) (-0.5,0,0) (0,0,3)\nspace origin: (10,-20,30.5)\n\
+                 encoding: raw\n\n";
+        let v = read_nrrd(file(dir.path(), "a.nrrd", h, &[0; 8])).unwrap();
+        let g = v.grid();
+        assert_eq!(g.spacing, [2.0, 0.5, 3.0]);
+        assert_eq!(g.origin, [10.0, -20.0, 30.5]);
+        assert_eq!(g.direction, DMat3::from_cols(DVec3::Y, -DVec3::X, DVec3::Z));
+        // No LPS→RAS flip: world = the file's space as written.
+        assert_eq!(
+            g.world_from_index(DVec3::new(1.0, 1.0, 1.0)),
+            DVec3::new(9.5, -18.0, 33.5)
+        );
+
+        // A rotation of 30° about z with spacing (1.5, 0.8, 2), vectors with spaces inside.
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        let h = format!(
+            "NRRD0004\ntype: uint8\ndimension: 3\nspace dimension: 3\nsizes: 2 2 2\n\
+             space directions: ({}, {}, 0) ({}, {}, 0) (0, 0, 2)\nencoding: raw\n\n",
+            1.5 * c,
+            1.5 * s,
+            -0.8 * s,
+            0.8 * c
+        );
+        let v = read_nrrd(file(dir.path(), "r.nrrd", &h, &[0; 8])).unwrap();
+        let g = v.grid();
+        for (a, b) in g.spacing.iter().zip([1.5, 0.8, 2.0]) {
+            assert!((a - b).abs() < 1e-12);
+        }
+        assert!(
+            g.direction
+                .abs_diff_eq(DMat3::from_rotation_z(30f64.to_radians()), 1e-12)
+        );
+
+        // `spacings` alone, with nan → 1, and `none` axes completed from the others.
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nspacings: 0.5 nan 4\nencoding: raw\n\n";
+        let g = read_nrrd(file(dir.path(), "s.nrrd", h, &[0; 8]))
+            .unwrap()
+            .grid()
+            .clone();
+        assert_eq!(g.spacing, [0.5, 1.0, 4.0]);
+        assert_eq!(g.direction, DMat3::IDENTITY);
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nspace: RAS\nsizes: 2 2 2\n\
+                 space directions: (0,0,2) none (3,0,0)\nencoding: raw\n\n";
+        let g = read_nrrd(file(dir.path(), "n.nrrd", h, &[0; 8]))
+            .unwrap()
+            .grid()
+            .clone();
+        assert_eq!(g.spacing, [2.0, 1.0, 3.0]);
+        assert_eq!(g.direction, DMat3::from_cols(DVec3::Z, DVec3::Y, DVec3::X));
+    }
+
+    #[test]
+    fn skips_comments_crlf_and_key_values() {
+        let dir = tempfile::tempdir().unwrap();
+        let data: Vec<u8> = (10..18).collect();
+        let expect: AnyVolume = Volume::new(Grid::with_dims([2, 2, 2]).unwrap(), data.clone())
+            .unwrap()
+            .into();
+        // byte skip in an attached file.
+        let h = "NRRD0004\r\n# a comment: with colon\r\nmy key:=my: value\r\ntype: uint8\r\n\
+                 dimension: 3\r\nsizes: 2 2 2\r\nencoding: raw\r\nbyte skip: 5\r\n\
+                 content: whatever\r\nkinds: domain domain domain\r\n\r\n";
+        let mut payload = b"JUNK!".to_vec();
+        payload.extend_from_slice(&data);
+        assert_eq!(
+            read_nrrd(file(dir.path(), "b.nrrd", h, &payload)).unwrap(),
+            expect
+        );
+        // byte skip -1: the samples are the last bytes of the file.
+        let h =
+            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nbyte skip: -1\n\n";
+        let mut payload = vec![0xAA; 100];
+        payload.extend_from_slice(&data);
+        assert_eq!(
+            read_nrrd(file(dir.path(), "e.nrrd", h, &payload)).unwrap(),
+            expect
+        );
+        // line skip, then byte skip, in a detached data file.
+        let mut raw = b"first line\nsecond line\nXY".to_vec();
+        raw.extend_from_slice(&data);
+        raw.extend_from_slice(b"trailing data is ignored");
+        std::fs::write(dir.path().join("ls.raw"), &raw).unwrap();
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\
+                 data file: ls.raw\nline skip: 2\nbyte skip: 2\n";
+        assert_eq!(
+            read_nrrd(file(dir.path(), "ls.nhdr", h, b"")).unwrap(),
+            expect
+        );
+        // gzip: byte skip counts decompressed bytes.
+        let mut inner = vec![1, 2, 3];
+        inner.extend_from_slice(&data);
+        std::fs::write(dir.path().join("bs.gz"), gz(&inner)).unwrap();
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: gzip\n\
+                 data file: bs.gz\nbyte skip: 3\n";
+        assert_eq!(
+            read_nrrd(file(dir.path(), "bs.nhdr", h, b"")).unwrap(),
+            expect
+        );
+    }
+
+    #[test]
+    fn ascii_encoding() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = "NRRD0004\ntype: short\ndimension: 3\nsizes: 2 2 1\nencoding: ascii\n\n";
+        let v = read_nrrd(file(dir.path(), "a.nrrd", h, b"-5 7,\n 300\t-32768\n")).unwrap();
+        assert_eq!(v.to_f32().data(), &[-5.0, 7.0, 300.0, -32768.0]);
+        assert_eq!(v.scalar_type(), ScalarType::I16);
+        let h = "NRRD0004\ntype: float\ndimension: 3\nsizes: 3 1 1\nencoding: text\n\n";
+        let v = read_nrrd(file(dir.path(), "f.nrrd", h, b"0.5 -1e3 2")).unwrap();
+        assert_eq!(v.to_f32().data(), &[0.5, -1000.0, 2.0]);
+        // Errors: too few values, out of range, not a number.
+        let h = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 3 1 1\nencoding: ascii\n\n";
+        let e = err_of(dir.path(), h, b"1 2");
+        assert!(e.contains("expected 3 values, found 2"), "{e}");
+        let e = err_of(dir.path(), h, b"1 256 2");
+        assert!(e.contains("value #1") && e.contains("256"), "{e}");
+        let e = err_of(dir.path(), h, b"1 x 2");
+        assert!(e.contains("value #1"), "{e}");
+    }
+
+    #[test]
+    fn truncated_payloads_are_rejected() {
+        let dir = tempfile::tempdir().unwrap();
+        let h =
+            "NRRD0004\ntype: uint16\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n";
+        let e = err_of(dir.path(), h, &[0; 100]);
+        assert!(e.contains("expected 128 bytes, found 100"), "{e}");
+        // Truncated gzip: a complete stream that is too short, and a stream cut off.
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 64 64 64\nencoding: gzip\n\n";
+        let e = err_of(dir.path(), h, &gz(&[7; 1000]));
+        assert!(e.contains("expected 262144 bytes, found 1000"), "{e}");
+        let full: Vec<u8> = (0..262144u32).map(|i| (i * 7919 % 251) as u8).collect();
+        let z = gz(&full);
+        assert!(read_nrrd(file(dir.path(), "ok.nrrd", h, &z)).is_ok());
+        let e = err_of(dir.path(), h, &z[..z.len() / 2]);
+        assert!(
+            e.contains("truncated") && e.contains("expected 262144 bytes"),
+            "{e}"
+        );
+        let e = err_of(dir.path(), h, &z[..z.len() - 4]);
+        assert!(e.contains("gzip"), "{e}");
+        // Corrupt gzip.
+        let mut bad = z.clone();
+        for b in &mut bad[20..60] {
+            *b ^= 0x5a;
+        }
+        let e = err_of(dir.path(), h, &bad);
+        assert!(e.contains("gzip"), "{e}");
+        // byte skip beyond the data, byte skip -1 on a short file, line skip past the end.
+        let h =
+            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nbyte skip: 5\n\n";
+        let e = err_of(dir.path(), h, &[0; 8]);
+        assert!(e.contains("expected 8 bytes, found 3"), "{e}");
+        let h =
+            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nbyte skip: -1\n\n";
+        let e = err_of(dir.path(), h, &[0; 7]);
+        assert!(
+            e.contains("byte skip") && e.contains("expected 8 bytes"),
+            "{e}"
+        );
+        let h =
+            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nline skip: 3\n\n";
+        let e = err_of(dir.path(), h, b"a\nb\n");
+        assert!(
+            e.contains("line skip") && e.contains("expected 3 lines"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn sizes_are_checked_before_allocating() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = header_with("sizes", Some("sizes: 100000 100000 100000"));
+        let e = err_of(dir.path(), &h, &[0; 8]);
+        assert!(
+            e.contains("sizes") && e.contains("exceeds the limit"),
+            "{e}"
+        );
+        let h = header_with("sizes", Some("sizes: 18446744073709551615 2 2"));
+        let e = err_of(dir.path(), &h, &[0; 8]);
+        assert!(e.contains("sizes"), "{e}");
+        // Within MAX_VOXELS but far larger than the file (8 GiB): rejected from the file size,
+        // without allocating.
+        let h = header_with("sizes", Some("sizes: 2048 2048 2048"));
+        let e = err_of(dir.path(), &h, &[0; 8]);
+        assert!(e.contains("expected 8589934592 bytes, found 8"), "{e}");
+        // Same with gzip: the buffer only grows with the data actually decompressed.
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2048 2048 2048\nencoding: gzip\n\n";
+        let e = err_of(dir.path(), h, &gz(&[1; 4096]));
+        assert!(e.contains("expected 8589934592 bytes, found 4096"), "{e}");
+    }
+
+    #[test]
+    fn header_errors_name_the_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let cases: Vec<(String, &str)> = vec![
+            (header_with("sizes", None), "missing required field `sizes`"),
+            (header_with("type", None), "missing required field `type`"),
+            (
+                header_with("encoding", None),
+                "missing required field `encoding`",
+            ),
+            (
+                header_with("dimension", None),
+                "missing required field `dimension`",
+            ),
+            (
+                header_with("type", Some("type: uint16")).replace("endian: little\n", ""),
+                "missing required field `endian`",
+            ),
+            (header_with("sizes", Some("sizes: 2 x 2")), "field `sizes`"),
+            (header_with("sizes", Some("sizes: 2 0 2")), "field `sizes`"),
+            (header_with("sizes", Some("sizes: 2 2")), "field `sizes`"),
+            (
+                header_with("dimension", Some("dimension: three")),
+                "field `dimension`",
+            ),
+            (
+                header_with("dimension", Some("dimension: 2")),
+                "field `dimension`",
+            ),
+            (
+                header_with("dimension", Some("dimension: 4")),
+                "field `dimension`",
+            ),
+            (
+                header_with("type", Some("type: int64")),
+                "field `type`: unsupported value \"int64\"",
+            ),
+            (header_with("type", Some("type: block")), "field `type`"),
+            (
+                header_with("encoding", Some("encoding: bzip2")),
+                "field `encoding`: unsupported value \"bzip2\"",
+            ),
+            (
+                header_with("encoding", Some("encoding: hex")),
+                "field `encoding`",
+            ),
+            (
+                header_with("endian", Some("endian: middle")),
+                "field `endian`",
+            ),
+            (
+                header_with("endian", Some("spacings: 1 -")),
+                "field `spacings`",
+            ),
+            (
+                header_with("endian", Some("spacings: 1 0 1")),
+                "field `spacings`",
+            ),
+            (
+                header_with("endian", Some("space origin: (1,a,0)")),
+                "field `space origin`",
+            ),
+            (
+                header_with("endian", Some("space origin: 1 2 3")),
+                "field `space origin`",
+            ),
+            (
+                header_with("endian", Some("space origin: (1,2)")),
+                "field `space origin`",
+            ),
+            (
+                header_with("endian", Some("byte skip: abc")),
+                "field `byte skip`",
+            ),
+            (
+                header_with("endian", Some("byte skip: -2")),
+                "field `byte skip`",
+            ),
+            (
+                header_with("endian", Some("line skip: -1")),
+                "field `line skip`",
+            ),
+            (header_with("endian", Some("space: RAST")), "field `space`"),
+            (
+                header_with("endian", Some("space: martian")),
+                "field `space`",
+            ),
+            (
+                header_with("endian", Some("space dimension: 2")),
+                "field `space dimension`",
+            ),
+            (
+                header_with("endian", Some("space directions: (1,0,0) (0,1,0)")),
+                "field `space directions`",
+            ),
+            (
+                header_with("endian", Some("space directions: (1,0,0) (0,0,0) (0,0,1)")),
+                "field `space directions`",
+            ),
+            (
+                header_with("endian", Some("space directions: (1,0,0) (1,1,0) (0,0,1)")),
+                "field `space directions`: invalid value \"(1,0,0) (1,1,0) (0,0,1)\": axis directions must be mutually orthogonal",
+            ),
+            (
+                header_with(
+                    "endian",
+                    Some("space directions: (1,0,0) (0,1,0) (0,0,1,0)"),
+                ),
+                "field `space directions`",
+            ),
+            (
+                header_with("endian", Some("data file: LIST")),
+                "field `data file`",
+            ),
+            (
+                header_with("endian", Some("data file: slice%03d.raw 1 10 1")),
+                "field `data file`",
+            ),
+            (header_with("endian", Some("no colon here")), "line 6"),
+            (header_with("endian", Some(": value")), "empty field name"),
+            (header_with("endian", Some("sizes: 2 2 2")), "given twice"),
+            (
+                header_with("encoding", Some("encoding: gzip\nbyte skip: -1")),
+                "field `byte skip`",
+            ),
+            ("NRRD0006\ntype: uint8\n\n".to_string(), "not a NRRD file"),
+            ("P5 2 2 255\n".to_string(), "not a NRRD file"),
+        ];
+        for (h, want) in &cases {
+            let e = err_of(d, h, &[0; 8]);
+            assert!(e.contains(want), "want {want:?} in: {e}");
+        }
+        let e = err_of(d, "", b"");
+        assert!(e.contains("empty file"), "{e}");
+        // A float payload with a NaN sample.
+        let h = header_with("type", Some("type: float"));
+        let h = h.replace("sizes: 2 2 2", "sizes: 2 1 1");
+        let mut data = 1.0f32.to_le_bytes().to_vec();
+        data.extend_from_slice(&f32::NAN.to_le_bytes());
+        let e = err_of(d, &h, &data);
+        assert!(e.contains("sample #1"), "{e}");
+    }
+
+    #[test]
+    fn data_file_problems() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n";
+        let e = read_nrrd(file(dir.path(), "m.nhdr", h, b"")).unwrap_err();
+        assert!(
+            e.to_string().contains("missing required field `data file`"),
+            "{e}"
+        );
+        let h2 = format!("{h}data file: nowhere.raw\n");
+        let e = read_nrrd(file(dir.path(), "m.nhdr", &h2, b"")).unwrap_err();
+        assert!(e.to_string().contains("nowhere.raw"), "{e}");
+        let e = read_nrrd(dir.path().join("absent.nrrd")).unwrap_err();
+        assert!(e.to_string().contains("absent.nrrd"), "{e}");
+    }
+
+    #[test]
+    fn huge_header_is_rejected() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut h = String::from("NRRD0004\n");
+        while h.len() <= crate::MAX_HEADER_BYTES {
+            h.push_str("# padding padding padding padding padding padding padding padding\n");
+        }
+        let e = err_of(dir.path(), &h, b"");
+        assert!(e.contains("header size") && e.contains("1048576"), "{e}");
+        // One line longer than the limit (no newline at all).
+        let long = format!("NRRD0004\n# {}", "x".repeat(crate::MAX_HEADER_BYTES + 10));
+        let e = err_of(dir.path(), &long, b"");
+        assert!(e.contains("header size"), "{e}");
+    }
+
+    const BRAINSMALL: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/mri_brainsmall.nrrd"
+    );
+    const COLIN27: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/mri_colin27.nhdr"
+    );
+
+    #[test]
+    fn real_data_brainsmall() {
+        if !Path::new(BRAINSMALL).exists() {
+            eprintln!("note: {BRAINSMALL} not found; skipping");
+            return;
+        }
+        let v = crate::read_volume(BRAINSMALL).unwrap();
+        assert_eq!(v.scalar_type(), ScalarType::U8);
+        assert_eq!(v.grid().dims, [128, 128, 84]);
+        assert_eq!(v.grid().spacing, [1.0; 3]);
+        let (lo, hi) = v.value_range();
+        assert!(lo < 10.0 && hi > 100.0, "range {lo}..{hi}");
+        // Round trip through our writer.
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("b.nrrd");
+        write_nrrd(&p, &v, true).unwrap();
+        assert_eq!(read_nrrd(&p).unwrap(), v);
+    }
+
+    #[test]
+    fn real_data_colin27() {
+        if !Path::new(COLIN27).exists() {
+            eprintln!("note: {COLIN27} not found; skipping");
+            return;
+        }
+        let v = crate::read_volume(COLIN27).unwrap();
+        assert_eq!(v.scalar_type(), ScalarType::U8);
+        assert_eq!(v.grid().dims, [181, 217, 181]);
+        assert_eq!(v.grid().spacing, [1.0; 3]);
+        let (lo, hi) = v.value_range();
+        assert!(lo < 10.0 && hi > 100.0, "range {lo}..{hi}");
+        let mean = v.to_f32().data().iter().map(|&x| x as f64).sum::<f64>()
+            / v.grid().voxel_count() as f64;
+        assert!(mean > 5.0, "mean {mean}");
+    }
+}
