@@ -92,7 +92,7 @@ impl<const N: usize> LookupTable<N> {
     }
 
     /// The interpolated entry at index value `x`.
-    #[inline]
+    #[inline(always)]
     pub fn lookup(&self, x: f32) -> [f32; N] {
         let n = self.values.len();
         if n == 1 {
@@ -320,6 +320,71 @@ pub struct SampleInput {
     pub depth: f32,
 }
 
+/// Opacity (step-corrected), emission and reflection fused into one density-indexed table, so
+/// a sample needs one lookup instead of three (used when all three are indexed by density).
+struct FusedDensityTable {
+    lo: f32,
+    scale: f32,
+    last: f32,
+    /// `[α, e_r, e_g, e_b, r_r, r_g, r_b, 0]` per entry.
+    values: Vec<[f32; 8]>,
+}
+
+impl FusedDensityTable {
+    const LEN: usize = 4096;
+
+    fn new(
+        opacity: &LookupTable<1>,
+        emission: &LookupTable<3>,
+        reflection: &LookupTable<3>,
+    ) -> Option<Self> {
+        let tables = [opacity.index, emission.index, reflection.index];
+        if tables.iter().any(|&i| i != TableIndex::Density) {
+            return None;
+        }
+        let lo = opacity.lo.min(emission.lo).min(reflection.lo);
+        let hi = opacity.hi.max(emission.hi).max(reflection.hi);
+        let n = if hi > lo { Self::LEN } else { 1 };
+        let values = (0..n)
+            .map(|k| {
+                let x = if n == 1 {
+                    lo
+                } else {
+                    lo + (hi - lo) * k as f32 / (n - 1) as f32
+                };
+                let ([a], e, r) = (opacity.lookup(x), emission.lookup(x), reflection.lookup(x));
+                [a, e[0], e[1], e[2], r[0], r[1], r[2], 0.0]
+            })
+            .collect();
+        let scale = if n > 1 {
+            (n - 1) as f32 / (hi - lo)
+        } else {
+            0.0
+        };
+        Some(FusedDensityTable {
+            lo,
+            scale,
+            last: (n - 1) as f32,
+            values,
+        })
+    }
+
+    /// Linearly interpolated entry; NaN maps to the first entry.
+    #[inline(always)]
+    fn lookup(&self, density: f32) -> [f32; 8] {
+        let t = ((density - self.lo) * self.scale).max(0.0).min(self.last);
+        let i = t as usize;
+        let f = t - i as f32;
+        let a = &self.values[i];
+        let b = &self.values[(i + 1).min(self.values.len() - 1)];
+        let mut out = [0.0; 8];
+        for c in 0..8 {
+            out[c] = a[c] + f * (b[c] - a[c]);
+        }
+        out
+    }
+}
+
 struct FrameLight {
     l: Vec3,
     h: Vec3,
@@ -336,6 +401,8 @@ pub struct FrameClassifier {
     shading: Shading,
     lights: Vec<FrameLight>,
     spec_pow: LookupTable<1>,
+    fused: Option<FusedDensityTable>,
+    constant_modulation: Option<f32>,
     /// Whether [`FrameClassifier::classify`] reads the gradient.
     pub needs_gradient: bool,
 }
@@ -376,7 +443,12 @@ impl FrameClassifier {
             .collect();
         let p = tables.shading.specular_power as f64;
         let spec_pow = LookupTable::from_fn(TableIndex::Density, 0.0, 1.0, 4097, |x| [x.powf(p)]);
+        let fused = FusedDensityTable::new(&opacity, &tables.emission, &tables.reflection);
+        let constant_modulation =
+            (tables.modulation.values.len() == 1).then(|| tables.modulation.values[0][0]);
         FrameClassifier {
+            fused,
+            constant_modulation,
             emission: tables.emission.clone(),
             opacity,
             reflection: tables.reflection.clone(),
@@ -405,6 +477,9 @@ impl FrameClassifier {
     /// before the gradient is computed); `None` if it is indexed by something else.
     #[inline]
     pub fn density_opacity(&self, density: f32) -> Option<f32> {
+        if let Some(f) = &self.fused {
+            return Some(f.lookup(density)[0]);
+        }
         (self.opacity.index == TableIndex::Density).then(|| self.opacity.lookup(density)[0])
     }
 
@@ -412,7 +487,37 @@ impl FrameClassifier {
     /// when the opacity is zero (culled).
     #[inline]
     pub fn classify(&self, s: &SampleInput) -> Option<[f32; 4]> {
-        let a = self.opacity(s);
+        // One fused lookup when every table is density-indexed; separate lookups otherwise.
+        let (a, emission, refl) = match &self.fused {
+            Some(f) => {
+                let v = f.lookup(s.density);
+                let m = match self.constant_modulation {
+                    Some(m) => m,
+                    None => self
+                        .modulation
+                        .lookup(index_value(self.modulation.index, s))[0],
+                };
+                (
+                    v[0] * m,
+                    Vec3::new(v[1], v[2], v[3]),
+                    Vec3::new(v[4], v[5], v[6]),
+                )
+            }
+            None => {
+                let a = self.opacity(s);
+                if a.is_nan() || a <= 0.0 {
+                    return None;
+                }
+                (
+                    a,
+                    Vec3::from(self.emission.lookup(index_value(self.emission.index, s))),
+                    Vec3::from(
+                        self.reflection
+                            .lookup(index_value(self.reflection.index, s)),
+                    ),
+                )
+            }
+        };
         if a.is_nan() || a <= 0.0 {
             return None;
         }
@@ -420,16 +525,12 @@ impl FrameClassifier {
         let sh = &self.shading;
         let mut c = Vec3::ZERO;
         if sh.emission {
-            c += Vec3::from(self.emission.lookup(index_value(self.emission.index, s)));
+            c += emission;
         }
         if sh.diffuse || sh.specular {
-            let g = s.gradient.length();
-            if g > 0.0 {
-                let n = s.gradient / g;
-                let refl = Vec3::from(
-                    self.reflection
-                        .lookup(index_value(self.reflection.index, s)),
-                );
+            let g2 = s.gradient.length_squared();
+            if g2 > 0.0 {
+                let n = s.gradient * g2.sqrt().recip();
                 let spec_color = match sh.specular_color {
                     SpecularColor::Constant(c) => Vec3::from(c),
                     SpecularColor::Reflection => refl,

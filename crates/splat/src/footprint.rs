@@ -40,7 +40,10 @@ pub struct FootprintSettings {
 
 impl Default for FootprintSettings {
     fn default() -> Self {
-        FootprintSettings { max_entries: 1 << 17, max_phases: 64 }
+        FootprintSettings {
+            max_entries: 1 << 17,
+            max_phases: 64,
+        }
     }
 }
 
@@ -445,8 +448,18 @@ impl FootprintTable {
                     for r in 0..th {
                         let at = |qx: usize, qy: usize| own_spans[(qy * np + qx) * th + r];
                         let (a, b, c) = (at(px, py), at(px + 1, py), at(px, py + 1));
-                        let lo = [a, b, c].iter().filter(|s| s.1 > s.0).map(|s| s.0).min().unwrap_or(0);
-                        let hi = [a, b, c].iter().filter(|s| s.1 > s.0).map(|s| s.1).max().unwrap_or(0);
+                        let lo = [a, b, c]
+                            .iter()
+                            .filter(|s| s.1 > s.0)
+                            .map(|s| s.0)
+                            .min()
+                            .unwrap_or(0);
+                        let hi = [a, b, c]
+                            .iter()
+                            .filter(|s| s.1 > s.0)
+                            .map(|s| s.1)
+                            .max()
+                            .unwrap_or(0);
                         row_spans[(py * np + px) * th + r] = (lo, hi.max(lo));
                     }
                 }
@@ -458,7 +471,12 @@ impl FootprintTable {
             half_extent: [hx, hy],
             entries,
             row_spans,
-            block: PhaseBlock { kx0: kx0 + c0 as i32, ky0: ky0 + r0 as i32, width: tw as u32, height: th as u32 },
+            block: PhaseBlock {
+                kx0: kx0 + c0 as i32,
+                ky0: ky0 + r0 as i32,
+                width: tw as u32,
+                height: th as u32,
+            },
         }
     }
 
@@ -466,7 +484,14 @@ impl FootprintTable {
     #[cfg(test)]
     pub(crate) fn from_raw(half_extent: [f64; 2], entries: Vec<f32>, block: PhaseBlock) -> Self {
         let spans = (0..block.height).map(|_| (0, block.width as u16)).collect();
-        FootprintTable { phases: 1, blend: false, half_extent, entries, row_spans: spans, block }
+        FootprintTable {
+            phases: 1,
+            blend: false,
+            half_extent,
+            entries,
+            row_spans: spans,
+            block,
+        }
     }
 
     /// Total number of stored weights.
@@ -658,9 +683,21 @@ mod tests {
         for k in [Kernel::default(), Kernel::Tent, Kernel::Nearest] {
             let t = FootprintTable::build(&k, &g, &FootprintSettings::default());
             assert!(t.entry_count() <= 1 << 17, "{}", k.name());
-            assert!(t.phases >= 16 && t.phases <= 64, "{}: {}", k.name(), t.phases);
+            assert!(
+                t.phases >= 16 && t.phases <= 64,
+                "{}: {}",
+                k.name(),
+                t.phases
+            );
         }
-        let t = FootprintTable::build(&Kernel::default(), &g, &FootprintSettings { max_entries: 1 << 17, max_phases: 9 });
+        let t = FootprintTable::build(
+            &Kernel::default(),
+            &g,
+            &FootprintSettings {
+                max_entries: 1 << 17,
+                max_phases: 9,
+            },
+        );
         assert_eq!(t.phases, 9);
         let t = FootprintTable::build(&Kernel::SinglePoint, &g, &FootprintSettings::default());
         assert_eq!(t.phases, 1);
@@ -670,7 +707,10 @@ mod tests {
     /// (F-W21) to the blend's second-order error, and row spans cover every non-zero weight.
     #[test]
     fn weights_at_pixel_centres_match_the_footprint() {
-        for k in [Kernel::default(), Kernel::MitchellNetravali { b: 1.0, c: 0.0 }] {
+        for k in [
+            Kernel::default(),
+            Kernel::MitchellNetravali { b: 1.0, c: 0.0 },
+        ] {
             let g = geometry([1.0, 1.3, 2.0], 20.0, 10.0, 2.0);
             let f = FootprintFunction::new(&k, &g);
             let t = FootprintTable::from_function(&f, &FootprintSettings::default());
@@ -685,15 +725,27 @@ mod tests {
                         let dy = (loc.y0 + r as i32) as f64 + 0.5 - y as f64;
                         let expect = f.weight(dx, dy);
                         // Near the truncation edge the footprint jumps; elsewhere it is smooth.
-                        let tol = if f.weight(dx + 0.05, dy) == 0.0 || f.weight(dx - 0.05, dy) == 0.0 { 0.01 } else { 2e-3 };
-                        assert!((wt - expect).abs() < tol * peak, "{}: {wt} vs {expect}", k.name());
+                        let tol =
+                            if f.weight(dx + 0.05, dy) == 0.0 || f.weight(dx - 0.05, dy) == 0.0 {
+                                0.01
+                            } else {
+                                2e-3
+                            };
+                        assert!(
+                            (wt - expect).abs() < tol * peak,
+                            "{}: {wt} vs {expect}",
+                            k.name()
+                        );
                         if wt != 0.0 {
-                            assert!((loc.spans[r].0 as usize..loc.spans[r].1 as usize).contains(&c), "{} row {r} col {c}", k.name());
+                            assert!(
+                                (loc.spans[r].0 as usize..loc.spans[r].1 as usize).contains(&c),
+                                "{} row {r} col {c}",
+                                k.name()
+                            );
                         }
                     }
                 }
             }
         }
     }
-
 }

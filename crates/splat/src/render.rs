@@ -201,7 +201,8 @@ struct BandState {
     composite_s: f64,
 }
 
-const TILE: usize = 16;
+/// Side of the square pixel tiles whose opacity is tracked for early termination.
+const TILE: usize = 4;
 
 /// Renders any volume; see [`render`].
 pub fn render_any(
@@ -253,7 +254,7 @@ pub fn render_with_progress<T: Scalar>(
             let rows = band_h.min(h - b * band_h);
             BandState {
                 sheet: vec![[0.0; 4]; rows * w],
-                opaque_tiles: vec![false; n_tiles],
+                opaque_tiles: vec![false; n_tiles * rows.div_ceil(TILE)],
                 pixel_updates: 0,
                 terminated: 0,
                 splat_s: 0.0,
@@ -300,7 +301,12 @@ pub fn render_with_progress<T: Scalar>(
             stats.splats_terminated += c.skipped;
         }
         let t1 = Instant::now();
-        let band_ctx = BandContext { table: &table, settings, width: w, band_h };
+        let band_ctx = BandContext {
+            table: &table,
+            settings,
+            width: w,
+            band_h,
+        };
         let classified = &*classified;
         acc.par_chunks_mut(band_h * w)
             .zip(bands.par_iter_mut())
@@ -313,7 +319,11 @@ pub fn render_with_progress<T: Scalar>(
         let phase = ms(t1);
         stats.splat_ms += phase; // split below
         done += sheets.len();
-        let p = Progress { sheets_done: done, sheets_total: geom.sheet_order.len(), accumulation: &acc };
+        let p = Progress {
+            sheets_done: done,
+            sheets_total: geom.sheet_order.len(),
+            accumulation: &acc,
+        };
         if !progress(&p) {
             return Err(SplatError::Cancelled);
         }
@@ -350,8 +360,8 @@ fn validate(s: &RenderSettings) -> Result<()> {
     if s.subsample == 0 {
         return bad("subsample must be ≥ 1");
     }
-    if s.band_height == 0 || s.sheets_per_batch == 0 {
-        return bad("band_height and sheets_per_batch must be ≥ 1");
+    if s.band_height == 0 || s.sheets_per_batch == 0 || s.band_height % TILE != 0 {
+        return bad("band_height must be a positive multiple of 4 and sheets_per_batch ≥ 1");
     }
     if s.opacity_cutoff.is_nan() || s.opacity_cutoff <= 0.0 {
         return bad("opacity_cutoff must be > 0");
@@ -486,12 +496,20 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         let (w, h) = (self.width as f32, self.height as f32);
         let n_tiles = self.width.div_ceil(TILE);
         for vi in 0..nv {
-            let v = if geom.in_sheet_reversed[1] { nv - 1 - vi } else { vi };
+            let v = if geom.in_sheet_reversed[1] {
+                nv - 1 - vi
+            } else {
+                vi
+            };
             // Incremental transform (Westover §3.5.1): one full position per row, then adds.
             let row = sheet_origin + jv * v as f64;
             let row_lin = sheet_lin + v * sv;
             for ui in 0..nu {
-                let u = if geom.in_sheet_reversed[0] { nu - 1 - ui } else { ui };
+                let u = if geom.in_sheet_reversed[0] {
+                    nu - 1 - ui
+                } else {
+                    ui
+                };
                 let lin = row_lin + u * su;
                 let density = self.data[lin].to_f32();
                 // Shade first (§5.2): cull zero opacity before anything else is computed.
@@ -519,11 +537,20 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     ((y + hy).min(h - 1.0) as usize / self.band_h).min(self.n_bands - 1),
                 );
                 if !opaque.is_empty() {
+                    // Tiles are TILE × TILE pixels; the map's rows are the image's tile rows.
                     let (t0, t1) = (
                         ((x - hx).max(0.0) as usize / TILE).min(n_tiles - 1),
                         ((x + hx).min(w - 1.0) as usize / TILE).min(n_tiles - 1),
                     );
-                    if (b0..=b1).all(|b| opaque[b * n_tiles + t0..=b * n_tiles + t1].iter().all(|&o| o)) {
+                    let (r0, r1) = (
+                        ((y - hy).max(0.0) as usize) / TILE,
+                        ((y + hy).min(h - 1.0) as usize) / TILE,
+                    );
+                    if (r0..=r1).all(|r| {
+                        opaque[r * n_tiles + t0..=r * n_tiles + t1]
+                            .iter()
+                            .all(|&o| o)
+                    }) {
                         skipped += 1;
                         continue;
                     }
@@ -540,7 +567,11 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                             Vec3::ZERO
                         };
                         let depth = ((p.z - dlo) * self.depth_scale) as f32;
-                        match self.classifier.classify(&SampleInput { density, gradient, depth }) {
+                        match self.classifier.classify(&SampleInput {
+                            density,
+                            gradient,
+                            depth,
+                        }) {
                             Some(c) => c,
                             None if self.cull => continue,
                             None => [0.0; 4],
@@ -578,7 +609,8 @@ impl BandContext<'_> {
         let w = self.width;
         let rows = acc.len() / w;
         let mode = self.settings.mode;
-        let every = mode == RenderMode::Composite && self.settings.visibility == Visibility::EverySample;
+        let every =
+            mode == RenderMode::Composite && self.settings.visibility == Visibility::EverySample;
         let ftb = self.settings.order == Order::FrontToBack;
         let cutoff = self.settings.opacity_cutoff;
         let terminate = mode == RenderMode::Composite && ftb && cutoff < 1.0;
@@ -590,7 +622,11 @@ impl BandContext<'_> {
             Sink::Sheet
         };
         let t0 = Instant::now();
-        let target: &mut [Rgba] = if matches!(sink, Sink::Sheet) { &mut st.sheet } else { acc };
+        let target: &mut [Rgba] = if matches!(sink, Sink::Sheet) {
+            &mut st.sheet
+        } else {
+            acc
+        };
         let mut span = SpanCtx {
             y_lo: (b * self.band_h) as i32,
             rows: rows as i32,
@@ -660,13 +696,18 @@ impl BandContext<'_> {
             }
         }
         if terminate {
-            for t in tx0 / TILE..=(tx1 - 1) / TILE {
-                if st.opaque_tiles[t] {
-                    continue;
+            let n_tiles = w.div_ceil(TILE);
+            for tr in 0..rows.div_ceil(TILE) {
+                let (y0, y1) = (tr * TILE, ((tr + 1) * TILE).min(rows));
+                for t in tx0 / TILE..=(tx1 - 1) / TILE {
+                    let flag = &mut st.opaque_tiles[tr * n_tiles + t];
+                    if *flag {
+                        continue;
+                    }
+                    let (c0, c1) = (t * TILE, ((t + 1) * TILE).min(w));
+                    *flag = (y0..y1)
+                        .all(|r| acc[r * w + c0..r * w + c1].iter().all(|p| p[3] >= cutoff));
                 }
-                let (c0, c1) = (t * TILE, ((t + 1) * TILE).min(w));
-                st.opaque_tiles[t] =
-                    (0..rows).all(|r| acc[r * w + c0..r * w + c1].iter().all(|p| p[3] >= cutoff));
             }
         }
         st.composite_s += t1.elapsed().as_secs_f64();
@@ -700,18 +741,26 @@ struct SpanCtx<'a> {
 }
 
 impl SpanCtx<'_> {
-    /// Clips the column range `[x0, x1]` to the image; `None` if empty or (FTB) already opaque.
+    /// Clips the column range `[x0, x1]` to the image; `None` if empty or (FTB) every tile
+    /// under columns `x0..=x1` and band rows `r0..r1` (band-relative) is already opaque.
     #[inline(always)]
-    fn columns(&mut self, x0: i32, x1: i32) -> Option<(i32, i32)> {
+    fn columns(&mut self, x0: i32, x1: i32, r0: i32, r1: i32) -> Option<(i32, i32)> {
         let (x0, x1) = (x0.max(0), x1.min(self.width - 1));
         if x0 > x1 {
             return None;
         }
-        if self.terminate
-            && self.opaque[x0 as usize / TILE..=x1 as usize / TILE].iter().all(|&o| o)
-        {
-            self.terminated += 1;
-            return None;
+        if self.terminate {
+            let n_tiles = (self.width as usize).div_ceil(TILE);
+            let (t0, t1) = (x0 as usize / TILE, x1 as usize / TILE);
+            let all = (r0 as usize / TILE..=(r1 - 1) as usize / TILE).all(|tr| {
+                self.opaque[tr * n_tiles + t0..=tr * n_tiles + t1]
+                    .iter()
+                    .all(|&o| o)
+            });
+            if all {
+                self.terminated += 1;
+                return None;
+            }
         }
         Some((x0, x1))
     }
@@ -769,7 +818,12 @@ fn deposit<const S: u8>(px: &mut Rgba, wt: f32, v: &Rgba) {
 /// Splats one sample (Westover §3.7.2, Fig 3.08): its phase's block of weights is deposited
 /// over the pixels it covers, row by row within each row's non-zero span, clipped to the band.
 #[inline(always)]
-fn splat_block<const S: u8>(table: &FootprintTable, sp: &Splat, span: &mut SpanCtx, target: &mut [Rgba]) {
+fn splat_block<const S: u8>(
+    table: &FootprintTable,
+    sp: &Splat,
+    span: &mut SpanCtx,
+    target: &mut [Rgba],
+) {
     let blk = table.block();
     let (bw, bh) = (blk.width as i32, blk.height as i32);
     let loc = table.locate(sp.x, sp.y);
@@ -779,7 +833,12 @@ fn splat_block<const S: u8>(table: &FootprintTable, sp: &Splat, span: &mut SpanC
     if cy0 >= cy1 {
         return;
     }
-    let Some((xa, xb)) = span.columns(px0, px0 + bw - 1) else {
+    let Some((xa, xb)) = span.columns(
+        px0,
+        px0 + bw - 1,
+        py0 + cy0 - span.y_lo,
+        py0 + cy1 - span.y_lo,
+    ) else {
         return;
     };
     let (ca, cb) = ((xa - px0) as usize, (xb - px0 + 1) as usize);
