@@ -360,7 +360,7 @@ fn validate(s: &RenderSettings) -> Result<()> {
     if s.subsample == 0 {
         return bad("subsample must be ≥ 1");
     }
-    if s.band_height == 0 || s.sheets_per_batch == 0 || s.band_height % TILE != 0 {
+    if s.band_height == 0 || s.sheets_per_batch == 0 || !s.band_height.is_multiple_of(TILE) {
         return bad("band_height must be a positive multiple of 4 and sheets_per_batch ≥ 1");
     }
     if s.opacity_cutoff.is_nan() || s.opacity_cutoff <= 0.0 {
