@@ -5,7 +5,10 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 fn volsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volsplat")).args(args).output().expect("binary runs")
+    Command::new(env!("CARGO_BIN_EXE_volsplat"))
+        .args(args)
+        .output()
+        .expect("binary runs")
 }
 
 fn stderr(o: &Output) -> String {
@@ -16,20 +19,50 @@ fn npy_shape(path: &Path) -> Vec<usize> {
     let bytes = std::fs::read(path).unwrap();
     assert_eq!(&bytes[..6], b"\x93NUMPY");
     let header = String::from_utf8_lossy(&bytes[10..]).to_string();
-    let shape = header.split("'shape': (").nth(1).unwrap().split(')').next().unwrap();
-    shape.split(',').filter(|s| !s.trim().is_empty()).map(|s| s.trim().parse().unwrap()).collect()
+    let shape = header
+        .split("'shape': (")
+        .nth(1)
+        .unwrap()
+        .split(')')
+        .next()
+        .unwrap();
+    shape
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| s.trim().parse().unwrap())
+        .collect()
 }
 
 #[test]
 fn demo_render_writes_a_png_and_stats() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo.png");
-    let o = volsplat(&["render", "-o", out.to_str().unwrap(), "--size", "96x80", "--phantom-size", "48", "--azimuth", "30", "--stats"]);
+    let o = volsplat(&[
+        "render",
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "96x80",
+        "--phantom-size",
+        "48",
+        "--azimuth",
+        "30",
+        "--stats",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let png = std::fs::read(&out).unwrap();
     assert_eq!(&png[1..4], b"PNG");
-    let stats: serde_json::Value = serde_json::from_slice(&o.stdout).expect("--stats prints one JSON object");
-    for key in ["classify_ms", "splat_ms", "composite_ms", "total_ms", "splats", "kernel_cost", "threads"] {
+    let stats: serde_json::Value =
+        serde_json::from_slice(&o.stdout).expect("--stats prints one JSON object");
+    for key in [
+        "classify_ms",
+        "splat_ms",
+        "composite_ms",
+        "total_ms",
+        "splats",
+        "kernel_cost",
+        "threads",
+    ] {
         assert!(stats.get(key).is_some(), "missing {key} in {stats}");
     }
     assert_eq!(stats["width"], 96);
@@ -41,10 +74,32 @@ fn npy_outputs_have_the_documented_shapes() {
     let dir = tempfile::tempdir().unwrap();
     let rgba = dir.path().join("c.npy");
     let xray = dir.path().join("x.npy");
-    let o = volsplat(&["render", "--phantom", "blobs", "--phantom-size", "32", "--size", "40x30", "-o", rgba.to_str().unwrap()]);
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "32",
+        "--size",
+        "40x30",
+        "-o",
+        rgba.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(npy_shape(&rgba), vec![30, 40, 4]);
-    let o = volsplat(&["render", "--phantom", "blobs", "--phantom-size", "32", "--size", "40x30", "--mode", "xray", "-o", xray.to_str().unwrap()]);
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "32",
+        "--size",
+        "40x30",
+        "--mode",
+        "xray",
+        "-o",
+        xray.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(npy_shape(&xray), vec![30, 40]);
 }
@@ -53,7 +108,14 @@ fn npy_outputs_have_the_documented_shapes() {
 fn phantom_round_trips_through_nrrd_and_info() {
     let dir = tempfile::tempdir().unwrap();
     let nrrd = dir.path().join("sl.nrrd");
-    let o = volsplat(&["phantom", "shepp-logan", "--size", "24,20,16", "-o", nrrd.to_str().unwrap()]);
+    let o = volsplat(&[
+        "phantom",
+        "shepp-logan",
+        "--size",
+        "24,20,16",
+        "-o",
+        nrrd.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let o = volsplat(&["info", nrrd.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -61,7 +123,16 @@ fn phantom_round_trips_through_nrrd_and_info() {
     assert!(text.contains("24 x 20 x 16"), "{text}");
     assert!(text.contains("f32"), "{text}");
     let png = dir.path().join("sl.png");
-    let o = volsplat(&["render", nrrd.to_str().unwrap(), "--mode", "mip", "--size", "32x32", "-o", png.to_str().unwrap()]);
+    let o = volsplat(&[
+        "render",
+        nrrd.to_str().unwrap(),
+        "--mode",
+        "mip",
+        "--size",
+        "32x32",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
@@ -71,26 +142,77 @@ fn camera_and_transfer_function_files_are_used_and_checked() {
     let cam = dir.path().join("cam.json");
     let out = dir.path().join("a.png");
     // --save-camera writes the camera used; rendering with it reproduces the image exactly.
-    let o = volsplat(&["render", "--phantom-size", "32", "--size", "48x48", "--azimuth", "40", "-o", out.to_str().unwrap(), "--save-camera", cam.to_str().unwrap()]);
+    let o = volsplat(&[
+        "render",
+        "--phantom-size",
+        "32",
+        "--size",
+        "48x48",
+        "--azimuth",
+        "40",
+        "-o",
+        out.to_str().unwrap(),
+        "--save-camera",
+        cam.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out2 = dir.path().join("b.png");
-    let o = volsplat(&["render", "--phantom-size", "32", "--size", "48x48", "--camera", cam.to_str().unwrap(), "-o", out2.to_str().unwrap()]);
+    let o = volsplat(&[
+        "render",
+        "--phantom-size",
+        "32",
+        "--size",
+        "48x48",
+        "--camera",
+        cam.to_str().unwrap(),
+        "-o",
+        out2.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out2).unwrap());
 
     let bad = dir.path().join("bad.json");
-    std::fs::write(&bad, r#"{"position": [0, 0, 1], "focal_point": [0, 0, 0], "parallel_projection": true}"#).unwrap();
-    let o = volsplat(&["render", "--phantom-size", "16", "--camera", bad.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    std::fs::write(
+        &bad,
+        r#"{"position": [0, 0, 1], "focal_point": [0, 0, 0], "parallel_projection": true}"#,
+    )
+    .unwrap();
+    let o = volsplat(&[
+        "render",
+        "--phantom-size",
+        "16",
+        "--camera",
+        bad.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
     let e = stderr(&o);
     assert!(e.contains("view_up") && e.contains("bad.json"), "{e}");
 
     let tf = dir.path().join("tf.json");
-    std::fs::write(&tf, r#"{"color": [[0, 1, 1, 1]], "scalar_opacity": [[0, 0], [1, 2.0]], "colour_map": 3}"#).unwrap();
-    let o = volsplat(&["render", "--phantom", "blobs", "--phantom-size", "16", "--tf", tf.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    std::fs::write(
+        &tf,
+        r#"{"color": [[0, 1, 1, 1]], "scalar_opacity": [[0, 0], [1, 2.0]], "colour_map": 3}"#,
+    )
+    .unwrap();
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "16",
+        "--tf",
+        tf.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
     let e = stderr(&o);
-    assert!(e.contains("scalar_opacity[1]") && e.contains("tf.json"), "{e}");
+    assert!(
+        e.contains("scalar_opacity[1]") && e.contains("tf.json"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -98,11 +220,55 @@ fn bad_input_gives_clear_errors_not_panics() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o.png");
     let cases: Vec<(Vec<String>, &str)> = vec![
-        (vec!["render".into(), "/nonexistent/vol.nrrd".into(), "-o".into(), out.display().to_string()], "/nonexistent/vol.nrrd"),
-        (vec!["render".into(), "--size".into(), "12by4".into(), "-o".into(), out.display().to_string()], "--size"),
-        (vec!["render".into(), "--kernel".into(), "sinc".into(), "-o".into(), out.display().to_string()], "sinc"),
-        (vec!["render".into(), "--preset".into(), "nope".into(), "-o".into(), out.display().to_string()], "nope"),
-        (vec!["render".into(), "--phantom-size".into(), "8".into(), "-o".into(), dir.path().join("o.jpg").display().to_string()], "o.jpg"),
+        (
+            vec![
+                "render".into(),
+                "/nonexistent/vol.nrrd".into(),
+                "-o".into(),
+                out.display().to_string(),
+            ],
+            "/nonexistent/vol.nrrd",
+        ),
+        (
+            vec![
+                "render".into(),
+                "--size".into(),
+                "12by4".into(),
+                "-o".into(),
+                out.display().to_string(),
+            ],
+            "--size",
+        ),
+        (
+            vec![
+                "render".into(),
+                "--kernel".into(),
+                "sinc".into(),
+                "-o".into(),
+                out.display().to_string(),
+            ],
+            "sinc",
+        ),
+        (
+            vec![
+                "render".into(),
+                "--preset".into(),
+                "nope".into(),
+                "-o".into(),
+                out.display().to_string(),
+            ],
+            "nope",
+        ),
+        (
+            vec![
+                "render".into(),
+                "--phantom-size".into(),
+                "8".into(),
+                "-o".into(),
+                dir.path().join("o.jpg").display().to_string(),
+            ],
+            "o.jpg",
+        ),
     ];
     for (args, needle) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -114,7 +280,11 @@ fn bad_input_gives_clear_errors_not_panics() {
     }
     // A truncated NRRD names the file and the byte counts.
     let nrrd = dir.path().join("t.nrrd");
-    std::fs::write(&nrrd, b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 10 10 10\nencoding: raw\n\n0123").unwrap();
+    std::fs::write(
+        &nrrd,
+        b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 10 10 10\nencoding: raw\n\n0123",
+    )
+    .unwrap();
     let o = volsplat(&["info", nrrd.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
     let e = stderr(&o);
@@ -127,7 +297,16 @@ fn bad_input_gives_clear_errors_not_panics() {
 fn ladder_writes_previews() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("final.png");
-    let o = volsplat(&["render", "--phantom-size", "32", "--size", "32x32", "--ladder", "-o", out.to_str().unwrap()]);
+    let o = volsplat(&[
+        "render",
+        "--phantom-size",
+        "32",
+        "--size",
+        "32x32",
+        "--ladder",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     for name in ["final.png", "final.preview-s4.png", "final.preview-s2.png"] {
         assert!(dir.path().join(name).exists(), "{name}");
@@ -139,7 +318,21 @@ fn threads_do_not_change_the_output() {
     let dir = tempfile::tempdir().unwrap();
     let (a, b) = (dir.path().join("a.npy"), dir.path().join("b.npy"));
     for (p, t) in [(&a, "1"), (&b, "2")] {
-        let o = volsplat(&["render", "--phantom-size", "40", "--size", "64x64", "--azimuth", "20", "--elevation", "30", "--threads", t, "-o", p.to_str().unwrap()]);
+        let o = volsplat(&[
+            "render",
+            "--phantom-size",
+            "40",
+            "--size",
+            "64x64",
+            "--azimuth",
+            "20",
+            "--elevation",
+            "30",
+            "--threads",
+            t,
+            "-o",
+            p.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
     }
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());

@@ -133,18 +133,23 @@ pub struct Light {
     /// Unit direction *towards* the light. In the camera frame (x right, y up, z towards the
     /// viewer) when `follow_camera`, else in world coordinates.
     pub direction: [f64; 3],
-    /// Light colour (linear RGB, typically in [0, 1]).
+    /// Diffuse and specular colour of the light (linear RGB, typically in [0, 1]).
     pub color: [f32; 3],
+    /// Ambient colour of the light, multiplying a transfer function's `ambient` coefficient.
+    /// Black by default, as `vtkLight`'s, so `ambient` has no effect under the default
+    /// headlight, exactly as in VTK's volume mappers.
+    pub ambient_color: [f32; 3],
     /// Whether `direction` is relative to the camera (a headlight is `(0, 0, 1)`).
     pub follow_camera: bool,
 }
 
 impl Light {
-    /// VTK's default light: a white headlight.
+    /// VTK's default light: a white headlight with a black ambient colour.
     pub fn headlight() -> Self {
         Light {
             direction: [0.0, 0.0, 1.0],
             color: [1.0; 3],
+            ambient_color: [0.0; 3],
             follow_camera: true,
         }
     }
@@ -214,11 +219,23 @@ pub struct CrioTables {
 pub const DEFAULT_TABLE_LEN: usize = 4096;
 
 impl CrioTables {
-    /// Compiles a VTK-style transfer function into the four tables (DESIGN.md §3):
-    /// emission = colour (× ambient when shaded), reflection = diffuse × colour, opacity = scalar
-    /// opacity, modulation = gradient opacity (or 1), specular = `specular` × white, one white
-    /// two-sided headlight.
+    /// Compiles a VTK-style transfer function into the four tables (DESIGN.md §3), lit by VTK's
+    /// default white two-sided headlight: see [`CrioTables::from_transfer_function_lit`].
     pub fn from_transfer_function(tf: &TransferFunction, table_len: usize) -> Result<Self> {
+        Self::from_transfer_function_lit(tf, table_len, vec![Light::headlight()])
+    }
+
+    /// Compiles a VTK-style transfer function for the given lights, following
+    /// `vtkEncodedGradientShader` (the shading of VTK's CPU ray caster):
+    /// unshaded, emission = colour; shaded, emission = `ambient` × colour × Σ light ambient
+    /// colours (zero under VTK's default lights), reflection = `diffuse` × colour, specular =
+    /// `specular` × light colour, added only where `N·L > 0`; opacity = scalar opacity;
+    /// modulation = gradient opacity (or 1).
+    pub fn from_transfer_function_lit(
+        tf: &TransferFunction,
+        table_len: usize,
+        lights: Vec<Light>,
+    ) -> Result<Self> {
         let mut tf = tf.clone();
         tf.validate()?;
         let (clo, chi) = (tf.color[0][0], tf.color[tf.color.len() - 1][0]);
@@ -226,9 +243,21 @@ impl CrioTables {
             tf.scalar_opacity[0][0],
             tf.scalar_opacity[tf.scalar_opacity.len() - 1][0],
         );
-        let ambient = if tf.shade { tf.ambient } else { 1.0 };
+        let ambient_light = lights.iter().fold([0.0f64; 3], |acc, l| {
+            [
+                acc[0] + l.ambient_color[0] as f64,
+                acc[1] + l.ambient_color[1] as f64,
+                acc[2] + l.ambient_color[2] as f64,
+            ]
+        });
+        let ambient = if tf.shade {
+            ambient_light.map(|a| a * tf.ambient)
+        } else {
+            [1.0; 3]
+        };
         let emission = LookupTable::from_fn(TableIndex::Density, clo, chi, table_len, |x| {
-            tf.color_at(x).map(|c| c * ambient)
+            let c = tf.color_at(x);
+            [c[0] * ambient[0], c[1] * ambient[1], c[2] * ambient[2]]
         });
         let reflection = LookupTable::from_fn(TableIndex::Density, clo, chi, table_len, |x| {
             tf.color_at(x).map(|c| c * tf.diffuse)
@@ -260,7 +289,7 @@ impl CrioTables {
                 specular_color: SpecularColor::Constant([s; 3]),
                 specular_power: tf.specular_power as f32,
                 two_sided: true,
-                lights: vec![Light::headlight()],
+                lights,
             },
         })
     }
@@ -545,7 +574,7 @@ impl FrameClassifier {
                     if sh.diffuse && ndl > 0.0 {
                         c += refl * light.color * ndl;
                     }
-                    if sh.specular && ndh > 0.0 {
+                    if sh.specular && ndl > 0.0 && ndh > 0.0 {
                         c += spec_color * light.color * self.spec_pow.lookup(ndh)[0];
                     }
                 }
@@ -576,6 +605,38 @@ mod tests {
             ..Camera::default()
         }
         .frame()
+    }
+
+    /// A headlight whose ambient colour is white, so `ambient` contributes.
+    fn ambient_headlight() -> Light {
+        Light {
+            ambient_color: [1.0; 3],
+            ..Light::headlight()
+        }
+    }
+
+    /// VTK semantics: the default headlight has a black ambient colour, so `ambient` adds
+    /// nothing (vtkEncodedGradientShader: ambient = Ka · light ambient colour).
+    #[test]
+    fn default_headlight_ignores_ambient_like_vtk() {
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+        tf.color = vec![[0.0, 0.5, 0.5, 0.5]];
+        tf.scalar_opacity = vec![[0.0, 1.0]];
+        tf.shade = true;
+        tf.ambient = 1.0;
+        tf.diffuse = 0.0;
+        tf.specular = 0.0;
+        let t = CrioTables::from_transfer_function(&tf, 8).unwrap();
+        let c = FrameClassifier::new(&t, &frame(), 1.0)
+            .classify(&input(0.5, Vec3::Z))
+            .unwrap();
+        assert_eq!(&c[..3], &[0.0, 0.0, 0.0]);
+        let lit =
+            CrioTables::from_transfer_function_lit(&tf, 8, vec![ambient_headlight()]).unwrap();
+        let c = FrameClassifier::new(&lit, &frame(), 1.0)
+            .classify(&input(0.5, Vec3::Z))
+            .unwrap();
+        assert!((c[0] - 0.5).abs() < 1e-6);
     }
 
     fn input(density: f32, gradient: Vec3) -> SampleInput {
@@ -621,7 +682,7 @@ mod tests {
         tf.diffuse = 0.6;
         tf.specular = 0.3;
         tf.specular_power = 4.0;
-        let t = CrioTables::from_transfer_function(&tf, 8).unwrap();
+        let t = CrioTables::from_transfer_function_lit(&tf, 8, vec![ambient_headlight()]).unwrap();
         let fc = FrameClassifier::new(&t, &frame(), 1.0);
         let n = Vec3::new(3f32.sqrt() / 2.0, 0.0, 0.5) * 7.0; // |n·L| = 0.5
         let out = fc.classify(&input(0.3, n)).unwrap();
@@ -652,7 +713,7 @@ mod tests {
         tf.scalar_opacity = vec![[0.0, 1.0]];
         tf.shade = true;
         tf.ambient = 0.25;
-        let t = CrioTables::from_transfer_function(&tf, 8).unwrap();
+        let t = CrioTables::from_transfer_function_lit(&tf, 8, vec![ambient_headlight()]).unwrap();
         let g = Vec3::Z;
         let full = FrameClassifier::new(&t, &frame(), 1.0)
             .classify(&input(0.5, g))
