@@ -144,6 +144,11 @@ pub struct RenderOptions {
     /// Depth cueing: modulate opacity from NEAR (front) to FAR (back), both in [0, 1].
     #[arg(long, value_name = "NEAR:FAR")]
     pub depth_cue: Option<String>,
+    /// Front-to-back early termination: a pixel whose opacity reaches this value takes no more
+    /// splats. The default changes no pixel by more than 1e-6; 0.99 is close to what ray casters
+    /// use. Values ≥ 1 disable it.
+    #[arg(long, default_value_t = 1.0 - 1.0 / 1048576.0)]
+    pub opacity_cutoff: f32,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,

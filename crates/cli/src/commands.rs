@@ -214,6 +214,14 @@ fn build_settings(o: &RenderOptions) -> Result<RenderSettings> {
         },
         kernel: Kernel::from_name(&o.kernel)?,
         subsample: o.subsample,
+        opacity_cutoff: if o.opacity_cutoff.is_finite() && o.opacity_cutoff > 0.0 {
+            o.opacity_cutoff
+        } else {
+            bail!(
+                "--opacity-cutoff must be a positive number, got {}",
+                o.opacity_cutoff
+            )
+        },
         ..RenderSettings::default()
     })
 }

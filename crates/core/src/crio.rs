@@ -398,6 +398,17 @@ impl FusedDensityTable {
         })
     }
 
+    /// Linearly interpolated opacity only (the cull test).
+    #[inline(always)]
+    fn alpha(&self, density: f32) -> f32 {
+        let t = ((density - self.lo) * self.scale).max(0.0).min(self.last);
+        let i = t as usize;
+        let f = t - i as f32;
+        let a = self.values[i][0];
+        let b = self.values[(i + 1).min(self.values.len() - 1)][0];
+        a + f * (b - a)
+    }
+
     /// Linearly interpolated entry; NaN maps to the first entry.
     #[inline(always)]
     fn lookup(&self, density: f32) -> [f32; 8] {
@@ -507,7 +518,7 @@ impl FrameClassifier {
     #[inline]
     pub fn density_opacity(&self, density: f32) -> Option<f32> {
         if let Some(f) = &self.fused {
-            return Some(f.lookup(density)[0]);
+            return Some(f.alpha(density));
         }
         (self.opacity.index == TableIndex::Density).then(|| self.opacity.lookup(density)[0])
     }

@@ -533,12 +533,19 @@ impl FootprintTable {
                 spans: &self.row_spans[..h],
             };
         }
-        let (tx, ty) = ((x - 0.5) * p, (y - 0.5) * p);
-        let (ix, iy) = (floor(tx), floor(ty));
-        let (fx, fy) = (tx - ix as f32, ty - iy as f32);
-        let n = self.phases as i32;
-        let (bx, px) = (ix.div_euclid(n), ix.rem_euclid(n) as usize);
-        let (by, py) = (iy.div_euclid(n), iy.rem_euclid(n) as usize);
+        // Base pixel, then the phase within it: float arithmetic only (no integer division).
+        let (cx, cy) = (x - 0.5, y - 0.5);
+        let (bx, by) = (floor(cx), floor(cy));
+        let last = (self.phases - 1) as f32;
+        let (tx, ty) = (
+            ((cx - bx as f32) * p).min(last + 0.999_9),
+            ((cy - by as f32) * p).min(last + 0.999_9),
+        );
+        let (px, py) = (
+            (tx as usize).min(self.phases - 1),
+            (ty as usize).min(self.phases - 1),
+        );
+        let (fx, fy) = (tx - px as f32, ty - py as f32);
         let np = self.phases + 1;
         let block = |qx: usize, qy: usize| &self.entries[(qy * np + qx) * w * h..][..w * h];
         Located {
