@@ -213,7 +213,10 @@ pub struct BenchArgs {
     pub view: ViewArgs,
     #[command(flatten)]
     pub options: RenderOptions,
-    /// Frames to time (orbiting by 360/frames degrees of azimuth each), after one warm-up frame.
+    /// Frames to time, after one warm-up frame.
     #[arg(long, default_value_t = 8)]
     pub frames: usize,
+    /// Degrees of azimuth between frames (default 360/frames; 0 keeps the view fixed).
+    #[arg(long, allow_negative_numbers = true)]
+    pub orbit: Option<f64>,
 }

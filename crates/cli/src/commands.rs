@@ -421,7 +421,7 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
     pool.install(|| -> Result<()> {
         render_any(&vol, &camera, &tables, &settings)?; // warm-up
         for _ in 0..a.frames {
-            camera.azimuth(360.0 / a.frames as f64);
+            camera.azimuth(a.orbit.unwrap_or(360.0 / a.frames as f64));
             let out = render_any(&vol, &camera, &tables, &settings)?;
             times.push(out.stats.total_ms);
             last = Some(out);
