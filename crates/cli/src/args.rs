@@ -144,6 +144,20 @@ pub struct RenderOptions {
     /// Depth cueing: modulate opacity from NEAR (front) to FAR (back), both in [0, 1].
     #[arg(long, value_name = "NEAR:FAR")]
     pub depth_cue: Option<String>,
+    /// A directional light: direction X,Y,Z towards the light in the camera frame (x right, y up,
+    /// z towards the viewer), optionally followed by colour R,G,B. Repeat for several lights.
+    /// Default: one white headlight (0,0,1), as VTK.
+    #[arg(long, value_name = "X,Y,Z[,R,G,B]", allow_hyphen_values = true)]
+    pub light: Vec<String>,
+    /// Leave out the emission (ambient) term (Westover §3.6.1 switches).
+    #[arg(long)]
+    pub no_emission: bool,
+    /// Leave out the diffuse term.
+    #[arg(long)]
+    pub no_diffuse: bool,
+    /// Leave out the specular term.
+    #[arg(long)]
+    pub no_specular: bool,
     /// Front-to-back early termination: a pixel whose opacity reaches this value takes no more
     /// splats. The default changes no pixel by more than 1e-6; 0.99 is close to what ray casters
     /// use. Values ≥ 1 disable it.

@@ -6,7 +6,7 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use volsplat_core::phantom::{self, EllipsoidPhantom, GaussianBlobs, MarschnerLobb};
-use volsplat_core::{AnyVolume, Camera, CrioTables, Kernel, ScalarType, TransferFunction};
+use volsplat_core::{AnyVolume, Camera, CrioTables, Kernel, Light, ScalarType, TransferFunction};
 use volsplat_io::{PngBitDepth, PngSettings, RawSpec};
 use volsplat_splat::refine::{default_ladder, render_ladder};
 use volsplat_splat::{Order, RenderMode, RenderSettings, Rendered, Visibility, render_any};
@@ -165,8 +165,22 @@ fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTa
         });
         TransferFunction::preset(&name, range)?
     };
-    let mut tables =
-        CrioTables::from_transfer_function(&tf, volsplat_core::crio::DEFAULT_TABLE_LEN)?;
+    let lights = if o.light.is_empty() {
+        vec![Light::headlight()]
+    } else {
+        o.light
+            .iter()
+            .map(|l| parse_light(l))
+            .collect::<Result<Vec<_>>>()?
+    };
+    let mut tables = CrioTables::from_transfer_function_lit(
+        &tf,
+        volsplat_core::crio::DEFAULT_TABLE_LEN,
+        lights,
+    )?;
+    tables.shading.emission &= !o.no_emission;
+    tables.shading.diffuse &= !o.no_diffuse;
+    tables.shading.specular &= !o.no_specular;
     if let Some(s) = &o.surface_enhance {
         let (lo, hi) = pair(s, ':', "--surface-enhance")?;
         tables = tables.with_surface_enhancement(lo, hi)?;
@@ -176,6 +190,37 @@ fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTa
         tables = tables.with_depth_cue(near, far)?;
     }
     Ok(tables)
+}
+
+/// Parses `X,Y,Z[,R,G,B]`: a camera-relative direction towards the light and an optional colour.
+fn parse_light(s: &str) -> Result<Light> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<f64>()
+                .map_err(|_| anyhow!("--light: `{p}` is not a number in `{s}`"))
+        })
+        .collect::<Result<_>>()?;
+    if v.len() != 3 && v.len() != 6 {
+        bail!("--light: expected X,Y,Z or X,Y,Z,R,G,B, got `{s}`");
+    }
+    if v.iter().any(|x| !x.is_finite()) || v[..3].iter().all(|&x| x == 0.0) {
+        bail!("--light: direction must be finite and non-zero, got `{s}`");
+    }
+    let color = if v.len() == 6 {
+        [v[3] as f32, v[4] as f32, v[5] as f32]
+    } else {
+        [1.0; 3]
+    };
+    if color.iter().any(|&c| c < 0.0) {
+        bail!("--light: colour components must be ≥ 0, got `{s}`");
+    }
+    Ok(Light {
+        direction: [v[0], v[1], v[2]],
+        color,
+        ..Light::headlight()
+    })
 }
 
 fn build_settings(o: &RenderOptions) -> Result<RenderSettings> {

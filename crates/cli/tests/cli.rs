@@ -337,3 +337,55 @@ fn threads_do_not_change_the_output() {
     }
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
 }
+
+#[test]
+fn lights_and_switches_change_the_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let tf = dir.path().join("shaded.json");
+    std::fs::write(
+        &tf,
+        r#"{"color": [[0, 1, 0.8, 0.6]], "scalar_opacity": [[0, 0], [1, 0.3]], "shade": true,
+            "diffuse": 0.8, "specular": 0.3, "scalar_opacity_unit_distance": 0.05}"#,
+    )
+    .unwrap();
+    let render = |name: &str, extra: &[&str]| {
+        let p = dir.path().join(name);
+        let mut args = vec![
+            "render",
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "40",
+            "--size",
+            "48x48",
+            "--tf",
+            tf.to_str().unwrap(),
+            "-o",
+            p.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = volsplat(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        std::fs::read(&p).unwrap()
+    };
+    let base = render("a.npy", &[]);
+    assert!(
+        base[128..].iter().any(|&b| b != 0),
+        "the shaded blobs are visible"
+    );
+    let side = render("b.npy", &["--light", "1,0,0.2,1,0.5,0.5"]);
+    let two = render("c.npy", &["--light", "0,0,1", "--light", "-1,0,0.3,0,0,1"]);
+    let flat = render("d.npy", &["--no-diffuse", "--no-specular"]);
+    assert!(base != side && base != two && base != flat);
+    // The default is exactly one white headlight.
+    assert!(base == render("e.npy", &["--light", "0,0,1"]));
+    let o = volsplat(&[
+        "render",
+        "--light",
+        "0,0,0",
+        "-o",
+        dir.path().join("f.png").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--light"));
+}

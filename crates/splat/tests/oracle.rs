@@ -159,8 +159,8 @@ fn composite_matches_reference_integrator_per_kernel() {
             Kernel::MitchellNetravali { b: 0.0, c: 0.5 },
             35.0,
         ),
-        ("nearest", Kernel::Nearest, 25.0),
-        ("point", Kernel::SinglePoint, 20.0),
+        ("nearest", Kernel::Nearest, 35.0),
+        ("point", Kernel::SinglePoint, 35.0),
     ] {
         let s = RenderSettings {
             width: w,
