@@ -1,0 +1,1 @@
+//! Buchanan filtering (being written).
