@@ -31,8 +31,10 @@ use volsplat_core::glam::{DMat2, DVec2, DVec3};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FootprintSettings {
     /// Upper bound on the table's total entries (phases² × block size). Westover used about
-    /// 128 × 128 = 16 384 with at most 9 × 9 phases; we allow 2¹⁷ so that the sub-pixel placement
-    /// error stays near 1/100 voxel at the usual 1–2 pixels per voxel.
+    /// 128 × 128 = 16 384 with at most 9 × 9 phases; the default 2¹⁵ (128 KiB, cache-resident)
+    /// gives about 17 phases per axis at 1–2 pixels per voxel, and with the first-order phase
+    /// blend a constant sheet reconstructs within ±0.3 %. 2¹⁷ is 25 % slower and no more
+    /// accurate in rendered images (decision 0002).
     pub max_entries: usize,
     /// Largest number of sub-pixel phases per axis.
     pub max_phases: usize,
@@ -41,7 +43,7 @@ pub struct FootprintSettings {
 impl Default for FootprintSettings {
     fn default() -> Self {
         FootprintSettings {
-            max_entries: 1 << 17,
+            max_entries: 1 << 15,
             max_phases: 64,
         }
     }

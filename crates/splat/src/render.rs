@@ -1056,6 +1056,7 @@ mod tests {
                     hi = hi.max(v);
                 }
             }
+            eprintln!("constant sheet, view {az},{el},{roll} zoom {zoom}: [{lo}, {hi}]");
             assert!(
                 lo > 0.99 && hi < 1.01,
                 "view {az},{el},{roll} zoom {zoom}: [{lo}, {hi}]"
