@@ -7,7 +7,8 @@ Development tool; needs `pip install vtk numpy` and an X server (run under `xvfb
     xvfb-run -a python3 tools/vtk_compare.py VOLUME.nrrd CAMERA.json TF.json OUT_PREFIX [--size 512] [--frames 8]
 
 Writes OUT_PREFIX.vtk.png (VTK) and prints the median VTK render time. Compare with a volsplat
-render made with `--linear` (VTK writes its framebuffer values unencoded) using `--ssim A B`.
+render made with `--linear` (VTK writes its framebuffer values unencoded) using `--ssim A B`;
+`--montage OUT.png PREFIX...` puts PREFIX.vtk.png beside PREFIX.vs.png, one row per prefix.
 """
 import json
 import sys
@@ -51,7 +52,36 @@ def read_png_gray(path):
     return rgb @ np.array([0.2126, 0.7152, 0.0722]), rgb
 
 
+def montage(out, prefixes):
+    """Writes PREFIX.vtk.png | PREFIX.vs.png pairs, one row per prefix, at half size."""
+    import zlib
+    import struct
+
+    def rgb(path):
+        return (read_png_gray(path)[1] * 255 + 0.5).astype(np.uint8)[::2, ::2]
+
+    rows = []
+    for p in prefixes:
+        a, b = rgb(p + ".vtk.png"), rgb(p + ".vs.png")
+        gap = np.full((a.shape[0], 4, 3), 40, np.uint8)
+        rows.append(np.concatenate([a, gap, b], axis=1))
+        rows.append(np.full((4, rows[-1].shape[1], 3), 40, np.uint8))
+    im = np.ascontiguousarray(np.concatenate(rows[:-1], axis=0))
+    h, w, _ = im.shape
+    raw = b"".join(b"\x00" + im[y].tobytes() for y in range(h))
+
+    def chunk(t, d):
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
+
+    with open(out, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+                + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
+
+
 def main():
+    if sys.argv[1] == "--montage":
+        montage(sys.argv[2], sys.argv[3:])
+        return
     if sys.argv[1] == "--ssim":
         ga, ra = read_png_gray(sys.argv[2])
         gb, rb = read_png_gray(sys.argv[3])

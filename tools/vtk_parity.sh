@@ -5,6 +5,8 @@
 # they cannot be installed it says SKIPPED and exits 0.
 #
 #   bash tools/vtk_parity.sh [path/to/volsplat]
+#   KEEP=/tmp/parity bash tools/vtk_parity.sh && \
+#     python3 tools/vtk_compare.py --montage docs/figures/vtk-parity.png /tmp/parity/{mr,head,colin}
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin="${1:-target/release/volsplat}"
@@ -15,8 +17,11 @@ fi
 if ! command -v xvfb-run >/dev/null 2>&1; then
   (apt-get update -qq && apt-get install -y -qq xvfb) >/dev/null 2>&1 || { echo "SKIPPED: VTK parity (could not install xvfb)"; exit 0; }
 fi
-work="$(mktemp -d)"
-trap 'rm -rf "$work"' EXIT
+if [ -n "${KEEP:-}" ]; then
+  work="$KEEP"; mkdir -p "$work"          # keep the images (e.g. for docs/figures/vtk-parity.png)
+else
+  work="$(mktemp -d)"; trap 'rm -rf "$work"' EXIT
+fi
 cp docs/bench/parity/*.json "$work/"
 "$bin" phantom head --size 120,150,135 -o "$work/head.nrrd" 2>/dev/null
 cases=("head bone $work/head.nrrd 30 20 1.0" "skin skin $work/head.nrrd -40 10 1.3")
