@@ -122,7 +122,7 @@ pub struct RenderOptions {
     #[arg(long, conflicts_with = "preset")]
     pub tf: Option<PathBuf>,
     /// Built-in transfer function: ct-bone, ct-skin, mr, ramp. Default: ct-skin for the demo
-    /// head, otherwise a ramp over the data range.
+    /// head, otherwise a ramp over the data range (opaque grey window for MIP/MinIP).
     #[arg(long)]
     pub preset: Option<String>,
     /// Reconstruction kernel: gaussian, point, nearest, tent, bspline, catmull-rom, mitchell.

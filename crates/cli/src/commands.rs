@@ -155,6 +155,9 @@ fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTa
             eprintln!("warning: {w}");
         }
         tf
+    } else if o.preset.is_none() && matches!(o.mode, ModeArg::Mip | ModeArg::Minip) {
+        // Projections without a transfer function: a grey window over the data range, opaque.
+        TransferFunction::ramp(range.0, range.1, 1.0)
     } else {
         let name = o.preset.clone().unwrap_or_else(|| {
             if demo {
