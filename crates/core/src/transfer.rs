@@ -94,6 +94,33 @@ pub fn piecewise_linear<const N: usize>(points: &[(f64, [f64; N])], x: f64) -> [
     out
 }
 
+/// Interpolates rows `[x, y₁, y₂, …]` sorted by `x` at `x` (clamped at the ends, like
+/// [`piecewise_linear`]) without allocating; column 0 of the result is `x` itself. Empty input
+/// gives zeros.
+pub fn interpolate_rows<const M: usize>(rows: &[[f64; M]], x: f64) -> [f64; M] {
+    let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
+        return [0.0; M];
+    };
+    if x <= first[0] {
+        return *first;
+    }
+    if x >= last[0] {
+        return *last;
+    }
+    let hi = rows.partition_point(|r| r[0] <= x);
+    let (a, b) = (rows[hi - 1], rows[hi]);
+    let t = if b[0] > a[0] {
+        (x - a[0]) / (b[0] - a[0])
+    } else {
+        1.0
+    };
+    let mut out = [0.0; M];
+    for c in 0..M {
+        out[c] = a[c] + t * (b[c] - a[c]);
+    }
+    out
+}
+
 impl TransferFunction {
     /// Checks every field and sorts the points by value (as VTK does). Errors name the field and
     /// the point index.
@@ -169,29 +196,20 @@ impl TransferFunction {
 
     /// Colour (r, g, b in [0, 1]) at a data value.
     pub fn color_at(&self, value: f64) -> [f64; 3] {
-        let pts: Vec<(f64, [f64; 3])> = self
-            .color
-            .iter()
-            .map(|p| (p[0], [p[1], p[2], p[3]]))
-            .collect();
-        piecewise_linear(&pts, value)
+        let r = interpolate_rows(&self.color, value);
+        [r[1], r[2], r[3]]
     }
 
     /// Scalar opacity (per unit distance) at a data value.
     pub fn opacity_at(&self, value: f64) -> f64 {
-        let pts: Vec<(f64, [f64; 1])> =
-            self.scalar_opacity.iter().map(|p| (p[0], [p[1]])).collect();
-        piecewise_linear(&pts, value)[0]
+        interpolate_rows(&self.scalar_opacity, value)[1]
     }
 
     /// Gradient-opacity factor at a gradient magnitude (1 when there is no gradient opacity).
     pub fn gradient_opacity_at(&self, magnitude: f64) -> f64 {
         match &self.gradient_opacity {
             None => 1.0,
-            Some(g) => {
-                let pts: Vec<(f64, [f64; 1])> = g.iter().map(|p| (p[0], [p[1]])).collect();
-                piecewise_linear(&pts, magnitude)[0]
-            }
+            Some(g) => interpolate_rows(g, magnitude)[1],
         }
     }
 
