@@ -21,6 +21,9 @@ pub enum Command {
     Phantom(PhantomArgs),
     /// Time repeated renders of an orbit around the volume; prints the median per frame.
     Bench(Box<BenchArgs>),
+    /// Buchanan's texture-filtering comparison (Tables 5.1–5.11, Plates 5.1–5.16): renders the
+    /// test images with every technique and writes a Markdown report and PNG images.
+    TextureBench(TextureBenchArgs),
 }
 
 /// Built-in phantoms.
@@ -233,4 +236,28 @@ pub struct BenchArgs {
     /// Degrees of azimuth between frames (default 360/frames; 0 keeps the view fixed).
     #[arg(long, allow_negative_numbers = true)]
     pub orbit: Option<f64>,
+}
+
+/// Image size presets of the texture-filtering benchmark.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum TextureBenchSize {
+    /// 48×36: a quick look (seconds).
+    Quick,
+    /// 128×96 (default; about a minute on 2 cores).
+    Default,
+    /// 100×100, the thesis's size.
+    Thesis,
+}
+
+#[derive(Debug, Args)]
+pub struct TextureBenchArgs {
+    /// Output folder for report.md and the images (created if missing).
+    #[arg(short, long, default_value = "texture-bench")]
+    pub out: PathBuf,
+    /// Image size preset.
+    #[arg(long, value_enum, default_value = "default")]
+    pub size: TextureBenchSize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
 }

@@ -17,6 +17,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Info(a) => info_cmd(a),
         Command::Phantom(a) => phantom_cmd(a),
         Command::Bench(a) => bench_cmd(*a),
+        Command::TextureBench(a) => texture_bench_cmd(a),
     }
 }
 
@@ -488,5 +489,34 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
     j["min_ms"] = json!(sorted[0]);
     j["max_ms"] = json!(sorted[sorted.len() - 1]);
     println!("{j}");
+    Ok(())
+}
+
+fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
+    use volsplat_filter::{TextureBenchSettings, run_texture_bench};
+    let settings = match a.size {
+        TextureBenchSize::Quick => TextureBenchSettings::quick(),
+        TextureBenchSize::Default => TextureBenchSettings::default(),
+        TextureBenchSize::Thesis => TextureBenchSettings::thesis_size(),
+    };
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let pool = thread_pool(a.threads)?;
+    let report = pool.install(|| run_texture_bench(&settings))?;
+    for img in &report.images {
+        let path = a.out.join(format!("{}.png", img.name));
+        volsplat_io::write_png_gray(&path, &img.image, 0.0, 1.0, PngBitDepth::Eight)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let md = report.to_markdown();
+    let path = a.out.join("report.md");
+    volsplat_io::write_bytes_atomic(&path, md.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("{md}");
+    eprintln!(
+        "wrote {} and {} images to {}",
+        path.display(),
+        report.images.len(),
+        a.out.display()
+    );
     Ok(())
 }

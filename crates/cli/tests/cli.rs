@@ -389,3 +389,29 @@ fn lights_and_switches_change_the_picture() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("--light"));
 }
+
+#[test]
+fn texture_bench_writes_report_and_plates() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("tb");
+    let o = volsplat(&[
+        "texture-bench",
+        "--size",
+        "quick",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    for row in [
+        "Point sampled",
+        "Step clamped",
+        "Direct Gauss-27",
+        "NIL, M=1",
+        "EWA-3 adaptive",
+    ] {
+        assert!(report.contains(row), "report lacks {row}");
+    }
+    let png = std::fs::read(out.join("plate_5_1_point_sampled.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+}

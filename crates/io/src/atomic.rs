@@ -64,6 +64,16 @@ where
     result
 }
 
+/// Writes `bytes` to `path` atomically (a temporary file renamed over `path`): reports, Markdown,
+/// any small file a tool produces.
+pub fn write_bytes_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
+    let path = path.as_ref();
+    write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(bytes).map_err(write_err(path))
+    })
+}
+
 /// Maps a write error inside [`write_atomic`]'s closure.
 pub(crate) fn write_err(path: &Path) -> impl Fn(std::io::Error) -> IoError + '_ {
     move |e| IoError::os(path, "write", e)

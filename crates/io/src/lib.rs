@@ -52,6 +52,7 @@ pub mod nrrd;
 mod payload;
 mod raw;
 
+pub use atomic::write_bytes_atomic;
 pub use error::{IoError, Result};
 pub use header::MAX_HEADER_BYTES;
 pub use image::{PngBitDepth, PngSettings, srgb_encode, write_png, write_png_gray};
