@@ -304,6 +304,107 @@ mod tests {
         }
     }
 
+    /// MSE (8-bit²) of EWA over `fps` against the direct Gaussian over `V_tan` at depth `eps`.
+    fn ewa_mse(fps: &[PixelFootprint], eps: f64, runs: &[EwaSettings]) -> Vec<f64> {
+        let tex = CosineTexture::seeded(4, 1).unwrap();
+        let d = DirectSettings {
+            filter: FilterKind::Gaussian { alpha: 2.0 },
+            tolerance: 1e-4,
+            max_depth: 12,
+            ..Default::default()
+        };
+        let refs: Vec<f64> = fps
+            .iter()
+            .map(|fp| filter_direct(&tex, &fp.v_tan, &d).value)
+            .collect();
+        runs.iter()
+            .map(|s| {
+                let table = EwaTable::new(s).unwrap();
+                let se: f64 = fps
+                    .iter()
+                    .zip(&refs)
+                    .map(|(fp, r)| (filter_ewa(&tex, fp, eps, s, &table).value - r).powi(2))
+                    .sum();
+                se / fps.len() as f64 * 255.0 * 255.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn adaptive_error_is_set_by_the_cap_not_the_spacing() {
+        // Halving or quartering the adaptive spacing 1/(2 f_max) changes nothing that matters:
+        // the error lives in footprints wider than `max_samples` spacings, where the cap binds.
+        let fps = footprints();
+        let tex = CosineTexture::seeded(4, 1).unwrap();
+        let base = 0.5 / tex.max_frequency().unwrap();
+        let mut runs = Vec::new();
+        for n in [3, 7, 15] {
+            for f in [1.0, 0.25] {
+                runs.push(EwaSettings {
+                    count: SampleCount::Adaptive,
+                    max_samples: n,
+                    spacing: Some(base * f),
+                    ..Default::default()
+                });
+            }
+        }
+        let m = ewa_mse(&fps, 0.01, &runs);
+        eprintln!("EWA-3 adaptive MSE, n = 3, 7, 15 × spacing 1, ¼: {m:?}");
+        for pair in m.chunks(2) {
+            assert!((pair[0] - pair[1]).abs() <= 0.15 * pair[0] + 0.1, "{m:?}");
+        }
+        assert!(m[4] < 0.5 * m[0], "{m:?}");
+    }
+
+    #[test]
+    fn thick_depth_gives_a_kernel_mismatch_floor() {
+        // With V_tan a quarter period deep, EWA-3's 3-D Gaussian ellipsoid and the reference's
+        // 2-D Gaussian × box in depth differ: the adaptive error saturates on that floor (n = 11,
+        // 21, 41 within 25 %), and EWA-2, which ignores the depth, sits far above it.
+        let scene = {
+            let mut s = SceneSettings::test_plane(40, 30);
+            s.epsilon = 0.25;
+            Scene::new(s).unwrap()
+        };
+        let mut fps = Vec::new();
+        for y in (0..30).step_by(2) {
+            for x in (0..40).step_by(3) {
+                if let Footprint::Hit(fp) = scene.footprint(x, y) {
+                    fps.push(fp);
+                }
+            }
+        }
+        let run = |variant, n| EwaSettings {
+            variant,
+            count: SampleCount::Adaptive,
+            max_samples: n,
+            ..Default::default()
+        };
+        let m = ewa_mse(
+            &fps,
+            0.25,
+            &[
+                run(EwaVariant::Ewa3, 3),
+                run(EwaVariant::Ewa3, 11),
+                run(EwaVariant::Ewa3, 21),
+                run(EwaVariant::Ewa3, 41),
+                run(EwaVariant::Ewa2, 41),
+            ],
+        );
+        eprintln!(
+            "ε = 0.25: EWA-3 n = 3, 11, 21, 41: {:?}; EWA-2 n = 41: {}",
+            &m[..4],
+            m[4]
+        );
+        let floor = m[3];
+        assert!(floor > 1.0, "{m:?}");
+        for v in &m[1..3] {
+            assert!((v - floor).abs() < 0.25 * floor, "{m:?}");
+        }
+        assert!(m[0] > m[1], "{m:?}");
+        assert!(m[4] > 3.0 * floor, "{m:?}");
+    }
+
     #[test]
     fn error_saturates_with_max_samples_table_5_4() {
         let tex = CosineTexture::seeded(4, 1).unwrap();

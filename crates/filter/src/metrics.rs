@@ -31,6 +31,27 @@ pub fn mse_8bit(a: &ScalarImage, b: &ScalarImage) -> Option<f64> {
     Some(sum / a.values().len() as f64)
 }
 
+/// The MSE of [`mse_8bit`] restricted to the pixels (row-major index) for which `keep` is true,
+/// averaged over those pixels; `None` if the sizes differ or no pixel is kept.
+pub fn mse_8bit_where(
+    a: &ScalarImage,
+    b: &ScalarImage,
+    keep: impl Fn(usize) -> bool,
+) -> Option<f64> {
+    if a.width() != b.width() || a.height() != b.height() {
+        return None;
+    }
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (i, (x, y)) in a.values().iter().zip(b.values()).enumerate() {
+        if keep(i) {
+            let d = to_8bit(*x) as f64 - to_8bit(*y) as f64;
+            sum += d * d;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
+}
+
 /// `SNR = 10·log₁₀(255²/MSE)` in dB (infinite for MSE 0).
 pub fn snr_db(mse: f64) -> f64 {
     10.0 * (255.0f64 * 255.0 / mse).log10()
@@ -90,5 +111,8 @@ mod tests {
         assert!((mse_8bit(&a, &b).unwrap() - 50.0).abs() < 1e-12);
         assert!(mse_8bit(&a, &ScalarImage::new(1, 1)).is_none());
         assert_eq!(total_variation(&a), 1.0);
+        assert!((mse_8bit_where(&a, &b, |i| i == 0).unwrap() - 100.0).abs() < 1e-12);
+        assert_eq!(mse_8bit_where(&a, &b, |i| i == 1), Some(0.0));
+        assert!(mse_8bit_where(&a, &b, |_| false).is_none());
     }
 }

@@ -77,6 +77,8 @@ pub struct Rendered {
     pub work: u64,
     /// Pixels where the technique fell back (NIL scale collapse → point sample).
     pub fallbacks: usize,
+    /// Row-major indices (`y·width + x`) of the pixels that fell back, ascending.
+    pub fallback_pixels: Vec<usize>,
 }
 
 enum Prepared {
@@ -148,11 +150,11 @@ pub fn render(
     let background = scene.settings().background;
     let eps = scene.settings().epsilon;
     let t1 = Instant::now();
-    let rows: Vec<(Vec<f32>, u64, usize)> = (0..h)
+    let rows: Vec<(Vec<f32>, u64, Vec<usize>)> = (0..h)
         .into_par_iter()
         .map(|y| {
             let mut row = Vec::with_capacity(w);
-            let (mut work, mut fallbacks) = (0u64, 0usize);
+            let (mut work, mut fallbacks) = (0u64, Vec::new());
             let mut scratch = NilScratch::default();
             for x in 0..w {
                 let v = match scene.footprint(x, y) {
@@ -200,7 +202,7 @@ pub fn render(
                             );
                             work += r.patches as u64;
                             if r.collapsed {
-                                fallbacks += 1;
+                                fallbacks.push(y * w + x);
                                 texture.value(fp.v_tan.center)
                             } else {
                                 r.value()
@@ -216,11 +218,11 @@ pub fn render(
         .collect();
     let seconds = t1.elapsed().as_secs_f64();
     let mut values = Vec::with_capacity(w * h);
-    let (mut work, mut fallbacks) = (0, 0);
+    let (mut work, mut fallback_pixels) = (0, Vec::new());
     for (r, wk, fb) in rows {
         values.extend(r);
         work += wk;
-        fallbacks += fb;
+        fallback_pixels.extend(fb);
     }
     let image = ScalarImage::from_values(w, h, values)
         .ok_or_else(|| FilterError::invalid("image", (w, h), "internal size mismatch"))?;
@@ -229,6 +231,7 @@ pub fn render(
         seconds,
         preprocess_seconds,
         work,
-        fallbacks,
+        fallbacks: fallback_pixels.len(),
+        fallback_pixels,
     })
 }
