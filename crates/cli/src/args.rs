@@ -24,6 +24,9 @@ pub enum Command {
     /// Buchanan's texture-filtering comparison (Tables 5.1–5.11, Plates 5.1–5.16): renders the
     /// test images with every technique and writes a Markdown report and PNG images.
     TextureBench(TextureBenchArgs),
+    /// Buchanan's Chapter 6 volume displays (Plates 6.1–6.14, Tables 6.1–6.2): renders every
+    /// display on one volume, times them against splatting, and writes a report and images.
+    DisplayBench(Box<crate::display::DisplayBenchArgs>),
 }
 
 /// Built-in phantoms.
@@ -198,6 +201,23 @@ pub struct RenderArgs {
     /// Print per-stage timings and counters as one JSON object on stdout.
     #[arg(long)]
     pub stats: bool,
+    /// Which renderer draws the image: Westover/Swan splatting, or one of Buchanan's
+    /// Chapter 6 displays (Sabella's density-emitter model, or the NIL-map linearised display).
+    #[arg(long, value_enum, default_value = "splat")]
+    pub renderer: RendererArg,
+    #[command(flatten)]
+    pub display: crate::display::DisplayArgs,
+}
+
+/// Renderers reachable from `render --renderer`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RendererArg {
+    /// Splatting (Westover 1991; perspective and anti-aliasing after Swan et al. 1997).
+    Splat,
+    /// Sabella's density-emitter display integrated along each ray (Buchanan eq. 3.1).
+    Sabella,
+    /// The linearised display evaluated with NIL maps (Buchanan ch. 6).
+    Nil,
 }
 
 #[derive(Debug, Args)]

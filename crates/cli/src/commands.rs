@@ -18,6 +18,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Phantom(a) => phantom_cmd(a),
         Command::Bench(a) => bench_cmd(*a),
         Command::TextureBench(a) => texture_bench_cmd(a),
+        Command::DisplayBench(a) => crate::display::display_bench_cmd(*a),
     }
 }
 
@@ -148,9 +149,10 @@ fn build_camera(v: &ViewArgs, vol: &AnyVolume) -> Result<Camera> {
     Ok(cam)
 }
 
-fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTables> {
+/// The transfer function from `--tf`, `--preset`, or the default for the mode and data.
+pub(crate) fn build_tf(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<TransferFunction> {
     let range = vol.value_range();
-    let tf = if let Some(path) = &o.tf {
+    Ok(if let Some(path) = &o.tf {
         let (tf, warnings) = volsplat_io::load_transfer_function(path)?;
         for w in warnings {
             eprintln!("warning: {w}");
@@ -168,7 +170,11 @@ fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTa
             }
         });
         TransferFunction::preset(&name, range)?
-    };
+    })
+}
+
+fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTables> {
+    let tf = build_tf(o, vol, demo)?;
     let lights = if o.light.is_empty() {
         vec![Light::headlight()]
     } else {
@@ -275,7 +281,7 @@ fn build_settings(o: &RenderOptions) -> Result<RenderSettings> {
     })
 }
 
-fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+pub(crate) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut b = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
         if n == 0 || n > 1024 {
@@ -363,6 +369,34 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     let camera = build_camera(&a.view, &vol)?;
     if let Some(p) = &a.view.save_camera {
         volsplat_io::save_camera(p, &camera)?;
+    }
+    if a.renderer != RendererArg::Splat {
+        let tf = build_tf(&a.options, &vol, demo)?;
+        let settings = build_settings(&a.options)?;
+        let pool = thread_pool(a.options.threads)?;
+        let (image, stats) = pool
+            .install(|| {
+                crate::display::render_display(
+                    &a,
+                    &vol,
+                    &camera,
+                    &tf,
+                    settings.width,
+                    settings.height,
+                )
+            })
+            .with_context(|| format!("rendering {label}"))?;
+        let out = Rendered {
+            image,
+            values: None,
+            stats: Default::default(),
+        };
+        write_output(&a.output, &out, &a)
+            .with_context(|| format!("writing {}", a.output.display()))?;
+        if a.stats {
+            println!("{stats}");
+        }
+        return Ok(());
     }
     let tables = build_tables(&a.options, &vol, demo)?;
     let settings = build_settings(&a.options)?;

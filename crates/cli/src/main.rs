@@ -5,6 +5,7 @@
 
 mod args;
 mod commands;
+mod display;
 
 use clap::Parser;
 

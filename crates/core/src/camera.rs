@@ -197,6 +197,14 @@ impl Camera {
         }
     }
 
+    /// VTK's `Dolly`: moves the eye towards the focal point, dividing their distance by `factor`
+    /// (> 1 moves closer). The focal point stays.
+    pub fn dolly(&mut self, factor: f64) {
+        let fp = DVec3::from(self.focal_point);
+        let eye = DVec3::from(self.position);
+        self.position = (fp + (eye - fp) / factor).to_array();
+    }
+
     fn rotate_eye(&mut self, axis: DVec3, degrees: f64) {
         let fp = DVec3::from(self.focal_point);
         let rot = DMat3::from_axis_angle(axis, degrees.to_radians());
@@ -233,13 +241,7 @@ impl OrthoProjection {
                 "this renderer supports orthographic cameras only (set parallel_projection: true)",
             ));
         }
-        if width == 0 || height == 0 {
-            return Err(CoreError::invalid(
-                "image size",
-                (width, height),
-                "must be non-zero",
-            ));
-        }
+        check_size(width, height)?;
         Ok(OrthoProjection {
             frame: camera.frame(),
             width,
@@ -276,6 +278,174 @@ impl OrthoProjection {
         self.frame.focal
             + self.frame.right * ((x - self.width as f64 * 0.5) * self.pixel_size)
             + self.frame.up * ((self.height as f64 * 0.5 - y) * self.pixel_size)
+    }
+}
+
+/// Perspective (pinhole) projection of a camera onto a `width × height` raster, with VTK's
+/// semantics: `view_angle` is the vertical field of view; the image plane is perpendicular to
+/// the direction of projection.
+///
+/// Raster coordinates as [`OrthoProjection`]. Depth is the eye-space distance along the
+/// direction of projection (`z_e` of Swan et al. 1997, Fig. 1a), world units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PerspectiveProjection {
+    /// The camera frame.
+    pub frame: ViewFrame,
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Eye-to-screen distance in pixels: `(height/2) / tan(view_angle/2)`. This is `D/p` of
+    /// Swan et al. 1997 eq. 3 (screen distance over pixel extent).
+    pub focal_px: f64,
+}
+
+impl PerspectiveProjection {
+    /// Builds the projection; errors if the camera is invalid, orthographic, or the image is
+    /// empty.
+    pub fn new(camera: &Camera, width: usize, height: usize) -> Result<Self> {
+        camera.validate()?;
+        if camera.parallel_projection {
+            return Err(CoreError::invalid(
+                "parallel_projection",
+                true,
+                "a perspective projection needs parallel_projection: false",
+            ));
+        }
+        check_size(width, height)?;
+        let half = (camera.view_angle.to_radians() * 0.5).tan();
+        Ok(PerspectiveProjection {
+            frame: camera.frame(),
+            width,
+            height,
+            focal_px: height as f64 * 0.5 / half,
+        })
+    }
+
+    /// Raster position `(x, y)` in pixels and eye-space depth (world units) of a world point.
+    /// Points at depth ≤ 0 (at or behind the eye) give non-finite or mirrored raster positions:
+    /// callers clip on depth first.
+    pub fn raster_from_world(&self, p_world: DVec3) -> DVec3 {
+        let d = p_world - self.frame.eye;
+        let z = d.dot(self.frame.forward);
+        let s = self.focal_px / z;
+        DVec3::new(
+            self.width as f64 * 0.5 + d.dot(self.frame.right) * s,
+            self.height as f64 * 0.5 - d.dot(self.frame.up) * s,
+            z,
+        )
+    }
+
+    /// The 2×3 derivative of raster `(x, y)` with respect to the world position at `p_world`
+    /// (pixels per world unit), as the first two rows of a 3×3 matrix whose third row is the
+    /// derivative of depth (the direction of projection). Local affine approximation of the
+    /// perspective map (Zwicker et al. 2001, §4.1).
+    pub fn jacobian(&self, p_world: DVec3) -> DMat3 {
+        let d = p_world - self.frame.eye;
+        let z = d.dot(self.frame.forward);
+        let (xr, yu) = (d.dot(self.frame.right), d.dot(self.frame.up));
+        let f = self.focal_px;
+        // x = W/2 + f·xr/z ; y = H/2 − f·yu/z.
+        let row_x = self.frame.right * (f / z) - self.frame.forward * (f * xr / (z * z));
+        let row_y = -self.frame.up * (f / z) + self.frame.forward * (f * yu / (z * z));
+        DMat3::from_cols(row_x, row_y, self.frame.forward).transpose()
+    }
+
+    /// Unit direction (world) of the ray from the eye through raster point `(x, y)`.
+    pub fn ray_direction(&self, x: f64, y: f64) -> DVec3 {
+        let f = self.focal_px;
+        (self.frame.forward + self.frame.right * ((x - self.width as f64 * 0.5) / f)
+            - self.frame.up * ((y - self.height as f64 * 0.5) / f))
+            .normalize()
+    }
+}
+
+fn check_size(width: usize, height: usize) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(CoreError::invalid(
+            "image size",
+            (width, height),
+            "must be non-zero",
+        ));
+    }
+    Ok(())
+}
+
+/// Either projection, chosen by the camera's `parallel_projection` flag.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Projection {
+    /// Parallel projection.
+    Ortho(OrthoProjection),
+    /// Pinhole perspective.
+    Perspective(PerspectiveProjection),
+}
+
+impl Projection {
+    /// The projection the camera asks for.
+    pub fn new(camera: &Camera, width: usize, height: usize) -> Result<Self> {
+        Ok(if camera.parallel_projection {
+            Projection::Ortho(OrthoProjection::new(camera, width, height)?)
+        } else {
+            Projection::Perspective(PerspectiveProjection::new(camera, width, height)?)
+        })
+    }
+
+    /// The camera frame.
+    pub fn frame(&self) -> &ViewFrame {
+        match self {
+            Projection::Ortho(p) => &p.frame,
+            Projection::Perspective(p) => &p.frame,
+        }
+    }
+
+    /// Image size `(width, height)` in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            Projection::Ortho(p) => (p.width, p.height),
+            Projection::Perspective(p) => (p.width, p.height),
+        }
+    }
+
+    /// Raster `(x, y)` in pixels and depth along the direction of projection from the eye
+    /// (world units).
+    pub fn raster_from_world(&self, p_world: DVec3) -> DVec3 {
+        match self {
+            Projection::Ortho(p) => p.raster_from_world(p_world),
+            Projection::Perspective(p) => p.raster_from_world(p_world),
+        }
+    }
+
+    /// Derivative of (raster x, raster y, depth) with respect to world position at `p_world`.
+    pub fn jacobian(&self, p_world: DVec3) -> DMat3 {
+        match self {
+            Projection::Ortho(p) => p.raster_from_world_linear(),
+            Projection::Perspective(p) => p.jacobian(p_world),
+        }
+    }
+
+    /// The ray through raster point `(x, y)`: a world origin and a unit world direction. For
+    /// perspective the origin is the eye; for orthographic views it is the point on the plane
+    /// through the eye perpendicular to the direction of projection (volumes behind that plane
+    /// are still in view, as in VTK, whose clipping range is reset to the data).
+    pub fn ray(&self, x: f64, y: f64) -> (DVec3, DVec3) {
+        match self {
+            Projection::Ortho(p) => {
+                let on_focal = p.world_from_raster(x, y);
+                let back = (on_focal - p.frame.eye).dot(p.frame.forward);
+                (on_focal - p.frame.forward * back, p.frame.forward)
+            }
+            Projection::Perspective(p) => (p.frame.eye, p.ray_direction(x, y)),
+        }
+    }
+
+    /// Size of one pixel in world units at depth `depth` (world units from the eye along the
+    /// direction of projection): constant for orthographic views, `depth / focal_px` for
+    /// perspective.
+    pub fn pixel_size_at(&self, depth: f64) -> f64 {
+        match self {
+            Projection::Ortho(p) => p.pixel_size,
+            Projection::Perspective(p) => depth / p.focal_px,
+        }
     }
 }
 
@@ -326,6 +496,63 @@ mod tests {
         let w = p.world_from_raster(130.5, 20.5);
         let back = p.raster_from_world(w);
         assert!((back.x - 130.5).abs() < 1e-9 && (back.y - 20.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn perspective_projection_matches_its_rays_and_jacobian() {
+        let mut c = Camera::reset_to_bounds(DVec3::splat(-1.0), DVec3::splat(1.0), false);
+        c.azimuth(25.0);
+        c.elevation(-15.0);
+        c.orthogonalize_view_up();
+        let p = PerspectiveProjection::new(&c, 160, 120).unwrap();
+        let proj = Projection::Perspective(p);
+        // The focal point lands on the image centre.
+        let centre = p.raster_from_world(DVec3::from(c.focal_point));
+        assert!((centre.x - 80.0).abs() < 1e-9 && (centre.y - 60.0).abs() < 1e-9);
+        // The top edge of the image is view_angle/2 above the axis.
+        let f = p.frame;
+        let top = f.eye + (f.forward + f.up * 15f64.to_radians().tan()) * 3.0;
+        assert!(p.raster_from_world(top).y.abs() < 1e-9);
+        // A point on the ray through (x, y) projects back to (x, y).
+        for (x, y) in [(0.5, 0.5), (123.25, 77.5), (159.5, 3.0)] {
+            let (o, d) = proj.ray(x, y);
+            let q = p.raster_from_world(o + d * 4.2);
+            assert!((q.x - x).abs() < 1e-9 && (q.y - y).abs() < 1e-9);
+        }
+        // The Jacobian matches central differences.
+        let x0 = DVec3::new(0.3, -0.4, 0.2);
+        let j = p.jacobian(x0);
+        for a in 0..3 {
+            let mut e = DVec3::ZERO;
+            e[a] = 1e-6;
+            let fd = (p.raster_from_world(x0 + e) - p.raster_from_world(x0 - e)) / 2e-6;
+            let col = j.col(a);
+            assert!((fd - col).length() < 1e-5, "axis {a}: {fd} vs {col}");
+        }
+        // Pixel size at the focal distance: the image height spans 2·d·tan(15°).
+        let dist = (DVec3::from(c.position) - DVec3::from(c.focal_point)).length();
+        let px = proj.pixel_size_at(dist);
+        assert!((px * 120.0 - 2.0 * dist * 15f64.to_radians().tan()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn orthographic_rays_are_parallel_and_project_back() {
+        let c = Camera::reset_to_bounds(DVec3::splat(-1.0), DVec3::splat(1.0), true);
+        let proj = Projection::new(&c, 64, 48).unwrap();
+        let (o, d) = proj.ray(10.5, 20.5);
+        assert!((d - proj.frame().forward).length() < 1e-12);
+        let q = proj.raster_from_world(o + d * 2.0);
+        assert!((q.x - 10.5).abs() < 1e-9 && (q.y - 20.5).abs() < 1e-9);
+        assert!((q.z - 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn dolly_divides_the_distance() {
+        let mut c = Camera::reset_to_bounds(DVec3::splat(-1.0), DVec3::splat(1.0), false);
+        let d0 = (DVec3::from(c.position) - DVec3::from(c.focal_point)).length();
+        c.dolly(2.0);
+        let d1 = (DVec3::from(c.position) - DVec3::from(c.focal_point)).length();
+        assert!((d0 / d1 - 2.0).abs() < 1e-12);
     }
 
     #[test]

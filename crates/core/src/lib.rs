@@ -27,7 +27,7 @@ pub mod phantom;
 pub mod transfer;
 pub mod volume;
 
-pub use camera::{Camera, OrthoProjection, ViewFrame};
+pub use camera::{Camera, OrthoProjection, PerspectiveProjection, Projection, ViewFrame};
 pub use crio::{CrioTables, FrameClassifier, Light, LookupTable, SampleInput, Shading, TableIndex};
 pub use error::{CoreError, Result};
 pub use image::{Image, Rgba, ScalarImage};
