@@ -12,6 +12,8 @@
 //! - [`kernel`]: reconstruction kernels (Gaussian, single-point, nearest, tent, Mitchell–Netravali).
 //! - [`image`]: premultiplied RGBA [`Image`], [`ScalarImage`], and the *over* operators.
 //! - [`phantom`]: analytic test volumes with closed-form line integrals (the built-in demo data).
+//! - [`scenes`]: synthetic stand-ins for the test scenes of Swan et al. 1997, Fig. 7
+//!   (checkerboard sheet, terrain, confocal-like filaments) with matching transfer functions.
 //!
 //! Conventions (DESIGN.md §3): world units are those of the data (usually mm); angles are degrees
 //! at interfaces and radians inside; images have row 0 at the top and pixel centres at half
@@ -24,6 +26,7 @@ pub mod error;
 pub mod image;
 pub mod kernel;
 pub mod phantom;
+pub mod scenes;
 pub mod transfer;
 pub mod volume;
 

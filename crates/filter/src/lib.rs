@@ -23,6 +23,10 @@
 //!   `M = 1…4`, trigger-point hierarchies, negative levels, normalisation, corrected level
 //!   weighting and transfer-function `D` maps (§4-4, §5-6, App. A–C).
 //! - [`render`]: renders a scene with one [`Technique`](render::Technique).
+//! - [`display`]: Chapter 6 — volume display as filtering: Sabella's display (eq 3.1), the
+//!   linearised display (eq 6.1) by quadrature and by NIL maps, Gaussian slices, the maximum,
+//!   sample-and-filter with a difference of Gaussians, and transfer-function changes through
+//!   `D` maps without rebuilding (§6-1 … §6-5, App. B); decisions on A-15 … A-18 there.
 //! - [`metrics`]: MSE and SNR of §5-2.
 //! - [`harness`]: the whole `texture-bench` evaluation ([`harness::run_texture_bench`]):
 //!   analogues of Tables 5.1–5.11 and Plates 5.1–5.16 as data, with a Markdown rendering.
@@ -81,8 +85,7 @@
 //!   are computed exactly from the parent texel), and eq 4.32's weight.
 //! - **A-14 procedural unit cell**: the level-0 cell is one period of the cosine texture;
 //!   `γ_max = 10`, `γ_min = −8` by default; roots above `γ_max` return the DC value.
-//! - **A-15 … A-18, A-20** concern Chapter 6 (volume rendering), which this crate does not
-//!   implement yet.
+//! - **A-15 … A-18, A-20** concern Chapter 6 (volume rendering): see [`display`].
 //! - **A-16 tables**: our report numbers rows as Table 5.2 and cites the reference row; NIL and
 //!   EWA are scored against row 6 (Simpson Gaussian), clamping against row 4 (Simpson box).
 //! - **A-19 negative levels**: weighted like positive ones (`2^{3γ}`); `γ_min` is a parameter.
@@ -155,6 +158,7 @@
 
 pub mod clamp;
 pub mod direct;
+pub mod display;
 pub mod error;
 pub mod ewa;
 pub mod filters;

@@ -5,7 +5,7 @@
 
 use std::io::Write;
 use volsplat_core::phantom;
-use volsplat_core::{Camera, CrioTables, Image, OrthoProjection, TransferFunction};
+use volsplat_core::{Camera, CrioTables, Image, OrthoProjection, Projection, TransferFunction};
 use volsplat_splat::{RenderSettings, render};
 use volsplat_testkit::reference::{ReferenceSettings, reference_composite};
 
@@ -48,7 +48,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let splat = render(&vol, &cam, &tables, &s)?;
     write_ppm(&out.join("splat.ppm"), &splat.image)?;
     let proj = OrthoProjection::new(&cam, 256, 256)?;
-    let reference = reference_composite(&vol, &proj, &tables, &ReferenceSettings::default());
+    let reference = reference_composite(
+        &vol,
+        &Projection::Ortho(proj),
+        &tables,
+        &ReferenceSettings::default(),
+    );
     write_ppm(&out.join("reference.ppm"), &reference)?;
     let psnr = volsplat_testkit::metrics::image_psnr(&splat.image, &reference);
     println!("PSNR splat vs reference: {psnr:.2} dB");

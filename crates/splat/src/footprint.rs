@@ -23,6 +23,7 @@
 //! unity over the projected sheet lattice); multiplying by `Δs` gives the world-space line
 //! integral used by X-ray mode.
 
+use crate::aa::{Antialias, footprint_variance, widen};
 use crate::geometry::SplatGeometry;
 use volsplat_core::Kernel;
 use volsplat_core::glam::{DMat2, DVec2, DVec3};
@@ -118,6 +119,9 @@ pub struct FootprintTable {
 /// The continuous footprint of one frame, before tabulation.
 pub(crate) struct FootprintFunction {
     kind: Kind,
+    /// Anti-aliasing (crate::aa): the weight at `δ` is `energy · inner(pre · δ)`.
+    pre: DMat2,
+    energy: f64,
     /// 1 / (|g| Δs): converts an index-length line integral into a sheet-normalised weight.
     scale: f64,
     half_extent: [f64; 2],
@@ -147,7 +151,29 @@ enum Kind {
 const RADIAL_TABLE_LEN: usize = 4096;
 
 impl FootprintFunction {
-    pub(crate) fn new(kernel: &Kernel, geom: &SplatGeometry) -> Self {
+    pub(crate) fn new(kernel: &Kernel, geom: &SplatGeometry, aa: Antialias) -> Self {
+        let mut f = Self::unfiltered(kernel, geom);
+        let q = lattice_metric(geom);
+        if aa != Antialias::None && !matches!(f.kind, Kind::Point { .. }) {
+            let (q2, e) = widen(aa, q, footprint_variance(kernel));
+            if e < 1.0 {
+                // M = L⁻¹L′ maps the widened ellipse onto the original: MᵀQM = Q′.
+                let m = ellipse_to_circle(q).inverse() * ellipse_to_circle(q2);
+                let mi = m.inverse();
+                let [hx, hy] = f.half_extent;
+                f.half_extent = [
+                    mi.col(0).x.abs() * hx + mi.col(1).x.abs() * hy,
+                    mi.col(0).y.abs() * hx + mi.col(1).y.abs() * hy,
+                ];
+                f.pre = m;
+                f.energy = e;
+            }
+        }
+        f
+    }
+
+    /// The true projected footprint, without anti-aliasing.
+    fn unfiltered(kernel: &Kernel, geom: &SplatGeometry) -> Self {
         // Raster offsets (dx, dy) → lattice offsets: columns of J⁻¹ for x and y at fixed depth.
         let j_inv = geom.jacobian.inverse();
         let b = [j_inv.col(0), j_inv.col(1)];
@@ -159,14 +185,11 @@ impl FootprintFunction {
         let ju = geom.jacobian.col(geom.in_sheet_axes[0]);
         let jv = geom.jacobian.col(geom.in_sheet_axes[1]);
         match *kernel {
-            Kernel::Gaussian { radius, .. } => {
+            Kernel::SinglePoint | Kernel::Nearest => {}
+            k if k.is_radial() => {
+                let radius = k.radius();
                 // Q = Bᵀ (I − ĝĝᵀ) B, the projected ellipse's quadratic form.
-                let perp = |v: DVec3| v - g_hat * v.dot(g_hat);
-                let (p0, p1) = (perp(b[0]), perp(b[1]));
-                let q = DMat2::from_cols(
-                    DVec2::new(p0.dot(p0), p0.dot(p1)),
-                    DVec2::new(p1.dot(p0), p1.dot(p1)),
-                );
+                let q = lattice_metric(geom);
                 let l = ellipse_to_circle(q);
                 let qi = q.inverse();
                 let half_extent = [radius * qi.col(0).x.sqrt(), radius * qi.col(1).y.sqrt()];
@@ -177,7 +200,7 @@ impl FootprintFunction {
                         kernel.line_integral_radial(r2.sqrt()).unwrap_or(0.0)
                     })
                     .collect();
-                FootprintFunction {
+                return FootprintFunction {
                     kind: Kind::Radial {
                         kernel: *kernel,
                         l,
@@ -186,8 +209,31 @@ impl FootprintFunction {
                     },
                     scale,
                     half_extent,
-                }
+                    pre: DMat2::IDENTITY,
+                    energy: 1.0,
+                };
             }
+            _ => {
+                let r = kernel.radius();
+                let jac = geom.jacobian;
+                let half_extent = [
+                    r * (jac.col(0).x.abs() + jac.col(1).x.abs() + jac.col(2).x.abs()),
+                    r * (jac.col(0).y.abs() + jac.col(1).y.abs() + jac.col(2).y.abs()),
+                ];
+                return FootprintFunction {
+                    kind: Kind::Separable {
+                        kernel: *kernel,
+                        b,
+                        g_hat,
+                    },
+                    scale,
+                    half_extent,
+                    pre: DMat2::IDENTITY,
+                    energy: 1.0,
+                };
+            }
+        }
+        match *kernel {
             Kernel::SinglePoint => FootprintFunction {
                 kind: Kind::Point {
                     weight: geom.cell_volume
@@ -195,6 +241,8 @@ impl FootprintFunction {
                 },
                 scale: 1.0,
                 half_extent: [0.0, 0.0],
+                pre: DMat2::IDENTITY,
+                energy: 1.0,
             },
             Kernel::Nearest => {
                 let cell = DMat2::from_cols(DVec2::new(ju.x, ju.y), DVec2::new(jv.x, jv.y));
@@ -207,30 +255,30 @@ impl FootprintFunction {
                         0.5 * (ju.x.abs() + jv.x.abs()),
                         0.5 * (ju.y.abs() + jv.y.abs()),
                     ],
+                    pre: DMat2::IDENTITY,
+                    energy: 1.0,
                 }
             }
-            Kernel::Tent | Kernel::MitchellNetravali { .. } => {
-                let r = kernel.radius();
-                let jac = geom.jacobian;
-                let half_extent = [
-                    r * (jac.col(0).x.abs() + jac.col(1).x.abs() + jac.col(2).x.abs()),
-                    r * (jac.col(0).y.abs() + jac.col(1).y.abs() + jac.col(2).y.abs()),
-                ];
-                FootprintFunction {
-                    kind: Kind::Separable {
-                        kernel: *kernel,
-                        b,
-                        g_hat,
-                    },
-                    scale,
-                    half_extent,
-                }
-            }
+            _ => FootprintFunction {
+                kind: Kind::Point { weight: 0.0 },
+                scale: 1.0,
+                half_extent: [0.0, 0.0],
+                pre: DMat2::IDENTITY,
+                energy: 1.0,
+            },
         }
     }
 
     /// The sheet-normalised weight at raster offset `(dx, dy)` pixels from the sample's centre.
     pub(crate) fn weight(&self, dx: f64, dy: f64) -> f64 {
+        if self.energy != 1.0 {
+            let d = self.pre * DVec2::new(dx, dy);
+            return self.energy * self.inner_weight(d.x, d.y);
+        }
+        self.inner_weight(dx, dy)
+    }
+
+    fn inner_weight(&self, dx: f64, dy: f64) -> f64 {
         match &self.kind {
             Kind::Radial {
                 l,
@@ -276,12 +324,32 @@ impl FootprintFunction {
     pub(crate) fn exact_weight(&self, dx: f64, dy: f64) -> f64 {
         match &self.kind {
             Kind::Radial { kernel, l, .. } => {
-                let rho = (*l * DVec2::new(dx, dy)).length();
-                kernel.line_integral_radial(rho).unwrap_or(0.0) * self.scale
+                let d = self.pre * DVec2::new(dx, dy);
+                let rho = (*l * d).length();
+                self.energy * kernel.line_integral_radial(rho).unwrap_or(0.0) * self.scale
             }
             _ => self.weight(dx, dy),
         }
     }
+}
+
+/// The frame's lattice metric `Q = Bᵀ(I − ĝĝᵀ)B` (lattice units² per pixel²): a ray through
+/// raster offset `δ` passes a sample at lattice distance `√(δᵀQδ)` ([`crate::aa`]).
+pub(crate) fn lattice_metric(geom: &SplatGeometry) -> DMat2 {
+    let j_inv = geom.jacobian.inverse();
+    metric_from(j_inv.col(0), j_inv.col(1), j_inv.col(2))
+}
+
+/// `Q = Bᵀ(I − ĝĝᵀ)B` from the lattice displacements of a one-pixel step in x and y (`b0`, `b1`)
+/// and the lattice direction of the ray (`g`, any length).
+pub(crate) fn metric_from(b0: DVec3, b1: DVec3, g: DVec3) -> DMat2 {
+    let g_hat = g.normalize();
+    let perp = |v: DVec3| v - g_hat * v.dot(g_hat);
+    let (p0, p1) = (perp(b0), perp(b1));
+    DMat2::from_cols(
+        DVec2::new(p0.dot(p0), p0.dot(p1)),
+        DVec2::new(p1.dot(p0), p1.dot(p1)),
+    )
 }
 
 /// `L` with `LᵀL = Q` for a symmetric positive-definite 2×2 `Q`, from its eigen-decomposition
@@ -377,8 +445,13 @@ fn separable_line_integral(kernel: &Kernel, o: DVec3, g: DVec3) -> f64 {
 
 impl FootprintTable {
     /// Tabulates the footprint of `kernel` for the frame `geom`.
-    pub fn build(kernel: &Kernel, geom: &SplatGeometry, settings: &FootprintSettings) -> Self {
-        let f = FootprintFunction::new(kernel, geom);
+    pub fn build(
+        kernel: &Kernel,
+        geom: &SplatGeometry,
+        settings: &FootprintSettings,
+        antialias: Antialias,
+    ) -> Self {
+        let f = FootprintFunction::new(kernel, geom, antialias);
         Self::from_function(&f, settings)
     }
 
@@ -566,6 +639,7 @@ impl FootprintTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::aa::Antialias;
     use crate::geometry::{Order, SplatGeometry};
     use volsplat_core::glam::{DMat3, DVec3};
     use volsplat_core::{Camera, Grid, OrthoProjection};
@@ -609,7 +683,7 @@ mod tests {
             ([1.0; 3], 0.0, 0.0),
         ] {
             let g = geometry(spacing, az, el, 2.0);
-            let f = FootprintFunction::new(&k, &g);
+            let f = FootprintFunction::new(&k, &g, Antialias::None);
             for (dx, dy) in [(0.0, 0.0), (0.7, -0.3), (1.5, 1.1), (-2.2, 0.4)] {
                 let a = f.exact_weight(dx, dy);
                 let t = f.weight(dx, dy);
@@ -634,7 +708,7 @@ mod tests {
             Kernel::MitchellNetravali { b: 0.0, c: 0.5 },
         ] {
             let g = geometry([1.0, 1.0, 1.5], 28.0, 17.0, 1.7);
-            let f = FootprintFunction::new(&k, &g);
+            let f = FootprintFunction::new(&k, &g, Antialias::None);
             for (dx, dy) in [(0.0, 0.0), (0.9, -0.35), (2.1, 1.3)] {
                 let a = f.weight(dx, dy);
                 let b = brute_force(&k, &g, dx, dy);
@@ -676,11 +750,15 @@ mod tests {
     fn gaussian_extents_match_the_thesis() {
         let k = Kernel::default();
         let width = |h: f64| 2 * (h + 1e-9).floor() as i32 + 1;
-        let f = FootprintFunction::new(&k, &geometry([1.0; 3], 0.0, 0.0, 2.0));
+        let f = FootprintFunction::new(&k, &geometry([1.0; 3], 0.0, 0.0, 2.0), Antialias::None);
         assert_eq!((width(f.half_extent[0]), width(f.half_extent[1])), (9, 9));
-        let f = FootprintFunction::new(&k, &geometry([1.0; 3], 0.0, 0.0, 3.0));
+        let f = FootprintFunction::new(&k, &geometry([1.0; 3], 0.0, 0.0, 3.0), Antialias::None);
         assert_eq!(width(f.half_extent[0]), 13);
-        let f = FootprintFunction::new(&k, &geometry([1.0, 2.0, 1.0], 0.0, 0.0, 2.0));
+        let f = FootprintFunction::new(
+            &k,
+            &geometry([1.0, 2.0, 1.0], 0.0, 0.0, 2.0),
+            Antialias::None,
+        );
         assert_eq!((width(f.half_extent[0]), width(f.half_extent[1])), (9, 17));
     }
 
@@ -690,7 +768,7 @@ mod tests {
     fn table_resolution_rule() {
         let g = geometry([1.0; 3], 0.0, 0.0, 2.0);
         for k in [Kernel::default(), Kernel::Tent, Kernel::Nearest] {
-            let t = FootprintTable::build(&k, &g, &FootprintSettings::default());
+            let t = FootprintTable::build(&k, &g, &FootprintSettings::default(), Antialias::None);
             assert!(t.entry_count() <= 1 << 17, "{}", k.name());
             assert!(
                 t.phases >= 16 && t.phases <= 64,
@@ -706,9 +784,15 @@ mod tests {
                 max_entries: 1 << 17,
                 max_phases: 9,
             },
+            Antialias::None,
         );
         assert_eq!(t.phases, 9);
-        let t = FootprintTable::build(&Kernel::SinglePoint, &g, &FootprintSettings::default());
+        let t = FootprintTable::build(
+            &Kernel::SinglePoint,
+            &g,
+            &FootprintSettings::default(),
+            Antialias::None,
+        );
         assert_eq!(t.phases, 1);
     }
 
@@ -721,7 +805,7 @@ mod tests {
             Kernel::MitchellNetravali { b: 1.0, c: 0.0 },
         ] {
             let g = geometry([1.0, 1.3, 2.0], 20.0, 10.0, 2.0);
-            let f = FootprintFunction::new(&k, &g);
+            let f = FootprintFunction::new(&k, &g, Antialias::None);
             let t = FootprintTable::from_function(&f, &FootprintSettings::default());
             let peak = f.weight(0.0, 0.0);
             for (x, y) in [(10.25f32, 7.8125f32), (3.1234, 9.87), (5.5, 5.5)] {

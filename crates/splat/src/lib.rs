@@ -16,15 +16,19 @@
 //! Output is bit-identical for any rayon thread count.
 #![deny(missing_docs)]
 
+pub mod aa;
 pub mod error;
 pub mod footprint;
 pub mod geometry;
+pub mod list;
 pub mod refine;
 pub mod render;
 
+pub use aa::Antialias;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};
+pub use list::{ExtractSettings, SplatList, SplatRecord, render_list};
 pub use render::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render, render_any,
     render_with_progress,

@@ -12,6 +12,7 @@
 //! parallel. Every pixel therefore receives its contributions in the same order whatever the
 //! thread count, and the output is bit-identical for any number of threads.
 
+use crate::aa::Antialias;
 use crate::error::{Result, SplatError};
 use crate::footprint::{FootprintSettings, FootprintTable};
 use crate::geometry::{Order, SplatGeometry};
@@ -80,6 +81,9 @@ pub struct RenderSettings {
     pub band_height: usize,
     /// Sheets classified together before the bands splat them.
     pub sheets_per_batch: usize,
+    /// Anti-aliasing of footprints finer than a pixel (Swan et al. 1997; default
+    /// [`Antialias::Swan`]). Changes nothing where every voxel spans at least a pixel.
+    pub antialias: Antialias,
 }
 
 impl Default for RenderSettings {
@@ -97,6 +101,7 @@ impl Default for RenderSettings {
             footprint: FootprintSettings::default(),
             band_height: 16,
             sheets_per_batch: 8,
+            antialias: Antialias::default(),
         }
     }
 }
@@ -121,6 +126,10 @@ pub struct RenderStats {
     pub splats: u64,
     /// Samples skipped because their whole footprint was already opaque.
     pub splats_terminated: u64,
+    /// Perspective only: splats clipped at the near plane (behind or too close to the eye).
+    pub splats_clipped: u64,
+    /// Splats whose footprint anti-aliasing widened (beyond `k`, Swan et al. 1997 §4.3).
+    pub splats_widened: u64,
     /// Pixel updates (multiply–adds of one RGBA weight) — Westover's kernel cost (§4.2.2).
     pub pixel_updates: u64,
     /// Number of sheets.
@@ -177,11 +186,11 @@ pub struct Progress<'a> {
 
 /// One classified sample on its way to reconstruction (Westover's tuple D, §3.4).
 #[derive(Debug, Clone, Copy)]
-struct Splat {
-    x: f32,
-    y: f32,
+pub(crate) struct Splat {
+    pub(crate) x: f32,
+    pub(crate) y: f32,
     /// Premultiplied RGBA (composite); `[ρ·Δs, ..]` (X-ray); `[ρ, 1, 0, 0]` (MIP/MinIP).
-    v: Rgba,
+    pub(crate) v: Rgba,
 }
 
 #[derive(Default)]
@@ -192,17 +201,31 @@ struct SheetSplats {
     skipped: u64,
 }
 
-struct BandState {
-    sheet: Vec<Rgba>,
-    opaque_tiles: Vec<bool>,
-    pixel_updates: u64,
-    terminated: u64,
-    splat_s: f64,
-    composite_s: f64,
+pub(crate) struct BandState {
+    pub(crate) sheet: Vec<Rgba>,
+    pub(crate) opaque_tiles: Vec<bool>,
+    pub(crate) pixel_updates: u64,
+    pub(crate) terminated: u64,
+    pub(crate) splat_s: f64,
+    pub(crate) composite_s: f64,
+}
+
+impl BandState {
+    /// Empty state for a band of `rows` scanlines of an image `w` pixels wide.
+    pub(crate) fn new(rows: usize, w: usize) -> Self {
+        BandState {
+            sheet: vec![[0.0; 4]; rows * w],
+            opaque_tiles: vec![false; w.div_ceil(TILE) * rows.div_ceil(TILE)],
+            pixel_updates: 0,
+            terminated: 0,
+            splat_s: 0.0,
+            composite_s: 0.0,
+        }
+    }
 }
 
 /// Side of the square pixel tiles whose opacity is tracked for early termination.
-const TILE: usize = 4;
+pub(crate) const TILE: usize = 4;
 
 /// Renders any volume; see [`render`].
 pub fn render_any(
@@ -238,7 +261,12 @@ pub fn render_with_progress<T: Scalar>(
     settings.kernel.validate()?;
     let proj = OrthoProjection::new(camera, settings.width, settings.height)?;
     let geom = SplatGeometry::new(volume.grid(), &proj, settings.subsample, settings.order)?;
-    let table = FootprintTable::build(&settings.kernel, &geom, &settings.footprint);
+    let table = FootprintTable::build(
+        &settings.kernel,
+        &geom,
+        &settings.footprint,
+        settings.antialias,
+    );
     let classifier = FrameClassifier::new(tables, &proj.frame, geom.sheet_spacing);
     let (w, h) = (settings.width, settings.height);
     let band_h = settings.band_height;
@@ -248,19 +276,8 @@ pub fn render_with_progress<T: Scalar>(
         _ => [0.0; 4],
     };
     let mut acc = vec![init; w * h];
-    let n_tiles = w.div_ceil(TILE);
     let mut bands: Vec<BandState> = (0..n_bands)
-        .map(|b| {
-            let rows = band_h.min(h - b * band_h);
-            BandState {
-                sheet: vec![[0.0; 4]; rows * w],
-                opaque_tiles: vec![false; n_tiles * rows.div_ceil(TILE)],
-                pixel_updates: 0,
-                terminated: 0,
-                splat_s: 0.0,
-                composite_s: 0.0,
-            }
-        })
+        .map(|b| BandState::new(band_h.min(h - b * band_h), w))
         .collect();
     let mut stats = RenderStats {
         sheets: geom.sheet_order.len(),
@@ -349,7 +366,7 @@ pub fn render_with_progress<T: Scalar>(
     })
 }
 
-fn validate(s: &RenderSettings) -> Result<()> {
+pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
     let bad = |m: &str| Err(SplatError::Settings(m.into()));
     if s.width == 0 || s.height == 0 {
         return bad("image width and height must be ≥ 1");
@@ -372,7 +389,7 @@ fn validate(s: &RenderSettings) -> Result<()> {
     Ok(())
 }
 
-fn ms(t: Instant) -> f64 {
+pub(crate) fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
@@ -428,42 +445,15 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         }
     }
 
-    /// World-space gradient at full-resolution voxel `p`: central differences divided by
-    /// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
-    /// by the direction matrix (DESIGN.md §4.4). Data units per world unit.
     #[inline]
     fn gradient(&self, p: [usize; 3]) -> Vec3 {
-        let [nx, ny, nz] = self.dims_full;
-        let lin = p[0] + nx * (p[1] + ny * p[2]);
-        let strides = [1, nx, nx * ny];
-        if p[0] > 0 && p[1] > 0 && p[2] > 0 && p[0] + 1 < nx && p[1] + 1 < ny && p[2] + 1 < nz {
-            // Interior: central differences on all three axes, no border cases.
-            let d = |s: usize| self.data[lin + s].to_f32() - self.data[lin - s].to_f32();
-            let g = Vec3::new(
-                d(1) * self.inv_spacing_full[0],
-                d(strides[1]) * self.inv_spacing_full[1],
-                d(strides[2]) * self.inv_spacing_full[2],
-            ) * 0.5;
-            return self.direction * g;
-        }
-        let mut g = Vec3::ZERO;
-        for c in 0..3 {
-            let n = self.dims_full[c];
-            if n < 2 {
-                continue;
-            }
-            let s = strides[c];
-            let (lo, hi, half) = if p[c] == 0 {
-                (lin, lin + s, 1.0)
-            } else if p[c] == n - 1 {
-                (lin - s, lin, 1.0)
-            } else {
-                (lin - s, lin + s, 0.5)
-            };
-            g[c] =
-                (self.data[hi].to_f32() - self.data[lo].to_f32()) * half * self.inv_spacing_full[c];
-        }
-        self.direction * g
+        gradient_at(
+            self.data,
+            self.dims_full,
+            self.inv_spacing_full,
+            self.direction,
+            p,
+        )
     }
 
     /// Transform, cull and classify one sheet (Westover §3.5–3.6), routing each surviving splat
@@ -593,6 +583,120 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
     }
 }
 
+/// World-space gradient at full-resolution voxel `p`: central differences divided by
+/// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
+/// by the direction matrix (DESIGN.md §4.4). Data units per world unit.
+#[inline]
+pub(crate) fn gradient_at<T: Scalar>(
+    data: &[T],
+    dims_full: [usize; 3],
+    inv_spacing_full: [f32; 3],
+    direction: Mat3,
+    p: [usize; 3],
+) -> Vec3 {
+    let [nx, ny, nz] = dims_full;
+    let lin = p[0] + nx * (p[1] + ny * p[2]);
+    let strides = [1, nx, nx * ny];
+    if p[0] > 0 && p[1] > 0 && p[2] > 0 && p[0] + 1 < nx && p[1] + 1 < ny && p[2] + 1 < nz {
+        // Interior: central differences on all three axes, no border cases.
+        let d = |s: usize| data[lin + s].to_f32() - data[lin - s].to_f32();
+        let g = Vec3::new(
+            d(1) * inv_spacing_full[0],
+            d(strides[1]) * inv_spacing_full[1],
+            d(strides[2]) * inv_spacing_full[2],
+        ) * 0.5;
+        return direction * g;
+    }
+    let mut g = Vec3::ZERO;
+    for c in 0..3 {
+        let n = dims_full[c];
+        if n < 2 {
+            continue;
+        }
+        let s = strides[c];
+        let (lo, hi, half) = if p[c] == 0 {
+            (lin, lin + s, 1.0)
+        } else if p[c] == n - 1 {
+            (lin - s, lin, 1.0)
+        } else {
+            (lin - s, lin + s, 0.5)
+        };
+        g[c] = (data[hi].to_f32() - data[lo].to_f32()) * half * inv_spacing_full[c];
+    }
+    direction * g
+}
+
+/// Composites the touched columns `tx0..tx1` of one band's sheet buffer into the band's slice
+/// of the accumulation buffer (premultiplied *over*, opacity clamped with colour scaled alike,
+/// DESIGN.md §4.2; or the normalised MIP/MinIP update) and clears them. With `cutoff`, marks the
+/// 4 × 4 tiles whose pixels all reached that opacity (front-to-back early termination).
+pub(crate) fn composite_band_sheet(
+    mode: RenderMode,
+    ftb: bool,
+    cutoff: Option<f32>,
+    w: usize,
+    st: &mut BandState,
+    acc: &mut [Rgba],
+    (tx0, tx1): (usize, usize),
+) {
+    let rows = acc.len() / w;
+    // Composite the touched columns of the sheet buffer, then clear them.
+    for r in 0..rows {
+        let range = r * w + tx0..r * w + tx1;
+        let (srow, arow) = (&mut st.sheet[range.clone()], &mut acc[range]);
+        match mode {
+            RenderMode::Composite => {
+                for (s, a) in srow.iter_mut().zip(arow) {
+                    if s[3] > 0.0 {
+                        let mut src = *s;
+                        // Clamp consistently: opacity ≤ 1 with colour scaled alike
+                        // (DESIGN.md §4.2).
+                        if src[3] > 1.0 {
+                            let k = 1.0 / src[3];
+                            src = [src[0] * k, src[1] * k, src[2] * k, 1.0];
+                        }
+                        if ftb {
+                            over_front_to_back(a, src)
+                        } else {
+                            over_back_to_front(a, src)
+                        }
+                    }
+                    *s = [0.0; 4];
+                }
+            }
+            RenderMode::Mip | RenderMode::Minip => {
+                let max = mode == RenderMode::Mip;
+                for (s, a) in srow.iter_mut().zip(arow) {
+                    // Normalised reconstruction where the sheet covers the pixel.
+                    if s[1] >= 0.5 {
+                        let val = s[0] / s[1];
+                        if a[0].is_nan() || (max && val > a[0]) || (!max && val < a[0]) {
+                            a[0] = val;
+                        }
+                    }
+                    *s = [0.0; 4];
+                }
+            }
+            RenderMode::Xray => {}
+        }
+    }
+    if let Some(cutoff) = cutoff {
+        let n_tiles = w.div_ceil(TILE);
+        for tr in 0..rows.div_ceil(TILE) {
+            let (y0, y1) = (tr * TILE, ((tr + 1) * TILE).min(rows));
+            for t in tx0 / TILE..=(tx1 - 1) / TILE {
+                let flag = &mut st.opaque_tiles[tr * n_tiles + t];
+                if *flag {
+                    continue;
+                }
+                let (c0, c1) = (t * TILE, ((t + 1) * TILE).min(w));
+                *flag =
+                    (y0..y1).all(|r| acc[r * w + c0..r * w + c1].iter().all(|p| p[3] >= cutoff));
+            }
+        }
+    }
+}
+
 struct BandContext<'a> {
     table: &'a FootprintTable,
     settings: &'a RenderSettings,
@@ -655,68 +759,22 @@ impl BandContext<'_> {
         if !matches!(sink, Sink::Sheet) || tx0 >= tx1 {
             return;
         }
-        // Composite the touched columns of the sheet buffer, then clear them.
-        for r in 0..rows {
-            let range = r * w + tx0..r * w + tx1;
-            let (srow, arow) = (&mut st.sheet[range.clone()], &mut acc[range]);
-            match mode {
-                RenderMode::Composite => {
-                    for (s, a) in srow.iter_mut().zip(arow) {
-                        if s[3] > 0.0 {
-                            let mut src = *s;
-                            // Clamp consistently: opacity ≤ 1 with colour scaled alike
-                            // (DESIGN.md §4.2).
-                            if src[3] > 1.0 {
-                                let k = 1.0 / src[3];
-                                src = [src[0] * k, src[1] * k, src[2] * k, 1.0];
-                            }
-                            if ftb {
-                                over_front_to_back(a, src)
-                            } else {
-                                over_back_to_front(a, src)
-                            }
-                        }
-                        *s = [0.0; 4];
-                    }
-                }
-                RenderMode::Mip | RenderMode::Minip => {
-                    let max = mode == RenderMode::Mip;
-                    for (s, a) in srow.iter_mut().zip(arow) {
-                        // Normalised reconstruction where the sheet covers the pixel.
-                        if s[1] >= 0.5 {
-                            let val = s[0] / s[1];
-                            if a[0].is_nan() || (max && val > a[0]) || (!max && val < a[0]) {
-                                a[0] = val;
-                            }
-                        }
-                        *s = [0.0; 4];
-                    }
-                }
-                RenderMode::Xray => {}
-            }
-        }
-        if terminate {
-            let n_tiles = w.div_ceil(TILE);
-            for tr in 0..rows.div_ceil(TILE) {
-                let (y0, y1) = (tr * TILE, ((tr + 1) * TILE).min(rows));
-                for t in tx0 / TILE..=(tx1 - 1) / TILE {
-                    let flag = &mut st.opaque_tiles[tr * n_tiles + t];
-                    if *flag {
-                        continue;
-                    }
-                    let (c0, c1) = (t * TILE, ((t + 1) * TILE).min(w));
-                    *flag = (y0..y1)
-                        .all(|r| acc[r * w + c0..r * w + c1].iter().all(|p| p[3] >= cutoff));
-                }
-            }
-        }
+        composite_band_sheet(
+            mode,
+            ftb,
+            terminate.then_some(cutoff),
+            w,
+            st,
+            acc,
+            (tx0, tx1),
+        );
         st.composite_s += t1.elapsed().as_secs_f64();
     }
 }
 
 /// Where weighted splat values go.
 #[derive(Debug, Clone, Copy)]
-enum Sink {
+pub(crate) enum Sink {
     /// Add into the sheet buffer (sheet-buffer visibility, MIP/MinIP).
     Sheet,
     /// Add channel 0 into the accumulation buffer (X-ray line integral).
@@ -728,23 +786,23 @@ enum Sink {
 }
 
 /// Per-band clipping and bookkeeping shared by the splat loops.
-struct SpanCtx<'a> {
-    y_lo: i32,
-    rows: i32,
-    width: i32,
-    terminate: bool,
-    opaque: &'a [bool],
-    tx0: usize,
-    tx1: usize,
-    updates: u64,
-    terminated: u64,
+pub(crate) struct SpanCtx<'a> {
+    pub(crate) y_lo: i32,
+    pub(crate) rows: i32,
+    pub(crate) width: i32,
+    pub(crate) terminate: bool,
+    pub(crate) opaque: &'a [bool],
+    pub(crate) tx0: usize,
+    pub(crate) tx1: usize,
+    pub(crate) updates: u64,
+    pub(crate) terminated: u64,
 }
 
 impl SpanCtx<'_> {
     /// Clips the column range `[x0, x1]` to the image; `None` if empty or (FTB) every tile
     /// under columns `x0..=x1` and band rows `r0..r1` (band-relative) is already opaque.
     #[inline(always)]
-    fn columns(&mut self, x0: i32, x1: i32, r0: i32, r1: i32) -> Option<(i32, i32)> {
+    pub(crate) fn columns(&mut self, x0: i32, x1: i32, r0: i32, r1: i32) -> Option<(i32, i32)> {
         let (x0, x1) = (x0.max(0), x1.min(self.width - 1));
         if x0 > x1 {
             return None;
@@ -766,13 +824,13 @@ impl SpanCtx<'_> {
     }
 }
 
-const SINK_SHEET: u8 = 0;
-const SINK_LINE: u8 = 1;
-const SINK_OVER_FTB: u8 = 2;
-const SINK_OVER_BTF: u8 = 3;
+pub(crate) const SINK_SHEET: u8 = 0;
+pub(crate) const SINK_LINE: u8 = 1;
+pub(crate) const SINK_OVER_FTB: u8 = 2;
+pub(crate) const SINK_OVER_BTF: u8 = 3;
 
 impl Sink {
-    fn code(self) -> u8 {
+    pub(crate) fn code(self) -> u8 {
         match self {
             Sink::Sheet => SINK_SHEET,
             Sink::Line => SINK_LINE,
@@ -785,7 +843,7 @@ impl Sink {
 /// Accumulates `weight × v` into one pixel; `S` is a [`Sink`] code, so each splat loop is
 /// compiled once per sink with no per-pixel dispatch.
 #[inline(always)]
-fn deposit<const S: u8>(px: &mut Rgba, wt: f32, v: &Rgba) {
+pub(crate) fn deposit<const S: u8>(px: &mut Rgba, wt: f32, v: &Rgba) {
     let sink = match S {
         SINK_SHEET => Sink::Sheet,
         SINK_LINE => Sink::Line,
@@ -874,7 +932,7 @@ fn splat_block<const S: u8>(
     span.tx1 = span.tx1.max(xb as usize + 1);
 }
 
-fn finish(
+pub(crate) fn finish(
     acc: Vec<Rgba>,
     settings: &RenderSettings,
     tables: &CrioTables,
@@ -1094,7 +1152,11 @@ mod tests {
         // Peak against the closed form: ρ · L(0) / |g| where the ray through the centre.
         let proj = OrthoProjection::new(&cam, 48, 48).unwrap();
         let geom = SplatGeometry::new(&grid, &proj, 1, Order::FrontToBack).unwrap();
-        let f = crate::footprint::FootprintFunction::new(&Kernel::default(), &geom);
+        let f = crate::footprint::FootprintFunction::new(
+            &Kernel::default(),
+            &geom,
+            crate::aa::Antialias::None,
+        );
         let c = geom.raster_of([2, 2, 2]);
         let mut max_err = 0.0f64;
         for y in 0..48 {

@@ -4,7 +4,7 @@
 use volsplat_core::glam::{DMat3, DVec3};
 use volsplat_core::phantom::{self, Blob, EllipsoidPhantom, GaussianBlobs, Phantom};
 use volsplat_core::{
-    Camera, CrioTables, Grid, Image, Kernel, OrthoProjection, TransferFunction, Volume,
+    Camera, CrioTables, Grid, Image, Kernel, OrthoProjection, Projection, TransferFunction, Volume,
 };
 use volsplat_splat::{RenderMode, RenderSettings, render};
 use volsplat_testkit::metrics::{image_psnr, relative_l2};
@@ -94,7 +94,11 @@ fn xray_of_shepp_logan_is_within_the_sampling_error_bound() {
     let out = render(&vol, &cam, &tables, &s).unwrap();
     let proj = OrthoProjection::new(&cam, w, h).unwrap();
     let exact = analytic_xray(&sl, &proj);
-    let reference = reference_xray(&vol, &proj, &ReferenceSettings::default());
+    let reference = reference_xray(
+        &vol,
+        &Projection::Ortho(proj),
+        &ReferenceSettings::default(),
+    );
     let sampling_error = relative_l2(reference.values(), &exact);
     let err = relative_l2(out.values.as_ref().unwrap().values(), &exact);
     eprintln!(
@@ -144,7 +148,12 @@ fn composite_matches_reference_integrator_per_kernel() {
     let (w, h) = (128, 128);
     let tables = shaded_tables();
     let proj = OrthoProjection::new(&cam, w, h).unwrap();
-    let reference = reference_composite(&vol, &proj, &tables, &ReferenceSettings::default());
+    let reference = reference_composite(
+        &vol,
+        &Projection::Ortho(proj),
+        &tables,
+        &ReferenceSettings::default(),
+    );
     let mut report = Vec::new();
     for (name, kernel, bar) in [
         ("gaussian", Kernel::default(), 35.0),
@@ -198,7 +207,11 @@ fn mip_matches_reference() {
     )
     .unwrap();
     let proj = OrthoProjection::new(&cam, w, h).unwrap();
-    let reference = reference_mip(&vol, &proj, &ReferenceSettings::default());
+    let reference = reference_mip(
+        &vol,
+        &Projection::Ortho(proj),
+        &ReferenceSettings::default(),
+    );
     let ours = out.values.unwrap();
     // Compare where both cover the pixel.
     let (mut se, mut n) = (0.0f64, 0usize);

@@ -2,7 +2,8 @@
 //!
 //! Dev-only test oracles for volsplat (DESIGN.md §6.5: oracle tests before golden images).
 //!
-//! - [`reference`](mod@reference): the brute-force orthographic ray integrator — X-ray
+//! - [`reference`](mod@reference): the brute-force ray integrator for orthographic and
+//!   perspective [`Projection`](volsplat_core::Projection)s — X-ray
 //!   ([`reference_xray`]), MIP / MinIP ([`reference_mip`], [`reference_minip`]) and CRIO
 //!   compositing ([`reference_composite`]) by marching each pixel's ray through the trilinear
 //!   field — and the closed-form X-ray image of a phantom ([`analytic_xray`]). It shares no code
@@ -19,6 +20,7 @@
 //! deterministic: parallel loops (rayon, over image rows) compute each pixel independently.
 #![deny(missing_docs)]
 
+pub mod emitter;
 pub mod metrics;
 pub mod reference;
 

@@ -1,10 +1,17 @@
 //! The brute-force reference integrator: the independent oracle for the splatting renderer.
 //!
-//! For every pixel of an [`OrthoProjection`] (centre `(x + ½, y + ½)`, or `n × n` sub-pixel
-//! positions `x + (s + ½)/n`), a ray leaves the image plane point
-//! [`OrthoProjection::world_from_raster`] along `frame.forward`; it covers the whole line (no
-//! near or far clipping). It is clipped exactly to the box of voxel centres, `[0, dims − 1]³` in
-//! index space ([`ray_box_interval`]), marched at a fixed world-space step, and the field is
+//! For every pixel of a [`Projection`] (centre `(x + ½, y + ½)`, or `n × n` sub-pixel positions
+//! `x + (s + ½)/n`), one ray per position:
+//!
+//! - [`Projection::Ortho`]: the ray leaves the image-plane point
+//!   [`OrthoProjection::world_from_raster`](volsplat_core::OrthoProjection::world_from_raster) along `frame.forward` and covers the whole line (no
+//!   near or far clipping; volumes behind the eye plane are in view, as in VTK).
+//! - [`Projection::Perspective`]: the ray leaves the eye along
+//!   [`PerspectiveProjection::ray_direction`](volsplat_core::PerspectiveProjection::ray_direction) and covers only the forward half-line `t ≥ 0`
+//!   (eye-space depth ≥ 0), so an eye inside the volume sees what lies in front of it.
+//!
+//! The ray is clipped exactly to the box of voxel centres, `[0, dims − 1]³` in index space
+//! ([`ray_box_interval`]), marched at a fixed world-space step along the ray, and the field is
 //! reconstructed by trilinear interpolation in index space ([`trilinear`]). Nothing here shares
 //! code with the renderer beyond the core types and the CRIO classifier.
 //!
@@ -23,8 +30,7 @@ use volsplat_core::glam::{DVec3, Vec3};
 use volsplat_core::image::over_front_to_back;
 use volsplat_core::phantom::Phantom;
 use volsplat_core::{
-    CrioTables, FrameClassifier, Grid, Image, OrthoProjection, Rgba, SampleInput, ScalarImage,
-    Volume,
+    CrioTables, FrameClassifier, Grid, Image, Projection, Rgba, SampleInput, ScalarImage, Volume,
 };
 
 /// Settings of the reference integrator.
@@ -192,41 +198,71 @@ fn trilinear_gradient(grads: &[[f32; 3]], grid: &Grid, p_index: DVec3) -> Vec3 {
     g
 }
 
+/// One sub-pixel ray: world origin, unit world direction, and the smallest admissible parameter
+/// (`−∞` for orthographic rays, `0` — the eye — for perspective rays).
+#[derive(Clone, Copy)]
+struct Ray {
+    origin: DVec3,
+    dir: DVec3,
+    t_min: f64,
+}
+
 /// Per-view ray geometry shared by the integrators.
 struct Rays<'a> {
     vol: &'a Volume<f32>,
-    proj: &'a OrthoProjection,
+    proj: &'a Projection,
     n: usize,
 }
 
 impl Rays<'_> {
-    /// Calls `f(origin_world)` for each sub-pixel ray of pixel `(x, y)`.
-    fn for_each_ray(&self, x: usize, y: usize, mut f: impl FnMut(DVec3)) {
+    /// Calls `f(ray)` for each sub-pixel ray of pixel `(x, y)`.
+    fn for_each_ray(&self, x: usize, y: usize, mut f: impl FnMut(Ray)) {
         let n = self.n as f64;
         for sy in 0..self.n {
             for sx in 0..self.n {
                 let rx = x as f64 + (sx as f64 + 0.5) / n;
                 let ry = y as f64 + (sy as f64 + 0.5) / n;
-                f(self.proj.world_from_raster(rx, ry));
+                f(pixel_ray(self.proj, rx, ry));
             }
         }
     }
 
     /// The clipped ray: entry parameter, length (world units), and index-space start and
     /// direction (index units per world unit).
-    fn clip(&self, origin: DVec3) -> Option<(f64, f64, DVec3, DVec3)> {
+    fn clip(&self, ray: &Ray) -> Option<(f64, f64, DVec3, DVec3)> {
         let grid = self.vol.grid();
-        let dir = self.proj.frame.forward;
-        let (t0, t1) = ray_box_interval(grid, origin, dir)?;
-        let q0 = grid.index_from_world(origin + dir * t0);
-        let dq = grid.index_from_world(origin + dir) - grid.index_from_world(origin);
+        let (t0, t1) = ray_box_interval(grid, ray.origin, ray.dir)?;
+        let t0 = t0.max(ray.t_min);
+        if t1 < t0 {
+            return None;
+        }
+        let q0 = grid.index_from_world(ray.origin + ray.dir * t0);
+        let dq = grid.index_from_world(ray.origin + ray.dir) - grid.index_from_world(ray.origin);
         Some((t0, t1 - t0, q0, dq))
+    }
+}
+
+/// The ray through raster point `(x, y)` (pixels): for orthographic views from the image-plane
+/// point through the focal point, unbounded both ways; for perspective views from the eye,
+/// forward only.
+fn pixel_ray(proj: &Projection, x: f64, y: f64) -> Ray {
+    match proj {
+        Projection::Ortho(p) => Ray {
+            origin: p.world_from_raster(x, y),
+            dir: p.frame.forward,
+            t_min: f64::NEG_INFINITY,
+        },
+        Projection::Perspective(p) => Ray {
+            origin: p.frame.eye,
+            dir: p.ray_direction(x, y),
+            t_min: 0.0,
+        },
     }
 }
 
 fn render_scalar(
     vol: &Volume<f32>,
-    proj: &OrthoProjection,
+    proj: &Projection,
     settings: &ReferenceSettings,
     pixel: impl Fn(&Rays, usize, usize) -> f32 + Sync,
 ) -> ScalarImage {
@@ -235,20 +271,21 @@ fn render_scalar(
         proj,
         n: settings.rays_per_axis(),
     };
-    let mut values = vec![0.0f32; proj.width * proj.height];
+    let (width, height) = proj.size();
+    let mut values = vec![0.0f32; width * height];
     if values.is_empty() {
-        return ScalarImage::new(proj.width, proj.height);
+        return ScalarImage::new(width, height);
     }
     values
-        .par_chunks_mut(proj.width)
+        .par_chunks_mut(width)
         .enumerate()
         .for_each(|(y, row)| {
             for (x, v) in row.iter_mut().enumerate() {
                 *v = pixel(&rays, x, y);
             }
         });
-    ScalarImage::from_values(proj.width, proj.height, values)
-        .unwrap_or_else(|| ScalarImage::new(proj.width, proj.height))
+    ScalarImage::from_values(width, height, values)
+        .unwrap_or_else(|| ScalarImage::new(width, height))
 }
 
 /// The X-ray image `∫ f ds` along each pixel's ray (data units × world units), trapezoid rule
@@ -256,16 +293,16 @@ fn render_scalar(
 /// length). Rays that miss the volume give 0. Sub-pixel rays are averaged.
 pub fn reference_xray(
     vol: &Volume<f32>,
-    proj: &OrthoProjection,
+    proj: &Projection,
     settings: &ReferenceSettings,
 ) -> ScalarImage {
     let step = settings.step_for(vol.grid());
     render_scalar(vol, proj, settings, |rays, x, y| {
         let mut sum = 0.0f64;
         let mut count = 0usize;
-        rays.for_each_ray(x, y, |origin| {
+        rays.for_each_ray(x, y, |ray| {
             count += 1;
-            let Some((_, len, q0, dq)) = rays.clip(origin) else {
+            let Some((_, len, q0, dq)) = rays.clip(&ray) else {
                 return;
             };
             if len <= 0.0 {
@@ -286,7 +323,7 @@ pub fn reference_xray(
 /// Extremum of the samples along each ray: `better(candidate, current)` picks.
 fn extremum_image(
     vol: &Volume<f32>,
-    proj: &OrthoProjection,
+    proj: &Projection,
     settings: &ReferenceSettings,
     better: fn(f64, f64) -> bool,
 ) -> ScalarImage {
@@ -294,8 +331,8 @@ fn extremum_image(
     render_scalar(vol, proj, settings, |rays, x, y| {
         let mut sum = 0.0f64;
         let mut hits = 0usize;
-        rays.for_each_ray(x, y, |origin| {
-            let Some((_, len, q0, dq)) = rays.clip(origin) else {
+        rays.for_each_ray(x, y, |ray| {
+            let Some((_, len, q0, dq)) = rays.clip(&ray) else {
                 return;
             };
             let intervals = (len / step).ceil().max(1.0) as usize;
@@ -323,7 +360,7 @@ fn extremum_image(
 /// `f32::NAN`; with supersampling, the maxima of the sub-pixel rays that hit are averaged.
 pub fn reference_mip(
     vol: &Volume<f32>,
-    proj: &OrthoProjection,
+    proj: &Projection,
     settings: &ReferenceSettings,
 ) -> ScalarImage {
     extremum_image(vol, proj, settings, |v, best| v > best)
@@ -333,7 +370,7 @@ pub fn reference_mip(
 /// along each ray; `f32::NAN` for rays that miss the volume.
 pub fn reference_minip(
     vol: &Volume<f32>,
-    proj: &OrthoProjection,
+    proj: &Projection,
     settings: &ReferenceSettings,
 ) -> ScalarImage {
     extremum_image(vol, proj, settings, |v, best| v < best)
@@ -348,25 +385,28 @@ const OPAQUE: f32 = 1.0 - 1e-6;
 /// one shorter); each segment is represented by a sample at its midpoint with density
 /// (trilinear), world gradient (trilinear interpolation of [`voxel_gradients`], only if the
 /// tables need it) and depth (distance along the view, normalised to [0, 1] over the volume's
-/// eight corners), classified by `FrameClassifier::new(tables, &proj.frame, step)` (Westover
-/// §3.6) and composited front to back with [`over_front_to_back`]. The last, shorter segment of
-/// length `ℓ` has its opacity rescaled to `1 − (1 − a)^(ℓ/step)` and its colour by the same
-/// factor (exact for unmodulated opacity). Rays stop once opacity exceeds `1 − 10⁻⁶`.
-/// Sub-pixel rays are averaged.
+/// eight corners), classified by `FrameClassifier::new(tables, proj.frame(), step)` (Westover
+/// §3.6) and composited front to back with [`over_front_to_back`]. The step is measured along
+/// the ray in world units for both projections, so the CRIO opacity correction
+/// `1 − (1 − α)^(step/unit)` uses the true path length of a perspective ray too; lights and the
+/// specular half-vector are those of the frame (viewer at infinity along the direction of
+/// projection, as in Westover's per-frame classification), also for perspective views. The
+/// last, shorter segment of length `ℓ` has its opacity rescaled to `1 − (1 − a)^(ℓ/step)` and
+/// its colour by the same factor (exact for unmodulated opacity). Rays stop once opacity
+/// exceeds `1 − 10⁻⁶`. Sub-pixel rays are averaged.
 pub fn reference_composite(
     vol: &Volume<f32>,
-    proj: &OrthoProjection,
+    proj: &Projection,
     tables: &CrioTables,
     settings: &ReferenceSettings,
 ) -> Image {
     let grid = vol.grid();
     let step = settings.step_for(grid);
-    let classifier = FrameClassifier::new(tables, &proj.frame, step);
+    let frame = *proj.frame();
+    let classifier = FrameClassifier::new(tables, &frame, step);
     let grads = classifier.needs_gradient.then(|| voxel_gradients(vol));
-    let forward = proj.frame.forward;
-    let depths = grid
-        .corners_world()
-        .map(|c| (c - proj.frame.eye).dot(forward));
+    let forward = frame.forward;
+    let depths = grid.corners_world().map(|c| (c - frame.eye).dot(forward));
     let dmin = depths.iter().fold(f64::INFINITY, |m, &d| m.min(d));
     let dmax = depths.iter().fold(f64::NEG_INFINITY, |m, &d| m.max(d));
     let depth_scale = if dmax > dmin {
@@ -379,20 +419,21 @@ pub fn reference_composite(
         proj,
         n: settings.rays_per_axis(),
     };
-    let mut pixels = vec![[0.0f32; 4]; proj.width * proj.height];
+    let (width, height) = proj.size();
+    let mut pixels = vec![[0.0f32; 4]; width * height];
     if pixels.is_empty() {
-        return Image::new(proj.width, proj.height);
+        return Image::new(width, height);
     }
     pixels
-        .par_chunks_mut(proj.width)
+        .par_chunks_mut(width)
         .enumerate()
         .for_each(|(y, row)| {
             for (x, px) in row.iter_mut().enumerate() {
                 let mut sum = [0.0f64; 4];
                 let mut count = 0usize;
-                rays.for_each_ray(x, y, |origin| {
+                rays.for_each_ray(x, y, |ray| {
                     count += 1;
-                    let Some((t0, len, q0, dq)) = rays.clip(origin) else {
+                    let Some((t0, len, q0, dq)) = rays.clip(&ray) else {
                         return;
                     };
                     let mut acc: Rgba = [0.0; 4];
@@ -406,9 +447,8 @@ pub fn reference_composite(
                         if classifier.density_opacity(density) == Some(0.0) {
                             continue;
                         }
-                        let depth = ((origin + forward * (t0 + mid) - proj.frame.eye).dot(forward)
-                            - dmin)
-                            * depth_scale;
+                        let p_world = ray.origin + ray.dir * (t0 + mid);
+                        let depth = ((p_world - frame.eye).dot(forward) - dmin) * depth_scale;
                         let gradient = match &grads {
                             Some(g) => trilinear_gradient(g, grid, q),
                             None => Vec3::ZERO,
@@ -441,28 +481,31 @@ pub fn reference_composite(
                 *px = sum.map(|s| (s * inv) as f32);
             }
         });
-    Image::from_pixels(proj.width, proj.height, pixels)
-        .unwrap_or_else(|| Image::new(proj.width, proj.height))
+    Image::from_pixels(width, height, pixels).unwrap_or_else(|| Image::new(width, height))
 }
 
 /// The closed-form X-ray image of a phantom: each pixel's (sub-pixel-averaged) exact line
-/// integral [`Phantom::line_integral`] along `frame.forward` over the whole line (data units ×
-/// world units; background excluded). `None` if the phantom has no closed form. Note that a
-/// volume sampled from the phantom is truncated at its bounds while this integral is not.
+/// integral [`Phantom::line_integral`] along the pixel's ray (the same rays as the reference
+/// integrator), over the whole line (data units × world units; background excluded). `None` if
+/// the phantom has no closed form. For a perspective view the part of the line behind the eye
+/// is included too, so compare with [`reference_xray`] only for an eye outside the phantom's
+/// support. Note that a volume sampled from the phantom is truncated at its bounds while this
+/// integral is not.
 pub fn analytic_xray<P: Phantom + ?Sized>(
     phantom: &P,
-    proj: &OrthoProjection,
+    proj: &Projection,
     supersample: usize,
 ) -> Option<ScalarImage> {
     let n = supersample.max(1);
-    let dir = proj.frame.forward;
-    phantom.line_integral(proj.frame.focal, dir)?;
-    let mut values = vec![0.0f32; proj.width * proj.height];
+    let (width, height) = proj.size();
+    let probe = pixel_ray(proj, width as f64 * 0.5, height as f64 * 0.5);
+    phantom.line_integral(probe.origin, probe.dir)?;
+    let mut values = vec![0.0f32; width * height];
     if values.is_empty() {
-        return Some(ScalarImage::new(proj.width, proj.height));
+        return Some(ScalarImage::new(width, height));
     }
     values
-        .par_chunks_mut(proj.width)
+        .par_chunks_mut(width)
         .enumerate()
         .for_each(|(y, row)| {
             for (x, v) in row.iter_mut().enumerate() {
@@ -471,32 +514,27 @@ pub fn analytic_xray<P: Phantom + ?Sized>(
                     for sx in 0..n {
                         let rx = x as f64 + (sx as f64 + 0.5) / n as f64;
                         let ry = y as f64 + (sy as f64 + 0.5) / n as f64;
-                        let o = proj.world_from_raster(rx, ry);
-                        sum += phantom.line_integral(o, dir).unwrap_or(f64::NAN);
+                        let ray = pixel_ray(proj, rx, ry);
+                        sum += phantom
+                            .line_integral(ray.origin, ray.dir)
+                            .unwrap_or(f64::NAN);
                     }
                 }
                 *v = (sum / (n * n) as f64) as f32;
             }
         });
-    ScalarImage::from_values(proj.width, proj.height, values)
+    ScalarImage::from_values(width, height, values)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use volsplat_core::Camera;
     use volsplat_core::crio::{LookupTable, Shading};
     use volsplat_core::glam::DMat3;
     use volsplat_core::phantom::{Blob, GaussianBlobs, sample};
+    use volsplat_core::{Camera, OrthoProjection};
 
-    fn ortho(
-        focal: DVec3,
-        from: DVec3,
-        up: DVec3,
-        scale: f64,
-        w: usize,
-        h: usize,
-    ) -> OrthoProjection {
+    fn ortho(focal: DVec3, from: DVec3, up: DVec3, scale: f64, w: usize, h: usize) -> Projection {
         let cam = Camera {
             position: (focal + from).to_array(),
             focal_point: focal.to_array(),
@@ -505,7 +543,7 @@ mod tests {
             parallel_projection: true,
             parallel_scale: scale,
         };
-        OrthoProjection::new(&cam, w, h).unwrap()
+        Projection::Ortho(OrthoProjection::new(&cam, w, h).unwrap())
     }
 
     fn constant_tables(color: [f32; 3], alpha: f32, unit: f64) -> CrioTables {
@@ -537,7 +575,7 @@ mod tests {
         cam.elevation(20.0);
         cam.orthogonalize_view_up();
         cam.parallel_scale = 1.0;
-        let proj = OrthoProjection::new(&cam, 40, 40).unwrap();
+        let proj = Projection::Ortho(OrthoProjection::new(&cam, 40, 40).unwrap());
         let img = reference_xray(&vol, &proj, &ReferenceSettings::default());
         let exact = analytic_xray(&blobs, &proj, 1).unwrap();
         let peak = exact.values().iter().fold(0.0f32, |m, &v| m.max(v));
@@ -683,7 +721,7 @@ mod tests {
         cam.azimuth(25.0);
         cam.elevation(-35.0);
         cam.orthogonalize_view_up();
-        let proj = OrthoProjection::new(&cam, 33, 29).unwrap();
+        let proj = Projection::Ortho(OrthoProjection::new(&cam, 33, 29).unwrap());
         let mut tables = constant_tables([1.0, 0.5, 0.2], 0.2, 0.3);
         tables.opacity =
             LookupTable::from_fn(volsplat_core::TableIndex::Density, 0.0, 1.0, 64, |x| [x]);
@@ -693,6 +731,9 @@ mod tests {
             step: 0.05,
             supersample: 2,
         };
+        cam.parallel_projection = false;
+        cam.dolly(1.5);
+        let persp = Projection::new(&cam, 33, 29).unwrap();
         let run = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
@@ -702,11 +743,185 @@ mod tests {
                     (
                         reference_composite(&vol, &proj, &tables, &settings),
                         reference_xray(&vol, &proj, &settings),
+                        reference_composite(&vol, &persp, &tables, &settings),
+                        reference_mip(&vol, &persp, &settings),
                     )
                 })
         };
         let (a, b) = (run(1), run(3));
-        assert_eq!(a, b);
+        assert_eq!(a.0, b.0);
+        assert_eq!(a.1, b.1);
+        assert_eq!(a.2, b.2);
+        // MIP images hold NaN for missed rays; compare bit patterns.
+        let bits = |img: &ScalarImage| img.values().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a.3), bits(&b.3));
         assert!(a.0.pixels().iter().any(|p| p[3] > 0.1));
+        assert!(a.2.pixels().iter().any(|p| p[3] > 0.1));
+    }
+
+    /// A perspective camera looking at `focal` from `focal + from`.
+    fn perspective(
+        focal: DVec3,
+        from: DVec3,
+        up: DVec3,
+        fov: f64,
+        w: usize,
+        h: usize,
+    ) -> Projection {
+        let cam = Camera {
+            position: (focal + from).to_array(),
+            focal_point: focal.to_array(),
+            view_up: up.to_array(),
+            view_angle: fov,
+            parallel_projection: false,
+            parallel_scale: 1.0,
+        };
+        Projection::new(&cam, w, h).unwrap()
+    }
+
+    #[test]
+    fn perspective_xray_of_sampled_blobs_matches_closed_form() {
+        let blobs = GaussianBlobs::new(vec![
+            Blob {
+                center: DVec3::new(0.05, -0.03, 0.02),
+                sigma: 0.3,
+                amplitude: 0.8,
+            },
+            Blob {
+                center: DVec3::new(-0.2, 0.25, -0.1),
+                sigma: 0.2,
+                amplitude: 1.0,
+            },
+        ]);
+        let vol = sample(&blobs, [97, 97, 97], 1).unwrap();
+        let mut cam = Camera::reset_to_bounds(blobs.bounds.0, blobs.bounds.1, false);
+        cam.azimuth(30.0);
+        cam.elevation(20.0);
+        cam.orthogonalize_view_up();
+        cam.dolly(1.4);
+        let proj = Projection::new(&cam, 40, 36).unwrap();
+        // Strong perspective: the rays diverge by tens of degrees across the image.
+        let (_, d0) = proj.ray(0.5, 0.5);
+        let (_, d1) = proj.ray(39.5, 35.5);
+        assert!(d0.dot(d1) < 0.92, "{}", d0.dot(d1));
+        for n in [1, 2] {
+            let settings = ReferenceSettings {
+                step: 0.0,
+                supersample: n,
+            };
+            let img = reference_xray(&vol, &proj, &settings);
+            let exact = analytic_xray(&blobs, &proj, n).unwrap();
+            let err = crate::metrics::relative_l2(img.values(), exact.values());
+            eprintln!("perspective X-ray, {n}×{n} rays/pixel: relative L2 error {err:.2e}");
+            assert!(err < 2e-3, "{err}");
+            assert!(img.values().iter().all(|v| v.is_finite()));
+        }
+    }
+
+    #[test]
+    fn perspective_eye_inside_the_volume_integrates_the_forward_half_ray() {
+        // The eye sits on the centre of a Gaussian: every ray's forward half-line carries
+        // exactly half of the full line integral, A·σ·√(2π)/2.
+        let (a, sigma) = (1.0, 0.25);
+        let blobs = GaussianBlobs::new(vec![Blob {
+            center: DVec3::ZERO,
+            sigma,
+            amplitude: a,
+        }]);
+        let vol = sample(&blobs, [81, 81, 81], 1).unwrap();
+        let proj = perspective(
+            DVec3::ZERO,
+            DVec3::new(0.3, -0.2, 1.0),
+            DVec3::Y,
+            70.0,
+            24,
+            20,
+        );
+        // Move the eye onto the blob's centre, looking the same way.
+        let Projection::Perspective(mut p) = proj else {
+            unreachable!()
+        };
+        let shift = p.frame.eye;
+        p.frame.eye -= shift;
+        p.frame.focal -= shift;
+        let proj = Projection::Perspective(p);
+        let half = 0.5 * a * sigma * (2.0 * std::f64::consts::PI).sqrt();
+        let settings = ReferenceSettings {
+            step: 0.0,
+            supersample: 2,
+        };
+        let img = reference_xray(&vol, &proj, &settings);
+        let mut worst = 0.0f64;
+        for &v in img.values() {
+            assert!(v.is_finite());
+            worst = worst.max((v as f64 / half - 1.0).abs());
+        }
+        eprintln!("eye inside: worst relative error of the half-ray integral {worst:.2e}");
+        assert!(worst < 3e-3, "{worst}");
+        // MIP: the maximum is at the eye; MinIP: the far tail; composite: finite everywhere.
+        let mip = reference_mip(&vol, &proj, &settings);
+        let minip = reference_minip(&vol, &proj, &settings);
+        for (m, n) in mip.values().iter().zip(minip.values()) {
+            assert!((*m as f64 - a).abs() < 1e-3, "{m}");
+            assert!(*n < 1e-3, "{n}");
+        }
+        let tables = constant_tables([1.0, 0.5, 0.25], 0.2, 0.3);
+        let comp = reference_composite(&vol, &proj, &tables, &settings);
+        assert!(comp.pixels().iter().flatten().all(|c| c.is_finite()));
+        // The eye and everything within 0.9 of it lies inside [-1, 1]³, so every ray has
+        // path length ≥ 0.9 of constant opacity: α ≥ 1 − 0.8^3.
+        for px in comp.pixels() {
+            assert!(px[3] as f64 > 1.0 - 0.8f64.powi(3), "{}", px[3]);
+        }
+    }
+
+    #[test]
+    fn perspective_composite_of_a_constant_box_uses_the_path_length_along_the_ray() {
+        // Eye on the axis in front of a slab 4 thick: a ray at angle θ to the slab normal
+        // crosses 4/cos θ world units, so α = 1 − (1 − α₀)^(4/(cos θ · unit)).
+        let vol = constant_volume([41, 41, 5], 1.0);
+        let (color, alpha, unit) = ([0.2f32, 0.6, 0.9], 0.3f32, 1.5);
+        let tables = constant_tables(color, alpha, unit);
+        let proj = perspective(
+            DVec3::new(20.0, 20.0, 2.0),
+            DVec3::Z * 20.0,
+            DVec3::Y,
+            60.0,
+            9,
+            9,
+        );
+        for settings in [
+            ReferenceSettings::default(),
+            ReferenceSettings {
+                step: 0.37,
+                supersample: 1,
+            },
+        ] {
+            let img = reference_composite(&vol, &proj, &tables, &settings);
+            for y in 0..9 {
+                for x in 0..9 {
+                    let (_, dir) = proj.ray(x as f64 + 0.5, y as f64 + 0.5);
+                    let len = 4.0 / dir.dot(-DVec3::Z);
+                    let a = 1.0 - (1.0 - alpha as f64).powf(len / unit);
+                    let p = img.pixels()[y * 9 + x];
+                    assert!(
+                        (p[3] as f64 - a).abs() < 2e-5,
+                        "({x}, {y}): {} vs {a}",
+                        p[3]
+                    );
+                }
+            }
+        }
+        // A volume entirely behind the eye is invisible in perspective.
+        let behind = perspective(
+            DVec3::new(20.0, 20.0, 30.0),
+            DVec3::Z * -5.0,
+            DVec3::Y,
+            60.0,
+            4,
+            4,
+        );
+        let img = reference_xray(&vol, &behind, &ReferenceSettings::default());
+        assert!(img.values().iter().all(|&v| v == 0.0));
     }
 }
