@@ -27,6 +27,9 @@ pub enum Command {
     /// Buchanan's Chapter 6 volume displays (Plates 6.1–6.14, Tables 6.1–6.2): renders every
     /// display on one volume, times them against splatting, and writes a report and images.
     DisplayBench(Box<crate::display::DisplayBenchArgs>),
+    /// Swan et al. 1997 anti-aliasing study: Fig. 7 figures (no AA | AA) and the aliasing,
+    /// flicker and energy measurements, written to a folder with a Markdown report.
+    AaFigures(crate::aa_figures::AaFiguresArgs),
 }
 
 /// Built-in phantoms.
@@ -40,6 +43,15 @@ pub enum PhantomKind {
     Blobs,
     /// Marschner–Lobb test function (f32, f_M = 6, α = 0.25).
     MarschnerLobb,
+    /// Swan et al. Fig. 7a–b: a one-voxel sheet of red and white 10×10 squares, 498×398×1
+    /// (--phantom-size X,Y[,SQUARE] changes the sheet and the square size).
+    Checkerboard,
+    /// Swan et al. Fig. 7c–d: a fractal terrain height field with a detailed "photo" draped
+    /// on it, 512×512×103.
+    Terrain,
+    /// Swan et al. Fig. 7e–f: a dense tangle of thin bright fibres (a confocal-microscopy
+    /// stand-in), 420×468×62, finer than the image.
+    Filaments,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -107,9 +119,21 @@ pub struct ViewArgs {
     /// Degrees about the view direction (VTK's Roll).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub roll: f64,
-    /// Magnification (VTK's Zoom: divides the parallel scale).
+    /// Magnification (VTK's Zoom: divides the parallel scale, or the view angle in
+    /// perspective).
     #[arg(long, default_value_t = 1.0)]
     pub zoom: f64,
+    /// Perspective projection (VTK's default camera) instead of orthographic. Implies the
+    /// splat-list renderer (Swan et al. 1997).
+    #[arg(long)]
+    pub perspective: bool,
+    /// Perspective only: vertical field of view in degrees (VTK's ViewAngle).
+    #[arg(long, default_value_t = 30.0)]
+    pub view_angle: f64,
+    /// Move the eye towards the focal point, dividing their distance by this factor (VTK's
+    /// Dolly; > 1 moves closer).
+    #[arg(long, default_value_t = 1.0)]
+    pub dolly: f64,
     /// Write the camera actually used to this JSON file.
     #[arg(long)]
     pub save_camera: Option<PathBuf>,
@@ -172,6 +196,27 @@ pub struct RenderOptions {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Anti-aliasing of voxels smaller than a pixel: Swan et al. 1997 eq. 4 and 8 (`swan`),
+    /// its §4.6 perpendicular-distance estimate (`swan-perpendicular`), Zwicker et al.'s EWA
+    /// screen filter (`ewa`), or none. Changes nothing where voxels cover a pixel or more.
+    #[arg(long, value_enum, default_value = "swan")]
+    pub antialias: AntialiasArg,
+    /// Render from a sparse splat list (Swan et al. §5): the visible voxels are extracted once
+    /// and reused for every frame. Always on for perspective views.
+    #[arg(long)]
+    pub splat_list: bool,
+    /// Splat list: keep voxels whose opacity (scalar × gradient opacity) exceeds this, in
+    /// [0, 1). 0 keeps every voxel that is not fully transparent.
+    #[arg(long, default_value_t = 0.0)]
+    pub list_threshold: f32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AntialiasArg {
+    Swan,
+    SwanPerpendicular,
+    Ewa,
+    None,
 }
 
 #[derive(Debug, Args)]
@@ -201,6 +246,10 @@ pub struct RenderArgs {
     /// Print per-stage timings and counters as one JSON object on stdout.
     #[arg(long)]
     pub stats: bool,
+    /// Perspective: draw the line at distance k = s·D/p beyond which a voxel covers less than
+    /// a pixel (Swan et al. Fig. 7a, c), in the colour R,G,B (default black).
+    #[arg(long, value_name = "R,G,B", num_args = 0..=1, default_missing_value = "0,0,0")]
+    pub draw_k: Option<String>,
     /// Which renderer draws the image: Westover/Swan splatting, or one of Buchanan's
     /// Chapter 6 displays (Sabella's density-emitter model, or the NIL-map linearised display).
     #[arg(long, value_enum, default_value = "splat")]

@@ -8,8 +8,12 @@ use std::time::Instant;
 use volsplat_core::phantom::{self, EllipsoidPhantom, GaussianBlobs, MarschnerLobb};
 use volsplat_core::{AnyVolume, Camera, CrioTables, Kernel, Light, ScalarType, TransferFunction};
 use volsplat_io::{PngBitDepth, PngSettings, RawSpec};
+use volsplat_splat::list::{draw_depth_contour, k_distance, render_list_depth};
 use volsplat_splat::refine::{default_ladder, render_ladder};
-use volsplat_splat::{Order, RenderMode, RenderSettings, Rendered, Visibility, render_any};
+use volsplat_splat::{
+    Antialias, ExtractSettings, Order, RenderMode, RenderSettings, Rendered, SplatList, Visibility,
+    render_any, render_list,
+};
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
@@ -19,6 +23,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bench(a) => bench_cmd(*a),
         Command::TextureBench(a) => texture_bench_cmd(a),
         Command::DisplayBench(a) => crate::display::display_bench_cmd(*a),
+        Command::AaFigures(a) => crate::aa_figures::aa_figures_cmd(a),
     }
 }
 
@@ -68,6 +73,46 @@ fn grid_size(s: &str, flag: &str) -> Result<[usize; 3]> {
 }
 
 fn make_phantom(kind: PhantomKind, size: Option<&str>) -> Result<AnyVolume> {
+    use volsplat_core::scenes;
+    match kind {
+        PhantomKind::Checkerboard => {
+            let (nx, ny, sq) = scenes::CHECKERBOARD_PAPER;
+            let (nx, ny, sq) = match size {
+                None => (nx, ny, sq),
+                Some(s) => {
+                    let v: Vec<usize> = s
+                        .split(',')
+                        .map(|p| p.trim().parse::<usize>())
+                        .collect::<std::result::Result<_, _>>()
+                        .map_err(|_| anyhow!("--phantom-size: expected X,Y[,SQUARE], got `{s}`"))?;
+                    match v[..] {
+                        [x, y] => (x, y, sq),
+                        [x, y, q] => (x, y, q),
+                        _ => bail!("--phantom-size: expected X,Y[,SQUARE], got `{s}`"),
+                    }
+                }
+            };
+            if !(1..=8192).contains(&nx) || !(1..=8192).contains(&ny) {
+                bail!("--phantom-size: sheet sides must be in 1..=8192, got {nx}x{ny}");
+            }
+            return Ok(scenes::checkerboard_sheet(nx, ny, sq)?.into());
+        }
+        PhantomKind::Terrain => {
+            let d = match size {
+                Some(s) => grid_size(s, "--phantom-size")?,
+                None => scenes::TERRAIN_PAPER,
+            };
+            return Ok(scenes::terrain(d[0], d[1], d[2], 1)?.into());
+        }
+        PhantomKind::Filaments => {
+            let d = match size {
+                Some(s) => grid_size(s, "--phantom-size")?,
+                None => scenes::FILAMENTS_PAPER,
+            };
+            return Ok(scenes::filaments(d[0], d[1], d[2], 1)?.into());
+        }
+        _ => {}
+    }
     let dims = match size {
         Some(s) => grid_size(s, "--phantom-size")?,
         None => match kind {
@@ -90,6 +135,9 @@ fn make_phantom(kind: PhantomKind, size: Option<&str>) -> Result<AnyVolume> {
             1,
         )?
         .into(),
+        PhantomKind::Checkerboard | PhantomKind::Terrain | PhantomKind::Filaments => {
+            unreachable!("handled above")
+        }
     })
 }
 
@@ -139,42 +187,88 @@ fn build_camera(v: &ViewArgs, vol: &AnyVolume) -> Result<Camera> {
             bail!("{flag} must be a finite number of degrees");
         }
     }
+    if !(v.view_angle > 0.0 && v.view_angle < 180.0) {
+        bail!(
+            "--view-angle must be in (0, 180) degrees, got {}",
+            v.view_angle
+        );
+    }
+    if !(v.dolly.is_finite() && v.dolly > 0.0) {
+        bail!("--dolly must be a positive number, got {}", v.dolly);
+    }
     let (lo, hi) = vol.grid().bounds_world();
-    let mut cam = Camera::reset_to_bounds(lo, hi, true);
+    let mut cam = Camera::reset_to_bounds(lo, hi, !v.perspective);
+    if v.view_angle != cam.view_angle {
+        // VTK's ResetCamera places the eye at radius / sin(view_angle / 2).
+        let fp = volsplat_core::glam::DVec3::from(cam.focal_point);
+        let radius = cam.parallel_scale;
+        let dist = radius / (v.view_angle.to_radians() * 0.5).sin();
+        cam.position = (fp + volsplat_core::glam::DVec3::Z * dist).to_array();
+        cam.view_angle = v.view_angle;
+    }
     cam.azimuth(v.azimuth);
     cam.elevation(v.elevation);
     cam.orthogonalize_view_up();
     cam.roll(v.roll);
     cam.zoom(v.zoom);
+    cam.dolly(v.dolly);
     Ok(cam)
 }
 
 /// The transfer function from `--tf`, `--preset`, or the default for the mode and data.
-pub(crate) fn build_tf(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<TransferFunction> {
+pub(crate) fn build_tf(
+    o: &RenderOptions,
+    vol: &AnyVolume,
+    demo: bool,
+    scene_tf: Option<TransferFunction>,
+) -> Result<TransferFunction> {
     let range = vol.value_range();
-    Ok(if let Some(path) = &o.tf {
-        let (tf, warnings) = volsplat_io::load_transfer_function(path)?;
-        for w in warnings {
-            eprintln!("warning: {w}");
-        }
-        tf
-    } else if o.preset.is_none() && matches!(o.mode, ModeArg::Mip | ModeArg::Minip) {
-        // Projections without a transfer function: a grey window over the data range, opaque.
-        TransferFunction::ramp(range.0, range.1, 1.0)
-    } else {
-        let name = o.preset.clone().unwrap_or_else(|| {
-            if demo {
-                "ct-skin".into()
-            } else {
-                "ramp".into()
+    Ok(
+        if let (None, None, Some(tf)) = (&o.tf, &o.preset, scene_tf) {
+            tf
+        } else if let Some(path) = &o.tf {
+            let (tf, warnings) = volsplat_io::load_transfer_function(path)?;
+            for w in warnings {
+                eprintln!("warning: {w}");
             }
-        });
-        TransferFunction::preset(&name, range)?
-    })
+            tf
+        } else if o.preset.is_none() && matches!(o.mode, ModeArg::Mip | ModeArg::Minip) {
+            // Projections without a transfer function: a grey window over the data range, opaque.
+            TransferFunction::ramp(range.0, range.1, 1.0)
+        } else {
+            let name = o.preset.clone().unwrap_or_else(|| {
+                if demo {
+                    "ct-skin".into()
+                } else {
+                    "ramp".into()
+                }
+            });
+            TransferFunction::preset(&name, range)?
+        },
+    )
 }
 
-fn build_tables(o: &RenderOptions, vol: &AnyVolume, demo: bool) -> Result<CrioTables> {
-    let tf = build_tf(o, vol, demo)?;
+/// The transfer function a built-in scene is meant to be seen with, if the input is one.
+pub(crate) fn scene_tf(a: &InputArgs) -> Option<TransferFunction> {
+    use volsplat_core::scenes;
+    if a.input.is_some() {
+        return None;
+    }
+    match a.phantom {
+        PhantomKind::Checkerboard => Some(scenes::checkerboard_tf()),
+        PhantomKind::Terrain => Some(scenes::terrain_tf()),
+        PhantomKind::Filaments => Some(scenes::filaments_tf()),
+        _ => None,
+    }
+}
+
+fn build_tables(
+    o: &RenderOptions,
+    vol: &AnyVolume,
+    demo: bool,
+    scene: Option<TransferFunction>,
+) -> Result<CrioTables> {
+    let tf = build_tf(o, vol, demo, scene)?;
     let lights = if o.light.is_empty() {
         vec![Light::headlight()]
     } else {
@@ -277,8 +371,36 @@ fn build_settings(o: &RenderOptions) -> Result<RenderSettings> {
                 o.opacity_cutoff
             )
         },
+        antialias: match o.antialias {
+            AntialiasArg::Swan => Antialias::Swan,
+            AntialiasArg::SwanPerpendicular => Antialias::SwanPerpendicular,
+            AntialiasArg::Ewa => Antialias::Ewa,
+            AntialiasArg::None => Antialias::None,
+        },
         ..RenderSettings::default()
     })
+}
+
+/// Whether the sparse splat-list renderer draws this view (perspective, or asked for).
+fn use_list(camera: &Camera, o: &RenderOptions) -> bool {
+    o.splat_list || !camera.parallel_projection
+}
+
+fn build_list(o: &RenderOptions, vol: &AnyVolume, tables: &CrioTables) -> Result<SplatList> {
+    if !(o.list_threshold >= 0.0 && o.list_threshold < 1.0) {
+        bail!(
+            "--list-threshold must be in [0, 1), got {}",
+            o.list_threshold
+        );
+    }
+    Ok(SplatList::build_any(
+        vol,
+        tables,
+        &ExtractSettings {
+            threshold: o.list_threshold,
+            subsample: o.subsample,
+        },
+    )?)
 }
 
 pub(crate) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
@@ -346,6 +468,9 @@ fn stats_json(out: &Rendered, settings: &RenderSettings, load_ms: f64) -> serde_
         "voxels": s.voxels,
         "splats": s.splats,
         "splats_terminated": s.splats_terminated,
+        "splats_clipped": s.splats_clipped,
+        "splats_widened": s.splats_widened,
+        "antialias": settings.antialias.name(),
         "pixel_updates": s.pixel_updates,
         "kernel_cost": s.kernel_cost(),
         "kernel": settings.kernel.name(),
@@ -371,7 +496,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         volsplat_io::save_camera(p, &camera)?;
     }
     if a.renderer != RendererArg::Splat {
-        let tf = build_tf(&a.options, &vol, demo)?;
+        let tf = build_tf(&a.options, &vol, demo, scene_tf(&a.input))?;
         let settings = build_settings(&a.options)?;
         let pool = thread_pool(a.options.threads)?;
         let (image, stats) = pool
@@ -398,9 +523,59 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let tables = build_tables(&a.options, &vol, demo)?;
+    let tables = build_tables(&a.options, &vol, demo, scene_tf(&a.input))?;
     let settings = build_settings(&a.options)?;
     let pool = thread_pool(a.options.threads)?;
+    if use_list(&camera, &a.options) {
+        if a.ladder {
+            bail!("--ladder works with the dense orthographic renderer only");
+        }
+        let (mut out, list) = pool
+            .install(|| -> Result<(Rendered, SplatList)> {
+                let list = build_list(&a.options, &vol, &tables)?;
+                Ok((render_list(&list, &camera, &tables, &settings)?, list))
+            })
+            .with_context(|| format!("rendering {label}"))?;
+        if let Some(color) = &a.draw_k {
+            let color = triple::<f32>(color, "--draw-k")?;
+            let proj = volsplat_core::Projection::new(&camera, settings.width, settings.height)?;
+            match k_distance(vol.grid(), a.options.subsample, &proj) {
+                Some(k) => {
+                    let depth =
+                        pool.install(|| render_list_depth(&list, &camera, &tables, &settings))?;
+                    draw_depth_contour(&mut out.image, &depth, k as f32, color);
+                    eprintln!("k = s·D/p = {k:.4} world units from the eye");
+                }
+                None => eprintln!(
+                    "--draw-k: orthographic view, no distance k (every voxel covers {:.3} pixels)",
+                    vol.grid()
+                        .spacing
+                        .iter()
+                        .fold(f64::INFINITY, |m, &v| m.min(v))
+                        / proj.pixel_size_at(1.0)
+                ),
+            }
+        }
+        write_output(&a.output, &out, &a)
+            .with_context(|| format!("writing {}", a.output.display()))?;
+        if a.stats {
+            let mut j = stats_json(&out, &settings, load_ms);
+            j["renderer"] = json!("splat-list");
+            j["list_splats"] = json!(list.len());
+            j["list_bytes"] = json!(list.bytes());
+            j["list_build_ms"] = json!(list.build_ms());
+            j["projection"] = json!(if camera.parallel_projection {
+                "orthographic"
+            } else {
+                "perspective"
+            });
+            println!("{j}");
+        }
+        return Ok(());
+    }
+    if a.draw_k.is_some() {
+        bail!("--draw-k needs the splat-list renderer (--perspective or --splat-list)");
+    }
     let out = pool.install(|| -> Result<Rendered> {
         if a.ladder {
             let ladder = default_ladder(settings.kernel);
@@ -496,16 +671,32 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
     let (vol, label) = load_volume(&a.input)?;
     let demo = a.input.input.is_none() && a.input.phantom == PhantomKind::Head;
     let mut camera = build_camera(&a.view, &vol)?;
-    let tables = build_tables(&a.options, &vol, demo)?;
+    let tables = build_tables(&a.options, &vol, demo, scene_tf(&a.input))?;
     let settings = build_settings(&a.options)?;
     let pool = thread_pool(a.options.threads)?;
     let mut times = Vec::with_capacity(a.frames);
     let mut last = None;
+    let list_mode = use_list(&camera, &a.options);
+    let mut list_info = None;
     pool.install(|| -> Result<()> {
-        render_any(&vol, &camera, &tables, &settings)?; // warm-up
+        // The list is built once and reused while only the camera moves (Swan et al. §5).
+        let list = if list_mode {
+            let l = build_list(&a.options, &vol, &tables)?;
+            list_info = Some((l.len(), l.bytes(), l.build_ms()));
+            Some(l)
+        } else {
+            None
+        };
+        let frame = |camera: &Camera| -> Result<Rendered> {
+            Ok(match &list {
+                Some(l) => render_list(l, camera, &tables, &settings)?,
+                None => render_any(&vol, camera, &tables, &settings)?,
+            })
+        };
+        frame(&camera)?; // warm-up
         for _ in 0..a.frames {
             camera.azimuth(a.orbit.unwrap_or(360.0 / a.frames as f64));
-            let out = render_any(&vol, &camera, &tables, &settings)?;
+            let out = frame(&camera)?;
             times.push(out.stats.total_ms);
             last = Some(out);
         }
@@ -518,6 +709,13 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
         .map(|o| stats_json(&o, &settings, 0.0))
         .unwrap_or(json!({}));
     j["input"] = json!(label);
+    j["renderer"] = json!(if list_mode { "splat-list" } else { "dense" });
+    if let Some((n, bytes, build_ms)) = list_info {
+        j["list_splats"] = json!(n);
+        j["list_bytes"] = json!(bytes);
+        j["list_build_ms"] = json!(build_ms);
+    }
+    j["volume_bytes"] = json!(vol.grid().voxel_count() * vol.scalar_type().size_bytes());
     j["frames_ms"] = json!(times);
     j["median_ms"] = json!(median);
     j["min_ms"] = json!(sorted[0]);

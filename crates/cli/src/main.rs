@@ -3,6 +3,7 @@
 //! Thin by design: parse, validate, call the libraries, map errors to exit codes
 //! (0 success, 1 failure, 2 usage error from clap).
 
+mod aa_figures;
 mod args;
 mod commands;
 mod display;

@@ -415,3 +415,75 @@ fn texture_bench_writes_report_and_plates() {
     let png = std::fs::read(out.join("plate_5_1_point_sampled.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
 }
+
+#[test]
+fn perspective_render_with_antialiasing_and_the_k_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let cam = dir.path().join("cam.json");
+    std::fs::write(
+        &cam,
+        r#"{"position":[-6,-6,24],"focal_point":[60,48,0],"view_up":[0,0,1],"view_angle":90,"parallel_projection":false}"#,
+    )
+    .unwrap();
+    let cam = cam.to_str().unwrap();
+    let mut stats = Vec::new();
+    for aa in ["none", "swan", "ewa"] {
+        let out = dir.path().join(format!("cb-{aa}.png"));
+        let o = volsplat(&[
+            "render",
+            "--phantom",
+            "checkerboard",
+            "--phantom-size",
+            "150,120,4",
+            "--camera",
+            cam,
+            "--size",
+            "96x64",
+            "--antialias",
+            aa,
+            "--draw-k",
+            "--stats",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("k = s·D/p"), "{}", stderr(&o));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["projection"], "perspective");
+        assert_eq!(j["list_splats"], 150 * 120);
+        stats.push(j["splats_widened"].as_u64().unwrap());
+    }
+    // No widening without anti-aliasing; Swan widens only splats beyond k; EWA widens all.
+    assert_eq!(stats[0], 0);
+    assert!(stats[1] > 0 && stats[1] < stats[2]);
+}
+
+#[test]
+fn perspective_options_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    let o = volsplat(&[
+        "render",
+        "--perspective",
+        "--view-angle",
+        "190",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--view-angle"), "{}", stderr(&o));
+    let o = volsplat(&[
+        "render",
+        "--perspective",
+        "--kernel",
+        "tent",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("radial kernel"), "{}", stderr(&o));
+    let o = volsplat(&["render", "--draw-k", "-o", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--draw-k"), "{}", stderr(&o));
+    assert!(!out.exists());
+}

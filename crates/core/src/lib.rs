@@ -9,7 +9,8 @@
 //! - [`transfer`]: VTK-style [`TransferFunction`] files and presets.
 //! - [`crio`]: Westover's four CRIO tables, lights and shading, and the per-frame
 //!   [`FrameClassifier`].
-//! - [`kernel`]: reconstruction kernels (Gaussian, single-point, nearest, tent, Mitchell–Netravali).
+//! - [`kernel`]: reconstruction kernels (Gaussian, single-point, nearest, tent, Mitchell–Netravali,
+//!   Crawfis–Max cubic splat).
 //! - [`image`]: premultiplied RGBA [`Image`], [`ScalarImage`], and the *over* operators.
 //! - [`phantom`]: analytic test volumes with closed-form line integrals (the built-in demo data).
 //! - [`scenes`]: synthetic stand-ins for the test scenes of Swan et al. 1997, Fig. 7

@@ -522,7 +522,7 @@ mod tests {
     }
 
     #[test]
-    fn terrain_at_paper_size_is_fast() {
+    fn scenes_at_paper_size_are_fast() {
         let [nx, ny, nz] = TERRAIN_PAPER;
         let t = std::time::Instant::now();
         let v = terrain(nx, ny, nz, 1).unwrap();
@@ -532,6 +532,13 @@ mod tests {
         // Generous: debug builds are ~10× slower than release.
         assert!(secs < 20.0);
         assert!(filled >= 2 * nx * ny);
+        let [fx, fy, fz] = FILAMENTS_PAPER;
+        let t = std::time::Instant::now();
+        let f = filaments(fx, fy, fz, 1).unwrap();
+        let secs = t.elapsed().as_secs_f64();
+        let lit = f.data().iter().filter(|&&x| x != EMPTY).count();
+        eprintln!("filaments {fx}×{fy}×{fz}: {secs:.3} s, {lit} non-empty voxels");
+        assert!(secs < 20.0);
     }
 
     #[test]

@@ -688,7 +688,7 @@ impl Frame<'_> {
             let ((q, wt, [hx, hy]), ray_ratio) = match (&self.ortho, &self.proj) {
                 (Some(o), _) => (*o, 1.0),
                 (None, Projection::Perspective(pp)) => {
-                    if !(z > self.near) {
+                    if z.is_nan() || z <= self.near {
                         out.clipped += 1;
                         return;
                     }

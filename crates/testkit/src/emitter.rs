@@ -81,7 +81,7 @@ pub fn reference_emitter(
                     if matches!(proj, Projection::Perspective(_)) {
                         t0 = t0.max(0.0);
                     }
-                    if miss || !(t1 > t0) {
+                    if miss || t1.partial_cmp(&t0) != Some(std::cmp::Ordering::Greater) {
                         continue;
                     }
                     let k = ((t1 - t0) / step).ceil().max(1.0) as usize;

@@ -5,11 +5,16 @@
 //! ray, `(a, b)` the offsets perpendicular to it in units of the screen filter's standard
 //! deviation `σ(t)` (world units; grows with depth under perspective). The screen filter is a
 //! Gaussian truncated to the square `|a|, |b| ≤ 3` and divided by `σ(t)²`, i.e. a filter over
-//! *screen* area as eq 6.1 writes it. All filters are zero outside the box of voxel centres.
+//! *screen* area as eq 6.1 writes it. Filters are *not* cut at the volume's faces: the density
+//! is zero outside the box of voxel centres (eq 4.2), so cutting would change nothing exact, but
+//! NIL patches straddling a face would then approximate a discontinuous filter and bias the
+//! normalisation (the patch extends into the zero padding in the denominator only).
 //!
-//! The direct evaluation integrates `∭ F ρ / ∭ F` in `(a, b, t)` (Jacobian `σ(t)²`, which the
-//! `1/σ²` cancels) with composite Gauss–Legendre rules: along the ray panels of `step` world
-//! units with 2 nodes; across it `cross` nodes per axis over `[−3, 3]` (composite 4-point rules).
+//! The direct evaluation integrates in `(a, b, t)` (Jacobian `σ(t)²`, which the `1/σ²`
+//! cancels) with composite Gauss–Legendre rules: along the ray panels of `step` world units with
+//! 2 nodes; across it `cross` nodes per axis over `[−3, 3]` (composite 4-point rules). The
+//! linearised display returns `τ ∫_{t_a}^{t_b} e^{−τ(t−t_a)} ⟨ρ⟩(t) dt` with `⟨ρ⟩` the
+//! normalised screen average (ρ = 0 beyond `t_b`); slices and balls return `∭Fρ/∭F`.
 
 use super::volume::{DisplayVolume, PixelRay};
 use crate::quadrature::gauss_legendre;
@@ -35,8 +40,14 @@ impl Sigma {
 /// A display filter around one pixel.
 #[derive(Debug, Clone, Copy)]
 pub(crate) enum PixelFilter {
-    /// eq 6.1: screen Gaussian × `exp(−τ(t − t_a))` on `[t_a, t_b]`; `tau` per world unit.
-    Linearised { ray: PixelRay, sigma: Sigma, tau: f64 },
+    /// eq 6.1: screen Gaussian × `exp(−τ(t − t_a))` for `t ≥ t_a`; `tau` per world unit. Not
+    /// cut at the exit `t_b`: the density is zero beyond it, and the uncut filter has the known
+    /// integral `K = K_screen/τ` (eq 4.15).
+    Linearised {
+        ray: PixelRay,
+        sigma: Sigma,
+        tau: f64,
+    },
     /// §6-2: screen Gaussian × Gaussian along the ray centred at `tc`, std `w` (world units),
     /// truncated at `±3w`.
     Slice {
@@ -58,7 +69,7 @@ impl PixelFilter {
             PixelFilter::Linearised { ray, sigma, tau } => {
                 let rel = p - ray.o;
                 let t = rel.dot(ray.d);
-                if t < ray.ta || t > ray.tb {
+                if t < ray.ta {
                     return 0.0;
                 }
                 let s = sigma.at(t);
@@ -92,14 +103,10 @@ impl PixelFilter {
         }
     }
 
-    /// Weight at an index-space point, zero outside the box of voxel centres.
+    /// Weight at an index-space point.
     #[inline]
     pub fn weight_index(&self, vol: &DisplayVolume, p_index: DVec3) -> f64 {
-        if vol.inside(p_index) {
-            self.weight(vol.world_from_index(p_index))
-        } else {
-            0.0
-        }
+        self.weight(vol.world_from_index(p_index))
     }
 }
 
@@ -127,15 +134,19 @@ pub(crate) fn direct(
 ) -> Option<f64> {
     let (mut num, mut den) = (0.0, 0.0);
     let mut acc = |p_world: DVec3, w: f64| {
-        let q = vol.index_from_world(p_world);
-        if w != 0.0 && vol.inside(q) {
-            num += w * vol.density_index(q);
+        if w != 0.0 {
+            num += w * vol.density(p_world);
             den += w;
         }
     };
     match *filter {
         PixelFilter::Linearised { ray, sigma, tau } => {
             let panels = ((ray.tb - ray.ta) / step).ceil().max(1.0) as usize;
+            let screen: f64 = cross
+                .iter()
+                .flat_map(|&(a, wa)| cross.iter().map(move |&(b, wb)| (a, wa, b, wb)))
+                .map(|(a, wa, b, wb)| wa * wb * (-0.5 * (a * a + b * b)).exp())
+                .sum();
             for (t, wt) in composite_nodes(ray.ta, ray.tb, panels, 2) {
                 let s = sigma.at(t);
                 let base = ray.o + ray.d * t;
@@ -143,10 +154,11 @@ pub(crate) fn direct(
                 for &(a, wa) in cross {
                     for &(b, wb) in cross {
                         let w = et * wa * wb * (-0.5 * (a * a + b * b)).exp();
-                        acc(base + (ray.e1 * a + ray.e2 * b) * s, w);
+                        num += w * vol.density(base + (ray.e1 * a + ray.e2 * b) * s);
                     }
                 }
             }
+            return Some(tau * num / screen);
         }
         PixelFilter::Slice { ray, sigma, tc, w } => {
             let (lo, hi) = (tc - TRUNC * w, tc + TRUNC * w);
@@ -236,7 +248,8 @@ pub(crate) fn triggers(
             for zi in 0..width {
                 for yi in 0..width {
                     for xi in 0..width {
-                        let p = c + DVec3::new(grid(xi, width), grid(yi, width), grid(zi, width)) * s;
+                        let p =
+                            c + DVec3::new(grid(xi, width), grid(yi, width), grid(zi, width)) * s;
                         push(p);
                     }
                 }

@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | `Sabella` | `τ·I`, `I = ∫ e^{−τ∫ρ} ρ dt` (eq 3.1), `n × n` rays per pixel; green = mean of the per-ray maximum density (Plate 6.1) | §6-1 |
 //! | `Maximum` | maximum density along the ray, `n × n` rays per pixel | §6-3 |
-//! | `Linearised` | `(1 − e^{−τL}) · ∭Fρ/∭F`, `F = G_screen · e^{−τ(t−t_a)}` on `[t_a, t_b]` (eq 3.3 = 6.1) | §6-1 |
+//! | `Linearised` | `τ·∭Fρ` with `F = G_screen · e^{−τ(t−t_a)}`, `t ≥ t_a`, `∬G_screen = 1` (eq 3.3 = 6.1) | §6-1 |
 //! | `Slice` | `∭Fρ/∭F`, `F = G_screen · G(t − t_c; w)` (thick `w = 0.1`, thin `0.01`) | §6-2 |
 //! | `Search` | density at the point the ray search picks (Plate 6.10) | §6-3 |
 //! | `SampleFilter` | `½ + gain · (ρ̄_{σ₁} − ρ̄_{σ₂})`, a difference of Gaussians at the searched point | §6-3 |
@@ -29,11 +29,13 @@
 //! `(x + ½, y + ½)`, so orthographic and perspective cameras both work. Images: row 0 at the top.
 //!
 //! ## Decisions (digest §7, A-15 …; recorded in `docs/nil-display/report.md`)
-//! - **Normalisation of eq 6.1** (A-17): the NIL result is a normalised average (eq 4.16); the
-//!   linearised display multiplies it by `1 − e^{−τL}` (L = central ray's length in the volume),
-//!   so that a constant density `ρ` shows `ρ(1 − e^{−τL})` — `τ` times eq 3.3 with a unit screen
-//!   filter. The direct evaluation uses the same normalisation, so NIL-vs-direct errors are NIL
-//!   approximation errors only.
+//! - **Normalisation of eq 6.1** (A-17): the display is `τ` times eq 3.3 with a unit screen
+//!   filter, so a constant density `ρ` over a length `L` shows `ρ(1 − e^{−τL})`. The NIL result
+//!   is eq 4.15, `K · Σ b·C / Σ b·B̄`, with the known `K = ∭F = 1/τ` of the filter *not* cut at the
+//!   exit (the density is zero beyond it), so the value is the normalised NIL average itself.
+//!   Filters are never cut at the volume's faces (see [`filter`]): cutting made patches that
+//!   straddle a face count the zero padding in the denominator only (−27 % on a constant
+//!   volume in our first version).
 //! - **Sabella (A-18)**: eq 3.1 as written (plus the max channel). Its integrand is
 //!   `d/dt(−e^{−τ∫ρ}/τ)`, so `τ·I = 1 − e^{−τ∫ρ}` exactly; the march is nevertheless written as
 //!   the thesis's ray marcher (256 samples, 4×4 rays), exact for piecewise-constant density.
@@ -216,14 +218,24 @@ impl DisplaySettings {
     /// Validates every parameter.
     pub fn validate(&self) -> Result<()> {
         let fin = |x: f64| x.is_finite();
-        check("tau", fin(self.tau) && self.tau > 0.0 && self.tau <= 1e4, self.tau, "must be in (0, 1e4]")?;
+        check(
+            "tau",
+            fin(self.tau) && self.tau > 0.0 && self.tau <= 1e4,
+            self.tau,
+            "must be in (0, 1e4]",
+        )?;
         check(
             "screen_sigma_px",
             fin(self.screen_sigma_px) && self.screen_sigma_px > 0.0 && self.screen_sigma_px <= 64.0,
             self.screen_sigma_px,
             "must be in (0, 64]",
         )?;
-        check("supersample", (1..=16).contains(&self.supersample), self.supersample, "must be in 1..=16")?;
+        check(
+            "supersample",
+            (1..=16).contains(&self.supersample),
+            self.supersample,
+            "must be in 1..=16",
+        )?;
         check(
             "samples_per_ray",
             (2..=65536).contains(&self.samples_per_ray),
@@ -250,9 +262,19 @@ impl DisplaySettings {
             self.dog_sigma,
             "needs 1e-6 < σ1 < σ2 ≤ 1 unit length",
         )?;
-        check("dog_gain", fin(self.dog_gain), self.dog_gain, "must be finite")?;
+        check(
+            "dog_gain",
+            fin(self.dog_gain),
+            self.dog_gain,
+            "must be finite",
+        )?;
         let n = &self.nil;
-        check("trigger_width", (1..=16).contains(&n.trigger_width), n.trigger_width, "must be in 1..=16")?;
+        check(
+            "trigger_width",
+            (1..=16).contains(&n.trigger_width),
+            n.trigger_width,
+            "must be in 1..=16",
+        )?;
         check(
             "trigger_steps",
             fin(n.trigger_steps) && n.trigger_steps > 0.0 && n.trigger_steps <= 4096.0,
@@ -265,9 +287,24 @@ impl DisplaySettings {
             (n.trigger_width, n.trigger_steps),
             "trigger_width² × trigger_steps must be at most 65536",
         )?;
-        check("tolerance", n.tolerance <= 1 << 20, n.tolerance, "must be at most 2^20")?;
-        check("gamma_min", (-8..=20).contains(&n.gamma_min), n.gamma_min, "must be in -8..=20")?;
-        check("guard", fin(n.guard) && (0.0..1.0).contains(&n.guard), n.guard, "must be in [0, 1)")?;
+        check(
+            "tolerance",
+            n.tolerance <= 1 << 20,
+            n.tolerance,
+            "must be at most 2^20",
+        )?;
+        check(
+            "gamma_min",
+            (-8..=20).contains(&n.gamma_min),
+            n.gamma_min,
+            "must be in -8..=20",
+        )?;
+        check(
+            "guard",
+            fin(n.guard) && (0.0..1.0).contains(&n.guard),
+            n.guard,
+            "must be in [0, 1)",
+        )?;
         let q = &self.quadrature;
         check(
             "quadrature step",
@@ -277,7 +314,7 @@ impl DisplaySettings {
         )?;
         check(
             "cross_nodes",
-            q.cross_nodes % 4 == 0 && (4..=64).contains(&q.cross_nodes),
+            q.cross_nodes.is_multiple_of(4) && (4..=64).contains(&q.cross_nodes),
             q.cross_nodes,
             "must be a multiple of 4 in 4..=64",
         )?;
@@ -342,7 +379,7 @@ impl DisplayStats {
 pub struct TransferCache {
     /// Channels per pixel `N`.
     pub channels: usize,
-    /// Per-pixel scale (`1 − e^{−τL}` for the linearised display, 1 for slices).
+    /// Per-pixel scale (1 for the linearised display and slices).
     pub scale: Vec<f64>,
     /// Channel averages, pixel-major (`N` per pixel).
     pub values: Vec<f64>,

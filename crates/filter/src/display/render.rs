@@ -2,13 +2,15 @@
 
 use super::filter::{PixelFilter, Sigma, composite_nodes, direct, triggers};
 use super::volume::{DisplayVolume, PixelRay, Rays};
-use super::{DisplayImage, DisplayKind, DisplaySettings, DisplayStats, Evaluator, SearchRule, TransferCache};
+use super::{
+    DisplayImage, DisplayKind, DisplaySettings, DisplayStats, Evaluator, SearchRule, TransferCache,
+};
 use crate::error::{FilterError, Result};
+use crate::nil::Cell;
 use crate::nil::{
     DiscreteNilMap, LevelWeighting, NilResult, NilSource, enclosing_cell, evaluate_cells,
     find_hierarchy,
 };
-use crate::nil::Cell;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -22,6 +24,8 @@ struct Scratch {
     triggers: Vec<DVec3>,
     cells: Vec<Cell>,
     moments: Vec<f64>,
+    /// Linearised display: where the central ray leaves the last kept cell (world `t`).
+    t_end: f64,
 }
 
 struct Pixel {
@@ -173,10 +177,7 @@ pub(crate) fn render(
                 st.rays += 1;
                 let sigma = sigma_of(&ray);
                 let (filter, scale) = if s.kind == DisplayKind::Linearised {
-                    (
-                        PixelFilter::Linearised { ray, sigma, tau },
-                        1.0 - (-tau * (ray.tb - ray.ta)).exp(),
-                    )
+                    (PixelFilter::Linearised { ray, sigma, tau }, 1.0)
                 } else {
                     let tc = slice_depths / ray.cos.max(1e-12);
                     (
@@ -192,8 +193,22 @@ pub(crate) fn render(
                 let ch = match (s.evaluator, map) {
                     (Evaluator::Nil, Some(map)) => {
                         let f = |p: DVec3| filter.weight_index(vol, p);
-                        let r = nil_eval(vol, map, &filter, &[&f], s, sc, st);
-                        r.into_iter().next().unwrap_or_default()
+                        let keep = (s.kind == DisplayKind::Linearised).then_some(&ray);
+                        let r = nil_eval(vol, map, &filter, &[&f], keep, s, sc, st);
+                        let (mut ch, fell_back) = r.into_iter().next().unwrap_or_default();
+                        if s.kind == DisplayKind::Linearised {
+                            // eq 4.15 with K = ∫F over the cells that meet the volume (the rest
+                            // hold zero density): the exponential up to where the central ray
+                            // leaves them (fall-back: up to the exit t_b).
+                            let t_end = if fell_back {
+                                ray.tb
+                            } else {
+                                sc.t_end.max(ray.tb)
+                            };
+                            let a = 1.0 - (-tau * (t_end - ray.ta)).exp();
+                            ch.iter_mut().for_each(|c| *c *= a);
+                        }
+                        ch
                     }
                     _ => {
                         let t0 = Instant::now();
@@ -237,8 +252,8 @@ pub(crate) fn render(
                         (Evaluator::Nil, Some(map)) => {
                             let w1 = |p: DVec3| f1.weight_index(vol, p);
                             let w2 = |p: DVec3| f2.weight_index(vol, p);
-                            let r = nil_eval(vol, map, &f2, &[&w1, &w2], s, sc, st);
-                            let g = |i: usize| r.get(i).and_then(|c| c.first()).copied();
+                            let r = nil_eval(vol, map, &f2, &[&w1, &w2], None, s, sc, st);
+                            let g = |i: usize| r.get(i).and_then(|c| c.0.first()).copied();
                             (g(0), g(1))
                         }
                         _ => {
@@ -320,7 +335,13 @@ pub(crate) fn sabella_ray(vol: &DisplayVolume, ray: &PixelRay, tau: f64, k: usiz
 }
 
 /// §6-3 search: the parameter `t` (world units) where the density along the ray meets `rho0`.
-fn search(vol: &DisplayVolume, ray: &PixelRay, rho0: f64, rule: SearchRule, k: usize) -> Option<f64> {
+fn search(
+    vol: &DisplayVolume,
+    ray: &PixelRay,
+    rho0: f64,
+    rule: SearchRule,
+    k: usize,
+) -> Option<f64> {
     let len = ray.tb - ray.ta;
     let h = len / k as f64;
     let t_of = |j: usize| ray.ta + (j as f64 + 0.5) * h;
@@ -357,25 +378,70 @@ fn search(vol: &DisplayVolume, ray: &PixelRay, rho0: f64, rule: SearchRule, k: u
 /// NIL evaluation of several filters on one hierarchy (the hierarchy comes from the triggers
 /// of `shape`): Fig 4.19 then the normalised, level-weighted sum (eqs 4.13–4.16, 4.32
 /// corrected). Falls back to point-sampling the filter at the triggers when the scale factor
-/// collapses (decision A-4). Returns one channel vector per filter.
+/// collapses (decision A-4). Returns per filter the channel averages and whether it fell back.
+#[allow(clippy::too_many_arguments)] // the two functions §6-5 swaps, plus buffers
 fn nil_eval(
     vol: &DisplayVolume,
     map: &DiscreteNilMap,
     shape: &PixelFilter,
     filters: &[&dyn Fn(DVec3) -> f64],
+    keep_box: Option<&PixelRay>,
     s: &DisplaySettings,
     sc: &mut Scratch,
     st: &mut DisplayStats,
-) -> Vec<Vec<f64>> {
+) -> Vec<(Vec<f64>, bool)> {
     let t0 = Instant::now();
-    triggers(vol, shape, s.nil.trigger_width, s.nil.trigger_steps, &mut sc.triggers);
+    triggers(
+        vol,
+        shape,
+        s.nil.trigger_width,
+        s.nil.trigger_steps,
+        &mut sc.triggers,
+    );
     let t1 = Instant::now();
     st.trigger_s += (t1 - t0).as_secs_f64();
     st.triggers += sc.triggers.len() as u64;
     sc.cells.clear();
     let root = enclosing_cell(&sc.triggers, s.nil.gamma_min, map.gamma_max());
     if let Some(root) = root {
-        find_hierarchy(&sc.triggers, root, s.nil.tolerance, s.nil.gamma_min, &mut sc.cells);
+        find_hierarchy(
+            &sc.triggers,
+            root,
+            s.nil.tolerance,
+            s.nil.gamma_min,
+            &mut sc.cells,
+        );
+    }
+    if let Some(ray) = keep_box {
+        // Keep the cells that meet the box of voxel centres (the others hold zero density)
+        // and find where the central ray leaves them.
+        let hi = vol.dims().map(|n| (n - 1) as f64);
+        sc.cells.retain(|c| {
+            let h = c.size();
+            (0..3).all(|a| h * c.index[a] as f64 <= hi[a] && h * (c.index[a] + 1) as f64 >= 0.0)
+        });
+        let q0 = vol.index_from_world(ray.o);
+        let dq = vol.index_from_world(ray.o + ray.d) - q0;
+        sc.t_end = f64::NEG_INFINITY;
+        for c in &sc.cells {
+            let h = c.size();
+            let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+            for a in 0..3 {
+                let (lo, up) = (h * c.index[a] as f64, h * (c.index[a] + 1) as f64);
+                if dq[a].abs() < 1e-300 {
+                    if q0[a] < lo || q0[a] > up {
+                        t1 = f64::NEG_INFINITY;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((lo - q0[a]) / dq[a], (up - q0[a]) / dq[a]);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+            if t1 >= t0 {
+                sc.t_end = sc.t_end.max(t1);
+            }
+        }
     }
     let t2 = Instant::now();
     st.hierarchy_s += (t2 - t1).as_secs_f64();
@@ -395,10 +461,10 @@ fn nil_eval(
             None
         };
         out.push(match r {
-            Some(r) => r.channels,
+            Some(r) => (r.channels, false),
             None => {
                 st.fallbacks += 1;
-                point_sampled(vol, map, &sc.triggers, *f)
+                (point_sampled(vol, map, &sc.triggers, *f), true)
             }
         });
     }

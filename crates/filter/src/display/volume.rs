@@ -12,10 +12,17 @@ use crate::texture::{DiscreteTexture, Reconstruction, SolidTexture};
 use glam::{DMat3, DVec3};
 use volsplat_core::{Grid, Projection};
 
-/// Zero samples appended on the high side of every axis, so that the periodic texture of the
-/// NIL machinery (decision A-5 of the texture crate) sees zero density just outside the volume
-/// (thesis eq 4.2: `T ≡ 0` outside) instead of the opposite face.
+/// Least number of zero samples appended on the high side of every axis, so that the periodic
+/// texture of the NIL machinery (decision A-5 of the texture crate) sees zero density just
+/// outside the volume (thesis eq 4.2: `T ≡ 0` outside) instead of the opposite face. Each axis
+/// is padded to `max(n + PAD, 2^⌈log₂ n⌉)` samples, so every NIL root cell enclosing points of
+/// the volume (inside `[0, 2^⌈log₂ n⌉)`) lies inside the padded texture and never wraps.
 pub const PAD: usize = 2;
+
+/// Padded size of an axis of `n` samples (see [`PAD`]).
+pub fn padded(n: usize) -> usize {
+    (n + PAD).max(n.next_power_of_two())
+}
 
 /// A density field on a volume grid: densities per voxel (dimensionless, normally `[0, 1]`),
 /// reconstructed by sample-and-hold or trilinear interpolation, zero outside the box of voxel
@@ -33,7 +40,7 @@ pub struct DisplayVolume {
 
 impl DisplayVolume {
     /// Wraps `densities` (x fastest, `grid.dims` samples, finite). Each axis needs at least two
-    /// samples. The texture is padded with [`PAD`] zero samples per axis.
+    /// samples. The texture is padded with zero samples (see [`PAD`]).
     pub fn new(grid: &Grid, densities: &[f64], recon: Reconstruction) -> Result<Self> {
         let dims = grid.dims;
         for (a, &n) in dims.iter().enumerate() {
@@ -53,7 +60,7 @@ impl DisplayVolume {
                 format!("expected {count} samples"),
             ));
         }
-        let pd = dims.map(|n| n + PAD);
+        let pd = dims.map(padded);
         let texture = DiscreteTexture::from_fn(pd, recon, |i, j, k| {
             if i < dims[0] && j < dims[1] && k < dims[2] {
                 densities[(k * dims[1] + j) * dims[0] + i]
@@ -116,6 +123,11 @@ impl DisplayVolume {
     /// One unit length in world units: the largest extent of the bounds of voxel centres.
     pub fn unit(&self) -> f64 {
         self.unit
+    }
+
+    /// World volume of one index-space unit cube (`|det world_from_index|`).
+    pub fn voxel_volume(&self) -> f64 {
+        self.world_from_index.determinant().abs()
     }
 
     /// Smallest grid spacing, world units.

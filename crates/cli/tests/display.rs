@@ -1,0 +1,89 @@
+//! `render --renderer sabella|nil` end to end on a small phantom.
+
+use std::process::Command;
+
+fn volsplat() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_volsplat"))
+}
+
+#[test]
+fn sabella_and_nil_renders_write_images_and_stats() {
+    let dir = tempfile::tempdir().unwrap();
+    for (renderer, extra) in [
+        ("sabella", vec!["--supersample", "2"]),
+        ("nil", vec!["--display", "linearised", "--density", "data"]),
+        (
+            "nil",
+            vec!["--display", "slice", "--direct", "--density", "data"],
+        ),
+        (
+            "nil",
+            vec![
+                "--display",
+                "sample-filter",
+                "--density",
+                "data",
+                "--rho0",
+                "0.3",
+            ],
+        ),
+    ] {
+        let out = dir.path().join(format!("{renderer}.png"));
+        let o = volsplat()
+            .args([
+                "render",
+                "--phantom",
+                "blobs",
+                "--phantom-size",
+                "16",
+                "--size",
+                "24x20",
+            ])
+            .args(["--renderer", renderer, "--stats", "-o"])
+            .arg(&out)
+            .args(&extra)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{renderer} {extra:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(std::fs::metadata(&out).unwrap().len() > 50);
+        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(stats["pixels"], 480);
+        assert!(stats["rays"].as_u64().unwrap() > 0);
+    }
+}
+
+#[test]
+fn bad_display_options_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    for bad in [
+        ["--tau", "-1"],
+        ["--patch-order", "7"],
+        ["--density", "foo"],
+    ] {
+        let o = volsplat()
+            .args([
+                "render",
+                "--phantom",
+                "blobs",
+                "--phantom-size",
+                "8",
+                "--size",
+                "8x8",
+            ])
+            .args(["--renderer", "nil", "-o"])
+            .arg(&out)
+            .args(bad)
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{bad:?}");
+        assert!(
+            !String::from_utf8_lossy(&o.stderr).contains("panicked"),
+            "{bad:?}"
+        );
+    }
+}
