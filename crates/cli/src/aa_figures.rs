@@ -80,7 +80,7 @@ fn figure(
         let proj = Projection::new(camera, size.0, size.1)?;
         if let Some(k) = k_distance(list.grid(), 1, &proj) {
             let depth = render_list_depth(list, camera, tables, &s)?;
-            draw_depth_contour(&mut img, &depth, k as f32, [0.0, 0.0, 0.0]);
+            draw_depth_contour(&mut img, &depth, k as f32, [0.0, 0.0, 0.0])?;
         }
         imgs.push(img);
     }

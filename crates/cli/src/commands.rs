@@ -56,6 +56,9 @@ fn pair(s: &str, sep: char, flag: &str) -> Result<(f64, f64)> {
     Ok((p(a)?, p(b)?))
 }
 
+/// Largest built-in phantom, voxels (2³⁰: 4 GiB as f32).
+const PHANTOM_MAX_VOXELS: u128 = 1 << 30;
+
 fn grid_size(s: &str, flag: &str) -> Result<[usize; 3]> {
     let dims = if s.contains(',') {
         triple::<usize>(s, flag)?
@@ -68,6 +71,14 @@ fn grid_size(s: &str, flag: &str) -> Result<[usize; 3]> {
     };
     if dims.iter().any(|d| !(2..=4096).contains(d)) {
         bail!("{flag}: each size must be in 2..=4096, got {dims:?}");
+    }
+    // Phantoms are generated in memory as f32 (or i16): keep them well inside a workstation.
+    let voxels: u128 = dims.iter().map(|&d| d as u128).product();
+    if voxels > PHANTOM_MAX_VOXELS {
+        bail!(
+            "{flag}: {dims:?} is {voxels} voxels; built-in phantoms are limited to {PHANTOM_MAX_VOXELS} \
+             (4 GiB as f32)"
+        );
     }
     Ok(dims)
 }
@@ -543,7 +554,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
                 Some(k) => {
                     let depth =
                         pool.install(|| render_list_depth(&list, &camera, &tables, &settings))?;
-                    draw_depth_contour(&mut out.image, &depth, k as f32, color);
+                    draw_depth_contour(&mut out.image, &depth, k as f32, color)?;
                     eprintln!("k = s·D/p = {k:.4} world units from the eye");
                 }
                 None => eprintln!(

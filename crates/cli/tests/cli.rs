@@ -482,6 +482,17 @@ fn perspective_options_are_checked() {
     ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("radial kernel"), "{}", stderr(&o));
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "terrain",
+        "--phantom-size",
+        "4096,4096,4096",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("limited to"), "{}", stderr(&o));
     let o = volsplat(&["render", "--draw-k", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--draw-k"), "{}", stderr(&o));

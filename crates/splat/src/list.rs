@@ -416,11 +416,21 @@ pub fn render_list_depth(
 }
 
 /// Paints `color` (premultiplied, opaque) on the pixels of `image` where `depth` crosses `k`
-/// between 4-neighbours: the contour "line at distance k" of Swan et al. Fig. 7a.
-pub fn draw_depth_contour(image: &mut Image, depth: &ScalarImage, k: f32, color: [f32; 3]) {
+/// between 4-neighbours: the contour "line at distance k" of Swan et al. Fig. 7a. Errors if the
+/// two images differ in size.
+pub fn draw_depth_contour(
+    image: &mut Image,
+    depth: &ScalarImage,
+    k: f32,
+    color: [f32; 3],
+) -> Result<()> {
     let (w, h) = (depth.width(), depth.height());
     if image.width() != w || image.height() != h {
-        return;
+        return Err(SplatError::Settings(format!(
+            "depth image {w}×{h} does not match the image {}×{}",
+            image.width(),
+            image.height()
+        )));
     }
     let d = depth.values();
     let side = |v: f32| if v.is_nan() { None } else { Some(v >= k) };
@@ -445,6 +455,7 @@ pub fn draw_depth_contour(image: &mut Image, depth: &ScalarImage, k: f32, color:
             *p = [color[0], color[1], color[2], 1.0];
         }
     }
+    Ok(())
 }
 
 fn render_inner(
@@ -1134,7 +1145,8 @@ mod tests {
         )
         .unwrap();
         let mut img = Image::new(4, 3);
-        draw_depth_contour(&mut img, &depth, 2.5, [1.0, 0.0, 0.0]);
+        draw_depth_contour(&mut img, &depth, 2.5, [1.0, 0.0, 0.0]).unwrap();
+        assert!(draw_depth_contour(&mut Image::new(3, 3), &depth, 2.5, [0.0; 3]).is_err());
         let marked: Vec<bool> = img.pixels().iter().map(|p| p[3] == 1.0).collect();
         assert_eq!(
             marked,
