@@ -164,22 +164,7 @@ fn perspective_xray_matches_closed_form_line_integrals() {
 #[test]
 fn perspective_composite_matches_the_reference_integrator() {
     let vol = phantom::sample(&blobs(), [64; 3], 1).unwrap();
-    let tf = TransferFunction {
-        color: vec![
-            [0.0, 0.2, 0.3, 0.9],
-            [0.4, 0.9, 0.6, 0.3],
-            [1.0, 1.0, 1.0, 0.9],
-        ],
-        scalar_opacity: vec![[0.0, 0.0], [0.1, 0.0], [1.0, 0.35]],
-        scalar_opacity_unit_distance: 0.05,
-        shade: true,
-        ambient: 0.3,
-        diffuse: 0.7,
-        specular: 0.2,
-        specular_power: 10.0,
-        ..TransferFunction::ramp(0.0, 1.0, 1.0)
-    };
-    let tables = CrioTables::from_transfer_function(&tf, 1024).unwrap();
+    let tables = volsplat_testkit::fixtures::shaded_tables().unwrap();
     let list = SplatList::build(&vol, &tables, &ExtractSettings::default()).unwrap();
     let (w, h) = (128, 128);
     let mut report = Vec::new();

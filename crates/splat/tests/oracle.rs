@@ -117,22 +117,7 @@ fn xray_of_shepp_logan_is_within_the_sampling_error_bound() {
 }
 
 fn shaded_tables() -> CrioTables {
-    let tf = TransferFunction {
-        color: vec![
-            [0.0, 0.2, 0.3, 0.9],
-            [0.4, 0.9, 0.6, 0.3],
-            [1.0, 1.0, 1.0, 0.9],
-        ],
-        scalar_opacity: vec![[0.0, 0.0], [0.1, 0.0], [1.0, 0.35]],
-        scalar_opacity_unit_distance: 0.05,
-        shade: true,
-        ambient: 0.3,
-        diffuse: 0.7,
-        specular: 0.2,
-        specular_power: 10.0,
-        ..TransferFunction::ramp(0.0, 1.0, 1.0)
-    };
-    CrioTables::from_transfer_function(&tf, 1024).unwrap()
+    volsplat_testkit::fixtures::shaded_tables().unwrap()
 }
 
 fn rgb_psnr(a: &Image, b: &Image) -> f64 {

@@ -11,6 +11,7 @@
 //! - [`metrics`](mod@metrics): [`mse`], [`psnr`], [`relative_l2`], [`ssim_gray`] and helpers
 //!   that turn a premultiplied [`Image`](volsplat_core::Image) into comparable channels
 //!   ([`image_rgb_over`], [`image_psnr`], [`luminance`]).
+//! - [`fixtures`](mod@fixtures): the shaded transfer function shared by the oracle tests.
 //! - [`phantom`](mod@phantom): re-export of [`volsplat_core::phantom`] (Gaussian blobs, the
 //!   3-D Shepp–Logan phantom, a CT head, Marschner–Lobb; closed-form line integrals; sampling
 //!   into volumes).
@@ -21,6 +22,7 @@
 #![deny(missing_docs)]
 
 pub mod emitter;
+pub mod fixtures;
 pub mod metrics;
 pub mod reference;
 
