@@ -14,6 +14,19 @@ fn sabella_and_nil_renders_write_images_and_stats() {
         ("nil", vec!["--display", "linearised", "--density", "data"]),
         (
             "nil",
+            vec![
+                "--display",
+                "linearised",
+                "--density",
+                "data",
+                "--control-points",
+                "interpolate",
+                "--patch-order",
+                "3",
+            ],
+        ),
+        (
+            "nil",
             vec!["--display", "slice", "--direct", "--density", "data"],
         ),
         (
@@ -53,6 +66,13 @@ fn sabella_and_nil_renders_write_images_and_stats() {
         let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(stats["pixels"], 480);
         assert!(stats["rays"].as_u64().unwrap() > 0);
+        if renderer == "nil" && !extra.contains(&"--direct") {
+            assert!(stats["patches"].as_u64().unwrap() > 0, "{extra:?}");
+            // Projected control points never fall back (decision 0007).
+            if !extra.contains(&"interpolate") {
+                assert_eq!(stats["fallbacks"], 0, "{extra:?}");
+            }
+        }
     }
 }
 
@@ -64,6 +84,8 @@ fn bad_display_options_are_errors() {
         ["--tau", "-1"],
         ["--patch-order", "7"],
         ["--density", "foo"],
+        ["--control-points", "guess"],
+        ["--trigger-width", "0"],
     ] {
         let o = volsplat()
             .args([

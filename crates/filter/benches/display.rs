@@ -1,12 +1,14 @@
 //! Criterion benches of the Chapter 6 displays (Buchanan Tables 6.1, 6.2): per-image time of
 //! Sabella, the direct linearised display and its NIL approximation by patch order, and the NIL
-//! map construction, on a smooth 32³ phantom at 48 × 48 pixels.
+//! map construction, with projected (decision 0007) and interpolated (thesis) control points,
+//! on a smooth 32³ phantom at 48 × 48 pixels.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use volsplat_core::{Camera, Grid};
 use volsplat_filter::display::{
-    DisplayKind, DisplaySettings, DisplayVolume, Evaluator, build_map, render_display,
+    ControlPoints, DisplayKind, DisplaySettings, DisplayVolume, Evaluator, NilDisplaySettings,
+    build_map, render_display,
 };
 use volsplat_filter::texture::Reconstruction;
 
@@ -56,9 +58,29 @@ fn benches(c: &mut Criterion) {
         });
         let map = build_map(&vol, m, None, 1 << 26).expect("map");
         let s = DisplaySettings::default();
-        g.bench_function(format!("linearised nil M={m} tol 2 steps 32"), |b| {
-            b.iter(|| render_display(&vol, Some(&map), &cam, w, h, black_box(&s)).expect("render"))
-        });
+        g.bench_function(
+            format!("linearised nil M={m} tol 2 steps 32 project"),
+            |b| {
+                b.iter(|| {
+                    render_display(&vol, Some(&map), &cam, w, h, black_box(&s)).expect("render")
+                })
+            },
+        );
+        let si = DisplaySettings {
+            nil: NilDisplaySettings {
+                control: ControlPoints::Interpolate,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        g.bench_function(
+            format!("linearised nil M={m} tol 2 steps 32 interpolate"),
+            |b| {
+                b.iter(|| {
+                    render_display(&vol, Some(&map), &cam, w, h, black_box(&si)).expect("render")
+                })
+            },
+        );
     }
     g.finish();
 }

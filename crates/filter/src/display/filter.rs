@@ -5,16 +5,13 @@
 //! ray, `(a, b)` the offsets perpendicular to it in units of the screen filter's standard
 //! deviation `σ(t)` (world units; grows with depth under perspective). The screen filter is a
 //! Gaussian truncated to the square `|a|, |b| ≤ 3` and divided by `σ(t)²`, i.e. a filter over
-//! *screen* area as eq 6.1 writes it. Filters are *not* cut at the volume's faces: the density
-//! is zero outside the box of voxel centres (eq 4.2), so cutting would change nothing exact, but
-//! NIL patches straddling a face would then approximate a discontinuous filter and bias the
-//! normalisation (the patch extends into the zero padding in the denominator only).
+//! *screen* area as eq 6.1 writes it. Filters are masked to the box of voxel centres (the
+//! density is zero outside it, eq 4.2).
 //!
-//! The direct evaluation integrates in `(a, b, t)` (Jacobian `σ(t)²`, which the `1/σ²`
-//! cancels) with composite Gauss–Legendre rules: along the ray panels of `step` world units with
-//! 2 nodes; across it `cross` nodes per axis over `[−3, 3]` (composite 4-point rules). The
-//! linearised display returns `τ ∫_{t_a}^{t_b} e^{−τ(t−t_a)} ⟨ρ⟩(t) dt` with `⟨ρ⟩` the
-//! normalised screen average (ρ = 0 beyond `t_b`); slices and balls return `∭Fρ/∭F`.
+//! Evaluation goes through the filter's lines ([`super::project::LineFilter`]): the direct
+//! evaluation ([`direct`]) integrates the data along each line clipped to the box; the NIL
+//! evaluation projects the filter onto the patches with the same lines. Slices and balls
+//! return `∭Fρ/∭F`; the linearised display returns `τ ∫∬ G e^{−τ(t−t_a)} ρ` with `∬G = 1`.
 
 use super::volume::{DisplayVolume, PixelRay};
 use crate::quadrature::gauss_legendre;
@@ -124,72 +121,19 @@ pub(crate) fn composite_nodes(lo: f64, hi: f64, panels: usize, n: usize) -> Vec<
     out
 }
 
-/// Direct evaluation of `∭ F ρ_l / ∭ F` for each channel `ρ_l = g_l(ρ)` (one channel with
-/// `g = id` for a plain display). `None` if the filter has no weight inside the volume.
+/// Direct evaluation of `∭ F ρ / ∭ F` (the reference for the NIL approximations): the filter's
+/// cross-section lines (`cross` nodes per axis) each clipped to the box of voxel centres and
+/// integrated along their own length ([`super::project::LineFilter::direct`]). `None` if the
+/// filter misses the volume.
 pub(crate) fn direct(
     vol: &DisplayVolume,
     filter: &PixelFilter,
     step: f64,
     cross: &[(f64, f64)],
 ) -> Option<f64> {
-    let (mut num, mut den) = (0.0, 0.0);
-    let mut acc = |p_world: DVec3, w: f64| {
-        if w != 0.0 {
-            num += w * vol.density(p_world);
-            den += w;
-        }
-    };
-    match *filter {
-        PixelFilter::Linearised { ray, sigma, tau } => {
-            let panels = ((ray.tb - ray.ta) / step).ceil().max(1.0) as usize;
-            let screen: f64 = cross
-                .iter()
-                .flat_map(|&(a, wa)| cross.iter().map(move |&(b, wb)| (a, wa, b, wb)))
-                .map(|(a, wa, b, wb)| wa * wb * (-0.5 * (a * a + b * b)).exp())
-                .sum();
-            for (t, wt) in composite_nodes(ray.ta, ray.tb, panels, 2) {
-                let s = sigma.at(t);
-                let base = ray.o + ray.d * t;
-                let et = wt * (-tau * (t - ray.ta)).exp();
-                for &(a, wa) in cross {
-                    for &(b, wb) in cross {
-                        let w = et * wa * wb * (-0.5 * (a * a + b * b)).exp();
-                        num += w * vol.density(base + (ray.e1 * a + ray.e2 * b) * s);
-                    }
-                }
-            }
-            return Some(tau * num / screen);
-        }
-        PixelFilter::Slice { ray, sigma, tc, w } => {
-            let (lo, hi) = (tc - TRUNC * w, tc + TRUNC * w);
-            let panels = ((hi - lo) / step).ceil().max(12.0) as usize;
-            for (t, wt) in composite_nodes(lo, hi, panels, 2) {
-                let s = sigma.at(t);
-                let base = ray.o + ray.d * t;
-                let u = (t - tc) / w;
-                let et = wt * (-0.5 * u * u).exp();
-                for &(a, wa) in cross {
-                    for &(b, wb) in cross {
-                        let wgt = et * wa * wb * (-0.5 * (a * a + b * b)).exp();
-                        acc(base + (ray.e1 * a + ray.e2 * b) * s, wgt);
-                    }
-                }
-            }
-        }
-        PixelFilter::Ball { c, s } => {
-            let panels = ((2.0 * TRUNC * s) / step).ceil().max(2.0) as usize;
-            let nodes = composite_nodes(-TRUNC, TRUNC, panels, 2);
-            for &(z, wz) in &nodes {
-                for &(y, wy) in &nodes {
-                    for &(x, wx) in &nodes {
-                        let w = wx * wy * wz * (-0.5 * (x * x + y * y + z * z)).exp();
-                        acc(c + DVec3::new(x, y, z) * s, w);
-                    }
-                }
-            }
-        }
-    }
-    (den > 0.0).then(|| num / den)
+    let mut lf = super::project::LineFilter::default();
+    lf.set(vol, filter, cross);
+    lf.direct(vol, step)
 }
 
 /// Trigger points for a filter, in index space (thesis §4-4.8 and App. B step 3):

@@ -18,7 +18,8 @@
 //! | `SampleFilter` | `½ + gain · (ρ̄_{σ₁} − ρ̄_{σ₂})`, a difference of Gaussians at the searched point | §6-3 |
 //!
 //! `Linearised`, `Slice` and `SampleFilter` are evaluated either directly (composite
-//! Gauss–Legendre, [`Evaluator::Direct`]) or with a NIL map ([`Evaluator::Nil`]).
+//! Gauss–Legendre along the filter's lines, [`Evaluator::Direct`]) or with a NIL map
+//! ([`Evaluator::Nil`]).
 //!
 //! ## Units and frames
 //! Lengths (`τ`'s inverse, slice width, DoG σ's, trigger steps) are in *unit lengths*: the
@@ -28,29 +29,46 @@
 //! under perspective). Rays come from [`volsplat_core::Projection::ray`] through pixel centres
 //! `(x + ½, y + ½)`, so orthographic and perspective cameras both work. Images: row 0 at the top.
 //!
-//! ## Decisions (digest §7, A-15 …; recorded in `docs/nil-display/report.md`)
+//! ## Decisions (digest §7, A-15 …; decision 0007; `docs/nil-display/report.md`)
+//! - **Control points by projection** (decision 0007, [`ControlPoints::Project`], default): a
+//!   patch's control points are the L² projection of the filter onto the patch space, not the
+//!   filter's values at the Lagrange nodes (App. B). The thesis's rule misses a filter narrower
+//!   than the cells, and its normalisation (eq 4.16) collapses: on the MRI at 160×120 it fell
+//!   back on 60–99 % of the rays. With projection `Σ b·B̄` is the filter's exact integral over
+//!   the cell, nothing collapses, and the error against direct quadrature falls strictly with
+//!   patch order, tolerance and trigger density (test
+//!   `nil_error_falls_with_order_tolerance_and_triggers`). The thesis's rule stays available
+//!   ([`ControlPoints::Interpolate`]) for comparison.
+//! - **One filter, two evaluators**: every filter is a set of straight lines through its
+//!   cross-section (`quadrature.cross_nodes` per axis over `±3σ`) with a profile along them;
+//!   each line is clipped to the box of voxel centres (eq 4.2: zero density outside) on its own.
+//!   The direct evaluation integrates the data along those lines; the NIL evaluation integrates
+//!   the patch basis along them (the projection moments). Their difference is the patch
+//!   approximation alone, and on a constant volume they agree to rounding at every pixel.
 //! - **Normalisation of eq 6.1** (A-17): the display is `τ` times eq 3.3 with a unit screen
-//!   filter, so a constant density `ρ` over a length `L` shows `ρ(1 − e^{−τL})`. The NIL result
-//!   is eq 4.15, `K · Σ b·C / Σ b·B̄`, with the known `K = ∭F = 1/τ` of the filter *not* cut at the
-//!   exit (the density is zero beyond it), so the value is the normalised NIL average itself.
-//!   Filters are never cut at the volume's faces (see [`filter`]): cutting made patches that
-//!   straddle a face count the zero padding in the denominator only (−27 % on a constant
-//!   volume in our first version).
+//!   filter, so a constant density `ρ` over a length `L` shows `ρ(1 − e^{−τL})`. Every display
+//!   value is `∭Fρ / K` with `K = ∭F` of the whole, unmasked filter (`1/τ` along the ray for
+//!   the linearised display). Interpolated control points give the normalised average of
+//!   eq 4.15, which is multiplied by `∭F_box / K` (the masked filter's share).
 //! - **Sabella (A-18)**: eq 3.1 as written (plus the max channel). Its integrand is
 //!   `d/dt(−e^{−τ∫ρ}/τ)`, so `τ·I = 1 − e^{−τ∫ρ}` exactly; the march is nevertheless written as
 //!   the thesis's ray marcher (256 samples, 4×4 rays), exact for piecewise-constant density.
-//! - **Zero outside** (eq 4.2): the periodic texture of the NIL machinery is padded with
-//!   [`volume::PAD`] zero voxels per axis, and every filter is zero outside the box of voxel
-//!   centres.
+//! - **Outside the volume** (eq 4.2): every filter is masked to the box of voxel centres; the
+//!   periodic texture behind the NIL map is padded by repeating the edge voxels
+//!   ([`volume::PAD`]), so that a patch straddling a face sees no artificial ramp to zero.
+//! - **Hierarchy root**: the smallest cell enclosing the triggers *and* the end points of the
+//!   filter's clipped lines, so the hierarchy covers the whole masked filter (Fig 4.19 encloses
+//!   the triggers only, which cut off the ends of the ray).
 //! - **Triggers (A-15)**: Table 6.1's column is read as *trigger slices per unit length*
 //!   (`trigger_steps`), with `trigger_width²` points per slice across `±2σ`; a hierarchy with
 //!   `S` slices per unit length approximates the volume at about `S³` cells, matching the
 //!   thesis's "levels of approximation 2³ … 16³".
-//! - **Scale collapse (A-4)**: a collapsed NIL sum falls back to point-sampling the filter at the
-//!   trigger points; such pixels are counted (`fallbacks`).
+//! - **Scale collapse (A-4)**, interpolated control points only: a collapsed NIL sum falls
+//!   back to point-sampling the filter at the trigger points; such pixels are counted
+//!   ([`DisplayStats::fallbacks`]) and flagged ([`DisplayImage::fallback`]).
 //! - **DoG**: a zero-mean filter cannot be normalised (eq 4.16's denominator vanishes), so the
-//!   difference of Gaussians is evaluated as the difference of two normalised Gaussian averages on
-//!   one hierarchy (σ's and the gain are not in the thesis; defaults `0.01, 0.02` unit lengths and
+//!   difference of Gaussians is evaluated as the difference of two Gaussian averages on one
+//!   hierarchy (σ's and the gain are not in the thesis; defaults `0.01, 0.02` unit lengths and
 //!   gain 8).
 //! - **Search**: the thesis takes the sample *closest* to `ρ₀`; the default here is the first
 //!   crossing of `ρ₀` (linearly interpolated), the closest sample is [`SearchRule::Closest`].
@@ -59,6 +77,7 @@
 //!   function is `N` multiply-adds per pixel, without rebuilding the map or the hierarchies.
 
 pub mod filter;
+mod project;
 mod render;
 pub mod volume;
 
@@ -103,9 +122,23 @@ pub enum SearchRule {
     Closest,
 }
 
+/// How the NIL control points of a patch are chosen (decision 0007).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ControlPoints {
+    /// L² projection of the filter onto the patch space (default): the denominator of eq 4.15
+    /// is the filter's exact integral over the cell, so it never collapses, and the error falls
+    /// with patch order and cell size.
+    Project,
+    /// The thesis's rule (App. B): the filter's values at the Lagrange nodes, then the
+    /// normalised eq 4.15 average. Collapses when the filter is narrower than the cells.
+    Interpolate,
+}
+
 /// NIL parameters of a display (thesis §4-4.8, App. B).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NilDisplaySettings {
+    /// Control-point rule.
+    pub control: ControlPoints,
     /// Subdivision tolerance: cells with at most this many triggers are not split.
     pub tolerance: usize,
     /// Triggers per axis across the ray (`width²` per slice; `width³` for slices and DoG).
@@ -116,16 +149,22 @@ pub struct NilDisplaySettings {
     pub gamma_min: i32,
     /// Scale-factor guard (decision A-4 of the texture crate).
     pub guard: f64,
+    /// Support refinement (decision 0007): cells without triggers that the filter crosses are
+    /// split down to the coarsest level holding triggers. Off reproduces Fig 4.19 as printed,
+    /// whose trigger-less cells next to a ray stay large and blur its fringe.
+    pub refine_support: bool,
 }
 
 impl Default for NilDisplaySettings {
     fn default() -> Self {
         NilDisplaySettings {
+            control: ControlPoints::Project,
             tolerance: 2,
             trigger_width: 1,
             trigger_steps: 32.0,
             gamma_min: -1,
             guard: 1e-3,
+            refine_support: true,
         }
     }
 }
@@ -135,7 +174,9 @@ impl Default for NilDisplaySettings {
 pub struct QuadratureSettings {
     /// Panel length along the ray (and the DoG cube), in units of the smallest grid spacing.
     pub step: f64,
-    /// Gauss–Legendre nodes per axis across the ray over `±3σ` (a multiple of 4).
+    /// Gauss–Legendre nodes per axis across the ray over `±3σ` (a multiple of 4): the filter's
+    /// cross-section lines, shared by the direct evaluation and the NIL control points, so that
+    /// their difference is the patch approximation alone.
     pub cross_nodes: usize,
 }
 
@@ -339,7 +380,11 @@ pub struct DisplayStats {
     pub trigger_s: f64,
     /// Patch selection: enclosing cell and Fig 4.19 subdivision.
     pub hierarchy_s: f64,
-    /// Evaluation: control points and patch integration (NIL) or quadrature (direct).
+    /// NIL control points: the filter's lines, their moments and the projection (decision
+    /// 0007); with interpolated control points only the line set-up (the node values are then
+    /// part of `evaluation_s`).
+    pub control_s: f64,
+    /// Evaluation: patch integration `Σ b·C` (NIL) or quadrature (direct).
     pub evaluation_s: f64,
     /// Ray search (sample-and-filter).
     pub search_s: f64,
@@ -363,6 +408,7 @@ impl DisplayStats {
     fn add(&mut self, o: &DisplayStats) {
         self.trigger_s += o.trigger_s;
         self.hierarchy_s += o.hierarchy_s;
+        self.control_s += o.control_s;
         self.evaluation_s += o.evaluation_s;
         self.search_s += o.search_s;
         self.march_s += o.march_s;
@@ -417,6 +463,9 @@ pub struct DisplayImage {
     pub green: Option<Vec<f32>>,
     /// NIL linearised/slice renders: channel averages for transfer-function changes.
     pub cache: Option<TransferCache>,
+    /// NIL renders: per pixel (row 0 at the top), whether a NIL evaluation fell back to
+    /// point-sampling (see [`DisplayStats::fallbacks`]); empty for other renders.
+    pub fallback: Vec<bool>,
     /// Timings and counters.
     pub stats: DisplayStats,
 }

@@ -1,15 +1,17 @@
 //! The per-pixel loop of the Chapter 6 displays (Buchanan App. B) for both evaluators.
 
-use super::filter::{PixelFilter, Sigma, composite_nodes, direct, triggers};
+use super::filter::{PixelFilter, Sigma, TRUNC, composite_nodes, direct, triggers};
+use super::project::{LineFilter, Projector, integrate_cells};
 use super::volume::{DisplayVolume, PixelRay, Rays};
 use super::{
-    DisplayImage, DisplayKind, DisplaySettings, DisplayStats, Evaluator, SearchRule, TransferCache,
+    ControlPoints, DisplayImage, DisplayKind, DisplaySettings, DisplayStats, Evaluator, SearchRule,
+    TransferCache,
 };
 use crate::error::{FilterError, Result};
 use crate::nil::Cell;
 use crate::nil::{
-    DiscreteNilMap, LevelWeighting, NilResult, NilSource, enclosing_cell, evaluate_cells,
-    find_hierarchy,
+    DiscreteNilMap, LevelWeighting, NilSource, enclosing_cell, evaluate_cells,
+    find_hierarchy_counted,
 };
 use glam::DVec3;
 use rayon::prelude::*;
@@ -22,13 +24,21 @@ const MAX_SIDE: usize = 16384;
 #[derive(Default)]
 struct Scratch {
     triggers: Vec<DVec3>,
+    /// Points the hierarchy root must enclose: triggers and the filters' line end points.
+    bound: Vec<DVec3>,
     cells: Vec<Cell>,
+    /// Hierarchy cells with their trigger counts.
+    counted: Vec<(Cell, usize)>,
     moments: Vec<f64>,
-    /// Linearised display: where the central ray leaves the last kept cell (world `t`).
-    t_end: f64,
+    lines: Vec<LineFilter>,
+    /// Control points per cell (projection).
+    bs: Vec<Option<[f64; 64]>>,
+    /// Cross-section nodes of the NIL line quadrature.
+    cross: Vec<(f64, f64)>,
 }
 
 struct Pixel {
+    fell_back: bool,
     value: f32,
     green: f32,
     scale: f64,
@@ -111,12 +121,13 @@ pub(crate) fn render(
     let unit = vol.unit();
     let tau = s.tau / unit;
     let step = s.quadrature.step * vol.min_spacing();
-    let cross = composite_nodes(
-        -super::filter::TRUNC,
-        super::filter::TRUNC,
-        s.quadrature.cross_nodes / 4,
-        4,
-    );
+    let cross = composite_nodes(-TRUNC, TRUNC, s.quadrature.cross_nodes / 4, 4);
+    let projector = map.map(|m| Projector::new(*m.basis()));
+    let prepare = |sc: &mut Scratch| {
+        if sc.cross.is_empty() {
+            sc.cross.clone_from(&cross);
+        }
+    };
     let slice_depths = {
         let (lo, hi) = {
             let d = vol.dims().map(|n| (n - 1) as f64);
@@ -138,7 +149,9 @@ pub(crate) fn render(
     };
 
     let pixel = |x: usize, y: usize, sc: &mut Scratch, st: &mut DisplayStats| -> Pixel {
+        let fallbacks_before = st.fallbacks;
         let mut px = Pixel {
+            fell_back: false,
             value: 0.0,
             green: 0.0,
             scale: 0.0,
@@ -190,25 +203,12 @@ pub(crate) fn render(
                         1.0,
                     )
                 };
-                let ch = match (s.evaluator, map) {
-                    (Evaluator::Nil, Some(map)) => {
-                        let f = |p: DVec3| filter.weight_index(vol, p);
-                        let keep = (s.kind == DisplayKind::Linearised).then_some(&ray);
-                        let r = nil_eval(vol, map, &filter, &[&f], keep, s, sc, st);
-                        let (mut ch, fell_back) = r.into_iter().next().unwrap_or_default();
-                        if s.kind == DisplayKind::Linearised {
-                            // eq 4.15 with K = ∫F over the cells that meet the volume (the rest
-                            // hold zero density): the exponential up to where the central ray
-                            // leaves them (fall-back: up to the exit t_b).
-                            let t_end = if fell_back {
-                                ray.tb
-                            } else {
-                                sc.t_end.max(ray.tb)
-                            };
-                            let a = 1.0 - (-tau * (t_end - ray.ta)).exp();
-                            ch.iter_mut().for_each(|c| *c *= a);
-                        }
-                        ch
+                let ch = match (s.evaluator, map, &projector) {
+                    (Evaluator::Nil, Some(map), Some(proj)) => {
+                        prepare(sc);
+                        nil_eval(vol, map, proj, &filter, &[&filter], s, sc, st)
+                            .pop()
+                            .unwrap_or_default()
                     }
                     _ => {
                         let t0 = Instant::now();
@@ -248,12 +248,11 @@ pub(crate) fn render(
                         c,
                         s: s.dog_sigma[1] * unit,
                     };
-                    let (a, b) = match (s.evaluator, map) {
-                        (Evaluator::Nil, Some(map)) => {
-                            let w1 = |p: DVec3| f1.weight_index(vol, p);
-                            let w2 = |p: DVec3| f2.weight_index(vol, p);
-                            let r = nil_eval(vol, map, &f2, &[&w1, &w2], None, s, sc, st);
-                            let g = |i: usize| r.get(i).and_then(|c| c.0.first()).copied();
+                    let (a, b) = match (s.evaluator, map, &projector) {
+                        (Evaluator::Nil, Some(map), Some(proj)) => {
+                            prepare(sc);
+                            let r = nil_eval(vol, map, proj, &f2, &[&f1, &f2], s, sc, st);
+                            let g = |i: usize| r.get(i).and_then(|c| c.first()).copied();
                             (g(0), g(1))
                         }
                         _ => {
@@ -271,6 +270,7 @@ pub(crate) fn render(
                 px.green = px.value;
             }
         }
+        px.fell_back = st.fallbacks != fallbacks_before;
         px
     };
 
@@ -287,6 +287,7 @@ pub(crate) fn render(
     let n = width * height;
     let mut value = Vec::with_capacity(n);
     let mut green = Vec::with_capacity(n);
+    let mut fallback = Vec::with_capacity(if uses_nil { n } else { 0 });
     let keep_channels = uses_nil && s.kind != DisplayKind::SampleFilter;
     let mut cache = TransferCache {
         channels,
@@ -298,6 +299,9 @@ pub(crate) fn render(
         for p in row {
             value.push(p.value);
             green.push(p.green);
+            if uses_nil {
+                fallback.push(p.fell_back);
+            }
             if keep_channels {
                 cache.scale.push(p.scale);
                 cache.values.extend_from_slice(&p.channels[..channels]);
@@ -312,6 +316,7 @@ pub(crate) fn render(
         value,
         green: (s.kind == DisplayKind::Sabella).then_some(green),
         cache: keep_channels.then_some(cache),
+        fallback,
         stats,
     })
 }
@@ -375,21 +380,23 @@ fn search(
     }
 }
 
-/// NIL evaluation of several filters on one hierarchy (the hierarchy comes from the triggers
-/// of `shape`): Fig 4.19 then the normalised, level-weighted sum (eqs 4.13–4.16, 4.32
-/// corrected). Falls back to point-sampling the filter at the triggers when the scale factor
-/// collapses (decision A-4). Returns per filter the channel averages and whether it fell back.
+/// NIL evaluation of several filters on one hierarchy (App. B steps 3–7). The hierarchy comes
+/// from the triggers of `shape` (Fig 4.19) under a root that encloses the triggers and every
+/// filter's masked support. Control points by projection (decision 0007: `Σ_cells Σ b·C / K`)
+/// or, as the thesis, by interpolation (the normalised eq 4.15 average times `∭F_box / K`,
+/// falling back to point-sampling at the triggers when its scale collapses, decision A-4).
+/// Returns per filter the channel values `∭ F ρ_l / ∭ F` (the filter's full integral `K`).
 #[allow(clippy::too_many_arguments)] // the two functions §6-5 swaps, plus buffers
 fn nil_eval(
     vol: &DisplayVolume,
     map: &DiscreteNilMap,
+    proj: &Projector,
     shape: &PixelFilter,
-    filters: &[&dyn Fn(DVec3) -> f64],
-    keep_box: Option<&PixelRay>,
+    filters: &[&PixelFilter],
     s: &DisplaySettings,
     sc: &mut Scratch,
     st: &mut DisplayStats,
-) -> Vec<(Vec<f64>, bool)> {
+) -> Vec<Vec<f64>> {
     let t0 = Instant::now();
     triggers(
         vol,
@@ -401,75 +408,122 @@ fn nil_eval(
     let t1 = Instant::now();
     st.trigger_s += (t1 - t0).as_secs_f64();
     st.triggers += sc.triggers.len() as u64;
+    sc.lines.resize_with(filters.len(), LineFilter::default);
+    sc.bound.clear();
+    sc.bound.extend_from_slice(&sc.triggers);
+    for (lf, f) in sc.lines.iter_mut().zip(filters) {
+        lf.set(vol, f, &sc.cross);
+        lf.endpoints(&mut sc.bound);
+    }
+    let t2 = Instant::now();
+    st.control_s += (t2 - t1).as_secs_f64();
     sc.cells.clear();
-    let root = enclosing_cell(&sc.triggers, s.nil.gamma_min, map.gamma_max());
+    sc.counted.clear();
+    let root = enclosing_cell(&sc.bound, s.nil.gamma_min, map.gamma_max());
     if let Some(root) = root {
-        find_hierarchy(
+        find_hierarchy_counted(
             &sc.triggers,
             root,
             s.nil.tolerance,
             s.nil.gamma_min,
-            &mut sc.cells,
+            &mut sc.counted,
         );
-    }
-    if let Some(ray) = keep_box {
-        // Keep the cells that meet the box of voxel centres (the others hold zero density)
-        // and find where the central ray leaves them.
-        let hi = vol.dims().map(|n| (n - 1) as f64);
-        sc.cells.retain(|c| {
-            let h = c.size();
-            (0..3).all(|a| h * c.index[a] as f64 <= hi[a] && h * (c.index[a] + 1) as f64 >= 0.0)
-        });
-        let q0 = vol.index_from_world(ray.o);
-        let dq = vol.index_from_world(ray.o + ray.d) - q0;
-        sc.t_end = f64::NEG_INFINITY;
-        for c in &sc.cells {
-            let h = c.size();
-            let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
-            for a in 0..3 {
-                let (lo, up) = (h * c.index[a] as f64, h * (c.index[a] + 1) as f64);
-                if dq[a].abs() < 1e-300 {
-                    if q0[a] < lo || q0[a] > up {
-                        t1 = f64::NEG_INFINITY;
-                    }
-                    continue;
+        // Support refinement (decision 0007): a cell without triggers that the filter crosses
+        // is split down to the coarsest level that holds triggers; split parts the filter
+        // does not cross are dropped (they carry no weight).
+        let g_ref = sc
+            .counted
+            .iter()
+            .filter(|c| c.1 > 0)
+            .map(|c| c.0.gamma)
+            .max();
+        for &(cell, n) in &sc.counted {
+            match g_ref {
+                Some(g) if s.nil.refine_support && n == 0 && cell.gamma > g => {
+                    refine(cell, g, &sc.lines, &mut sc.cells)
                 }
-                let (ta, tb) = ((lo - q0[a]) / dq[a], (up - q0[a]) / dq[a]);
-                t0 = t0.max(ta.min(tb));
-                t1 = t1.min(ta.max(tb));
-            }
-            if t1 >= t0 {
-                sc.t_end = sc.t_end.max(t1);
+                _ => sc.cells.push(cell),
             }
         }
     }
-    let t2 = Instant::now();
-    st.hierarchy_s += (t2 - t1).as_secs_f64();
+    let t3 = Instant::now();
+    st.hierarchy_s += (t3 - t2).as_secs_f64();
     st.patches += sc.cells.len() as u64;
+    let channels = map.channels();
     let mut out = Vec::with_capacity(filters.len());
-    for f in filters {
-        let r: Option<NilResult> = if root.is_some() {
-            evaluate_cells(
-                map,
-                &sc.cells,
-                *f,
-                LevelWeighting::CellVolume,
-                s.nil.guard,
-                &mut sc.moments,
-            )
-        } else {
-            None
-        };
-        out.push(match r {
-            Some(r) => (r.channels, false),
-            None => {
-                st.fallbacks += 1;
-                (point_sampled(vol, map, &sc.triggers, *f), true)
+    for (lf, f) in sc.lines.iter().zip(filters) {
+        let mut num = vec![0.0; channels];
+        if root.is_none() || lf.k_box <= 0.0 {
+            out.push(num);
+            continue;
+        }
+        match s.nil.control {
+            ControlPoints::Project => {
+                let tc = Instant::now();
+                sc.bs.clear();
+                for cell in &sc.cells {
+                    let mut b = [0.0; 64];
+                    let hit = proj.control_points(lf, cell, &mut b);
+                    sc.bs.push(hit.then_some(b));
+                }
+                let ti = Instant::now();
+                st.control_s += (ti - tc).as_secs_f64();
+                if !integrate_cells(map, &sc.cells, &sc.bs, &mut sc.moments, &mut num) {
+                    st.fallbacks += 1;
+                    num = point_sampled(vol, map, &sc.triggers, &|p| LineFilter::masked(vol, f, p));
+                    num.iter_mut().for_each(|x| *x *= lf.k_box);
+                }
+                num.iter_mut().for_each(|x| *x /= lf.k_full);
+                st.evaluation_s += ti.elapsed().as_secs_f64();
             }
-        });
+            ControlPoints::Interpolate => {
+                let ti = Instant::now();
+                let w = |p: DVec3| LineFilter::masked(vol, f, p);
+                let r = evaluate_cells(
+                    map,
+                    &sc.cells,
+                    &w,
+                    LevelWeighting::CellVolume,
+                    s.nil.guard,
+                    &mut sc.moments,
+                );
+                num = match r {
+                    Some(r) => r.channels,
+                    None => {
+                        st.fallbacks += 1;
+                        point_sampled(vol, map, &sc.triggers, &w)
+                    }
+                };
+                let k = lf.k_box / lf.k_full;
+                num.iter_mut().for_each(|x| *x *= k);
+                st.evaluation_s += ti.elapsed().as_secs_f64();
+            }
+        }
+        out.push(num);
     }
-    st.evaluation_s += t2.elapsed().as_secs_f64();
     out
+}
+
+/// Splits `cell` into its descendants of level `g` that a filter line crosses.
+fn refine(cell: Cell, g: i32, lines: &[LineFilter], out: &mut Vec<Cell>) {
+    if !lines.iter().any(|l| l.hits(&cell)) {
+        return;
+    }
+    if cell.gamma <= g {
+        out.push(cell);
+        return;
+    }
+    for c in 0..8i64 {
+        let child = Cell {
+            gamma: cell.gamma - 1,
+            index: [
+                2 * cell.index[0] + (c & 1),
+                2 * cell.index[1] + ((c >> 1) & 1),
+                2 * cell.index[2] + (c >> 2),
+            ],
+        };
+        refine(child, g, lines, out);
+    }
 }
 
 /// Fallback (decision A-4): `Σ F(p) ρ_l(p) / Σ F(p)` over the trigger points.

@@ -12,11 +12,14 @@ use crate::texture::{DiscreteTexture, Reconstruction, SolidTexture};
 use glam::{DMat3, DVec3};
 use volsplat_core::{Grid, Projection};
 
-/// Least number of zero samples appended on the high side of every axis, so that the periodic
-/// texture of the NIL machinery (decision A-5 of the texture crate) sees zero density just
-/// outside the volume (thesis eq 4.2: `T ≡ 0` outside) instead of the opposite face. Each axis
-/// is padded to `max(n + PAD, 2^⌈log₂ n⌉)` samples, so every NIL root cell enclosing points of
-/// the volume (inside `[0, 2^⌈log₂ n⌉)`) lies inside the padded texture and never wraps.
+/// Least number of samples appended on the high side of every axis, so that the periodic
+/// texture of the NIL machinery (decision A-5 of the texture crate) never sees the opposite face
+/// next to the last voxel. Each axis is padded to `max(n + PAD, 2^⌈log₂ n⌉)` samples, so every
+/// NIL root cell enclosing points of the volume (inside `[0, 2^⌈log₂ n⌉)`) lies inside the
+/// padded texture and never wraps. The padding samples repeat the edge voxel (see
+/// [`DisplayVolume`]): the density *field* is still zero outside the box of voxel centres
+/// (eq 4.2), because every display filter is masked to that box; the padding is only what a
+/// NIL patch that straddles the face sees beyond it (decision 0007).
 pub const PAD: usize = 2;
 
 /// Padded size of an axis of `n` samples (see [`PAD`]).
@@ -26,7 +29,8 @@ pub fn padded(n: usize) -> usize {
 
 /// A density field on a volume grid: densities per voxel (dimensionless, normally `[0, 1]`),
 /// reconstructed by sample-and-hold or trilinear interpolation, zero outside the box of voxel
-/// centres.
+/// centres. The NIL texture behind it ([`DisplayVolume::texture`]) is padded by repeating the
+/// edge voxels ([`PAD`]).
 #[derive(Debug, Clone)]
 pub struct DisplayVolume {
     texture: DiscreteTexture,
@@ -40,7 +44,7 @@ pub struct DisplayVolume {
 
 impl DisplayVolume {
     /// Wraps `densities` (x fastest, `grid.dims` samples, finite). Each axis needs at least two
-    /// samples. The texture is padded with zero samples (see [`PAD`]).
+    /// samples. The texture is padded by repeating the edge samples (see [`PAD`]).
     pub fn new(grid: &Grid, densities: &[f64], recon: Reconstruction) -> Result<Self> {
         let dims = grid.dims;
         for (a, &n) in dims.iter().enumerate() {
@@ -62,11 +66,8 @@ impl DisplayVolume {
         }
         let pd = dims.map(padded);
         let texture = DiscreteTexture::from_fn(pd, recon, |i, j, k| {
-            if i < dims[0] && j < dims[1] && k < dims[2] {
-                densities[(k * dims[1] + j) * dims[0] + i]
-            } else {
-                0.0
-            }
+            let (i, j, k) = (i.min(dims[0] - 1), j.min(dims[1] - 1), k.min(dims[2] - 1));
+            densities[(k * dims[1] + j) * dims[0] + i]
         })?;
         let world_from_index = grid.world_from_index_linear();
         let det = world_from_index.determinant();
@@ -98,11 +99,8 @@ impl DisplayVolume {
         let pd = self.texture.dims();
         let tex = &self.texture;
         let texture = DiscreteTexture::from_fn(pd, tex.reconstruction(), |i, j, k| {
-            if i < dims[0] && j < dims[1] && k < dims[2] {
-                f(tex.at(i as i64, j as i64, k as i64))
-            } else {
-                0.0
-            }
+            let (i, j, k) = (i.min(dims[0] - 1), j.min(dims[1] - 1), k.min(dims[2] - 1));
+            f(tex.at(i as i64, j as i64, k as i64))
         })?;
         Ok(DisplayVolume {
             texture,

@@ -146,7 +146,23 @@ pub fn find_hierarchy(
     out: &mut Vec<Cell>,
 ) {
     let mut idx: Vec<usize> = (0..points.len()).collect();
-    recurse(points, &mut idx, root, tol, gamma_min, out);
+    recurse(points, &mut idx, root, tol, gamma_min, &mut |c, _| {
+        out.push(c)
+    });
+}
+
+/// [`find_hierarchy`] that also reports how many triggers each cell holds.
+pub fn find_hierarchy_counted(
+    points: &[DVec3],
+    root: Cell,
+    tol: usize,
+    gamma_min: i32,
+    out: &mut Vec<(Cell, usize)>,
+) {
+    let mut idx: Vec<usize> = (0..points.len()).collect();
+    recurse(points, &mut idx, root, tol, gamma_min, &mut |c, n| {
+        out.push((c, n))
+    });
 }
 
 fn recurse(
@@ -155,10 +171,10 @@ fn recurse(
     cell: Cell,
     tol: usize,
     gamma_min: i32,
-    out: &mut Vec<Cell>,
+    out: &mut dyn FnMut(Cell, usize),
 ) {
     if idx.len() <= tol || cell.gamma <= gamma_min {
-        out.push(cell);
+        out(cell, idx.len());
         return;
     }
     let g = cell.gamma - 1;

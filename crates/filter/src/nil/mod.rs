@@ -27,7 +27,8 @@ pub use cosine::CosineNilMap;
 pub use discrete::{DiscreteNilMap, DiscreteNilSettings, TransferBasis};
 pub use eval::{
     Cell, LevelWeighting, NilResult, NilScratch, NilSettings, box_triggers, enclosing_cell,
-    evaluate_cells, find_hierarchy, nil_filter, nil_filter_box, nil_filter_with,
+    evaluate_cells, find_hierarchy, find_hierarchy_counted, nil_filter, nil_filter_box,
+    nil_filter_with,
 };
 
 /// A source of NIL cells (a pyramid, analytic or pre-computed).
