@@ -75,21 +75,36 @@ impl Antialias {
 }
 
 /// Eigen-decomposition of a symmetric 2×2 matrix: `(μ₁, μ₂, e₁)` with `μ₁ ≥ μ₂` and `e₁` the unit
-/// eigenvector of `μ₁` (`e₂` is `e₁` turned by 90°).
+/// eigenvector of `μ₁` (`e₂` is `e₁` turned by 90°). A non-finite input gives non-finite
+/// eigenvalues, which callers check.
+///
+/// The eigenvector is formed from the half-difference `d = (a − c)/2` and the discriminant
+/// `r = √(d² + b²)` as `(d + r, b)` when `a ≥ c` and `(b, r − d)` otherwise: the component
+/// `|d| + r ≥ r > 0` cannot cancel. (The textbook form `(a − μ₂, b)` cancels to `(0, 0)` when the
+/// metric is isotropic to rounding, `a` one ulp above `c` with `b = 0`: the footprint became NaN
+/// and whole images black at common orthographic views of cubic voxels; regression test
+/// `nearly_isotropic_metric_has_a_unit_eigenvector` and `crates/splat/tests/every_angle.rs`.)
 pub(crate) fn sym_eigen(q: DMat2) -> (f64, f64, DVec2) {
     let (a, b, c) = (q.col(0).x, 0.5 * (q.col(1).x + q.col(0).y), q.col(1).y);
     let mean = 0.5 * (a + c);
     let diff = 0.5 * (a - c);
-    let disc = (diff * diff + b * b).sqrt();
+    let disc = diff.hypot(b);
     let (l1, l2) = (mean + disc, mean - disc);
-    let e1 = if disc == 0.0 {
+    let e1 = if disc.is_nan() || disc <= 0.0 {
+        // Isotropic (or non-finite, reported through the eigenvalues): any unit vector.
         DVec2::X
-    } else if a >= c {
-        DVec2::new(a - l2, b).normalize()
+    } else if diff >= 0.0 {
+        unit(DVec2::new(diff + disc, b))
     } else {
-        DVec2::new(b, c - l2).normalize()
+        unit(DVec2::new(b, disc - diff))
     };
     (l1, l2, e1)
+}
+
+/// `v / |v|` without underflow for tiny `v` (one component is non-zero).
+fn unit(v: DVec2) -> DVec2 {
+    let v = v / v.x.abs().max(v.y.abs());
+    v / v.length()
 }
 
 fn from_eigen(l1: f64, l2: f64, e1: DVec2) -> DMat2 {
@@ -170,6 +185,42 @@ mod tests {
 
     fn metric(l1: f64, l2: f64, angle: f64) -> DMat2 {
         from_eigen(l1, l2, DVec2::new(angle.cos(), angle.sin()))
+    }
+
+    /// Root cause of the black/NaN images at azimuth 30°/45° (issue 17): for cubic voxels an
+    /// orthographic metric is isotropic up to rounding, e.g. `a` one ulp above `c` with `b = 0`.
+    /// The textbook eigenvector `(a − μ₂, b)` then cancelled to `(0, 0)` and normalised to NaN.
+    #[test]
+    fn nearly_isotropic_metric_has_a_unit_eigenvector() {
+        let mut cases = Vec::new();
+        for base in [1e-6f64, 0.0123, 0.25, 1.0, 1.0 / 3.0, 7.77, 1e6] {
+            let up = f64::from_bits(base.to_bits() + 1);
+            let down = f64::from_bits(base.to_bits() - 1);
+            for (a, c) in [
+                (up, base),
+                (base, up),
+                (base, down),
+                (down, base),
+                (base, base),
+            ] {
+                for b in [0.0, 1e-300, -1e-300, base * 1e-17, -base * 1e-17] {
+                    cases.push((a, b, c));
+                }
+            }
+        }
+        for (a, b, c) in cases {
+            let q = DMat2::from_cols(DVec2::new(a, b), DVec2::new(b, c));
+            let (m1, m2, e1) = sym_eigen(q);
+            assert!(e1.is_finite(), "({a:e}, {b:e}, {c:e}): e1 = {e1}");
+            assert!((e1.length() - 1.0).abs() < 1e-12);
+            assert!(m1 >= m2 && (m1 - a.max(c)).abs() <= 1e-12 * a.abs().max(c.abs()));
+            // Q e1 = μ₁ e1 to rounding.
+            let r = q * e1 - e1 * m1;
+            assert!(
+                r.length() <= 1e-12 * m1.abs(),
+                "({a:e}, {b:e}, {c:e}): residual {r}"
+            );
+        }
     }
 
     #[test]

@@ -15,6 +15,22 @@ pub enum SplatError {
     /// The progress callback asked to stop.
     #[error("render cancelled")]
     Cancelled,
+    /// A render produced non-finite pixels: an internal error (a bug), reported instead of
+    /// returning a picture that is silently wrong.
+    #[error(
+        "internal error: the {stage} produced {count} non-finite pixel values \
+         (first at x = {x}, y = {y}); please report this with the command line"
+    )]
+    NonFinite {
+        /// The renderer stage that produced them.
+        stage: &'static str,
+        /// How many values are NaN or infinite.
+        count: usize,
+        /// Column of the first one.
+        x: usize,
+        /// Row of the first one.
+        y: usize,
+    },
 }
 
 /// Result alias for rendering.

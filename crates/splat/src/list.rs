@@ -652,7 +652,7 @@ fn render_inner(
     }
     stats.pixel_updates = bands.iter().map(|b| b.pixel_updates).sum();
     stats.splats_terminated = bands.iter().map(|b| b.terminated).sum();
-    let (image, values) = finish(acc, settings, tables);
+    let (image, values) = finish(acc, settings, tables, "splat-list renderer")?;
     stats.total_ms = ms(t_start);
     Ok(Rendered {
         image,

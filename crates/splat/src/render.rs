@@ -357,7 +357,7 @@ pub fn render_with_progress<T: Scalar>(
     }
     stats.pixel_updates = bands.iter().map(|b| b.pixel_updates).sum();
     stats.splats_terminated += bands.iter().map(|b| b.terminated).sum::<u64>();
-    let (image, values) = finish(acc, settings, tables);
+    let (image, values) = finish(acc, settings, tables, "orthographic splatting renderer")?;
     stats.total_ms = ms(t_start);
     Ok(Rendered {
         image,
@@ -904,7 +904,10 @@ fn splat_block<const S: u8>(
     let v = &sp.v;
     let mut updates = 0usize;
     let blend = !loc.w10.is_empty();
+    // Convex weights (FootprintTable::locate): each term is ≥ 0 for non-negative tables, so
+    // the blended weight is too, exactly, not just up to rounding.
     let (fx, fy) = (loc.fx, loc.fy);
+    let f0 = (1.0 - fx - fy).max(0.0);
     for r in cy0 as usize..cy1 as usize {
         let (s0, s1) = loc.spans[r];
         let (c0, c1) = ((s0 as usize).max(ca), (s1 as usize).min(cb));
@@ -918,7 +921,7 @@ fn splat_block<const S: u8>(
         if blend {
             let (a, b, c) = (&loc.w00[i0..i1], &loc.w10[i0..i1], &loc.w01[i0..i1]);
             for (((px, &a), &b), &c) in out.iter_mut().zip(a).zip(b).zip(c) {
-                deposit::<S>(px, a + fx * (b - a) + fy * (c - a), v);
+                deposit::<S>(px, f0 * a + fx * b + fy * c, v);
             }
         } else {
             for (px, &wt) in out.iter_mut().zip(&loc.w00[i0..i1]) {
@@ -932,7 +935,33 @@ fn splat_block<const S: u8>(
     span.tx1 = span.tx1.max(xb as usize + 1);
 }
 
+/// Turns the accumulation buffer into the output image and values, after checking that every
+/// value the caller will see is finite (MIP/MinIP values may be NaN where nothing covers the
+/// pixel, by definition). `stage` names the renderer in the error.
 pub(crate) fn finish(
+    acc: Vec<Rgba>,
+    settings: &RenderSettings,
+    tables: &CrioTables,
+    stage: &'static str,
+) -> Result<(Image, Option<ScalarImage>)> {
+    let w = settings.width;
+    let bad = |p: &Rgba| match settings.mode {
+        RenderMode::Composite => p.iter().any(|c| !c.is_finite()),
+        RenderMode::Xray => !p[0].is_finite(),
+        RenderMode::Mip | RenderMode::Minip => p[0].is_infinite(),
+    };
+    if let Some(first) = acc.iter().position(bad) {
+        return Err(SplatError::NonFinite {
+            stage,
+            count: acc.iter().filter(|p| bad(p)).count(),
+            x: first % w,
+            y: first / w,
+        });
+    }
+    Ok(finish_unchecked(acc, settings, tables))
+}
+
+fn finish_unchecked(
     acc: Vec<Rgba>,
     settings: &RenderSettings,
     tables: &CrioTables,
