@@ -23,7 +23,7 @@ else
   work="$(mktemp -d)"; trap 'rm -rf "$work"' EXIT
 fi
 cp docs/bench/parity/*.json "$work/"
-"$bin" phantom head --size 120,150,135 -o "$work/head.nrrd" 2>/dev/null
+"$bin" phantom head --grid 120,150,135 -o "$work/head.nrrd" 2>/dev/null
 cases=("head bone $work/head.nrrd 30 20 1.0" "skin skin $work/head.nrrd -40 10 1.3")
 if [ -f "$data/mri_brainsmall.nrrd" ]; then cases+=("mr mr $data/mri_brainsmall.nrrd 30 20 1.0"); fi
 if [ -f "$data/mri_colin27.nhdr" ]; then cases+=("colin colin $data/mri_colin27.nhdr 120 15 1.2"); fi

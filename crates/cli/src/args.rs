@@ -56,9 +56,15 @@ pub enum PhantomKind {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ModeArg {
+    /// Front-to-back compositing of the classified volume (colour and opacity from the
+    /// transfer function).
     Composite,
+    /// Maximum intensity projection.
     Mip,
+    /// Minimum intensity projection.
     Minip,
+    /// X-ray: the line integral ∫ρ ds of the data along each ray. PNG output is scaled so that
+    /// the brightest pixel is white; .npy holds the unscaled values (data units × world units).
     Xray,
 }
 
@@ -80,134 +86,208 @@ pub enum OrderArg {
 #[derive(Debug, Args)]
 pub struct InputArgs {
     /// Volume file (.nrrd, .nhdr, .mha, .mhd, or raw with --raw-dims). Omit for the demo phantom.
+    /// A folder (e.g. of DICOM files) is not supported.
     pub input: Option<PathBuf>,
     /// Built-in phantom to use when no INPUT is given.
-    #[arg(long, value_enum, default_value = "head")]
+    #[arg(long, value_enum, default_value = "head", help_heading = "Input")]
     pub phantom: PhantomKind,
-    /// Phantom grid size: N (cube) or X,Y,Z.
-    #[arg(long, value_name = "N|X,Y,Z")]
+    /// Phantom grid size: N (cube) or X,Y,Z (checkerboard: X,Y[,SQUARE]). Default: the
+    /// phantom's own size.
+    #[arg(long, value_name = "N|X,Y,Z", help_heading = "Input")]
     pub phantom_size: Option<String>,
     /// Headerless raw input: dimensions X,Y,Z.
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", help_heading = "Input")]
     pub raw_dims: Option<String>,
     /// Headerless raw input: sample type (u8, i8, u16, i16, f32).
-    #[arg(long, default_value = "u8")]
+    #[arg(long, default_value = "u8", help_heading = "Input")]
     pub raw_type: String,
     /// Headerless raw input: spacing X,Y,Z in world units.
-    #[arg(long, value_name = "X,Y,Z", default_value = "1,1,1")]
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        default_value = "1,1,1",
+        help_heading = "Input"
+    )]
     pub raw_spacing: String,
     /// Headerless raw input: big-endian samples.
-    #[arg(long)]
+    #[arg(long, hide_short_help = true, help_heading = "Input")]
     pub raw_big_endian: bool,
     /// Headerless raw input: bytes to skip at the start of the file.
-    #[arg(long, default_value_t = 0)]
+    #[arg(
+        long,
+        default_value_t = 0,
+        hide_short_help = true,
+        help_heading = "Input"
+    )]
     pub raw_skip: u64,
 }
 
-/// Camera and view.
+// Camera and view. Without `--camera` the view starts from VTK's reset camera around the volume
+// (looking down −z, +y up); with it, from the file's camera. Either way the flags are then applied
+// in VTK's order: Azimuth, Elevation, OrthogonalizeViewUp, Roll, Zoom, Dolly.
 #[derive(Debug, Args)]
+#[command(next_help_heading = "Camera")]
 pub struct ViewArgs {
-    /// Camera JSON file (VTK semantics; DESIGN.md §3). Overrides --azimuth/--elevation/--zoom.
-    #[arg(long)]
+    /// Camera JSON file (VTK's camera; format in README.md, section "Files"). --azimuth,
+    /// --elevation, --roll, --zoom, --dolly and --perspective/--view-angle are applied to it.
+    #[arg(long, value_name = "FILE")]
     pub camera: Option<PathBuf>,
-    /// Degrees about the view-up axis, from VTK's reset view (looking down −z, +y up).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub azimuth: f64,
-    /// Degrees up over the focal point (VTK's Elevation).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub elevation: f64,
-    /// Degrees about the view direction (VTK's Roll).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub roll: f64,
+    /// Degrees about the view-up axis (VTK's Azimuth) [default: 0].
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    pub azimuth: Option<f64>,
+    /// Degrees up over the focal point (VTK's Elevation) [default: 0].
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    pub elevation: Option<f64>,
+    /// Degrees about the view direction (VTK's Roll) [default: 0].
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    pub roll: Option<f64>,
     /// Magnification (VTK's Zoom: divides the parallel scale, or the view angle in
-    /// perspective).
-    #[arg(long, default_value_t = 1.0)]
-    pub zoom: f64,
-    /// Perspective projection (VTK's default camera) instead of orthographic. Implies the
-    /// splat-list renderer (Swan et al. 1997).
+    /// perspective) [default: 1].
+    #[arg(long, value_name = "FACTOR")]
+    pub zoom: Option<f64>,
+    /// Perspective projection (VTK's default camera) instead of orthographic; switches a
+    /// --camera file's camera to perspective too. Implies the splat-list renderer (Swan et al.
+    /// 1997).
     #[arg(long)]
     pub perspective: bool,
-    /// Perspective only: vertical field of view in degrees (VTK's ViewAngle).
-    #[arg(long, default_value_t = 30.0)]
-    pub view_angle: f64,
+    /// Perspective only: vertical field of view in degrees (VTK's ViewAngle) [default: 30, or
+    /// the --camera file's view_angle].
+    #[arg(long, value_name = "DEG")]
+    pub view_angle: Option<f64>,
     /// Move the eye towards the focal point, dividing their distance by this factor (VTK's
-    /// Dolly; > 1 moves closer).
-    #[arg(long, default_value_t = 1.0)]
-    pub dolly: f64,
+    /// Dolly; > 1 moves closer) [default: 1].
+    #[arg(long, value_name = "FACTOR")]
+    pub dolly: Option<f64>,
     /// Write the camera actually used to this JSON file.
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     pub save_camera: Option<PathBuf>,
 }
 
 /// Classification and rendering options.
 #[derive(Debug, Args)]
 pub struct RenderOptions {
-    /// Image size WxH in pixels.
-    #[arg(long, default_value = "512x512")]
+    /// Image size in pixels: WxH (e.g. 640x480), or N for N×N.
+    #[arg(
+        long,
+        value_name = "WxH|N",
+        default_value = "512x512",
+        help_heading = "Output"
+    )]
     pub size: String,
-    /// Ray function.
-    #[arg(long, value_enum, default_value = "composite")]
+    /// Ray function. xray: the line integral ∫ρ ds; its PNG is scaled so that the brightest
+    /// pixel is white, its .npy holds the unscaled values (data units × world units).
+    #[arg(long, value_enum, default_value = "composite", help_heading = "Output")]
     pub mode: ModeArg,
-    /// Transfer-function JSON file (VTK terms; DESIGN.md §3).
-    #[arg(long, conflicts_with = "preset")]
+    /// Transfer-function JSON file (VTK's volume property; format in README.md, section
+    /// "Files").
+    #[arg(
+        long,
+        value_name = "FILE",
+        conflicts_with = "preset",
+        help_heading = "Transfer function"
+    )]
     pub tf: Option<PathBuf>,
     /// Built-in transfer function: ct-bone, ct-skin, mr, ramp. Default: ct-skin for the demo
     /// head, otherwise a ramp over the data range (opaque grey window for MIP/MinIP).
-    #[arg(long)]
+    #[arg(long, value_name = "NAME", help_heading = "Transfer function")]
     pub preset: Option<String>,
-    /// Reconstruction kernel: gaussian, point, nearest, tent, bspline, catmull-rom, mitchell.
-    #[arg(long, default_value = "gaussian")]
-    pub kernel: String,
-    /// Sheet buffers or composite-every-sample.
-    #[arg(long, value_enum, default_value = "sheet")]
-    pub visibility: VisibilityArg,
-    /// Traversal order.
-    #[arg(long, value_enum, default_value = "ftb")]
-    pub order: OrderArg,
-    /// Splat every N-th voxel per axis (successive refinement preview).
-    #[arg(long, default_value_t = 1)]
-    pub subsample: usize,
     /// Surface enhancement: modulate opacity by a 0→1 ramp on gradient magnitude LO:HI
     /// (data units per world unit). Replaces gradient opacity.
-    #[arg(long, value_name = "LO:HI")]
+    #[arg(
+        long,
+        value_name = "LO:HI",
+        help_heading = "Transfer function",
+        hide_short_help = true
+    )]
     pub surface_enhance: Option<String>,
     /// Depth cueing: modulate opacity from NEAR (front) to FAR (back), both in [0, 1].
-    #[arg(long, value_name = "NEAR:FAR")]
+    #[arg(
+        long,
+        value_name = "NEAR:FAR",
+        help_heading = "Transfer function",
+        hide_short_help = true
+    )]
     pub depth_cue: Option<String>,
     /// A directional light: direction X,Y,Z towards the light in the camera frame (x right, y up,
     /// z towards the viewer), optionally followed by colour R,G,B. Repeat for several lights.
     /// Default: one white headlight (0,0,1), as VTK.
-    #[arg(long, value_name = "X,Y,Z[,R,G,B]", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "X,Y,Z[,R,G,B]",
+        allow_hyphen_values = true,
+        help_heading = "Transfer function",
+        hide_short_help = true
+    )]
     pub light: Vec<String>,
     /// Leave out the emission (ambient) term (Westover §3.6.1 switches).
-    #[arg(long)]
+    #[arg(long, help_heading = "Transfer function", hide_short_help = true)]
     pub no_emission: bool,
     /// Leave out the diffuse term.
-    #[arg(long)]
+    #[arg(long, help_heading = "Transfer function", hide_short_help = true)]
     pub no_diffuse: bool,
     /// Leave out the specular term.
-    #[arg(long)]
+    #[arg(long, help_heading = "Transfer function", hide_short_help = true)]
     pub no_specular: bool,
-    /// Front-to-back early termination: a pixel whose opacity reaches this value takes no more
-    /// splats. The default changes no pixel by more than 1e-6; 0.99 is close to what ray casters
-    /// use. Values ≥ 1 disable it.
-    #[arg(long, default_value_t = 1.0 - 1.0 / 1048576.0)]
-    pub opacity_cutoff: f32,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    /// Reconstruction kernel: gaussian, point, nearest, tent, bspline, catmull-rom, mitchell,
+    /// crawfis-max (perspective and --splat-list: gaussian or crawfis-max).
+    #[arg(long, default_value = "gaussian", help_heading = "Quality")]
+    pub kernel: String,
     /// Anti-aliasing of voxels smaller than a pixel: Swan et al. 1997 eq. 4 and 8 (`swan`),
     /// its §4.6 perpendicular-distance estimate (`swan-perpendicular`), Zwicker et al.'s EWA
     /// screen filter (`ewa`), or none. Changes nothing where voxels cover a pixel or more.
-    #[arg(long, value_enum, default_value = "swan")]
+    #[arg(long, value_enum, default_value = "swan", help_heading = "Quality")]
     pub antialias: AntialiasArg,
+    /// Sheet buffers or composite-every-sample.
+    #[arg(
+        long,
+        value_enum,
+        default_value = "sheet",
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub visibility: VisibilityArg,
+    /// Traversal order.
+    #[arg(
+        long,
+        value_enum,
+        default_value = "ftb",
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub order: OrderArg,
+    /// Splat every N-th voxel per axis (successive refinement preview).
+    #[arg(
+        long,
+        default_value_t = 1,
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub subsample: usize,
+    /// Front-to-back early termination: a pixel whose opacity reaches this value takes no more
+    /// splats. The default changes no pixel by more than 1e-6; 0.99 is close to what ray casters
+    /// use. Values ≥ 1 disable it.
+    #[arg(
+        long,
+        default_value_t = 1.0 - 1.0 / 1048576.0,
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub opacity_cutoff: f32,
+    /// Worker threads (default: all cores).
+    #[arg(long, help_heading = "Performance")]
+    pub threads: Option<usize>,
     /// Render from a sparse splat list (Swan et al. §5): the visible voxels are extracted once
     /// and reused for every frame. Always on for perspective views.
-    #[arg(long)]
+    #[arg(long, help_heading = "Performance", hide_short_help = true)]
     pub splat_list: bool,
     /// Splat list: keep voxels whose opacity (scalar × gradient opacity) exceeds this, in
     /// [0, 1). 0 keeps every voxel that is not fully transparent.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        help_heading = "Performance",
+        hide_short_help = true
+    )]
     pub list_threshold: f32,
 }
 
@@ -224,38 +304,63 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub input: InputArgs,
     /// Output image: .png (8-bit sRGB, or 16-bit with --bits 16) or .npy (float32 H×W×4,
-    /// premultiplied; H×W line integrals for --mode xray).
-    #[arg(short, long)]
+    /// premultiplied; H×W line integrals for --mode xray). Its folder must exist.
+    #[arg(short, long, value_name = "FILE", help_heading = "Output")]
     pub output: PathBuf,
     #[command(flatten)]
     pub view: ViewArgs,
     #[command(flatten)]
     pub options: RenderOptions,
     /// PNG bit depth (8 or 16).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, help_heading = "Output")]
     pub bits: u8,
     /// Write linear values to PNG instead of sRGB-encoding them.
-    #[arg(long)]
+    #[arg(long, help_heading = "Output")]
     pub linear: bool,
     /// Background colour R,G,B in [0, 1] (linear), composited under the image.
-    #[arg(long, default_value = "0,0,0")]
+    #[arg(
+        long,
+        value_name = "R,G,B",
+        default_value = "0,0,0",
+        help_heading = "Output"
+    )]
     pub background: String,
-    /// Also write the successive-refinement previews (every 4th and 2nd voxel) next to OUTPUT.
-    #[arg(long)]
-    pub ladder: bool,
     /// Print per-stage timings and counters as one JSON object on stdout.
-    #[arg(long)]
+    #[arg(long, help_heading = "Output")]
     pub stats: bool,
+    /// Don't print what was written (warnings and errors are still printed).
+    #[arg(short, long, help_heading = "Output")]
+    pub quiet: bool,
+    /// Also write the successive-refinement previews (every 4th and 2nd voxel) next to OUTPUT.
+    #[arg(long, help_heading = "Output", hide_short_help = true)]
+    pub ladder: bool,
     /// Perspective: draw the line at distance k = s·D/p beyond which a voxel covers less than
     /// a pixel (Swan et al. Fig. 7a, c), in the colour R,G,B (default black).
-    #[arg(long, value_name = "R,G,B", num_args = 0..=1, default_missing_value = "0,0,0")]
+    #[arg(
+        long,
+        value_name = "R,G,B",
+        num_args = 0..=1,
+        default_missing_value = "0,0,0",
+        help_heading = "Output",
+        hide_short_help = true
+    )]
     pub draw_k: Option<String>,
     /// Which renderer draws the image: Westover/Swan splatting, or one of Buchanan's
-    /// Chapter 6 displays (Sabella's density-emitter model, or the NIL-map linearised display).
-    #[arg(long, value_enum, default_value = "splat")]
+    /// Chapter 6 displays (Sabella's density-emitter model, or the NIL-map linearised display;
+    /// README.md, section "Volume display as filtering"). Their options: see --help.
+    #[arg(
+        long,
+        value_enum,
+        default_value = "splat",
+        help_heading = "Research (Chapter 6 displays)"
+    )]
     pub renderer: RendererArg,
     #[command(flatten)]
     pub display: crate::display::DisplayArgs,
+    /// The Chapter 6 display flags given on the command line (filled in by `main`), to warn
+    /// when the splatting renderer would ignore them.
+    #[arg(skip)]
+    pub given_display_flags: Vec<String>,
 }
 
 /// Renderers reachable from `render --renderer`.
@@ -283,9 +388,14 @@ pub struct PhantomArgs {
     /// Output NRRD file.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Grid size: N (cube) or X,Y,Z.
-    #[arg(long, default_value = "128")]
-    pub size: String,
+    /// Grid size: N (cube) or X,Y,Z (checkerboard: X,Y[,SQUARE]), as `render --phantom-size`.
+    /// Default: the phantom's own size, the one `render --phantom KIND` uses (head
+    /// 128×160×144; shepp-logan, blobs, marschner-lobb 128³).
+    #[arg(long, value_name = "N|X,Y,Z")]
+    pub grid: Option<String>,
+    /// Renamed: `--size` means the image size in `render` and `bench`; use --grid here.
+    #[arg(long, hide = true, allow_hyphen_values = true)]
+    pub size: Option<String>,
     /// Gzip the payload.
     #[arg(long)]
     pub gzip: bool,

@@ -83,7 +83,9 @@ fn grid_size(s: &str, flag: &str) -> Result<[usize; 3]> {
     Ok(dims)
 }
 
-fn make_phantom(kind: PhantomKind, size: Option<&str>) -> Result<AnyVolume> {
+/// A built-in phantom; `size` as `render --phantom-size` / `phantom --grid` (named `flag` in
+/// errors), `None` for the phantom's own size.
+fn make_phantom(kind: PhantomKind, size: Option<&str>, flag: &str) -> Result<AnyVolume> {
     use volsplat_core::scenes;
     match kind {
         PhantomKind::Checkerboard => {
@@ -95,29 +97,29 @@ fn make_phantom(kind: PhantomKind, size: Option<&str>) -> Result<AnyVolume> {
                         .split(',')
                         .map(|p| p.trim().parse::<usize>())
                         .collect::<std::result::Result<_, _>>()
-                        .map_err(|_| anyhow!("--phantom-size: expected X,Y[,SQUARE], got `{s}`"))?;
+                        .map_err(|_| anyhow!("{flag}: expected X,Y[,SQUARE], got `{s}`"))?;
                     match v[..] {
                         [x, y] => (x, y, sq),
                         [x, y, q] => (x, y, q),
-                        _ => bail!("--phantom-size: expected X,Y[,SQUARE], got `{s}`"),
+                        _ => bail!("{flag}: expected X,Y[,SQUARE], got `{s}`"),
                     }
                 }
             };
             if !(1..=8192).contains(&nx) || !(1..=8192).contains(&ny) {
-                bail!("--phantom-size: sheet sides must be in 1..=8192, got {nx}x{ny}");
+                bail!("{flag}: sheet sides must be in 1..=8192, got {nx}x{ny}");
             }
             return Ok(scenes::checkerboard_sheet(nx, ny, sq)?.into());
         }
         PhantomKind::Terrain => {
             let d = match size {
-                Some(s) => grid_size(s, "--phantom-size")?,
+                Some(s) => grid_size(s, flag)?,
                 None => scenes::TERRAIN_PAPER,
             };
             return Ok(scenes::terrain(d[0], d[1], d[2], 1)?.into());
         }
         PhantomKind::Filaments => {
             let d = match size {
-                Some(s) => grid_size(s, "--phantom-size")?,
+                Some(s) => grid_size(s, flag)?,
                 None => scenes::FILAMENTS_PAPER,
             };
             return Ok(scenes::filaments(d[0], d[1], d[2], 1)?.into());
@@ -125,7 +127,7 @@ fn make_phantom(kind: PhantomKind, size: Option<&str>) -> Result<AnyVolume> {
         _ => {}
     }
     let dims = match size {
-        Some(s) => grid_size(s, "--phantom-size")?,
+        Some(s) => grid_size(s, flag)?,
         None => match kind {
             PhantomKind::Head => [128, 160, 144],
             _ => [128; 3],
@@ -156,10 +158,16 @@ fn make_phantom(kind: PhantomKind, size: Option<&str>) -> Result<AnyVolume> {
 fn load_volume(a: &InputArgs) -> Result<(AnyVolume, String)> {
     match &a.input {
         None => Ok((
-            make_phantom(a.phantom, a.phantom_size.as_deref())?,
+            make_phantom(a.phantom, a.phantom_size.as_deref(), "--phantom-size")?,
             format!("demo phantom `{:?}`", a.phantom),
         )),
         Some(path) => {
+            if path.is_dir() {
+                bail!(
+                    "{} is a directory (reading folders of DICOM files is not supported yet)",
+                    path.display()
+                );
+            }
             let vol = if let Some(dims) = &a.raw_dims {
                 let spec = RawSpec {
                     dims: triple::<usize>(dims, "--raw-dims")?,
@@ -178,51 +186,95 @@ fn load_volume(a: &InputArgs) -> Result<(AnyVolume, String)> {
     }
 }
 
+/// The camera: the `--camera` file's, or VTK's reset camera around the volume; then the view
+/// flags that were given, in VTK's order (Azimuth, Elevation, OrthogonalizeViewUp, Roll, Zoom,
+/// Dolly). `--perspective` switches a file's camera to perspective; `--view-angle` replaces its
+/// view angle.
 fn build_camera(v: &ViewArgs, vol: &AnyVolume) -> Result<Camera> {
-    if let Some(path) = &v.camera {
-        let (cam, warnings) = volsplat_io::load_camera(path)?;
-        for w in warnings {
-            eprintln!("warning: {w}");
-        }
-        return Ok(cam);
-    }
-    if !(v.zoom.is_finite() && v.zoom > 0.0) {
-        bail!("--zoom must be a positive number, got {}", v.zoom);
+    if let Some(zoom) = v.zoom
+        && !(zoom.is_finite() && zoom > 0.0)
+    {
+        bail!("--zoom must be a positive number, got {zoom}");
     }
     for (flag, x) in [
         ("--azimuth", v.azimuth),
         ("--elevation", v.elevation),
         ("--roll", v.roll),
     ] {
-        if !x.is_finite() {
+        if x.is_some_and(|x| !x.is_finite()) {
             bail!("{flag} must be a finite number of degrees");
         }
     }
-    if !(v.view_angle > 0.0 && v.view_angle < 180.0) {
-        bail!(
-            "--view-angle must be in (0, 180) degrees, got {}",
-            v.view_angle
+    if let Some(angle) = v.view_angle
+        && !(angle > 0.0 && angle < 180.0)
+    {
+        bail!("--view-angle must be in (0, 180) degrees, got {angle}");
+    }
+    if let Some(dolly) = v.dolly
+        && !(dolly.is_finite() && dolly > 0.0)
+    {
+        bail!("--dolly must be a positive number, got {dolly}");
+    }
+    let mut cam = if let Some(path) = &v.camera {
+        let (mut cam, warnings) = volsplat_io::load_camera(path)?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        if v.perspective {
+            cam.parallel_projection = false;
+        }
+        if let Some(angle) = v.view_angle {
+            cam.view_angle = angle;
+        }
+        cam
+    } else {
+        let (lo, hi) = vol.grid().bounds_world();
+        let mut cam = Camera::reset_to_bounds(lo, hi, !v.perspective);
+        if let Some(angle) = v.view_angle
+            && angle != cam.view_angle
+        {
+            // VTK's ResetCamera places the eye at radius / sin(view_angle / 2).
+            let fp = volsplat_core::glam::DVec3::from(cam.focal_point);
+            let radius = cam.parallel_scale;
+            let dist = radius / (angle.to_radians() * 0.5).sin();
+            cam.position = (fp + volsplat_core::glam::DVec3::Z * dist).to_array();
+            cam.view_angle = angle;
+        }
+        cam
+    };
+    if cam.parallel_projection && v.view_angle.is_some() {
+        eprintln!(
+            "warning: --view-angle has no effect on an orthographic camera{} (add --perspective)",
+            match &v.camera {
+                Some(p) => format!(" ({} has parallel_projection: true)", p.display()),
+                None => String::new(),
+            }
         );
     }
-    if !(v.dolly.is_finite() && v.dolly > 0.0) {
-        bail!("--dolly must be a positive number, got {}", v.dolly);
+    if let Some(deg) = v.azimuth {
+        cam.azimuth(deg);
     }
-    let (lo, hi) = vol.grid().bounds_world();
-    let mut cam = Camera::reset_to_bounds(lo, hi, !v.perspective);
-    if v.view_angle != cam.view_angle {
-        // VTK's ResetCamera places the eye at radius / sin(view_angle / 2).
-        let fp = volsplat_core::glam::DVec3::from(cam.focal_point);
-        let radius = cam.parallel_scale;
-        let dist = radius / (v.view_angle.to_radians() * 0.5).sin();
-        cam.position = (fp + volsplat_core::glam::DVec3::Z * dist).to_array();
-        cam.view_angle = v.view_angle;
+    if let Some(deg) = v.elevation {
+        cam.elevation(deg);
     }
-    cam.azimuth(v.azimuth);
-    cam.elevation(v.elevation);
-    cam.orthogonalize_view_up();
-    cam.roll(v.roll);
-    cam.zoom(v.zoom);
-    cam.dolly(v.dolly);
+    if v.azimuth.is_some() || v.elevation.is_some() || v.roll.is_some() {
+        cam.orthogonalize_view_up();
+    }
+    if let Some(deg) = v.roll {
+        cam.roll(deg);
+    }
+    if let Some(zoom) = v.zoom {
+        cam.zoom(zoom);
+    }
+    if let Some(dolly) = v.dolly {
+        cam.dolly(dolly);
+    }
+    cam.validate().map_err(|e| {
+        anyhow!(
+            "the camera after --azimuth/--elevation/--roll/--zoom/--dolly is degenerate: {e} \
+             (an elevation of ±90° looks along view-up; add --roll or change --elevation)"
+        )
+    })?;
     Ok(cam)
 }
 
@@ -338,20 +390,25 @@ fn parse_light(s: &str) -> Result<Light> {
     })
 }
 
-fn build_settings(o: &RenderOptions) -> Result<RenderSettings> {
-    let (w, h) = o
-        .size
-        .split_once(['x', 'X'])
-        .ok_or_else(|| anyhow!("--size: expected WxH, got `{}`", o.size))?;
-    let parse = |v: &str| {
-        v.trim()
-            .parse::<usize>()
-            .map_err(|_| anyhow!("--size: `{v}` is not a pixel count"))
+/// Parses an image size: `WxH` (or `WXH`) or a single `N` for N×N, each in 1..=16384.
+pub(crate) fn parse_image_size(s: &str, flag: &str) -> Result<(usize, usize)> {
+    let bad = || anyhow!("{flag}: expected WxH (e.g. 640x480) or N (N×N pixels), got `{s}`");
+    let parse = |v: &str| v.trim().parse::<usize>().map_err(|_| bad());
+    let (width, height) = match s.split_once(['x', 'X']) {
+        Some((w, h)) => (parse(w)?, parse(h)?),
+        None => {
+            let n = parse(s)?;
+            (n, n)
+        }
     };
-    let (width, height) = (parse(w)?, parse(h)?);
     if width == 0 || height == 0 || width > 16384 || height > 16384 {
-        bail!("--size: width and height must be in 1..=16384, got {width}x{height}");
+        bail!("{flag}: width and height must be in 1..=16384, got {width}x{height} (`{s}`)");
     }
+    Ok((width, height))
+}
+
+fn build_settings(o: &RenderOptions) -> Result<RenderSettings> {
+    let (width, height) = parse_image_size(&o.size, "--size")?;
     if !matches!(o.subsample, 1..=64) {
         bail!("--subsample must be in 1..=64, got {}", o.subsample);
     }
@@ -425,6 +482,132 @@ pub(crate) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     Ok(b.build()?)
 }
 
+/// The image formats `render -o` writes, by extension (case-insensitive).
+const OUTPUT_EXTENSIONS: &[&str] = &["png", "npy"];
+
+/// Checks, before any work, that `path` (given with `flag`) can be written: not a folder, its
+/// folder exists, and, if `extensions` is not empty, it ends in one of them.
+pub(crate) fn check_output_path(path: &Path, flag: &str, extensions: &[&str]) -> Result<()> {
+    if path.is_dir() {
+        bail!("{flag} {}: is a folder; give a file name", path.display());
+    }
+    if !extensions.is_empty() {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
+        if !extensions.contains(&ext.as_str()) {
+            let list: Vec<String> = extensions.iter().map(|e| format!(".{e}")).collect();
+            bail!(
+                "{flag} {}: unsupported extension; use {}",
+                path.display(),
+                list.join(" or ")
+            );
+        }
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.is_dir()
+    {
+        if dir.exists() {
+            bail!(
+                "{flag} {}: {} is not a folder",
+                path.display(),
+                dir.display()
+            );
+        }
+        bail!(
+            "{flag} {}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// Non-finite values in what would be written: an image file must never hold NaN or infinity.
+#[derive(Debug)]
+pub struct NonFiniteOutput {
+    /// The renderer or stage that produced the image.
+    pub stage: String,
+    /// Pixels with at least one non-finite value.
+    pub count: usize,
+    /// The file that was not written.
+    pub path: PathBuf,
+    /// Files this command had already written (ladder previews).
+    pub written: Vec<PathBuf>,
+}
+
+impl std::fmt::Display for NonFiniteOutput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "internal error: the {} produced {} non-finite pixel{}; ",
+            self.stage,
+            self.count,
+            if self.count == 1 { "" } else { "s" }
+        )?;
+        if self.written.is_empty() {
+            write!(f, "nothing was written")
+        } else {
+            let list: Vec<String> = self
+                .written
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect();
+            write!(
+                f,
+                "{} was not written (the previews {} had been)",
+                self.path.display(),
+                list.join(", ")
+            )
+        }
+    }
+}
+
+impl std::error::Error for NonFiniteOutput {}
+
+/// Whether `render` writes the X-ray line integrals (rather than the RGBA image) for `out`.
+fn writes_values(out: &Rendered, a: &RenderArgs) -> bool {
+    out_mode(a) == RenderMode::Xray && out.values.is_some()
+}
+
+/// Pixels of what would be written that hold a non-finite value: the line integrals if
+/// `values`, otherwise the RGBA image (a pixel counts once however many channels are bad).
+pub(crate) fn non_finite_pixels(out: &Rendered, values: bool) -> usize {
+    match (&out.values, values) {
+        (Some(v), true) => v.values().iter().filter(|x| !x.is_finite()).count(),
+        _ => out
+            .image
+            .pixels()
+            .iter()
+            .filter(|p| p.iter().any(|c| !c.is_finite()))
+            .count(),
+    }
+}
+
+/// Writes `out` to `path` unless it holds non-finite values ([`NonFiniteOutput`], naming
+/// `stage`; `written` lists the files already written by this command).
+fn write_checked(
+    path: &Path,
+    out: &Rendered,
+    a: &RenderArgs,
+    stage: &str,
+    written: &[PathBuf],
+) -> Result<()> {
+    let bad = non_finite_pixels(out, writes_values(out, a));
+    if bad > 0 {
+        return Err(NonFiniteOutput {
+            stage: stage.to_string(),
+            count: bad,
+            path: path.to_path_buf(),
+            written: written.to_vec(),
+        }
+        .into());
+    }
+    write_output(path, out, a).with_context(|| format!("writing {}", path.display()))
+}
+
 fn write_output(path: &Path, out: &Rendered, a: &RenderArgs) -> Result<()> {
     let ext = path
         .extension()
@@ -432,9 +615,9 @@ fn write_output(path: &Path, out: &Rendered, a: &RenderArgs) -> Result<()> {
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("png") => {
-            let bits = PngBitDepth::from_bits(a.bits as u32)
-                .ok_or_else(|| anyhow!("--bits must be 8 or 16, got {}", a.bits))?;
-            if let (RenderMode::Xray, Some(values)) = (out_mode(a), &out.values) {
+            let bits = png_bits(a)?;
+            if let (true, Some(values)) = (writes_values(out, a), &out.values) {
+                // X-ray PNGs are scaled so that the brightest pixel is white (--mode help).
                 let max = values.values().iter().fold(0.0f32, |m, &v| m.max(v));
                 volsplat_io::write_png_gray(path, values, 0.0, max.max(f32::MIN_POSITIVE), bits)?;
             } else {
@@ -446,16 +629,42 @@ fn write_output(path: &Path, out: &Rendered, a: &RenderArgs) -> Result<()> {
                 volsplat_io::write_png(path, &out.image, &settings)?;
             }
         }
-        Some("npy") => match (out_mode(a), &out.values) {
-            (RenderMode::Xray, Some(values)) => volsplat_io::write_npy_scalar(path, values)?,
+        Some("npy") => match (writes_values(out, a), &out.values) {
+            (true, Some(values)) => volsplat_io::write_npy_scalar(path, values)?,
             _ => volsplat_io::write_npy_rgba(path, &out.image)?,
         },
         _ => bail!(
-            "output `{}`: unknown extension; use .png or .npy",
+            "-o {}: unsupported extension; use .png or .npy",
             path.display()
         ),
     }
     Ok(())
+}
+
+fn png_bits(a: &RenderArgs) -> Result<PngBitDepth> {
+    PngBitDepth::from_bits(a.bits as u32)
+        .ok_or_else(|| anyhow!("--bits must be 8 or 16, got {}", a.bits))
+}
+
+/// The checks of `render` that need no volume: output paths, image size, PNG options. Run
+/// before loading and rendering, which can take seconds.
+fn check_render_args(a: &RenderArgs) -> Result<RenderSettings> {
+    check_output_path(&a.output, "-o", OUTPUT_EXTENSIONS)?;
+    if let Some(p) = &a.view.save_camera {
+        check_output_path(p, "--save-camera", &[])?;
+    }
+    png_bits(a)?;
+    triple::<f32>(&a.background, "--background")?;
+    if let Some(c) = &a.draw_k {
+        triple::<f32>(c, "--draw-k")?;
+    }
+    if !a.given_display_flags.is_empty() && a.renderer == RendererArg::Splat {
+        eprintln!(
+            "warning: {} only apply to --renderer sabella|nil; the splatting renderer ignores them",
+            a.given_display_flags.join(", ")
+        );
+    }
+    build_settings(&a.options)
 }
 
 fn out_mode(a: &RenderArgs) -> RenderMode {
@@ -499,6 +708,7 @@ fn stats_json(out: &Rendered, settings: &RenderSettings, load_ms: f64) -> serde_
 
 fn render_cmd(a: RenderArgs) -> Result<()> {
     let t0 = Instant::now();
+    let settings = check_render_args(&a)?;
     let (vol, label) = load_volume(&a.input)?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let demo = a.input.input.is_none() && a.input.phantom == PhantomKind::Head;
@@ -506,9 +716,19 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     if let Some(p) = &a.view.save_camera {
         volsplat_io::save_camera(p, &camera)?;
     }
+    let wrote = || {
+        if !a.quiet {
+            eprintln!(
+                "wrote {} ({}×{}, {:.0} ms)",
+                a.output.display(),
+                settings.width,
+                settings.height,
+                t0.elapsed().as_secs_f64() * 1e3
+            );
+        }
+    };
     if a.renderer != RendererArg::Splat {
         let tf = build_tf(&a.options, &vol, demo, scene_tf(&a.input))?;
-        let settings = build_settings(&a.options)?;
         let pool = thread_pool(a.options.threads)?;
         let (image, stats) = pool
             .install(|| {
@@ -527,15 +747,21 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             values: None,
             stats: Default::default(),
         };
-        write_output(&a.output, &out, &a)
-            .with_context(|| format!("writing {}", a.output.display()))?;
+        let stage = match a.renderer {
+            RendererArg::Sabella => "Sabella display".to_string(),
+            _ => format!(
+                "NIL renderer ({} display)",
+                format!("{:?}", a.display.display).to_lowercase()
+            ),
+        };
+        write_checked(&a.output, &out, &a, &stage, &[])?;
+        wrote();
         if a.stats {
             println!("{stats}");
         }
         return Ok(());
     }
     let tables = build_tables(&a.options, &vol, demo, scene_tf(&a.input))?;
-    let settings = build_settings(&a.options)?;
     let pool = thread_pool(a.options.threads)?;
     if use_list(&camera, &a.options) {
         if a.ladder {
@@ -555,10 +781,12 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
                     let depth =
                         pool.install(|| render_list_depth(&list, &camera, &tables, &settings))?;
                     draw_depth_contour(&mut out.image, &depth, k as f32, color)?;
-                    eprintln!("k = s·D/p = {k:.4} world units from the eye");
+                    if !a.quiet {
+                        eprintln!("k = s·D/p = {k:.4} world units from the eye");
+                    }
                 }
                 None => eprintln!(
-                    "--draw-k: orthographic view, no distance k (every voxel covers {:.3} pixels)",
+                    "warning: --draw-k: orthographic view, no distance k (every voxel covers {:.3} pixels)",
                     vol.grid()
                         .spacing
                         .iter()
@@ -567,8 +795,8 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
                 ),
             }
         }
-        write_output(&a.output, &out, &a)
-            .with_context(|| format!("writing {}", a.output.display()))?;
+        write_checked(&a.output, &out, &a, "splat-list renderer", &[])?;
+        wrote();
         if a.stats {
             let mut j = stats_json(&out, &settings, load_ms);
             j["renderer"] = json!("splat-list");
@@ -587,32 +815,40 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     if a.draw_k.is_some() {
         bail!("--draw-k needs the splat-list renderer (--perspective or --splat-list)");
     }
-    let out = pool.install(|| -> Result<Rendered> {
-        if a.ladder {
-            let ladder = default_ladder(settings.kernel);
-            let last = ladder.len() - 1;
-            let mut err = None;
-            let out = volsplat_core::with_volume!(&vol, v => render_ladder(v, &camera, &tables, &settings, &ladder, &mut |n, r| {
-                if n < last {
-                    let p = preview_path(&a.output, ladder[n].subsample);
-                    if let Err(e) = write_output(&p, r, &a) {
-                        err = Some(e);
-                        return false;
+    let mut written: Vec<PathBuf> = Vec::new();
+    let out = pool
+        .install(|| -> Result<Rendered> {
+            if a.ladder {
+                let ladder = default_ladder(settings.kernel);
+                let last = ladder.len() - 1;
+                let mut err = None;
+                let out = volsplat_core::with_volume!(&vol, v => render_ladder(v, &camera, &tables, &settings, &ladder, &mut |n, r| {
+                    if n < last {
+                        let s = ladder[n].subsample;
+                        let p = preview_path(&a.output, s);
+                        let stage = format!("splatting renderer (preview of every {s}th voxel)");
+                        if let Err(e) = write_checked(&p, r, &a, &stage, &written) {
+                            err = Some(e);
+                            return false;
+                        }
+                        written.push(p.clone());
+                        if !a.quiet {
+                            eprintln!("preview {}: {} ({:.1} ms)", n + 1, p.display(), r.stats.total_ms);
+                        }
                     }
-                    eprintln!("preview {}: {} ({:.1} ms)", n + 1, p.display(), r.stats.total_ms);
+                    true
+                }))?;
+                if let Some(e) = err {
+                    return Err(e);
                 }
-                true
-            }))?;
-            if let Some(e) = err {
-                return Err(e);
+                Ok(out)
+            } else {
+                Ok(render_any(&vol, &camera, &tables, &settings)?)
             }
-            Ok(out)
-        } else {
-            Ok(render_any(&vol, &camera, &tables, &settings)?)
-        }
-    })
-    .with_context(|| format!("rendering {label}"))?;
-    write_output(&a.output, &out, &a).with_context(|| format!("writing {}", a.output.display()))?;
+        })
+        .with_context(|| format!("rendering {label}"))?;
+    write_checked(&a.output, &out, &a, "splatting renderer", &written)?;
+    wrote();
     if a.stats {
         println!("{}", stats_json(&out, &settings, load_ms));
     }
@@ -658,11 +894,14 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
 }
 
 fn phantom_cmd(a: PhantomArgs) -> Result<()> {
-    let dims = grid_size(&a.size, "--size")?;
-    let vol = make_phantom(
-        a.kind,
-        Some(&format!("{},{},{}", dims[0], dims[1], dims[2])),
-    )?;
+    if let Some(size) = &a.size {
+        bail!(
+            "phantom --size was renamed --grid (e.g. `--grid {size}`): --size means the image size \
+             in render and bench"
+        );
+    }
+    check_output_path(&a.output, "-o", &[])?;
+    let vol = make_phantom(a.kind, a.grid.as_deref(), "--grid")?;
     volsplat_io::write_nrrd(&a.output, &vol, a.gzip)?;
     let g = vol.grid();
     eprintln!(
@@ -762,4 +1001,152 @@ fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use volsplat_core::{Image, ScalarImage};
+
+    fn render_args(extra: &[&str]) -> RenderArgs {
+        let mut argv = vec!["volsplat", "render"];
+        argv.extend_from_slice(extra);
+        match Cli::try_parse_from(argv).unwrap().command {
+            Command::Render(a) => *a,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    fn rendered(w: usize, h: usize) -> Rendered {
+        let mut image = Image::new(w, h);
+        for p in image.pixels_mut() {
+            *p = [0.25, 0.5, 0.75, 1.0];
+        }
+        Rendered {
+            image,
+            values: None,
+            stats: Default::default(),
+        }
+    }
+
+    #[test]
+    fn image_size_is_wxh_or_a_single_number() {
+        assert_eq!(parse_image_size("640x480", "--size").unwrap(), (640, 480));
+        assert_eq!(parse_image_size("64X48", "--size").unwrap(), (64, 48));
+        assert_eq!(parse_image_size("512", "--size").unwrap(), (512, 512));
+        assert_eq!(parse_image_size(" 7 ", "--size").unwrap(), (7, 7));
+        for bad in [
+            "", "x", "12by4", "12x", "x12", "1.5", "-3", "3x4x5", "0", "16385", "4x0",
+        ] {
+            let e = parse_image_size(bad, "--size").unwrap_err().to_string();
+            assert!(
+                e.contains("--size") && e.contains(&format!("`{bad}`")),
+                "{bad}: {e}"
+            );
+        }
+    }
+
+    #[test]
+    fn output_paths_are_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let ok = dir.path().join("a.PNG");
+        check_output_path(&ok, "-o", OUTPUT_EXTENSIONS).unwrap();
+        check_output_path(Path::new("relative.npy"), "-o", OUTPUT_EXTENSIONS).unwrap();
+        let e = check_output_path(&dir.path().join("a.tif"), "-o", OUTPUT_EXTENSIONS)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a.tif") && e.contains(".png or .npy"), "{e}");
+        let e = check_output_path(Path::new("noext"), "-o", OUTPUT_EXTENSIONS)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("noext") && e.contains(".png or .npy"), "{e}");
+        let missing = dir.path().join("no-such-folder");
+        let e = check_output_path(&missing.join("a.png"), "-o", OUTPUT_EXTENSIONS)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!("folder {} does not exist", missing.display())),
+            "{e}"
+        );
+        let e = check_output_path(dir.path(), "-o", OUTPUT_EXTENSIONS)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("is a folder"), "{e}");
+        // A file where the folder should be.
+        let file = dir.path().join("plain");
+        std::fs::write(&file, b"x").unwrap();
+        let e = check_output_path(&file.join("cam.json"), "--save-camera", &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--save-camera") && e.contains("is not a folder"),
+            "{e}"
+        );
+        check_output_path(&dir.path().join("cam.json"), "--save-camera", &[]).unwrap();
+    }
+
+    #[test]
+    fn non_finite_pixels_are_counted_in_what_would_be_written() {
+        let mut out = rendered(4, 3);
+        assert_eq!(non_finite_pixels(&out, false), 0);
+        out.image.pixels_mut()[1][2] = f32::NAN;
+        out.image.pixels_mut()[5] = [f32::INFINITY, f32::NAN, 0.0, f32::NEG_INFINITY];
+        assert_eq!(non_finite_pixels(&out, false), 2);
+        // X-ray output writes the line integrals, not the RGBA image.
+        let mut v = vec![1.0f32; 12];
+        v[7] = f32::NAN;
+        out.values = Some(ScalarImage::from_values(4, 3, v).unwrap());
+        assert_eq!(non_finite_pixels(&out, true), 1);
+        assert_eq!(non_finite_pixels(&out, false), 2);
+    }
+
+    #[test]
+    fn non_finite_images_are_not_written() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["a.png", "a.npy"] {
+            let path = dir.path().join(name);
+            let a = render_args(&["-o", path.to_str().unwrap()]);
+            let mut out = rendered(5, 4);
+            out.image.pixels_mut()[3][0] = f32::NAN;
+            out.image.pixels_mut()[9][3] = f32::INFINITY;
+            let e = write_checked(&path, &out, &a, "splatting renderer", &[]).unwrap_err();
+            assert_eq!(
+                e.to_string(),
+                "internal error: the splatting renderer produced 2 non-finite pixels; nothing \
+                 was written"
+            );
+            assert!(e.downcast_ref::<NonFiniteOutput>().is_some());
+            assert!(!path.exists(), "{name} was written");
+            assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+            // The same image made finite is written.
+            out.image.pixels_mut()[3][0] = 0.0;
+            out.image.pixels_mut()[9][3] = 1.0;
+            write_checked(&path, &out, &a, "splatting renderer", &[]).unwrap();
+            assert!(path.exists());
+            std::fs::remove_file(&path).unwrap();
+        }
+        // X-ray: the line integrals are checked, and a ladder's earlier previews are named.
+        let path = dir.path().join("x.npy");
+        let a = render_args(&["--mode", "xray", "-o", path.to_str().unwrap()]);
+        let mut out = rendered(2, 2);
+        out.values = Some(ScalarImage::from_values(2, 2, vec![0.0, f32::NAN, 1.0, 2.0]).unwrap());
+        let preview = dir.path().join("x.preview-s4.npy");
+        let e = write_checked(
+            &path,
+            &out,
+            &a,
+            "splatting renderer",
+            std::slice::from_ref(&preview),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("1 non-finite pixel;")
+                && e.contains(&format!("{} was not written", path.display()))
+                && e.contains(&preview.display().to_string()),
+            "{e}"
+        );
+        assert!(!path.exists());
+    }
 }

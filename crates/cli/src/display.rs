@@ -40,73 +40,86 @@ pub enum ControlArg {
 
 /// Options of the Chapter 6 displays (ignored by the splatting renderer).
 #[derive(Debug, Args)]
+#[command(next_help_heading = "Research (Chapter 6 displays)")]
 pub struct DisplayArgs {
     /// Chapter 6 display drawn by `--renderer nil`.
-    #[arg(long, value_enum, default_value = "linearised")]
+    #[arg(long, value_enum, default_value = "linearised", hide_short_help = true)]
     pub display: DisplayArg,
     /// Evaluate by direct quadrature instead of NIL maps.
-    #[arg(long)]
+    #[arg(long, hide_short_help = true)]
     pub direct: bool,
     /// Density: the transfer function's scalar opacity (`tf`) or the data value normalised to
     /// its range (`data`, as the thesis's [0, 1] densities).
-    #[arg(long, default_value = "tf")]
+    #[arg(long, default_value = "tf", hide_short_help = true)]
     pub density: String,
     /// Attenuation τ per unit length (unit = largest extent of the volume).
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, hide_short_help = true)]
     pub tau: f64,
     /// Screen Gaussian standard deviation, pixels.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, hide_short_help = true)]
     pub screen_sigma: f64,
     /// Rays per pixel per axis (Sabella, max).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, hide_short_help = true)]
     pub supersample: usize,
     /// Samples per ray (Sabella, max, search).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, hide_short_help = true)]
     pub samples_per_ray: usize,
     /// NIL patch order: 1 constant, 2 linear, 3 quadratic, 4 cubic.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, hide_short_help = true)]
     pub patch_order: usize,
     /// NIL subdivision tolerance (triggers per cell).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, hide_short_help = true)]
     pub tolerance: usize,
     /// NIL control points: `project` (L² projection of the filter, decision 0007) or
     /// `interpolate` (the thesis's filter values at the Lagrange nodes).
-    #[arg(long, value_enum, default_value = "project")]
+    #[arg(long, value_enum, default_value = "project", hide_short_help = true)]
     pub control_points: ControlArg,
     /// NIL triggers per axis across the ray (default: 1 for the linearised display, 3 for
     /// slices and sample-filter, whose triggers fill a box).
-    #[arg(long)]
+    #[arg(long, hide_short_help = true)]
     pub trigger_width: Option<usize>,
     /// NIL trigger slices per unit length along the ray.
-    #[arg(long, default_value_t = 32.0)]
+    #[arg(long, default_value_t = 32.0, hide_short_help = true)]
     pub trigger_steps: f64,
     /// Lowest NIL level γ_min (negative = sub-voxel cells).
-    #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = -1, allow_negative_numbers = true, hide_short_help = true)]
     pub gamma_min: i32,
     /// Slice depth in [0, 1] (0 = nearest corner of the volume, 1 = farthest).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, hide_short_help = true)]
     pub slice_depth: f64,
     /// Slice standard deviation along the ray, unit lengths (thick 0.1, thin 0.01).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, hide_short_help = true)]
     pub slice_width: f64,
     /// Search density ρ₀ (sample-filter, search).
-    #[arg(long, default_value_t = 0.18)]
+    #[arg(long, default_value_t = 0.18, hide_short_help = true)]
     pub rho0: f64,
     /// Use the sample closest to ρ₀ (thesis) instead of the first crossing.
-    #[arg(long)]
+    #[arg(long, hide_short_help = true)]
     pub closest: bool,
     /// DoG standard deviations σ1,σ2 in unit lengths.
-    #[arg(long, default_value = "0.01,0.02")]
+    #[arg(long, default_value = "0.01,0.02", hide_short_help = true)]
     pub dog_sigma: String,
     /// DoG display gain (value = ½ + gain·response).
-    #[arg(long, default_value_t = 8.0)]
+    #[arg(long, default_value_t = 8.0, hide_short_help = true)]
     pub dog_gain: f64,
     /// Largest NIL map (stored f64 values).
-    #[arg(long, default_value_t = 1 << 27)]
+    #[arg(long, default_value_t = 1 << 27, hide_short_help = true)]
     pub max_map_values: usize,
     /// Grey output for Sabella (default: red = intensity, green = maximum density).
-    #[arg(long)]
+    #[arg(long, hide_short_help = true)]
     pub grey: bool,
+}
+
+/// The `--flags` of [`DisplayArgs`] given explicitly on the command line in `matches`.
+pub fn given_flags(matches: &clap::ArgMatches) -> Vec<String> {
+    let cmd = DisplayArgs::augment_args(clap::Command::new("display"));
+    cmd.get_arguments()
+        .filter(|arg| {
+            matches.value_source(arg.get_id().as_str())
+                == Some(clap::parser::ValueSource::CommandLine)
+        })
+        .map(|arg| format!("--{}", arg.get_long().unwrap_or(arg.get_id().as_str())))
+        .collect()
 }
 
 fn settings(d: &DisplayArgs, kind: DisplayKind) -> Result<DisplaySettings> {

@@ -8,14 +8,25 @@ mod args;
 mod commands;
 mod display;
 
-use clap::Parser;
+use clap::{CommandFactory, FromArgMatches};
 
 fn main() -> std::process::ExitCode {
-    let cli = args::Cli::parse();
+    let matches = args::Cli::command().get_matches();
+    let mut cli = args::Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    if let (args::Command::Render(r), Some(("render", m))) =
+        (&mut cli.command, matches.subcommand())
+    {
+        r.given_display_flags = display::given_flags(m);
+    }
     match commands::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            if let Some(internal) = e.downcast_ref::<commands::NonFiniteOutput>() {
+                // Already worded as "internal error: …".
+                eprintln!("{internal}");
+            } else {
+                eprintln!("error: {e:#}");
+            }
             std::process::ExitCode::FAILURE
         }
     }

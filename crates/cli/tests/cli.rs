@@ -111,7 +111,7 @@ fn phantom_round_trips_through_nrrd_and_info() {
     let o = volsplat(&[
         "phantom",
         "shepp-logan",
-        "--size",
+        "--grid",
         "24,20,16",
         "-o",
         nrrd.to_str().unwrap(),
@@ -497,4 +497,402 @@ fn perspective_options_are_checked() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--draw-k"), "{}", stderr(&o));
     assert!(!out.exists());
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+#[test]
+fn output_paths_are_checked_before_the_volume_is_loaded() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("no-such-folder");
+    let good = dir.path().join("ok.png");
+    // The input does not exist: an error about the output proves it was checked first.
+    let cases: Vec<(Vec<String>, Vec<String>)> = vec![
+        (
+            vec!["-o".into(), dir.path().join("o.jpg").display().to_string()],
+            vec!["o.jpg".into(), ".png or .npy".into()],
+        ),
+        (
+            vec!["-o".into(), missing.join("a.png").display().to_string()],
+            vec![format!("folder {} does not exist", missing.display())],
+        ),
+        (
+            vec!["-o".into(), dir.path().display().to_string()],
+            vec!["is a folder".into()],
+        ),
+        (
+            vec![
+                "-o".into(),
+                good.display().to_string(),
+                "--save-camera".into(),
+                missing.join("cam.json").display().to_string(),
+            ],
+            vec![
+                "--save-camera".into(),
+                format!("folder {} does not exist", missing.display()),
+            ],
+        ),
+    ];
+    for (extra, needles) in cases {
+        let mut args = vec!["render".to_string(), "/nonexistent/vol.nrrd".to_string()];
+        args.extend(extra);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = volsplat(&args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}");
+        let e = stderr(&o);
+        for needle in &needles {
+            assert!(e.contains(needle.as_str()), "{args:?}: {e}");
+        }
+        assert!(!e.contains("vol.nrrd"), "output checked after loading: {e}");
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+#[test]
+fn render_says_what_it_wrote_unless_quiet() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("w.png");
+    let base = [
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "16",
+        "--size",
+        "40x30",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    let o = volsplat(&base);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    let line = format!("wrote {} (40×30, ", out.display());
+    assert!(e.contains(&line) && e.trim_end().ends_with(" ms)"), "{e}");
+    assert!(stdout(&o).is_empty());
+    // --stats: the JSON object stays alone on stdout; the report goes to stderr.
+    let o = volsplat(&[&base[..], &["--stats"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).expect("only JSON on stdout");
+    assert_eq!(j["width"], 40);
+    assert!(stderr(&o).contains(&line), "{}", stderr(&o));
+    for quiet in ["-q", "--quiet"] {
+        let o = volsplat(&[&base[..], &[quiet]].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(!stderr(&o).contains("wrote"), "{quiet}: {}", stderr(&o));
+        assert!(out.exists());
+    }
+    // Ladder previews are reported too, and silenced by --quiet.
+    let o = volsplat(&[&base[..], &["--ladder"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("w.preview-s4.png"), "{}", stderr(&o));
+    let o = volsplat(&[&base[..], &["--ladder", "-q"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).is_empty(), "{}", stderr(&o));
+}
+
+#[test]
+fn a_folder_as_input_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let series = dir.path().join("series");
+    std::fs::create_dir(&series).unwrap();
+    let out = dir.path().join("o.png");
+    for args in [
+        vec![
+            "render",
+            series.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        vec!["info", series.to_str().unwrap()],
+    ] {
+        let o = volsplat(&args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}");
+        let e = stderr(&o);
+        assert!(
+            e.contains(&format!(
+                "{} is a directory (reading folders of DICOM files is not supported yet)",
+                series.display()
+            )),
+            "{e}"
+        );
+    }
+    assert!(!out.exists());
+}
+
+#[test]
+fn view_flags_apply_to_a_camera_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).display().to_string();
+    let render = |extra: &[&str], out: &str| {
+        let mut args = vec![
+            "render",
+            "--phantom",
+            "head",
+            "--phantom-size",
+            "24,32,28",
+            "--size",
+            "40x36",
+            "-q",
+            "-o",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        let o = volsplat(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        (std::fs::read(out).unwrap(), o)
+    };
+    // The reset camera, and the same view turned 90° without a file.
+    let (reset_img, _) = render(&["--save-camera", &p("reset.json")], &p("reset.png"));
+    let (az_img, _) = render(
+        &["--azimuth", "90", "--save-camera", &p("az.json")],
+        &p("az.png"),
+    );
+    assert_ne!(reset_img, az_img);
+    // The reset camera file + --azimuth 90 is the no-file view, and the rotated file's view.
+    let (file_az, _) = render(
+        &["--camera", &p("reset.json"), "--azimuth", "90"],
+        &p("file-az.png"),
+    );
+    assert_eq!(file_az, az_img);
+    let (rotated, _) = render(&["--camera", &p("az.json")], &p("rotated.png"));
+    assert_eq!(rotated, az_img);
+    // Without flags the file's camera is used as it is.
+    let (plain, _) = render(&["--camera", &p("reset.json")], &p("plain.png"));
+    assert_eq!(plain, reset_img);
+    // Every flag changes the view of a file's camera, as it does without one.
+    let reset_json = p("reset.json");
+    for flags in [
+        vec!["--elevation", "40"],
+        vec!["--roll", "30"],
+        vec!["--zoom", "1.7"],
+    ] {
+        let mut with_file = vec!["--camera", reset_json.as_str()];
+        with_file.extend_from_slice(&flags);
+        let (a, _) = render(&with_file, &p("f.png"));
+        let (b, _) = render(&flags, &p("n.png"));
+        assert_ne!(a, reset_img, "{flags:?}");
+        assert_eq!(a, b, "{flags:?}");
+    }
+    // --perspective switches the file's camera; --view-angle replaces its view angle.
+    let (_, o) = render(
+        &[
+            "--camera",
+            &p("reset.json"),
+            "--perspective",
+            "--view-angle",
+            "20",
+            "--dolly",
+            "1.5",
+            "--stats",
+            "--save-camera",
+            &p("persp.json"),
+        ],
+        &p("persp.png"),
+    );
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["projection"], "perspective");
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(p("persp.json")).unwrap()).unwrap();
+    let reset: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(p("reset.json")).unwrap()).unwrap();
+    assert_eq!(saved["parallel_projection"], false);
+    assert_eq!(saved["view_angle"], 20.0);
+    let dist = |c: &serde_json::Value| {
+        (0..3)
+            .map(|i| {
+                (c["position"][i].as_f64().unwrap() - c["focal_point"][i].as_f64().unwrap()).powi(2)
+            })
+            .sum::<f64>()
+            .sqrt()
+    };
+    assert!((dist(&saved) * 1.5 - dist(&reset)).abs() < 1e-9 * dist(&reset));
+    // --view-angle on an orthographic camera says it has no effect.
+    let (_, o) = render(
+        &["--camera", &p("reset.json"), "--view-angle", "20"],
+        &p("va.png"),
+    );
+    assert!(
+        stderr(&o).contains("warning: --view-angle has no effect"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn camera_without_projection_and_unordered_transfer_functions_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.png");
+    let cam = dir.path().join("noproj.json");
+    std::fs::write(
+        &cam,
+        r#"{"position": [0, 0, 100], "focal_point": [0, 0, 0], "view_up": [0, 1, 0]}"#,
+    )
+    .unwrap();
+    let o = volsplat(&[
+        "render",
+        "--phantom-size",
+        "16",
+        "--camera",
+        cam.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("noproj.json") && e.contains("missing required field `parallel_projection`"),
+        "{e}"
+    );
+    let tf = dir.path().join("unordered.json");
+    std::fs::write(
+        &tf,
+        r#"{"color": [[0, 1, 1, 1]], "scalar_opacity": [[0, 0], [0.8, 0.5], [0.4, 1]]}"#,
+    )
+    .unwrap();
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "16",
+        "--tf",
+        tf.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("unordered.json")
+            && e.contains("scalar_opacity[2]")
+            && e.contains("0.4")
+            && e.contains("order"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn size_is_the_image_size_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sq.npy");
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "16",
+        "--size",
+        "24",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(npy_shape(&out), vec![24, 24, 4]);
+    let o = volsplat(&[
+        "bench",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "16",
+        "--size",
+        "20",
+        "--frames",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        (j["width"].as_u64(), j["height"].as_u64()),
+        (Some(20), Some(20))
+    );
+    for bad in ["24x", "2.5", "big"] {
+        let o = volsplat(&["render", "--size", bad, "-o", out.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(1));
+        let e = stderr(&o);
+        assert!(
+            e.contains("--size") && e.contains(&format!("`{bad}`")),
+            "{e}"
+        );
+    }
+    // phantom: --grid is the voxel grid; --size is an error pointing to it.
+    let nrrd = dir.path().join("p.nrrd");
+    let o = volsplat(&[
+        "phantom",
+        "blobs",
+        "--size",
+        "12",
+        "-o",
+        nrrd.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--grid 12"), "{}", stderr(&o));
+    assert!(!nrrd.exists());
+    let o = volsplat(&[
+        "phantom",
+        "blobs",
+        "--grid",
+        "12,10,8",
+        "-o",
+        nrrd.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = volsplat(&["info", nrrd.to_str().unwrap()]);
+    assert!(stdout(&o).contains("12 x 10 x 8"), "{}", stdout(&o));
+}
+
+#[test]
+fn short_help_keeps_to_everyday_options_in_groups() {
+    let short = stdout(&volsplat(&["render", "-h"]));
+    let long = stdout(&volsplat(&["render", "--help"]));
+    for heading in [
+        "Input:",
+        "Output:",
+        "Camera:",
+        "Transfer function:",
+        "Quality:",
+        "Performance:",
+    ] {
+        assert!(short.contains(heading), "-h lacks {heading}:\n{short}");
+    }
+    for everyday in [
+        "--output",
+        "--size",
+        "--camera",
+        "--azimuth",
+        "--tf",
+        "--quiet",
+    ] {
+        assert!(short.contains(everyday), "-h lacks {everyday}");
+    }
+    for research in [
+        "--gamma-min",
+        "--rho0",
+        "--dog-gain",
+        "--trigger-steps",
+        "--ladder",
+    ] {
+        assert!(!short.contains(research), "-h shows {research}");
+        assert!(long.contains(research), "--help lacks {research}");
+    }
+    assert!(long.contains("Research (Chapter 6 displays):"));
+    let count = |text: &str| {
+        text.lines()
+            .filter(|l| l.trim_start().starts_with("--"))
+            .count()
+    };
+    assert!(
+        count(&short) * 2 < count(&long),
+        "{} vs {}",
+        count(&short),
+        count(&long)
+    );
+    for cmd in ["render", "bench", "info", "phantom"] {
+        let help = stdout(&volsplat(&[cmd, "--help"]));
+        assert!(!help.contains("DESIGN"), "{cmd} --help cites DESIGN.md");
+    }
+    // The X-ray PNG's scaling is documented where the mode is chosen.
+    assert!(long.contains("brightest pixel is white"), "{long}");
 }

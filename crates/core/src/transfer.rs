@@ -122,8 +122,10 @@ pub fn interpolate_rows<const M: usize>(rows: &[[f64; M]], x: f64) -> [f64; M] {
 }
 
 impl TransferFunction {
-    /// Checks every field and sorts the points by value (as VTK does). Errors name the field and
-    /// the point index.
+    /// Checks every field. Errors name the field and the point index. Each point list must be in
+    /// non-decreasing order of value (equal consecutive values make a step, kept in the order
+    /// written); points out of order are an error rather than sorted, so that a mistyped value
+    /// is not silently moved elsewhere in the function.
     pub fn validate(&mut self) -> Result<()> {
         if self.color.is_empty() {
             return Err(CoreError::invalid(
@@ -142,9 +144,11 @@ impl TransferFunction {
         for (n, p) in self.color.iter().enumerate() {
             check_point(&format!("color[{n}]"), p)?;
         }
+        check_order("color", &self.color)?;
         for (n, p) in self.scalar_opacity.iter().enumerate() {
             check_point(&format!("scalar_opacity[{n}]"), p)?;
         }
+        check_order("scalar_opacity", &self.scalar_opacity)?;
         if let Some(g) = &self.gradient_opacity {
             if g.is_empty() {
                 return Err(CoreError::invalid(
@@ -156,6 +160,7 @@ impl TransferFunction {
             for (n, p) in g.iter().enumerate() {
                 check_point(&format!("gradient_opacity[{n}]"), p)?;
             }
+            check_order("gradient_opacity", g)?;
         }
         let positive = [(
             "scalar_opacity_unit_distance",
@@ -185,11 +190,6 @@ impl TransferFunction {
                 self.specular_power,
                 "must be ≥ 0",
             ));
-        }
-        self.color.sort_by(|a, b| a[0].total_cmp(&b[0]));
-        self.scalar_opacity.sort_by(|a, b| a[0].total_cmp(&b[0]));
-        if let Some(g) = &mut self.gradient_opacity {
-            g.sort_by(|a, b| a[0].total_cmp(&b[0]));
         }
         Ok(())
     }
@@ -322,6 +322,25 @@ impl TransferFunction {
     }
 }
 
+/// The first point of `points` whose value (entry 0) is less than its predecessor's is an error
+/// naming `field[index]`, the value and the predecessor's value. Equal values are allowed.
+fn check_order<const N: usize>(field: &str, points: &[[f64; N]]) -> Result<()> {
+    for (n, w) in points.windows(2).enumerate() {
+        let (prev, x) = (w[0][0], w[1][0]);
+        if x < prev {
+            return Err(CoreError::invalid(
+                format!("{field}[{}]", n + 1),
+                w[1],
+                format!(
+                    "value {x} is less than the value {prev} of {field}[{n}]; points must be in \
+                     non-decreasing order of value (equal values make a step)"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn check_point<const N: usize>(field: &str, p: &[f64; N]) -> Result<()> {
     if p.iter().any(|v| !v.is_finite()) {
         return Err(CoreError::invalid(field, p, "all entries must be finite"));
@@ -353,7 +372,7 @@ mod tests {
     #[test]
     fn json_defaults_follow_vtk() {
         let mut tf: TransferFunction =
-            serde_json::from_str(r#"{"color": [[0,1,1,1]], "scalar_opacity": [[10,0.5],[0,0]]}"#)
+            serde_json::from_str(r#"{"color": [[0,1,1,1]], "scalar_opacity": [[0,0],[10,0.5]]}"#)
                 .unwrap();
         tf.validate().unwrap();
         assert_eq!(tf.scalar_opacity_unit_distance, 1.0);
@@ -362,9 +381,36 @@ mod tests {
             (0.0, 0.7, 0.2, 10.0)
         );
         assert!(!tf.shade);
-        // Sorted on validation.
-        assert_eq!(tf.scalar_opacity[0][0], 0.0);
         assert_eq!(tf.opacity_at(5.0), 0.25);
+    }
+
+    #[test]
+    fn points_out_of_order_are_an_error_and_steps_are_allowed() {
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+        tf.scalar_opacity = vec![[0.0, 0.0], [10.0, 0.5], [3.0, 0.1]];
+        let e = tf.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("scalar_opacity[2]") && e.contains("value 3") && e.contains("order"),
+            "{e}"
+        );
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+        tf.color = vec![[1.0, 0.0, 0.0, 0.0], [0.5, 1.0, 1.0, 1.0]];
+        assert!(tf.validate().unwrap_err().to_string().contains("color[1]"));
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+        tf.gradient_opacity = Some(vec![[5.0, 1.0], [4.0, 0.0]]);
+        assert!(
+            tf.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("gradient_opacity[1]")
+        );
+        // A step: equal consecutive values, kept in the order written.
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+        tf.scalar_opacity = vec![[0.0, 0.0], [0.5, 0.0], [0.5, 1.0], [1.0, 1.0]];
+        tf.validate().unwrap();
+        assert_eq!(tf.scalar_opacity[1], [0.5, 0.0]);
+        assert_eq!(tf.opacity_at(0.25), 0.0);
+        assert_eq!(tf.opacity_at(0.75), 1.0);
     }
 
     #[test]

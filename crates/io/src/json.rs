@@ -1,8 +1,10 @@
-//! Camera and transfer-function JSON files (DESIGN.md §3).
+//! Camera and transfer-function JSON files (DESIGN.md §3; the README's "Files" section).
 //!
 //! Both are JSON objects. Unknown top-level fields are ignored with a warning (returned to the
 //! caller, which decides whether to print it); missing required fields and wrong types are errors
-//! naming the file and the field; the parsed value is then validated by `volsplat-core`.
+//! naming the file and the field; the parsed value is then validated by `volsplat-core` (for a
+//! transfer function: every point list in non-decreasing order of value, equal values allowed
+//! for a step).
 //! `//` line comments (outside strings) are removed before parsing, so the annotated examples of
 //! DESIGN.md load as written. Files larger than [`MAX_JSON_BYTES`] are rejected.
 
@@ -19,8 +21,9 @@ use volsplat_core::{Camera, TransferFunction};
 /// Largest camera or transfer-function file accepted, in bytes (16 MiB).
 pub const MAX_JSON_BYTES: u64 = 16 << 20;
 
-/// The fields of a camera file (VTK's camera; DESIGN.md §3). `position`, `focal_point` and
-/// `view_up` are required; the others default to VTK's values.
+/// The fields of a camera file (VTK's camera; DESIGN.md §3). `position`, `focal_point`,
+/// `view_up` and `parallel_projection` are required; `view_angle` and `parallel_scale` default to
+/// VTK's values (30° and 1).
 pub const CAMERA_FIELDS: &[&str] = &[
     "position",
     "focal_point",
@@ -33,11 +36,24 @@ pub const CAMERA_FIELDS: &[&str] = &[
 /// Loads a camera file: `position`, `focal_point` (world units), `view_up`, `view_angle`
 /// (degrees), `parallel_projection`, `parallel_scale` (world units; half the image height).
 ///
+/// `parallel_projection` is required: VTK's default (perspective) differs from volsplat's
+/// (orthographic), so a file that leaves it out would look different depending on the tool.
+///
 /// Returns the validated camera and one warning per unknown top-level field.
 pub fn load_camera(path: impl AsRef<Path>) -> Result<(Camera, Vec<String>)> {
     let path = path.as_ref();
     let (object, warnings) = load_object(path, CAMERA_FIELDS)?;
+    let has_projection = object.contains_key("parallel_projection");
     let camera: Camera = from_object(path, object, serde_json::to_value(Camera::default()).ok())?;
+    if !has_projection {
+        return Err(IoError::Json {
+            path: path.to_path_buf(),
+            message: "missing required field `parallel_projection` (true for an orthographic \
+                      camera, false for perspective; VTK's default is false, volsplat's \
+                      command line defaults to true)"
+                .into(),
+        });
+    }
     camera.validate().map_err(|e| IoError::core(path, e))?;
     Ok((camera, warnings))
 }
@@ -45,8 +61,11 @@ pub fn load_camera(path: impl AsRef<Path>) -> Result<(Camera, Vec<String>)> {
 /// Loads a transfer-function file (fields [`TRANSFER_FUNCTION_FIELDS`]; point values in the
 /// data's own units, `scalar_opacity_unit_distance` in world units).
 ///
-/// Returns the validated transfer function (points sorted by value) and one warning per unknown
-/// top-level field.
+/// Every point list (`color`, `scalar_opacity`, `gradient_opacity`) must be in non-decreasing
+/// order of value; equal consecutive values (a step) are allowed. An out-of-order point is an
+/// error naming the file, the field, the point's index and its value.
+///
+/// Returns the validated transfer function and one warning per unknown top-level field.
 pub fn load_transfer_function(path: impl AsRef<Path>) -> Result<(TransferFunction, Vec<String>)> {
     let path = path.as_ref();
     let (object, warnings) = load_object(path, TRANSFER_FUNCTION_FIELDS)?;
@@ -246,7 +265,8 @@ mod tests {
         let p = write(
             dir.path(),
             "cam.json",
-            r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,1,0], "zoom": 2}"#,
+            r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,1,0], "zoom": 2,
+                "parallel_projection": false}"#,
         );
         let (cam, w) = load_camera(&p).unwrap();
         assert_eq!(w.len(), 1);
@@ -255,7 +275,81 @@ mod tests {
             "{w:?}"
         );
         assert_eq!(cam.view_angle, 30.0);
+        assert_eq!(cam.parallel_scale, 1.0);
         assert!(!cam.parallel_projection);
+    }
+
+    #[test]
+    fn camera_without_parallel_projection_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(
+            dir.path(),
+            "noproj.json",
+            r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,1,0]}"#,
+        );
+        let e = load_camera(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("parallel_projection") && e.contains("noproj.json"),
+            "{e}"
+        );
+        // Either value given explicitly loads.
+        for (v, parallel) in [("true", true), ("false", false)] {
+            let p = write(
+                dir.path(),
+                "proj.json",
+                &format!(
+                    r#"{{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,1,0],
+                        "parallel_projection": {v}}}"#
+                ),
+            );
+            assert_eq!(load_camera(&p).unwrap().0.parallel_projection, parallel);
+        }
+    }
+
+    #[test]
+    fn transfer_function_points_must_be_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let cases: &[(&str, &str, &str)] = &[
+            (
+                r#"{"color": [[0,0,0,0], [10,1,1,1], [5,1,1,1]], "scalar_opacity": [[0, 1]]}"#,
+                "color[2]",
+                "5",
+            ),
+            (
+                r#"{"color": [[0,0,0,0]], "scalar_opacity": [[-5, 0], [300, 1], [200, 0.5], [100, 0]]}"#,
+                "scalar_opacity[2]",
+                "200",
+            ),
+            (
+                r#"{"color": [[0,0,0,0]], "scalar_opacity": [[0, 1]],
+                    "gradient_opacity": [[0, 0.5], [50, 1], [49.5, 1]]}"#,
+                "gradient_opacity[2]",
+                "49.5",
+            ),
+        ];
+        for (text, field, value) in cases {
+            let p = write(dir.path(), "unordered_tf.json", text);
+            let e = load_transfer_function(&p).unwrap_err().to_string();
+            assert!(
+                e.contains(field)
+                    && e.contains(value)
+                    && e.contains("unordered_tf.json")
+                    && e.contains("order"),
+                "{text}: {e}"
+            );
+        }
+        // Equal consecutive values make a step and stay allowed; the order is kept as written.
+        let p = write(
+            dir.path(),
+            "step_tf.json",
+            r#"{"color": [[0,0,0,0], [10,0,0,0], [10,1,1,1]],
+                "scalar_opacity": [[0, 0], [10, 0], [10, 1], [20, 1]]}"#,
+        );
+        let (tf, _) = load_transfer_function(&p).unwrap();
+        assert_eq!(tf.scalar_opacity[1], [10.0, 0.0]);
+        assert_eq!(tf.scalar_opacity[2], [10.0, 1.0]);
+        assert_eq!(tf.opacity_at(15.0), 1.0);
+        assert_eq!(tf.opacity_at(5.0), 0.0);
     }
 
     #[test]
@@ -267,11 +361,11 @@ mod tests {
                 "position",
             ),
             (
-                r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": "up"}"#,
+                r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": "up", "parallel_projection": true}"#,
                 "view_up",
             ),
             (
-                r#"{"position": [0,0,5], "focal_point": [0,0], "view_up": [0,1,0]}"#,
+                r#"{"position": [0,0,5], "focal_point": [0,0], "view_up": [0,1,0], "parallel_projection": true}"#,
                 "focal_point",
             ),
             (
@@ -279,11 +373,11 @@ mod tests {
                 "parallel_projection",
             ),
             (
-                r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,0,1]}"#,
+                r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,0,1], "parallel_projection": false}"#,
                 "view_up",
             ),
             (
-                r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,1,0], "view_angle": 200}"#,
+                r#"{"position": [0,0,5], "focal_point": [0,0,0], "view_up": [0,1,0], "view_angle": 200, "parallel_projection": false}"#,
                 "view_angle",
             ),
             (r#"[1, 2, 3]"#, "object"),
