@@ -904,10 +904,9 @@ fn splat_block<const S: u8>(
     let v = &sp.v;
     let mut updates = 0usize;
     let blend = !loc.w10.is_empty();
-    // Convex weights (FootprintTable::locate): each term is ≥ 0 for non-negative tables, so
-    // the blended weight is too, exactly, not just up to rounding.
-    let (fx, fy) = (loc.fx, loc.fy);
-    let f0 = (1.0 - fx - fy).max(0.0);
+    // The blend extrapolates where fx + fy > 1; `floor` keeps it ≥ 0 for non-negative kernels
+    // (FootprintTable::locate).
+    let (fx, fy, floor) = (loc.fx, loc.fy, loc.floor);
     for r in cy0 as usize..cy1 as usize {
         let (s0, s1) = loc.spans[r];
         let (c0, c1) = ((s0 as usize).max(ca), (s1 as usize).min(cb));
@@ -921,7 +920,7 @@ fn splat_block<const S: u8>(
         if blend {
             let (a, b, c) = (&loc.w00[i0..i1], &loc.w10[i0..i1], &loc.w01[i0..i1]);
             for (((px, &a), &b), &c) in out.iter_mut().zip(a).zip(b).zip(c) {
-                deposit::<S>(px, f0 * a + fx * b + fy * c, v);
+                deposit::<S>(px, (a + fx * (b - a) + fy * (c - a)).max(floor), v);
             }
         } else {
             for (px, &wt) in out.iter_mut().zip(&loc.w00[i0..i1]) {
