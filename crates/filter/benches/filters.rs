@@ -1,7 +1,7 @@
 //! Criterion benchmarks: cost per pixel of each technique against footprint size, and NIL
 //! pre-processing against texture size (thesis Tables 5.2, 5.5, 5.9, 5.10).
 //!
-//! `cargo bench --bench filters` (from crates/filter). Ids: `<technique>/<parameter>`, the
+//! `cargo bench -p volsplat-filter --features bench --bench filters`. Ids: `<technique>/<parameter>`, the
 //! parameter being the footprint half-width in texture units (`fp=…`) or the texture size.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};

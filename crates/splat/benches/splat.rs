@@ -7,7 +7,7 @@
 //!   256×256×93 voxels with z spacing twice x/y, 512², three input resolutions (every 4th, 2nd,
 //!   every voxel) × three kernels (single-point, nearest, Gaussian).
 //!
-//! Run: `cargo bench -p volsplat-splat --bench splat`. Numbers go to docs/BENCHMARKS.md.
+//! Run: `cargo bench -p volsplat-splat --features bench --bench splat`. Numbers go to docs/BENCHMARKS.md.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
