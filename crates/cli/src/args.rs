@@ -148,8 +148,13 @@ pub struct ViewArgs {
     /// Perspective projection (VTK's default camera) instead of orthographic; switches a
     /// --camera file's camera to perspective too. Implies the splat-list renderer (Swan et al.
     /// 1997).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "orthographic")]
     pub perspective: bool,
+    /// Switch a --camera file's perspective camera to orthographic (VTK's ParallelProjectionOn);
+    /// its parallel scale becomes the half-height of the perspective view at the focal point,
+    /// so the focal plane keeps its framing. Orthographic is already the default without a file.
+    #[arg(long, requires = "camera", hide_short_help = true)]
+    pub orthographic: bool,
     /// Perspective only: vertical field of view in degrees (VTK's ViewAngle) [default: 30, or
     /// the --camera file's view_angle].
     #[arg(long, value_name = "DEG")]
@@ -361,7 +366,31 @@ pub struct RenderArgs {
     /// when the splatting renderer would ignore them.
     #[arg(skip)]
     pub given_display_flags: Vec<String>,
+    /// The splatting-only flags given on the command line (filled in by `main`), to warn when
+    /// a Chapter 6 display would ignore them.
+    #[arg(skip)]
+    pub given_splat_flags: Vec<String>,
 }
+
+/// `render` flags that only the splatting renderer reads (clap ids and their flags).
+pub const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
+    ("kernel", "--kernel"),
+    ("visibility", "--visibility"),
+    ("order", "--order"),
+    ("subsample", "--subsample"),
+    ("surface_enhance", "--surface-enhance"),
+    ("depth_cue", "--depth-cue"),
+    ("light", "--light"),
+    ("no_emission", "--no-emission"),
+    ("no_diffuse", "--no-diffuse"),
+    ("no_specular", "--no-specular"),
+    ("opacity_cutoff", "--opacity-cutoff"),
+    ("antialias", "--antialias"),
+    ("splat_list", "--splat-list"),
+    ("list_threshold", "--list-threshold"),
+    ("ladder", "--ladder"),
+    ("draw_k", "--draw-k"),
+];
 
 /// Renderers reachable from `render --renderer`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -223,6 +223,12 @@ fn build_camera(v: &ViewArgs, vol: &AnyVolume) -> Result<Camera> {
         if v.perspective {
             cam.parallel_projection = false;
         }
+        if v.orthographic && !cam.parallel_projection {
+            use volsplat_core::glam::DVec3;
+            let (eye, focal) = (DVec3::from(cam.position), DVec3::from(cam.focal_point));
+            cam.parallel_scale = (eye - focal).length() * (0.5 * cam.view_angle.to_radians()).tan();
+            cam.parallel_projection = true;
+        }
         if let Some(angle) = v.view_angle {
             cam.view_angle = angle;
         }
@@ -663,6 +669,22 @@ fn check_render_args(a: &RenderArgs) -> Result<RenderSettings> {
             "warning: {} only apply to --renderer sabella|nil; the splatting renderer ignores them",
             a.given_display_flags.join(", ")
         );
+    }
+    if a.renderer != RendererArg::Splat {
+        if a.options.mode != ModeArg::Composite {
+            bail!(
+                "--mode {:?}: the Chapter 6 displays (--renderer sabella|nil) have their own ray \
+                 function; use --renderer splat for MIP, MinIP and X-ray",
+                a.options.mode
+            );
+        }
+        if !a.given_splat_flags.is_empty() {
+            eprintln!(
+                "warning: {} only apply to --renderer splat; the {:?} display ignores them",
+                a.given_splat_flags.join(", "),
+                a.renderer
+            );
+        }
     }
     build_settings(&a.options)
 }

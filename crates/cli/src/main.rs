@@ -17,6 +17,11 @@ fn main() -> std::process::ExitCode {
         (&mut cli.command, matches.subcommand())
     {
         r.given_display_flags = display::given_flags(m);
+        r.given_splat_flags = args::SPLAT_ONLY_FLAGS
+            .iter()
+            .filter(|(id, _)| m.value_source(id) == Some(clap::parser::ValueSource::CommandLine))
+            .map(|(_, flag)| flag.to_string())
+            .collect();
     }
     match commands::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -592,6 +592,141 @@ fn render_says_what_it_wrote_unless_quiet() {
     assert!(stderr(&o).is_empty(), "{}", stderr(&o));
 }
 
+/// Never ignore a flag silently: splatting-only flags with a Chapter 6 display warn, and a ray
+/// function the display cannot do is an error.
+#[test]
+fn splat_only_flags_with_a_display_renderer_are_not_ignored_silently() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.png");
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "24",
+        "--size",
+        "24",
+        "--renderer",
+        "sabella",
+        "--kernel",
+        "tent",
+        "--no-specular",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("warning: --kernel, --no-specular only apply to --renderer splat"),
+        "{e}"
+    );
+    assert!(out.exists());
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "24",
+        "--size",
+        "24",
+        "--renderer",
+        "sabella",
+        "--mode",
+        "xray",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("--renderer splat for MIP"),
+        "{}",
+        stderr(&o)
+    );
+    // Without such flags, no warning.
+    let o = volsplat(&[
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "24",
+        "--size",
+        "24",
+        "--renderer",
+        "sabella",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+}
+
+/// `--orthographic` switches a perspective camera file to orthographic, framing the focal plane
+/// as the perspective view did.
+#[test]
+fn orthographic_switches_a_perspective_camera_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let base = [
+        "render",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "24",
+        "--size",
+        "32",
+        "-q",
+    ];
+    let run = |extra: &[&str]| {
+        let mut args: Vec<&str> = base.to_vec();
+        args.extend_from_slice(extra);
+        let o = volsplat(&args);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+    };
+    run(&[
+        "--perspective",
+        "--azimuth",
+        "20",
+        "-o",
+        &p("a.png"),
+        "--save-camera",
+        &p("persp.json"),
+    ]);
+    run(&[
+        "--camera",
+        &p("persp.json"),
+        "--orthographic",
+        "-o",
+        &p("b.png"),
+        "--save-camera",
+        &p("ortho.json"),
+    ]);
+    let read = |n: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p(n)).unwrap()).unwrap()
+    };
+    let (persp, ortho) = (read("persp.json"), read("ortho.json"));
+    assert_eq!(persp["parallel_projection"], false);
+    assert_eq!(ortho["parallel_projection"], true);
+    let v = |j: &serde_json::Value, k: &str| -> Vec<f64> {
+        j[k].as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let d: f64 = v(&persp, "position")
+        .iter()
+        .zip(v(&persp, "focal_point"))
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        .sqrt();
+    let expect = d * (0.5 * persp["view_angle"].as_f64().unwrap().to_radians()).tan();
+    let got = ortho["parallel_scale"].as_f64().unwrap();
+    assert!((got - expect).abs() < 1e-9 * expect, "{got} vs {expect}");
+    assert_eq!(v(&ortho, "position"), v(&persp, "position"));
+    // Without a camera file it is a usage error (orthographic is already the default).
+    let o = volsplat(&["render", "--orthographic", "-o", &p("c.png")]);
+    assert_eq!(o.status.code(), Some(2));
+}
+
 #[test]
 fn a_folder_as_input_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
