@@ -1,0 +1,182 @@
+//! Bit-for-bit regression of the `render` command: small scenes whose output hashes were
+//! recorded before the engine facade (issue 11) moved rendering out of the binary, after the
+//! every-angle fix (issue 17) had been checked against the reference integrators and VTK. A
+//! change of any hash means the same flags now draw a different picture: either a bug, or an
+//! intended change of the algorithm, which must then be justified and the hash re-recorded
+//! (`VOLSPLAT_PRINT_HASHES=1 cargo test -p volsplat-cli --test golden -- --nocapture` prints the
+//! current ones).
+
+use std::process::Command;
+
+/// 64-bit FNV-1a: small, stable across Rust versions (unlike `DefaultHasher`).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// (name, arguments before `-o`, output extension, recorded hash).
+const CASES: &[(&str, &[&str], &str, u64)] = &[
+    (
+        "demo head, composite",
+        &[
+            "--phantom-size",
+            "40",
+            "--size",
+            "48x40",
+            "--azimuth",
+            "30",
+            "--elevation",
+            "15",
+        ],
+        "npy",
+        0x3173c65bfc844768,
+    ),
+    (
+        "demo head, PNG",
+        &[
+            "--phantom-size",
+            "40",
+            "--size",
+            "48x40",
+            "--azimuth",
+            "30",
+            "--elevation",
+            "15",
+        ],
+        "png",
+        0x1c7b0df9df104507,
+    ),
+    (
+        "perspective",
+        &[
+            "--phantom-size",
+            "40",
+            "--size",
+            "40",
+            "--perspective",
+            "--azimuth",
+            "-40",
+            "--elevation",
+            "20",
+        ],
+        "npy",
+        0x094f898a13f48a4b,
+    ),
+    (
+        "splat list, orthographic",
+        &[
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "32",
+            "--size",
+            "36x44",
+            "--splat-list",
+            "--azimuth",
+            "45",
+        ],
+        "npy",
+        0xe323830d241a2101,
+    ),
+    (
+        "MIP",
+        &[
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "32",
+            "--mode",
+            "mip",
+            "--size",
+            "40",
+            "--azimuth",
+            "60",
+        ],
+        "npy",
+        0x420e8883f4f46395,
+    ),
+    (
+        "X-ray",
+        &[
+            "--phantom",
+            "shepp-logan",
+            "--phantom-size",
+            "32",
+            "--mode",
+            "xray",
+            "--size",
+            "37x29",
+            "--azimuth",
+            "45",
+        ],
+        "npy",
+        0xf2709a4b7ab6e221,
+    ),
+    (
+        "Sabella display",
+        &[
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "24",
+            "--renderer",
+            "sabella",
+            "--size",
+            "24",
+            "--azimuth",
+            "20",
+        ],
+        "npy",
+        0xcb80baa160e11f36,
+    ),
+    (
+        "NIL display",
+        &[
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "24",
+            "--renderer",
+            "nil",
+            "--size",
+            "24",
+            "--azimuth",
+            "20",
+        ],
+        "npy",
+        0x95dce6d2432a4363,
+    ),
+];
+
+#[test]
+fn render_outputs_are_bit_for_bit_as_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let print = std::env::var_os("VOLSPLAT_PRINT_HASHES").is_some();
+    let mut failures = Vec::new();
+    for (n, (name, args, ext, recorded)) in CASES.iter().enumerate() {
+        let out = dir.path().join(format!("case{n}.{ext}"));
+        let o = Command::new(env!("CARGO_BIN_EXE_volsplat"))
+            .arg("render")
+            .args(*args)
+            .args(["-q", "-o", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let h = fnv1a(&std::fs::read(&out).unwrap());
+        if print {
+            println!("{name}: 0x{h:016x}");
+        }
+        if h != *recorded {
+            failures.push(format!("{name}: 0x{h:016x}, recorded 0x{recorded:016x}"));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
