@@ -336,6 +336,15 @@ pub struct RenderArgs {
     /// Don't print what was written (warnings and errors are still printed).
     #[arg(short, long, help_heading = "Output")]
     pub quiet: bool,
+    /// Render the request of a scene file (as written by --save-scene) instead of starting from
+    /// the defaults; flags given on the command line override its fields.
+    #[arg(long, value_name = "FILE", help_heading = "Input")]
+    pub scene: Option<PathBuf>,
+    /// Write the complete request that was rendered (volume, resolved camera and transfer
+    /// function, size, mode, renderer, quality) to this JSON file; `--scene` renders it again,
+    /// bit for bit.
+    #[arg(long, value_name = "FILE", help_heading = "Output")]
+    pub save_scene: Option<PathBuf>,
     /// Also write the successive-refinement previews (every 4th and 2nd voxel) next to OUTPUT.
     #[arg(long, help_heading = "Output", hide_short_help = true)]
     pub ladder: bool,
@@ -370,6 +379,10 @@ pub struct RenderArgs {
     /// a Chapter 6 display would ignore them.
     #[arg(skip)]
     pub given_splat_flags: Vec<String>,
+    /// Every flag given on the command line (clap ids, filled in by `main`): with `--scene`,
+    /// only these override the scene file.
+    #[arg(skip)]
+    pub given: Vec<String>,
 }
 
 /// `render` flags that only the splatting renderer reads (clap ids and their flags).
@@ -444,6 +457,13 @@ pub struct BenchArgs {
     /// Degrees of azimuth between frames (default 360/frames; 0 keeps the view fixed).
     #[arg(long, allow_negative_numbers = true)]
     pub orbit: Option<f64>,
+    /// Time the request of a scene file (as written by `render --save-scene`); flags given
+    /// override its fields.
+    #[arg(long, value_name = "FILE")]
+    pub scene: Option<PathBuf>,
+    /// Every flag given on the command line (filled in by `main`).
+    #[arg(skip)]
+    pub given: Vec<String>,
 }
 
 /// Image size presets of the texture-filtering benchmark.

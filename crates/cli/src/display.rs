@@ -1,13 +1,11 @@
 //! `render --renderer sabella|nil` and `display-bench`: Buchanan's Chapter 6 volume displays
 //! (library: `volsplat_filter::display`). Glue only: parse, classify, call the library.
 
-use crate::args::{RenderArgs, RendererArg};
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use serde_json::json;
 use std::path::PathBuf;
 use std::time::Instant;
-use volsplat_core::{AnyVolume, Camera, Image, TransferFunction};
+use volsplat_core::{AnyVolume, Camera, TransferFunction};
 use volsplat_filter::display::{
     ControlPoints, DisplayImage, DisplayKind, DisplaySettings, DisplayVolume, Evaluator,
     NilDisplaySettings, SearchRule, build_map, render_display as lib_render,
@@ -120,123 +118,6 @@ pub fn given_flags(matches: &clap::ArgMatches) -> Vec<String> {
         })
         .map(|arg| format!("--{}", arg.get_long().unwrap_or(arg.get_id().as_str())))
         .collect()
-}
-
-fn settings(d: &DisplayArgs, kind: DisplayKind) -> Result<DisplaySettings> {
-    let sig: Vec<f64> = d
-        .dog_sigma
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .context("--dog-sigma: expected S1,S2")?;
-    if sig.len() != 2 {
-        bail!("--dog-sigma: expected two numbers S1,S2");
-    }
-    Ok(DisplaySettings {
-        kind,
-        evaluator: if d.direct {
-            Evaluator::Direct
-        } else {
-            Evaluator::Nil
-        },
-        tau: d.tau,
-        screen_sigma_px: d.screen_sigma,
-        supersample: d.supersample,
-        samples_per_ray: d.samples_per_ray,
-        slice_depth: d.slice_depth,
-        slice_width: d.slice_width,
-        rho0: d.rho0,
-        search: if d.closest {
-            SearchRule::Closest
-        } else {
-            SearchRule::FirstCrossing
-        },
-        dog_sigma: [sig[0], sig[1]],
-        dog_gain: d.dog_gain,
-        nil: NilDisplaySettings {
-            control: match d.control_points {
-                ControlArg::Project => ControlPoints::Project,
-                ControlArg::Interpolate => ControlPoints::Interpolate,
-            },
-            tolerance: d.tolerance,
-            trigger_width: d.trigger_width.unwrap_or(match kind {
-                DisplayKind::Slice | DisplayKind::SampleFilter => 3,
-                _ => 1,
-            }),
-            trigger_steps: d.trigger_steps,
-            gamma_min: d.gamma_min,
-            ..Default::default()
-        },
-        transfer: None,
-        ..Default::default()
-    })
-}
-
-/// Densities of a volume: TF scalar opacity or the data normalised to its range.
-fn display_volume(vol: &AnyVolume, tf: &TransferFunction, density: &str) -> Result<DisplayVolume> {
-    let f = vol.to_f32();
-    let (lo, hi) = vol.value_range();
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    let d: Vec<f64> = match density {
-        "tf" => f.data().iter().map(|&v| tf.opacity_at(v as f64)).collect(),
-        "data" => f.data().iter().map(|&v| (v as f64 - lo) / span).collect(),
-        other => bail!("--density: expected tf or data, got `{other}`"),
-    };
-    Ok(DisplayVolume::new(f.grid(), &d, Reconstruction::Trilinear)?)
-}
-
-fn stats_json(img: &DisplayImage, map_s: f64) -> serde_json::Value {
-    let s = img.stats;
-    json!({
-        "map_build_s": map_s, "trigger_s": s.trigger_s, "hierarchy_s": s.hierarchy_s,
-        "control_points_s": s.control_s, "evaluation_s": s.evaluation_s, "search_s": s.search_s, "march_s": s.march_s,
-        "total_s": s.total_s, "pixels": s.pixels, "rays": s.rays, "triggers": s.triggers,
-        "patches": s.patches, "fallbacks": s.fallbacks,
-    })
-}
-
-/// Renders with the display chosen by `--renderer`; returns the premultiplied image and a JSON
-/// object of timings for `--stats`.
-pub fn render_display(
-    a: &RenderArgs,
-    vol: &AnyVolume,
-    camera: &Camera,
-    tf: &TransferFunction,
-    width: usize,
-    height: usize,
-) -> Result<(Image, serde_json::Value)> {
-    let d = &a.display;
-    let kind = match (a.renderer, d.display) {
-        (RendererArg::Sabella, _) => DisplayKind::Sabella,
-        (_, DisplayArg::Linearised) => DisplayKind::Linearised,
-        (_, DisplayArg::Slice) => DisplayKind::Slice,
-        (_, DisplayArg::Max) => DisplayKind::Maximum,
-        (_, DisplayArg::Search) => DisplayKind::Search,
-        (_, DisplayArg::SampleFilter) => DisplayKind::SampleFilter,
-    };
-    let s = settings(d, kind)?;
-    let dv = display_volume(vol, tf, &d.density)?;
-    let needs_map = !d.direct
-        && matches!(
-            kind,
-            DisplayKind::Linearised | DisplayKind::Slice | DisplayKind::SampleFilter
-        );
-    let t0 = Instant::now();
-    let map = if needs_map {
-        Some(
-            build_map(&dv, d.patch_order, None, d.max_map_values).with_context(|| {
-                format!(
-                    "building the NIL map (M = {}): raise --max-map-values, lower --patch-order, or use --direct",
-                    d.patch_order
-                )
-            })?,
-        )
-    } else {
-        None
-    };
-    let map_s = t0.elapsed().as_secs_f64();
-    let img = lib_render(&dv, map.as_ref(), camera, width, height, &s)?;
-    Ok((img.to_image(d.grey), stats_json(&img, map_s)))
 }
 
 /// Report size of `display-bench`.

@@ -7,15 +7,29 @@ mod aa_figures;
 mod args;
 mod commands;
 mod display;
+mod request;
 
 use clap::{CommandFactory, FromArgMatches};
 
 fn main() -> std::process::ExitCode {
     let matches = args::Cli::command().get_matches();
     let mut cli = args::Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    let given = |m: &clap::ArgMatches| -> Vec<String> {
+        m.ids()
+            .filter(|id| {
+                m.value_source(id.as_str()) == Some(clap::parser::ValueSource::CommandLine)
+            })
+            .map(|id| id.as_str().to_string())
+            .collect()
+    };
+    if let (args::Command::Bench(b), Some(("bench", m))) = (&mut cli.command, matches.subcommand())
+    {
+        b.given = given(m);
+    }
     if let (args::Command::Render(r), Some(("render", m))) =
         (&mut cli.command, matches.subcommand())
     {
+        r.given = given(m);
         r.given_display_flags = display::given_flags(m);
         r.given_splat_flags = args::SPLAT_ONLY_FLAGS
             .iter()

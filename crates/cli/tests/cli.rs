@@ -1031,3 +1031,83 @@ fn short_help_keeps_to_everyday_options_in_groups() {
     // The X-ray PNG's scaling is documented where the mode is chosen.
     assert!(long.contains("brightest pixel is white"), "{long}");
 }
+
+/// `--save-scene` then `--scene` writes the same bytes (orthographic, perspective, MIP, X-ray);
+/// flags given with `--scene` override its fields; scene-file problems are named.
+#[test]
+fn saved_scenes_render_again_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let cases: [&[&str]; 4] = [
+        &["--azimuth", "30", "--elevation", "10"],
+        &["--perspective", "--azimuth", "-20", "--view-angle", "40"],
+        &["--mode", "mip", "--azimuth", "45"],
+        &["--mode", "xray", "--roll", "15", "--zoom", "1.3"],
+    ];
+    for (n, extra) in cases.iter().enumerate() {
+        let (a, b, s) = (
+            p(&format!("a{n}.npy")),
+            p(&format!("b{n}.npy")),
+            p(&format!("s{n}.json")),
+        );
+        let mut args = vec![
+            "render",
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "24",
+            "--size",
+            "40x32",
+            "-q",
+        ];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["-o", &a, "--save-scene", &s]);
+        let o = volsplat(&args);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        let o = volsplat(&["render", "--scene", &s, "-q", "-o", &b]);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        assert!(stderr(&o).is_empty(), "{}", stderr(&o));
+        assert_eq!(
+            std::fs::read(&a).unwrap(),
+            std::fs::read(&b).unwrap(),
+            "{extra:?}"
+        );
+    }
+    // A flag given with --scene overrides the file: the size changes, the view does not.
+    let c = p("c.npy");
+    let o = volsplat(&[
+        "render",
+        "--scene",
+        &p("s0.json"),
+        "--size",
+        "20x16",
+        "-q",
+        "-o",
+        &c,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(npy_shape(Path::new(&c)), vec![16, 20, 4]);
+    // Unknown fields warn; a missing required field is an error naming it.
+    let text = std::fs::read_to_string(p("s0.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut extra = v.clone();
+    extra["colour_map"] = serde_json::json!("jet");
+    std::fs::write(p("x.json"), extra.to_string()).unwrap();
+    let o = volsplat(&["render", "--scene", &p("x.json"), "-q", "-o", &c]);
+    assert!(o.status.success());
+    assert!(
+        stderr(&o).contains("warning") && stderr(&o).contains("`colour_map`"),
+        "{}",
+        stderr(&o)
+    );
+    let mut missing = v.clone();
+    missing.as_object_mut().unwrap().remove("width");
+    std::fs::write(p("m.json"), missing.to_string()).unwrap();
+    let o = volsplat(&["render", "--scene", &p("m.json"), "-q", "-o", &c]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("missing field `width`") && stderr(&o).contains("m.json"),
+        "{}",
+        stderr(&o)
+    );
+}

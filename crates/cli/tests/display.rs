@@ -63,7 +63,9 @@ fn sabella_and_nil_renders_write_images_and_stats() {
             String::from_utf8_lossy(&o.stderr)
         );
         assert!(std::fs::metadata(&out).unwrap().len() > 50);
-        let stats: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let all: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(all["renderer"], renderer);
+        let stats = &all["display"];
         assert_eq!(stats["pixels"], 480);
         assert!(stats["rays"].as_u64().unwrap() > 0);
         if renderer == "nil" && !extra.contains(&"--direct") {

@@ -212,6 +212,155 @@ impl Camera {
     }
 }
 
+/// Which projection a view change switches a camera to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProjectionKind {
+    /// Parallel projection (`parallel_projection: true`).
+    Orthographic,
+    /// Perspective projection (`parallel_projection: false`).
+    Perspective,
+}
+
+/// View changes applied to a camera in VTK's order, the maths behind "orbit the volume":
+/// a projection switch and view angle first, then `Azimuth`, `Elevation`,
+/// `OrthogonalizeViewUp` (when any rotation is given), `Roll`, `Zoom` and `Dolly`. Every field
+/// is optional; an empty `Orbit` leaves a camera exactly as it is. Angles in degrees, factors
+/// unitless.
+///
+/// [`Orbit::reset_camera`] starts from VTK's `ResetCamera` for a volume's bounds (looking down
+/// −z, +y up; orthographic unless the orbit asks for perspective); [`Orbit::apply`] changes a
+/// given camera (a saved view), so a camera file can be orbited like the reset view.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Orbit {
+    /// Degrees about the view-up axis (VTK's `Azimuth`).
+    pub azimuth: Option<f64>,
+    /// Degrees over the focal point (VTK's `Elevation`).
+    pub elevation: Option<f64>,
+    /// Degrees about the view direction (VTK's `Roll`).
+    pub roll: Option<f64>,
+    /// Magnification (VTK's `Zoom`: divides the parallel scale, or the view angle in
+    /// perspective); > 0.
+    pub zoom: Option<f64>,
+    /// Divides the eye's distance to the focal point (VTK's `Dolly`; > 1 moves closer); > 0.
+    pub dolly: Option<f64>,
+    /// Vertical field of view in degrees, in (0, 180) (perspective). On the reset view the eye
+    /// moves so that the volume's bounding sphere still fits, as VTK's `ResetCamera` places it.
+    pub view_angle: Option<f64>,
+    /// Switch to this projection. Switching a perspective camera to orthographic sets its
+    /// parallel scale to the half-height of the perspective view at the focal point.
+    pub projection: Option<ProjectionKind>,
+}
+
+impl Orbit {
+    /// Checks that the given numbers are finite and in range; errors name the field.
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("azimuth", self.azimuth),
+            ("elevation", self.elevation),
+            ("roll", self.roll),
+        ] {
+            if let Some(v) = v
+                && !v.is_finite()
+            {
+                return Err(CoreError::invalid(
+                    name,
+                    v,
+                    "must be a finite number of degrees",
+                ));
+            }
+        }
+        for (name, v) in [("zoom", self.zoom), ("dolly", self.dolly)] {
+            if let Some(v) = v
+                && !(v.is_finite() && v > 0.0)
+            {
+                return Err(CoreError::invalid(name, v, "must be a positive number"));
+            }
+        }
+        if let Some(a) = self.view_angle
+            && !(a > 0.0 && a < 180.0)
+        {
+            return Err(CoreError::invalid(
+                "view_angle",
+                a,
+                "must be in (0, 180) degrees",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Whether the orbit changes nothing.
+    pub fn is_identity(&self) -> bool {
+        *self == Orbit::default()
+    }
+
+    /// VTK's reset camera for the world bounds `lo..hi` (see [`Camera::reset_to_bounds`]), in
+    /// the orbit's projection (orthographic by default), then the orbit.
+    pub fn reset_camera(&self, lo: DVec3, hi: DVec3) -> Result<Camera> {
+        self.validate()?;
+        let perspective = self.projection == Some(ProjectionKind::Perspective);
+        let mut cam = Camera::reset_to_bounds(lo, hi, !perspective);
+        if let Some(angle) = self.view_angle
+            && angle != cam.view_angle
+        {
+            // VTK's ResetCamera places the eye at radius / sin(view_angle / 2).
+            let fp = DVec3::from(cam.focal_point);
+            let dist = cam.parallel_scale / (angle.to_radians() * 0.5).sin();
+            cam.position = (fp + DVec3::Z * dist).to_array();
+            cam.view_angle = angle;
+        }
+        self.rotate_and_scale(&mut cam)?;
+        Ok(cam)
+    }
+
+    /// Applies the orbit to `camera` (a given view): projection switch, view angle, then the
+    /// rotations, zoom and dolly. Errors if a number is out of range or the result is degenerate
+    /// (for example an elevation of ±90° looking along view-up).
+    pub fn apply(&self, camera: &mut Camera) -> Result<()> {
+        self.validate()?;
+        match self.projection {
+            Some(ProjectionKind::Perspective) => camera.parallel_projection = false,
+            Some(ProjectionKind::Orthographic) if !camera.parallel_projection => {
+                let (eye, focal) = (
+                    DVec3::from(camera.position),
+                    DVec3::from(camera.focal_point),
+                );
+                camera.parallel_scale =
+                    (eye - focal).length() * (0.5 * camera.view_angle.to_radians()).tan();
+                camera.parallel_projection = true;
+            }
+            _ => {}
+        }
+        if let Some(angle) = self.view_angle {
+            camera.view_angle = angle;
+        }
+        self.rotate_and_scale(camera)
+    }
+
+    fn rotate_and_scale(&self, cam: &mut Camera) -> Result<()> {
+        if let Some(deg) = self.azimuth {
+            cam.azimuth(deg);
+        }
+        if let Some(deg) = self.elevation {
+            cam.elevation(deg);
+        }
+        if self.azimuth.is_some() || self.elevation.is_some() || self.roll.is_some() {
+            cam.orthogonalize_view_up();
+        }
+        if let Some(deg) = self.roll {
+            cam.roll(deg);
+        }
+        if let Some(zoom) = self.zoom {
+            cam.zoom(zoom);
+        }
+        if let Some(dolly) = self.dolly {
+            cam.dolly(dolly);
+        }
+        cam.validate()
+    }
+}
+
 /// Orthographic projection of a camera onto a `width × height` raster.
 ///
 /// Raster coordinates: x to the right, y down, row 0 at the top, pixel `(x, y)` centred at

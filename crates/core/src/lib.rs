@@ -31,7 +31,9 @@ pub mod scenes;
 pub mod transfer;
 pub mod volume;
 
-pub use camera::{Camera, OrthoProjection, PerspectiveProjection, Projection, ViewFrame};
+pub use camera::{
+    Camera, Orbit, OrthoProjection, PerspectiveProjection, Projection, ProjectionKind, ViewFrame,
+};
 pub use crio::{CrioTables, FrameClassifier, Light, LookupTable, SampleInput, Shading, TableIndex};
 pub use error::{CoreError, Result};
 pub use image::{Image, Rgba, ScalarImage};

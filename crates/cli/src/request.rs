@@ -1,0 +1,398 @@
+//! Translation of `render` / `bench` flags into an engine [`RenderRequest`]: no rendering maths
+//! here, only parsing and mapping.
+//!
+//! Without `--scene`, every flag applies (with its default when not given). With `--scene FILE`
+//! the file's request is the starting point and only the flags given on the command line
+//! override its fields.
+
+use crate::args::*;
+use anyhow::{Context, Result, anyhow, bail};
+use std::collections::HashSet;
+use volsplat::core::{Orbit, ProjectionKind, ScalarType};
+use volsplat::{
+    AntialiasChoice, CameraSpec, ControlChoice, DensityChoice, DisplayChoice, KernelChoice,
+    LightSpec, Mode, OrderChoice, RawLayout, RenderRequest, RendererChoice, Scene, TransferSpec,
+    VisibilityChoice, VolumeSource,
+};
+
+/// The clap ids of the flags given on the command line.
+pub type Given = HashSet<String>;
+
+/// Parses "A,B,C" into three numbers, naming the flag on error.
+pub fn triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        bail!("{flag}: expected three comma-separated values, got `{s}`");
+    }
+    let mut out = Vec::with_capacity(3);
+    for p in parts {
+        out.push(
+            p.parse::<T>()
+                .map_err(|_| anyhow!("{flag}: `{p}` is not a valid number"))?,
+        );
+    }
+    out.try_into()
+        .map_err(|_| anyhow!("{flag}: expected three values"))
+}
+
+fn pair(s: &str, sep: char, flag: &str) -> Result<[f64; 2]> {
+    let (a, b) = s
+        .split_once(sep)
+        .ok_or_else(|| anyhow!("{flag}: expected A{sep}B, got `{s}`"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .map_err(|_| anyhow!("{flag}: `{v}` is not a number"))
+    };
+    Ok([p(a)?, p(b)?])
+}
+
+/// Parses an image size: `WxH` (or `WXH`) or a single `N` for N×N, each in 1..=16384.
+pub fn parse_image_size(s: &str, flag: &str) -> Result<(usize, usize)> {
+    let bad = || anyhow!("{flag}: expected WxH (e.g. 640x480) or N (N×N pixels), got `{s}`");
+    let parse = |v: &str| v.trim().parse::<usize>().map_err(|_| bad());
+    let (width, height) = match s.split_once(['x', 'X']) {
+        Some((w, h)) => (parse(w)?, parse(h)?),
+        None => {
+            let n = parse(s)?;
+            (n, n)
+        }
+    };
+    if width == 0 || height == 0 || width > 16384 || height > 16384 {
+        bail!("{flag}: width and height must be in 1..=16384, got {width}x{height} (`{s}`)");
+    }
+    Ok((width, height))
+}
+
+/// A phantom grid `N`, `X,Y,Z` (or the checkerboard's `X,Y[,SQUARE]`) as numbers.
+pub fn parse_grid(s: &str, flag: &str) -> Result<Vec<usize>> {
+    s.split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<usize>()
+                .map_err(|_| anyhow!("{flag}: `{s}` is not a size (N or X,Y,Z)"))
+        })
+        .collect()
+}
+
+/// The engine's phantom for the CLI's.
+pub fn phantom_kind(k: PhantomKind) -> volsplat::PhantomKind {
+    match k {
+        PhantomKind::Head => volsplat::PhantomKind::Head,
+        PhantomKind::SheppLogan => volsplat::PhantomKind::SheppLogan,
+        PhantomKind::Blobs => volsplat::PhantomKind::Blobs,
+        PhantomKind::MarschnerLobb => volsplat::PhantomKind::MarschnerLobb,
+        PhantomKind::Checkerboard => volsplat::PhantomKind::Checkerboard,
+        PhantomKind::Terrain => volsplat::PhantomKind::Terrain,
+        PhantomKind::Filaments => volsplat::PhantomKind::Filaments,
+    }
+}
+
+/// A kernel name as `--kernel` accepts it (the names and aliases of `Kernel::from_name`).
+pub fn kernel_choice(name: &str) -> Result<KernelChoice> {
+    Ok(match name {
+        "gaussian" => KernelChoice::Gaussian,
+        "point" | "single-point" => KernelChoice::Point,
+        "nearest" | "nearest-neighbour" | "nn" => KernelChoice::Nearest,
+        "tent" | "linear" => KernelChoice::Tent,
+        "bspline" | "b-spline" => KernelChoice::Bspline,
+        "catmull-rom" | "catmullrom" => KernelChoice::CatmullRom,
+        "mitchell" => KernelChoice::Mitchell,
+        "crawfis-max" | "crawfismax" => KernelChoice::CrawfisMax,
+        other => {
+            // The library's message lists the known names.
+            volsplat::core::Kernel::from_name(other).context("--kernel")?;
+            bail!("--kernel: `{other}` is not supported here")
+        }
+    })
+}
+
+/// The volume source of the input flags.
+pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
+    Ok(match &a.input {
+        None => VolumeSource::Phantom {
+            phantom: phantom_kind(a.phantom),
+            grid: a
+                .phantom_size
+                .as_deref()
+                .map(|s| parse_grid(s, "--phantom-size"))
+                .transpose()?,
+        },
+        Some(path) => {
+            if path.is_dir() {
+                bail!(
+                    "{} is a directory (reading folders of DICOM files is not supported yet)",
+                    path.display()
+                );
+            }
+            let raw = match &a.raw_dims {
+                None => None,
+                Some(dims) => {
+                    ScalarType::from_name(&a.raw_type).context("--raw-type")?;
+                    Some(RawLayout {
+                        dims: triple::<usize>(dims, "--raw-dims")?,
+                        scalar_type: a.raw_type.clone(),
+                        spacing: triple::<f64>(&a.raw_spacing, "--raw-spacing")?,
+                        origin: [0.0; 3],
+                        big_endian: a.raw_big_endian,
+                        header_bytes: a.raw_skip,
+                    })
+                }
+            };
+            VolumeSource::File {
+                path: path.clone(),
+                raw,
+            }
+        }
+    })
+}
+
+/// Parses `X,Y,Z[,R,G,B]`: a camera-relative direction towards the light and an optional colour.
+fn parse_light(s: &str) -> Result<LightSpec> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<f64>()
+                .map_err(|_| anyhow!("--light: `{p}` is not a number in `{s}`"))
+        })
+        .collect::<Result<_>>()?;
+    if v.len() != 3 && v.len() != 6 {
+        bail!("--light: expected X,Y,Z or X,Y,Z,R,G,B, got `{s}`");
+    }
+    let color = if v.len() == 6 {
+        [v[3] as f32, v[4] as f32, v[5] as f32]
+    } else {
+        [1.0; 3]
+    };
+    let l = LightSpec {
+        direction: [v[0], v[1], v[2]],
+        color,
+    };
+    l.to_light("--light")
+        .map_err(|e| anyhow!("{e} (in `{s}`)"))?;
+    Ok(l)
+}
+
+/// Builds the request of `render` / `bench` from their flags; `base` is a `--scene` request.
+#[allow(clippy::too_many_arguments)]
+pub fn build_request(
+    input: &InputArgs,
+    view: &ViewArgs,
+    o: &RenderOptions,
+    renderer: RendererArg,
+    display: Option<&crate::display::DisplayArgs>,
+    draw_k: Option<&str>,
+    given: &Given,
+    base: Option<RenderRequest>,
+) -> Result<RenderRequest> {
+    let fresh = base.is_none();
+    let set = |id: &str| fresh || given.contains(id);
+    let mut req = base.unwrap_or_else(|| RenderRequest::new(Scene::default(), 512, 512));
+    let s = &mut req.scene;
+    if ["input", "phantom", "phantom_size", "raw_dims"]
+        .iter()
+        .any(|id| set(id))
+    {
+        s.volume = volume_source(input)?;
+    }
+    // Camera: a file replaces the camera; each view flag given sets its orbit field.
+    if let Some(path) = &view.camera {
+        let (camera, warnings) = volsplat::io::load_camera(path)?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        s.camera = CameraSpec::Explicit {
+            camera,
+            orbit: Orbit::default(),
+        };
+    }
+    let orbit = match &mut s.camera {
+        CameraSpec::Orbit(o) => o,
+        CameraSpec::Explicit { orbit, .. } => orbit,
+    };
+    let flags = [
+        (&mut orbit.azimuth, view.azimuth),
+        (&mut orbit.elevation, view.elevation),
+        (&mut orbit.roll, view.roll),
+        (&mut orbit.zoom, view.zoom),
+        (&mut orbit.dolly, view.dolly),
+        (&mut orbit.view_angle, view.view_angle),
+    ];
+    for (field, flag) in flags {
+        if flag.is_some() {
+            *field = flag;
+        }
+    }
+    if view.perspective {
+        orbit.projection = Some(ProjectionKind::Perspective);
+    } else if view.orthographic {
+        orbit.projection = Some(ProjectionKind::Orthographic);
+    }
+    if let Err(volsplat::core::CoreError::InvalidField {
+        field,
+        value,
+        reason,
+    }) = orbit.validate()
+    {
+        bail!("--{}: {value} {reason}", field.replace('_', "-"));
+    }
+    orbit.validate()?;
+    if let Some(path) = &o.tf {
+        let (tf, warnings) = volsplat::io::load_transfer_function(path)?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        s.transfer_function = TransferSpec::Function(tf);
+    } else if let Some(name) = &o.preset {
+        s.transfer_function = TransferSpec::Preset(name.clone());
+    }
+    if set("light") && (fresh || !o.light.is_empty()) {
+        s.lights = o
+            .light
+            .iter()
+            .map(|l| parse_light(l))
+            .collect::<Result<_>>()?;
+    }
+    if set("no_emission") {
+        s.shading.emission = !o.no_emission;
+    }
+    if set("no_diffuse") {
+        s.shading.diffuse = !o.no_diffuse;
+    }
+    if set("no_specular") {
+        s.shading.specular = !o.no_specular;
+    }
+    if set("surface_enhance") {
+        s.surface_enhance = o
+            .surface_enhance
+            .as_deref()
+            .map(|v| pair(v, ':', "--surface-enhance"))
+            .transpose()?;
+    }
+    if set("depth_cue") {
+        s.depth_cue = o
+            .depth_cue
+            .as_deref()
+            .map(|v| pair(v, ':', "--depth-cue"))
+            .transpose()?;
+    }
+    if set("size") {
+        (req.width, req.height) = parse_image_size(&o.size, "--size")?;
+    }
+    if set("mode") {
+        req.mode = match o.mode {
+            ModeArg::Composite => Mode::Composite,
+            ModeArg::Mip => Mode::Mip,
+            ModeArg::Minip => Mode::Minip,
+            ModeArg::Xray => Mode::Xray,
+        };
+    }
+    if set("renderer") || set("splat_list") {
+        req.renderer = match renderer {
+            RendererArg::Sabella => RendererChoice::Sabella,
+            RendererArg::Nil => RendererChoice::Nil,
+            RendererArg::Splat if o.splat_list => RendererChoice::SplatList,
+            RendererArg::Splat => RendererChoice::Auto,
+        };
+    }
+    let q = &mut req.quality;
+    if set("kernel") {
+        q.kernel = kernel_choice(&o.kernel)?;
+    }
+    if set("antialias") {
+        q.antialias = match o.antialias {
+            AntialiasArg::Swan => AntialiasChoice::Swan,
+            AntialiasArg::SwanPerpendicular => AntialiasChoice::SwanPerpendicular,
+            AntialiasArg::Ewa => AntialiasChoice::Ewa,
+            AntialiasArg::None => AntialiasChoice::None,
+        };
+    }
+    if set("visibility") {
+        q.visibility = match o.visibility {
+            VisibilityArg::Sheet => VisibilityChoice::Sheet,
+            VisibilityArg::Every => VisibilityChoice::Every,
+        };
+    }
+    if set("order") {
+        q.order = match o.order {
+            OrderArg::Ftb => OrderChoice::Ftb,
+            OrderArg::Btf => OrderChoice::Btf,
+        };
+    }
+    if set("opacity_cutoff") {
+        q.opacity_cutoff = o.opacity_cutoff;
+    }
+    if set("subsample") {
+        q.subsample = o.subsample;
+    }
+    if set("list_threshold") {
+        q.list_threshold = o.list_threshold;
+    }
+    if set("threads") {
+        req.threads = o.threads;
+    }
+    if set("draw_k") {
+        req.k_contour = draw_k.map(|c| triple::<f32>(c, "--draw-k")).transpose()?;
+    }
+    if let Some(d) = display {
+        let t = &mut req.display;
+        if set("display") {
+            t.display = match d.display {
+                crate::display::DisplayArg::Linearised => DisplayChoice::Linearised,
+                crate::display::DisplayArg::Slice => DisplayChoice::Slice,
+                crate::display::DisplayArg::Max => DisplayChoice::Max,
+                crate::display::DisplayArg::Search => DisplayChoice::Search,
+                crate::display::DisplayArg::SampleFilter => DisplayChoice::SampleFilter,
+            };
+        }
+        if set("density") {
+            t.density = match d.density.as_str() {
+                "tf" => DensityChoice::Tf,
+                "data" => DensityChoice::Data,
+                other => bail!("--density: expected tf or data, got `{other}`"),
+            };
+        }
+        if set("control_points") {
+            t.control_points = match d.control_points {
+                crate::display::ControlArg::Project => ControlChoice::Project,
+                crate::display::ControlArg::Interpolate => ControlChoice::Interpolate,
+            };
+        }
+        if set("dog_sigma") {
+            let sig: Vec<f64> = d
+                .dog_sigma
+                .split(',')
+                .map(|p| p.trim().parse::<f64>())
+                .collect::<std::result::Result<_, _>>()
+                .context("--dog-sigma: expected S1,S2")?;
+            let [a, b] = sig[..] else {
+                bail!("--dog-sigma: expected two numbers S1,S2");
+            };
+            t.dog_sigma = [a, b];
+        }
+        macro_rules! copy {
+            ($($f:ident),*) => { $( if set(stringify!($f)) { t.$f = d.$f.clone(); } )* };
+        }
+        copy!(
+            direct,
+            tau,
+            screen_sigma,
+            supersample,
+            samples_per_ray,
+            patch_order,
+            tolerance,
+            trigger_width,
+            trigger_steps,
+            gamma_min,
+            slice_depth,
+            slice_width,
+            rho0,
+            closest,
+            dog_gain,
+            max_map_values,
+            grey
+        );
+    }
+    Ok(req)
+}

@@ -1,0 +1,52 @@
+//! # volsplat
+//!
+//! The crate to depend on: one render request in, one picture out, whichever renderer draws it.
+//! Front ends (the `volsplat` command, a Python package, a movie writer, a viewer) build a
+//! [`RenderRequest`] and hand it to a [`Renderer`]; nothing else needs to know which library
+//! does what.
+//!
+//! - [`Scene`]: what is seen. The [`VolumeSource`] (a file, a built-in [`PhantomKind`], or a
+//!   volume in memory), the [`CameraSpec`] (VTK's reset view or a given VTK camera, then an
+//!   [`Orbit`](volsplat_core::Orbit) of azimuth, elevation, roll, zoom, dolly), the
+//!   [`TransferSpec`], lights and shading switches.
+//! - [`RenderRequest`]: how. Image size in pixels, [`Mode`] (composite, MIP, MinIP, X-ray),
+//!   [`RendererChoice`], [`Quality`] of the splatting renderers, [`DisplayOptions`] of the
+//!   Chapter 6 displays, threads. It is one JSON file ([`RenderRequest::load`] /
+//!   [`RenderRequest::save`]) whose camera and transfer function are objects in the formats of
+//!   the README's camera and transfer-function files.
+//! - [`Renderer`]: built once, `render(&request, progress) -> Output`. It keeps the volume,
+//!   classification tables, splat list, display volume and NIL map while the request leaves
+//!   them unchanged, so a frame that only moves the camera costs only the frame.
+//! - [`Output`]: the premultiplied linear RGBA image, the X-ray or MIP values, one [`Stats`]
+//!   (milliseconds), and the camera and transfer function actually used.
+//!
+//! World space, cameras and transfer functions follow VTK (see `docs/architecture.md`):
+//! world units (usually mm), angles in degrees, opacity per `scalar_opacity_unit_distance`.
+//! Output does not depend on the thread count.
+#![deny(missing_docs)]
+
+pub mod error;
+pub mod renderer;
+pub mod request;
+pub mod scene;
+
+pub use error::{EngineError, Result};
+pub use renderer::{
+    DisplayStats, Output, Preview, Progress, Renderer, Stats, UsedRenderer, render_once,
+    renderer_name,
+};
+pub use request::{
+    AntialiasChoice, ControlChoice, DensityChoice, DisplayChoice, DisplayOptions, KernelChoice,
+    Mode, OrderChoice, Quality, RenderRequest, RendererChoice, VisibilityChoice,
+};
+pub use scene::{
+    CameraSpec, LightSpec, PhantomKind, RawLayout, Scene, ShadingTerms, TransferSpec, VolumeSource,
+    make_phantom,
+};
+
+/// The libraries underneath, for callers that need their types (cameras, volumes, images).
+pub use volsplat_core as core;
+/// Readers and writers (volumes, PNG, `.npy`, camera and transfer-function files).
+pub use volsplat_io as io;
+/// Successive-refinement ladders for [`Renderer::render_refined`].
+pub use volsplat_splat::refine::{RefinementStep, default_ladder};

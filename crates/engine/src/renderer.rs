@@ -1,0 +1,688 @@
+//! The reusable [`Renderer`]: one entry point for every renderer, keeping what does not change
+//! between frames.
+
+use crate::error::{EngineError, Result};
+use crate::request::{DensityChoice, Mode, RenderRequest, RendererChoice};
+use crate::scene::{TransferSpec, VolumeSource};
+use serde::Serialize;
+use std::sync::Arc;
+use std::time::Instant;
+use volsplat_core::{
+    AnyVolume, Camera, CrioTables, Image, Light, Projection, ScalarImage, TransferFunction,
+};
+use volsplat_filter::display::{DisplayVolume, build_map, render_display};
+use volsplat_filter::nil::DiscreteNilMap;
+use volsplat_filter::texture::Reconstruction;
+use volsplat_splat::list::{draw_depth_contour, k_distance, render_list_depth};
+use volsplat_splat::refine::{RefinementStep, render_ladder};
+use volsplat_splat::{ExtractSettings, Rendered, SplatList, render_list, render_with_progress};
+
+/// Progress of a render, passed to the caller's callback.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Fraction done, in [0, 1].
+    pub fraction: f64,
+    /// What is being done: `"load"`, `"classify"` (tables, splat list, display volume),
+    /// `"render"` or `"done"`.
+    pub stage: &'static str,
+}
+
+/// Which renderer actually drew an image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UsedRenderer {
+    /// The dense orthographic sheet renderer.
+    Dense,
+    /// The sparse splat list.
+    SplatList,
+    /// Sabella's display.
+    Sabella,
+    /// A Chapter 6 display with NIL maps or direct quadrature.
+    Nil,
+}
+
+/// Timings (milliseconds) and counters of one render: one type for every renderer. Fields a
+/// renderer does not have are zero or absent.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Stats {
+    /// The renderer that drew the image.
+    pub renderer: Option<UsedRenderer>,
+    /// `orthographic` or `perspective`.
+    pub projection: &'static str,
+    /// Loading or building the volume in this call (0 when the renderer kept it).
+    pub load_ms: f64,
+    /// Classification state built in this call: CRIO tables, splat list or display volume and
+    /// NIL map (0 when kept from an earlier frame).
+    pub prepare_ms: f64,
+    /// Frame set-up of the splatting renderer: geometry, footprint table, classifier tables.
+    pub setup_ms: f64,
+    /// Transform + classification and shading (splatting).
+    pub classify_ms: f64,
+    /// Splatting into sheet buffers.
+    pub splat_ms: f64,
+    /// Compositing sheets.
+    pub composite_ms: f64,
+    /// The frame itself (excluding load and prepare).
+    pub render_ms: f64,
+    /// Everything in this call.
+    pub total_ms: f64,
+    /// Lattice points visited.
+    pub voxels: u64,
+    /// Samples splatted.
+    pub splats: u64,
+    /// Samples skipped because their footprint was already opaque.
+    pub splats_terminated: u64,
+    /// Perspective: splats clipped at the near plane.
+    pub splats_clipped: u64,
+    /// Splats widened by anti-aliasing.
+    pub splats_widened: u64,
+    /// Pixel updates (multiply–adds of one RGBA weight).
+    pub pixel_updates: u64,
+    /// Average pixels per splat.
+    pub kernel_cost: f64,
+    /// Kernel name.
+    pub kernel: String,
+    /// Anti-aliasing rule.
+    pub antialias: &'static str,
+    /// Sheets.
+    pub sheets: usize,
+    /// Sheet-normal axis, `i`, `j` or `k`.
+    pub sheet_axis: &'static str,
+    /// World path between sheets along the view.
+    pub sheet_spacing: f64,
+    /// Footprint table entries.
+    pub footprint_entries: usize,
+    /// Footprint sub-pixel phases per axis.
+    pub footprint_phases: usize,
+    /// Footprint half-extent, pixels.
+    pub footprint_half_extent_px: [f64; 2],
+    /// Worker threads.
+    pub threads: usize,
+    /// Image width, pixels.
+    pub width: usize,
+    /// Image height, pixels.
+    pub height: usize,
+    /// Splat list: splats kept.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub list_splats: Option<usize>,
+    /// Splat list: bytes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub list_bytes: Option<usize>,
+    /// Splat list: extraction time (whenever it was built).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub list_build_ms: Option<f64>,
+    /// Chapter 6 displays: per-stage timings and counters.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub display: Option<DisplayStats>,
+}
+
+/// Timings (milliseconds) and counters of a Chapter 6 display.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct DisplayStats {
+    /// NIL map construction (whenever it was built; 0 without a map).
+    pub map_build_ms: f64,
+    /// Trigger placement.
+    pub trigger_ms: f64,
+    /// Patch selection.
+    pub hierarchy_ms: f64,
+    /// NIL control points.
+    pub control_points_ms: f64,
+    /// Evaluation.
+    pub evaluation_ms: f64,
+    /// Ray search.
+    pub search_ms: f64,
+    /// Ray marching.
+    pub march_ms: f64,
+    /// Pixels.
+    pub pixels: u64,
+    /// Rays that hit the volume.
+    pub rays: u64,
+    /// Trigger points.
+    pub triggers: u64,
+    /// NIL patches used.
+    pub patches: u64,
+    /// NIL evaluations that fell back to point sampling.
+    pub fallbacks: u64,
+}
+
+/// The result of a render.
+#[derive(Debug, Clone)]
+pub struct Output {
+    /// Premultiplied linear RGBA, row 0 at the top. MIP/MinIP: the projected value through the
+    /// transfer function; X-ray: grey scaled so the brightest pixel is 1.
+    pub image: Image,
+    /// X-ray line integrals (data units × world units) or MIP/MinIP values (data units; NaN
+    /// where no sample covers the pixel); `None` in composite mode.
+    pub values: Option<ScalarImage>,
+    /// Timings and counters.
+    pub stats: Stats,
+    /// The camera actually used (world units).
+    pub camera: Camera,
+    /// The transfer function actually used (data units).
+    pub transfer_function: TransferFunction,
+    /// Notes for the user (for example an option the chosen renderer does not use).
+    pub warnings: Vec<String>,
+}
+
+impl Output {
+    /// Whether the output's float values are X-ray line integrals.
+    pub fn is_xray(&self, request: &RenderRequest) -> bool {
+        request.mode == Mode::Xray && self.values.is_some()
+    }
+}
+
+/// A render of one rung of the successive-refinement ladder (Westover §4.2.3).
+pub struct Preview<'a> {
+    /// Which rung, 0 first.
+    pub index: usize,
+    /// Subsampling stride of this rung.
+    pub subsample: usize,
+    /// Its image and values.
+    pub rendered: &'a Rendered,
+}
+
+/// The Chapter 6 state kept between frames: densities, NIL map, and the map's build time (ms).
+type DisplayState = (DisplayVolume, Option<DiscreteNilMap>, f64);
+
+/// A preview callback of [`Renderer::render_refined`].
+type OnPreview<'a> = &'a mut (dyn FnMut(&Preview) -> Result<bool> + Send);
+
+struct Cached<K, V> {
+    key: K,
+    value: V,
+}
+
+fn cached<K: PartialEq, V>(
+    slot: &mut Option<Cached<K, V>>,
+    key: K,
+    build: impl FnOnce() -> Result<V>,
+) -> Result<(&V, bool)> {
+    let hit = slot.as_ref().is_some_and(|c| c.key == key);
+    if !hit {
+        *slot = None;
+        *slot = Some(Cached {
+            key,
+            value: build()?,
+        });
+    }
+    Ok((&slot.as_ref().expect("just filled").value, !hit))
+}
+
+/// Renders [`RenderRequest`]s, keeping between calls what the next frame can reuse: the loaded
+/// volume (per volume source), the classification tables (per transfer function, lights and
+/// shading), the splat list (per tables, threshold and subsampling), the Chapter 6 display
+/// volume and NIL map, and the thread pool. A second frame that changes only the camera costs
+/// only the frame itself.
+///
+/// ```
+/// use volsplat::{PhantomKind, RenderRequest, Renderer, Scene, VolumeSource};
+/// use volsplat::core::Orbit;
+///
+/// let mut scene = Scene::default();
+/// scene.volume = VolumeSource::Phantom { phantom: PhantomKind::Blobs, grid: Some(vec![32]) };
+/// scene.camera = volsplat::CameraSpec::Orbit(Orbit { azimuth: Some(30.0), ..Orbit::default() });
+/// let request = RenderRequest::new(scene, 64, 48);
+/// let mut renderer = Renderer::new();
+/// let out = renderer.render(&request, &mut |_| true).unwrap();
+/// assert_eq!((out.image.width(), out.image.height()), (64, 48));
+/// assert!(out.image.pixels().iter().any(|p| p[3] > 0.1)); // the blobs are visible
+/// assert_eq!(out.image.get(0, 0), [0.0; 4]); // the corner is not
+/// println!("{}", serde_json::to_string(&out.stats).unwrap()); // timings in ms
+/// ```
+#[derive(Default)]
+pub struct Renderer {
+    volume: Option<Cached<VolumeSource, Arc<AnyVolume>>>,
+    tables: Option<Cached<String, Arc<CrioTables>>>,
+    list: Option<Cached<(String, u32, usize), Arc<SplatList>>>,
+    display: Option<Cached<String, Arc<DisplayState>>>,
+    pool: Option<Cached<Option<usize>, rayon::ThreadPool>>,
+}
+
+impl Renderer {
+    /// A renderer with nothing cached.
+    pub fn new() -> Self {
+        Renderer::default()
+    }
+
+    /// The volume of `source`, loaded once and kept while the source stays the same.
+    pub fn volume(&mut self, source: &VolumeSource) -> Result<Arc<AnyVolume>> {
+        Ok(Arc::clone(
+            cached(&mut self.volume, source.clone(), || source.load())?.0,
+        ))
+    }
+
+    /// The camera `request` resolves to (loads the volume for its bounds if needed).
+    pub fn camera(&mut self, request: &RenderRequest) -> Result<Camera> {
+        let vol = self.volume(&request.scene.volume)?;
+        request.scene.camera.resolve(vol.grid().bounds_world())
+    }
+
+    /// The transfer function `request` resolves to for its volume and mode.
+    pub fn transfer_function(&mut self, request: &RenderRequest) -> Result<TransferFunction> {
+        let vol = self.volume(&request.scene.volume)?;
+        resolve_tf(request, &vol)
+    }
+
+    /// Renders `request`. `progress` is called between stages and, for the dense renderer,
+    /// after each batch of sheets; returning `false` cancels with [`EngineError::Cancelled`].
+    pub fn render(
+        &mut self,
+        request: &RenderRequest,
+        progress: &mut (dyn FnMut(&Progress) -> bool + Send),
+    ) -> Result<Output> {
+        self.render_inner(request, progress, None)
+    }
+
+    /// Like [`Renderer::render`] with the dense renderer's successive refinement (Westover
+    /// §4.2.3): `ladder` rungs are rendered in order and all but the last are passed to
+    /// `on_preview` (return `false` to stop). Orthographic dense rendering only.
+    pub fn render_refined(
+        &mut self,
+        request: &RenderRequest,
+        ladder: &[RefinementStep],
+        on_preview: &mut (dyn FnMut(&Preview) -> Result<bool> + Send),
+    ) -> Result<Output> {
+        self.render_inner(request, &mut |_| true, Some((ladder, on_preview)))
+    }
+
+    fn render_inner(
+        &mut self,
+        request: &RenderRequest,
+        progress: &mut (dyn FnMut(&Progress) -> bool + Send),
+        ladder: Option<(&[RefinementStep], OnPreview<'_>)>,
+    ) -> Result<Output> {
+        let t0 = Instant::now();
+        request.validate()?;
+        report(progress, 0.0, "load")?;
+        let vol_was_cached = self
+            .volume
+            .as_ref()
+            .is_some_and(|c| c.key == request.scene.volume);
+        let vol = self.volume(&request.scene.volume)?;
+        let load_ms = if vol_was_cached { 0.0 } else { ms(t0) };
+        let camera = request.scene.camera.resolve(vol.grid().bounds_world())?;
+        let tf = resolve_tf(request, &vol)?;
+        let threads = request.threads;
+        cached(&mut self.pool, threads, || {
+            let mut b = rayon::ThreadPoolBuilder::new();
+            if let Some(n) = threads {
+                b = b.num_threads(n);
+            }
+            b.build().map_err(|e| EngineError::Threads {
+                threads: threads.unwrap_or(0),
+                message: e.to_string(),
+            })
+        })?;
+        let pool = &self.pool.as_ref().expect("just built").value;
+        let mut warnings = Vec::new();
+        let t_prep = Instant::now();
+        report(progress, 0.05, "classify")?;
+        let renderer = match request.renderer {
+            RendererChoice::Auto if camera.parallel_projection => UsedRenderer::Dense,
+            RendererChoice::Auto | RendererChoice::SplatList => UsedRenderer::SplatList,
+            RendererChoice::Splat => {
+                if !camera.parallel_projection {
+                    return Err(EngineError::request(
+                        "renderer",
+                        "the dense `splat` renderer draws orthographic views only; use `auto` \
+                         or `splat_list` for perspective",
+                    ));
+                }
+                UsedRenderer::Dense
+            }
+            RendererChoice::Sabella => UsedRenderer::Sabella,
+            RendererChoice::Nil => UsedRenderer::Nil,
+        };
+        if ladder.is_some() && renderer != UsedRenderer::Dense {
+            return Err(EngineError::request(
+                "renderer",
+                "successive refinement works with the dense orthographic renderer only",
+            ));
+        }
+        if request.k_contour.is_some() && renderer != UsedRenderer::SplatList {
+            return Err(EngineError::request(
+                "k_contour",
+                "the line at distance k needs the splat-list renderer (perspective or splat_list)",
+            ));
+        }
+        let projection = if camera.parallel_projection {
+            "orthographic"
+        } else {
+            "perspective"
+        };
+        let (w, h) = (request.width, request.height);
+        let mut stats;
+        let (image, values) = match renderer {
+            UsedRenderer::Sabella | UsedRenderer::Nil => {
+                let d = &request.display;
+                let kind = d.kind(request.renderer);
+                let key = serde_json::json!({
+                    "volume": format!("{:p}", Arc::as_ptr(&vol)),
+                    "tf": &tf, "density": d.density, "map": d.needs_map(kind).then_some(d.patch_order),
+                    "max": d.max_map_values,
+                })
+                .to_string();
+                let (dv, fresh) = cached(&mut self.display, key, || {
+                    let dv = display_volume(&vol, &tf, d.density)?;
+                    let tm = Instant::now();
+                    let map = if d.needs_map(kind) {
+                        Some(build_map(&dv, d.patch_order, None, d.max_map_values)?)
+                    } else {
+                        None
+                    };
+                    Ok(Arc::new((dv, map, ms(tm))))
+                })?;
+                let dv = Arc::clone(dv);
+                let prepare_ms = if fresh { ms(t_prep) } else { 0.0 };
+                report(progress, 0.2, "render")?;
+                let t_r = Instant::now();
+                let settings = d.settings(kind);
+                let img = pool
+                    .install(|| render_display(&dv.0, dv.1.as_ref(), &camera, w, h, &settings))?;
+                let s = img.stats;
+                stats = Stats {
+                    prepare_ms,
+                    render_ms: ms(t_r),
+                    threads: pool.current_num_threads(),
+                    display: Some(DisplayStats {
+                        map_build_ms: dv.2,
+                        trigger_ms: s.trigger_s * 1e3,
+                        hierarchy_ms: s.hierarchy_s * 1e3,
+                        control_points_ms: s.control_s * 1e3,
+                        evaluation_ms: s.evaluation_s * 1e3,
+                        search_ms: s.search_s * 1e3,
+                        march_ms: s.march_s * 1e3,
+                        pixels: s.pixels,
+                        rays: s.rays,
+                        triggers: s.triggers,
+                        patches: s.patches,
+                        fallbacks: s.fallbacks,
+                    }),
+                    ..Stats::default()
+                };
+                (img.to_image(d.grey), None)
+            }
+            UsedRenderer::Dense | UsedRenderer::SplatList => {
+                let (tables, fresh_tables) =
+                    cached(&mut self.tables, tables_key(request, &tf), || {
+                        Ok(Arc::new(build_tables(request, &tf)?))
+                    })?;
+                let tables = Arc::clone(tables);
+                let settings = request.splat_settings();
+                let mut fresh = fresh_tables;
+                let rendered = if renderer == UsedRenderer::SplatList {
+                    let q = &request.quality;
+                    let key = (
+                        tables_key(request, &tf) + &format!("{:p}", Arc::as_ptr(&vol)),
+                        q.list_threshold.to_bits(),
+                        q.subsample,
+                    );
+                    let (list, fresh_list) = cached(&mut self.list, key, || {
+                        pool.install(|| {
+                            Ok(Arc::new(SplatList::build_any(
+                                &vol,
+                                &tables,
+                                &ExtractSettings {
+                                    threshold: q.list_threshold,
+                                    subsample: q.subsample,
+                                },
+                            )?))
+                        })
+                    })?;
+                    let list = Arc::clone(list);
+                    fresh |= fresh_list;
+                    let prepare_ms = if fresh { ms(t_prep) } else { 0.0 };
+                    report(progress, 0.2, "render")?;
+                    let mut out =
+                        pool.install(|| render_list(&list, &camera, &tables, &settings))?;
+                    if let Some(color) = request.k_contour {
+                        let proj = Projection::new(&camera, w, h)?;
+                        match k_distance(vol.grid(), q.subsample, &proj) {
+                            Some(k) => {
+                                let depth = pool.install(|| {
+                                    render_list_depth(&list, &camera, &tables, &settings)
+                                })?;
+                                draw_depth_contour(&mut out.image, &depth, k as f32, color)?;
+                                warnings
+                                    .push(format!("k = s·D/p = {k:.4} world units from the eye"));
+                            }
+                            None => warnings.push(format!(
+                                "k_contour: orthographic view, no distance k (every voxel covers \
+                                 {:.3} pixels)",
+                                vol.grid()
+                                    .spacing
+                                    .iter()
+                                    .fold(f64::INFINITY, |m, &v| m.min(v))
+                                    / proj.pixel_size_at(1.0)
+                            )),
+                        }
+                    }
+                    stats = Stats {
+                        prepare_ms,
+                        list_splats: Some(list.len()),
+                        list_bytes: Some(list.bytes()),
+                        list_build_ms: Some(list.build_ms()),
+                        ..Stats::default()
+                    };
+                    out
+                } else {
+                    let prepare_ms = if fresh { ms(t_prep) } else { 0.0 };
+                    report(progress, 0.2, "render")?;
+                    stats = Stats {
+                        prepare_ms,
+                        ..Stats::default()
+                    };
+                    match ladder {
+                        Some((steps, on_preview)) => {
+                            let last = steps.len().saturating_sub(1);
+                            let mut err = None;
+                            let out = pool.install(|| {
+                                volsplat_core::with_volume!(&*vol, v => render_ladder(
+                                    v, &camera, &tables, &settings, steps,
+                                    &mut |n, r| {
+                                        if n >= last {
+                                            return true;
+                                        }
+                                        let p = Preview { index: n, subsample: steps[n].subsample, rendered: r };
+                                        match on_preview(&p) {
+                                            Ok(go) => go,
+                                            Err(e) => {
+                                                err = Some(e);
+                                                false
+                                            }
+                                        }
+                                    }
+                                ))
+                            });
+                            if let Some(e) = err {
+                                return Err(e);
+                            }
+                            out?
+                        }
+                        None => {
+                            let mut cancelled = false;
+                            let out = pool.install(|| {
+                                volsplat_core::with_volume!(&*vol, v => render_with_progress(
+                                    v, &camera, &tables, &settings,
+                                    &mut |p| {
+                                        let f = 0.2 + 0.8 * p.sheets_done as f64
+                                            / p.sheets_total.max(1) as f64;
+                                        let go = progress(&Progress { fraction: f, stage: "render" });
+                                        cancelled |= !go;
+                                        go
+                                    }
+                                ))
+                            });
+                            if cancelled {
+                                return Err(EngineError::Cancelled);
+                            }
+                            out?
+                        }
+                    }
+                };
+                let s = &rendered.stats;
+                stats.render_ms = s.total_ms;
+                stats.setup_ms = s.setup_ms;
+                stats.classify_ms = s.classify_ms;
+                stats.splat_ms = s.splat_ms;
+                stats.composite_ms = s.composite_ms;
+                stats.voxels = s.voxels;
+                stats.splats = s.splats;
+                stats.splats_terminated = s.splats_terminated;
+                stats.splats_clipped = s.splats_clipped;
+                stats.splats_widened = s.splats_widened;
+                stats.pixel_updates = s.pixel_updates;
+                stats.kernel_cost = s.kernel_cost();
+                stats.kernel = settings.kernel.name();
+                stats.antialias = settings.antialias.name();
+                stats.sheets = s.sheets;
+                stats.sheet_axis = ["i", "j", "k"].get(s.sheet_axis).copied().unwrap_or("?");
+                stats.sheet_spacing = s.sheet_spacing;
+                stats.footprint_entries = s.footprint_entries;
+                stats.footprint_phases = s.footprint_phases;
+                stats.footprint_half_extent_px = s.footprint_half_extent;
+                stats.threads = s.threads;
+                (rendered.image, rendered.values)
+            }
+        };
+        let bad = match (&values, request.mode) {
+            (Some(v), Mode::Xray) => v.values().iter().filter(|x| !x.is_finite()).count(),
+            _ => image
+                .pixels()
+                .iter()
+                .filter(|p| p.iter().any(|c| !c.is_finite()))
+                .count(),
+        };
+        if bad > 0 {
+            return Err(EngineError::NonFinite {
+                stage: renderer_name(renderer).into(),
+                count: bad,
+            });
+        }
+        stats.renderer = Some(renderer);
+        stats.projection = projection;
+        stats.load_ms = load_ms;
+        stats.width = w;
+        stats.height = h;
+        stats.total_ms = ms(t0);
+        report(progress, 1.0, "done")?;
+        Ok(Output {
+            image,
+            values,
+            stats,
+            camera,
+            transfer_function: tf,
+            warnings,
+        })
+    }
+}
+
+/// Calls the progress callback; `false` from it is [`EngineError::Cancelled`].
+fn report(
+    progress: &mut (dyn FnMut(&Progress) -> bool + Send),
+    fraction: f64,
+    stage: &'static str,
+) -> Result<()> {
+    if progress(&Progress { fraction, stage }) {
+        Ok(())
+    } else {
+        Err(EngineError::Cancelled)
+    }
+}
+
+/// The renderer's name in messages.
+pub fn renderer_name(r: UsedRenderer) -> &'static str {
+    match r {
+        UsedRenderer::Dense => "splatting renderer",
+        UsedRenderer::SplatList => "splat-list renderer",
+        UsedRenderer::Sabella => "Sabella display",
+        UsedRenderer::Nil => "NIL renderer",
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// The transfer function for `request` on `vol` (see [`TransferSpec::Auto`]).
+fn resolve_tf(request: &RenderRequest, vol: &AnyVolume) -> Result<TransferFunction> {
+    let range = vol.value_range();
+    let scene = match &request.scene.volume {
+        VolumeSource::Phantom { phantom, .. } => phantom.scene_transfer_function(),
+        _ => None,
+    };
+    let mut tf = match &request.scene.transfer_function {
+        TransferSpec::Function(tf) => tf.clone(),
+        TransferSpec::Preset(name) => TransferFunction::preset(name, range)?,
+        TransferSpec::Auto => match scene {
+            Some(tf) => tf,
+            None if matches!(request.mode, Mode::Mip | Mode::Minip) => {
+                // Projections without a transfer function: an opaque grey window over the data.
+                TransferFunction::ramp(range.0, range.1, 1.0)
+            }
+            None if request.scene.volume.is_demo_head() => {
+                TransferFunction::preset("ct-skin", range)?
+            }
+            None => TransferFunction::preset("ramp", range)?,
+        },
+    };
+    tf.validate()?;
+    Ok(tf)
+}
+
+/// The key of the classification tables: everything they are built from.
+fn tables_key(request: &RenderRequest, tf: &TransferFunction) -> String {
+    let s = &request.scene;
+    serde_json::json!({
+        "tf": tf, "lights": s.lights, "shading": s.shading,
+        "surface": s.surface_enhance, "depth": s.depth_cue,
+    })
+    .to_string()
+}
+
+fn build_tables(request: &RenderRequest, tf: &TransferFunction) -> Result<CrioTables> {
+    let s = &request.scene;
+    let lights = if s.lights.is_empty() {
+        vec![Light::headlight()]
+    } else {
+        s.lights
+            .iter()
+            .enumerate()
+            .map(|(n, l)| l.to_light(&format!("scene.lights[{n}]")))
+            .collect::<Result<Vec<_>>>()?
+    };
+    let mut tables =
+        CrioTables::from_transfer_function_lit(tf, volsplat_core::crio::DEFAULT_TABLE_LEN, lights)?;
+    tables.shading.emission &= s.shading.emission;
+    tables.shading.diffuse &= s.shading.diffuse;
+    tables.shading.specular &= s.shading.specular;
+    if let Some([lo, hi]) = s.surface_enhance {
+        tables = tables.with_surface_enhancement(lo, hi)?;
+    }
+    if let Some([near, far]) = s.depth_cue {
+        tables = tables.with_depth_cue(near, far)?;
+    }
+    Ok(tables)
+}
+
+/// Densities of a volume for the Chapter 6 displays: the transfer function's scalar opacity
+/// or the data normalised to its range.
+fn display_volume(
+    vol: &AnyVolume,
+    tf: &TransferFunction,
+    density: DensityChoice,
+) -> Result<DisplayVolume> {
+    let f = vol.to_f32();
+    let (lo, hi) = vol.value_range();
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let d: Vec<f64> = match density {
+        DensityChoice::Tf => f.data().iter().map(|&v| tf.opacity_at(v as f64)).collect(),
+        DensityChoice::Data => f.data().iter().map(|&v| (v as f64 - lo) / span).collect(),
+    };
+    Ok(DisplayVolume::new(f.grid(), &d, Reconstruction::Trilinear)?)
+}
+
+/// Renders without a [`Renderer`] (nothing kept): the one-shot convenience.
+pub fn render_once(request: &RenderRequest) -> Result<Output> {
+    Renderer::new().render(request, &mut |_| true)
+}

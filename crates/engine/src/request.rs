@@ -1,0 +1,556 @@
+//! How it is rendered: image size, ray function, renderer, quality and threads, around a
+//! [`Scene`]. A [`RenderRequest`] is one JSON file ([`RenderRequest::load`], [`RenderRequest::save`]).
+
+use crate::error::{EngineError, Result};
+use crate::scene::Scene;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use volsplat_filter::display::{
+    ControlPoints, DisplayKind, DisplaySettings, Evaluator, NilDisplaySettings, SearchRule,
+};
+use volsplat_splat::{Antialias, Order, RenderMode, RenderSettings, Visibility};
+
+/// What is computed along each ray.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Emission–absorption compositing of classified, shaded samples.
+    #[default]
+    Composite,
+    /// Maximum intensity projection (data units).
+    Mip,
+    /// Minimum intensity projection (data units).
+    Minip,
+    /// The line integral `∫ρ ds` (data units × world units).
+    Xray,
+}
+
+impl Mode {
+    /// The splatting renderer's mode.
+    pub fn splat_mode(self) -> RenderMode {
+        match self {
+            Mode::Composite => RenderMode::Composite,
+            Mode::Mip => RenderMode::Mip,
+            Mode::Minip => RenderMode::Minip,
+            Mode::Xray => RenderMode::Xray,
+        }
+    }
+}
+
+/// Which renderer draws the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RendererChoice {
+    /// Splatting: the dense sheet renderer for orthographic views, the sparse splat list for
+    /// perspective ones.
+    #[default]
+    Auto,
+    /// The dense orthographic sheet-buffer renderer (Westover 1991).
+    Splat,
+    /// The sparse splat list (Swan et al. 1997 §5), orthographic or perspective; the list is
+    /// kept by the [`crate::Renderer`] across frames.
+    SplatList,
+    /// Sabella's density-emitter display (Buchanan eq. 3.1).
+    Sabella,
+    /// One of Buchanan's Chapter 6 displays evaluated with NIL maps or direct quadrature
+    /// ([`DisplayOptions`]).
+    Nil,
+}
+
+/// Reconstruction kernels by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum KernelChoice {
+    /// Westover's Gaussian, σ = 0.6 voxel, radius 2.
+    #[default]
+    Gaussian,
+    /// A single point at the nearest pixel.
+    Point,
+    /// The voxel's box (nearest neighbour).
+    Nearest,
+    /// Trilinear (tent).
+    Tent,
+    /// Cubic B-spline (Mitchell–Netravali B = 1, C = 0).
+    Bspline,
+    /// Catmull–Rom (B = 0, C = ½); has negative lobes.
+    CatmullRom,
+    /// Mitchell–Netravali B = C = ⅓.
+    Mitchell,
+    /// Crawfis and Max's minimal-ripple radial cubic (decision 0005).
+    CrawfisMax,
+}
+
+impl KernelChoice {
+    /// The core kernel.
+    pub fn kernel(self) -> volsplat_core::Kernel {
+        let name = match self {
+            KernelChoice::Gaussian => "gaussian",
+            KernelChoice::Point => "point",
+            KernelChoice::Nearest => "nearest",
+            KernelChoice::Tent => "tent",
+            KernelChoice::Bspline => "bspline",
+            KernelChoice::CatmullRom => "catmull-rom",
+            KernelChoice::Mitchell => "mitchell",
+            KernelChoice::CrawfisMax => "crawfis-max",
+        };
+        // Every name above is one that `Kernel::from_name` knows (tested).
+        volsplat_core::Kernel::from_name(name).unwrap_or_default()
+    }
+}
+
+/// Anti-aliasing of voxels smaller than a pixel (Swan et al. 1997; [`Antialias`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AntialiasChoice {
+    /// Swan et al. eq. 4 and 8.
+    #[default]
+    Swan,
+    /// Swan et al. §4.6, per principal axis.
+    SwanPerpendicular,
+    /// Zwicker et al.'s EWA screen filter.
+    Ewa,
+    /// None: the true projection whatever its size.
+    None,
+}
+
+/// Sheet buffers or composite-every-sample (Westover §3.8.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum VisibilityChoice {
+    /// Sheet buffers (Westover 1990/91).
+    #[default]
+    Sheet,
+    /// Composite every sample (Westover 1989; bleeds).
+    Every,
+}
+
+/// Traversal order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OrderChoice {
+    /// Front to back (allows early termination).
+    #[default]
+    Ftb,
+    /// Back to front.
+    Btf,
+}
+
+/// Quality settings of the splatting renderers.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Quality {
+    /// Reconstruction kernel (the splat list takes `gaussian` or `crawfis-max`).
+    pub kernel: KernelChoice,
+    /// Anti-aliasing rule.
+    pub antialias: AntialiasChoice,
+    /// Sheet buffers or composite-every-sample (dense renderer).
+    pub visibility: VisibilityChoice,
+    /// Traversal order (dense renderer).
+    pub order: OrderChoice,
+    /// Front-to-back early termination: pixels at this opacity take no more splats (> 0; ≥ 1
+    /// disables it). The default `1 − 2⁻²⁰` changes no pixel by more than 1e-6.
+    pub opacity_cutoff: f32,
+    /// Splat every N-th voxel per axis (1..=64).
+    pub subsample: usize,
+    /// Splat list: keep voxels whose opacity exceeds this, in [0, 1).
+    pub list_threshold: f32,
+}
+
+impl Default for Quality {
+    fn default() -> Self {
+        Quality {
+            kernel: KernelChoice::Gaussian,
+            antialias: AntialiasChoice::Swan,
+            visibility: VisibilityChoice::Sheet,
+            order: OrderChoice::Ftb,
+            opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
+            subsample: 1,
+            list_threshold: 0.0,
+        }
+    }
+}
+
+/// The Chapter 6 display drawn by [`RendererChoice::Nil`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DisplayChoice {
+    /// Linearised display, eq 6.1.
+    #[default]
+    Linearised,
+    /// Gaussian slice (§6-2).
+    Slice,
+    /// Maximum density along the ray (§6-3).
+    Max,
+    /// The density found by the ray search (Plate 6.10).
+    Search,
+    /// Search, then a difference of Gaussians there (§6-3).
+    SampleFilter,
+}
+
+/// Density of the Chapter 6 displays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DensityChoice {
+    /// The transfer function's scalar opacity.
+    #[default]
+    Tf,
+    /// The data value normalised to its range (the thesis's [0, 1] densities).
+    Data,
+}
+
+/// NIL control-point rule (decision 0007).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ControlChoice {
+    /// L² projection of the filter onto each patch.
+    #[default]
+    Project,
+    /// Filter values at the Lagrange nodes (the thesis).
+    Interpolate,
+}
+
+/// Options of Buchanan's Chapter 6 displays (see the README's "Volume display as filtering").
+/// Lengths in "unit lengths" are fractions of the volume's largest extent.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct DisplayOptions {
+    /// The display of `--renderer nil`.
+    pub display: DisplayChoice,
+    /// Direct quadrature instead of NIL maps.
+    pub direct: bool,
+    /// What the density is.
+    pub density: DensityChoice,
+    /// Attenuation τ per unit length.
+    pub tau: f64,
+    /// Screen Gaussian standard deviation, pixels.
+    pub screen_sigma: f64,
+    /// Rays per pixel per axis (Sabella, max).
+    pub supersample: usize,
+    /// Samples per ray (Sabella, max, search).
+    pub samples_per_ray: usize,
+    /// NIL patch order (1..=4).
+    pub patch_order: usize,
+    /// NIL subdivision tolerance (triggers per cell).
+    pub tolerance: usize,
+    /// NIL control points.
+    pub control_points: ControlChoice,
+    /// NIL triggers per axis across the ray (default: 1 for the linearised display, 3 for
+    /// slices and sample-filter).
+    pub trigger_width: Option<usize>,
+    /// NIL trigger slices per unit length.
+    pub trigger_steps: f64,
+    /// Lowest NIL level γ_min.
+    pub gamma_min: i32,
+    /// Slice depth in [0, 1].
+    pub slice_depth: f64,
+    /// Slice standard deviation, unit lengths.
+    pub slice_width: f64,
+    /// Search density ρ₀.
+    pub rho0: f64,
+    /// The sample closest to ρ₀ instead of the first crossing.
+    pub closest: bool,
+    /// DoG standard deviations, unit lengths.
+    pub dog_sigma: [f64; 2],
+    /// DoG display gain.
+    pub dog_gain: f64,
+    /// Largest NIL map (stored f64 values).
+    pub max_map_values: usize,
+    /// Grey output for Sabella (default: red = intensity, green = maximum density).
+    pub grey: bool,
+}
+
+impl Default for DisplayOptions {
+    fn default() -> Self {
+        DisplayOptions {
+            display: DisplayChoice::Linearised,
+            direct: false,
+            density: DensityChoice::Tf,
+            tau: 3.0,
+            screen_sigma: 0.5,
+            supersample: 4,
+            samples_per_ray: 256,
+            patch_order: 2,
+            tolerance: 2,
+            control_points: ControlChoice::Project,
+            trigger_width: None,
+            trigger_steps: 32.0,
+            gamma_min: -1,
+            slice_depth: 0.5,
+            slice_width: 0.1,
+            rho0: 0.18,
+            closest: false,
+            dog_sigma: [0.01, 0.02],
+            dog_gain: 8.0,
+            max_map_values: 1 << 27,
+            grey: false,
+        }
+    }
+}
+
+impl DisplayOptions {
+    /// The display kind for `renderer` (Sabella or the chosen NIL display).
+    pub fn kind(&self, renderer: RendererChoice) -> DisplayKind {
+        match (renderer, self.display) {
+            (RendererChoice::Sabella, _) => DisplayKind::Sabella,
+            (_, DisplayChoice::Linearised) => DisplayKind::Linearised,
+            (_, DisplayChoice::Slice) => DisplayKind::Slice,
+            (_, DisplayChoice::Max) => DisplayKind::Maximum,
+            (_, DisplayChoice::Search) => DisplayKind::Search,
+            (_, DisplayChoice::SampleFilter) => DisplayKind::SampleFilter,
+        }
+    }
+
+    /// The filter library's settings for `kind`.
+    pub fn settings(&self, kind: DisplayKind) -> DisplaySettings {
+        DisplaySettings {
+            kind,
+            evaluator: if self.direct {
+                Evaluator::Direct
+            } else {
+                Evaluator::Nil
+            },
+            tau: self.tau,
+            screen_sigma_px: self.screen_sigma,
+            supersample: self.supersample,
+            samples_per_ray: self.samples_per_ray,
+            slice_depth: self.slice_depth,
+            slice_width: self.slice_width,
+            rho0: self.rho0,
+            search: if self.closest {
+                SearchRule::Closest
+            } else {
+                SearchRule::FirstCrossing
+            },
+            dog_sigma: self.dog_sigma,
+            dog_gain: self.dog_gain,
+            nil: NilDisplaySettings {
+                control: match self.control_points {
+                    ControlChoice::Project => ControlPoints::Project,
+                    ControlChoice::Interpolate => ControlPoints::Interpolate,
+                },
+                tolerance: self.tolerance,
+                trigger_width: self.trigger_width.unwrap_or(match kind {
+                    DisplayKind::Slice | DisplayKind::SampleFilter => 3,
+                    _ => 1,
+                }),
+                trigger_steps: self.trigger_steps,
+                gamma_min: self.gamma_min,
+                ..Default::default()
+            },
+            transfer: None,
+            ..Default::default()
+        }
+    }
+
+    /// Whether the display needs a NIL map.
+    pub fn needs_map(&self, kind: DisplayKind) -> bool {
+        !self.direct
+            && matches!(
+                kind,
+                DisplayKind::Linearised | DisplayKind::Slice | DisplayKind::SampleFilter
+            )
+    }
+}
+
+/// One render: a scene, an image size, a ray function, a renderer and its settings.
+///
+/// In a scene file `scene` (with its `volume`), `width` and `height` are required; every other
+/// field has the default documented on its type.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RenderRequest {
+    /// What is seen.
+    pub scene: Scene,
+    /// Image width, pixels (1..=16384).
+    pub width: usize,
+    /// Image height, pixels (1..=16384).
+    pub height: usize,
+    /// Ray function.
+    #[serde(default)]
+    pub mode: Mode,
+    /// Renderer.
+    #[serde(default)]
+    pub renderer: RendererChoice,
+    /// Splatting quality.
+    #[serde(default)]
+    pub quality: Quality,
+    /// Chapter 6 display options (Sabella and NIL renderers).
+    #[serde(default)]
+    pub display: DisplayOptions,
+    /// Splat list renderer only: draw the line at distance `k = s·D/p` beyond which a voxel
+    /// covers less than a pixel (Swan et al. Fig. 7a, c) in this linear RGB colour.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k_contour: Option<[f32; 3]>,
+    /// Worker threads (`None`: all cores). Output does not depend on it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threads: Option<usize>,
+}
+
+impl RenderRequest {
+    /// A request for `scene` at `width × height` with every other setting at its default.
+    pub fn new(scene: Scene, width: usize, height: usize) -> Self {
+        RenderRequest {
+            scene,
+            width,
+            height,
+            mode: Mode::default(),
+            renderer: RendererChoice::default(),
+            quality: Quality::default(),
+            display: DisplayOptions::default(),
+            k_contour: None,
+            threads: None,
+        }
+    }
+
+    /// Checks the fields that need no volume; errors name the field as in a scene file.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |f: &str, m: String| Err(EngineError::request(f, m));
+        for (f, v) in [("width", self.width), ("height", self.height)] {
+            if !(1..=16384).contains(&v) {
+                return bad(f, format!("must be in 1..=16384 pixels, got {v}"));
+            }
+        }
+        let q = &self.quality;
+        if !(1..=64).contains(&q.subsample) {
+            return bad(
+                "quality.subsample",
+                format!("must be in 1..=64, got {}", q.subsample),
+            );
+        }
+        if !(q.opacity_cutoff.is_finite() && q.opacity_cutoff > 0.0) {
+            return bad(
+                "quality.opacity_cutoff",
+                format!("must be a positive number, got {}", q.opacity_cutoff),
+            );
+        }
+        if !(q.list_threshold >= 0.0 && q.list_threshold < 1.0) {
+            return bad(
+                "quality.list_threshold",
+                format!("must be in [0, 1), got {}", q.list_threshold),
+            );
+        }
+        if let Some(t) = self.threads
+            && !(1..=1024).contains(&t)
+        {
+            return bad("threads", format!("must be in 1..=1024, got {t}"));
+        }
+        if matches!(self.renderer, RendererChoice::Sabella | RendererChoice::Nil)
+            && self.mode != Mode::Composite
+        {
+            return bad(
+                "mode",
+                format!(
+                    "{:?}: the Chapter 6 displays have their own ray function; use the splatting \
+                     renderer for MIP, MinIP and X-ray",
+                    self.mode
+                ),
+            );
+        }
+        if let [s1, s2] = self.display.dog_sigma
+            && !(s1 > 0.0 && s2 > 0.0 && s1.is_finite() && s2.is_finite())
+        {
+            return bad(
+                "display.dog_sigma",
+                format!(
+                    "must be two positive numbers, got {:?}",
+                    self.display.dog_sigma
+                ),
+            );
+        }
+        if let Some([lo, hi]) = self.scene.surface_enhance
+            && !(lo.is_finite() && hi.is_finite() && hi > lo && lo >= 0.0)
+        {
+            return bad(
+                "scene.surface_enhance",
+                format!("expected 0 ≤ lo < hi, got [{lo}, {hi}]"),
+            );
+        }
+        self.scene.camera_orbit().validate()?;
+        Ok(())
+    }
+
+    /// The splatting renderer's settings for this request.
+    pub fn splat_settings(&self) -> RenderSettings {
+        let q = &self.quality;
+        RenderSettings {
+            width: self.width,
+            height: self.height,
+            mode: self.mode.splat_mode(),
+            visibility: match q.visibility {
+                VisibilityChoice::Sheet => Visibility::SheetBuffer,
+                VisibilityChoice::Every => Visibility::EverySample,
+            },
+            order: match q.order {
+                OrderChoice::Ftb => Order::FrontToBack,
+                OrderChoice::Btf => Order::BackToFront,
+            },
+            kernel: q.kernel.kernel(),
+            subsample: q.subsample,
+            opacity_cutoff: q.opacity_cutoff,
+            antialias: match q.antialias {
+                AntialiasChoice::Swan => Antialias::Swan,
+                AntialiasChoice::SwanPerpendicular => Antialias::SwanPerpendicular,
+                AntialiasChoice::Ewa => Antialias::Ewa,
+                AntialiasChoice::None => Antialias::None,
+            },
+            ..RenderSettings::default()
+        }
+    }
+
+    /// Reads a request from a JSON file. Unknown fields, at any depth, come back as warnings
+    /// naming their path (`scene.camera.orbit.azimth`); a missing required field or a wrong
+    /// type is an error naming the field. Files over 16 MiB are refused.
+    pub fn load(path: impl AsRef<Path>) -> Result<(RenderRequest, Vec<String>)> {
+        let path = path.as_ref();
+        let scene_err = |message: String| EngineError::SceneFile {
+            path: path.to_path_buf(),
+            message,
+        };
+        let len = std::fs::metadata(path)
+            .map_err(|e| scene_err(format!("cannot read: {e}")))?
+            .len();
+        if len > volsplat_io::MAX_JSON_BYTES {
+            return Err(scene_err(format!(
+                "{len} bytes; scene files are limited to {} bytes",
+                volsplat_io::MAX_JSON_BYTES
+            )));
+        }
+        let text =
+            std::fs::read_to_string(path).map_err(|e| scene_err(format!("cannot read: {e}")))?;
+        let mut warnings = Vec::new();
+        let de = &mut serde_json::Deserializer::from_str(&text);
+        let req: RenderRequest = serde_ignored::deserialize(de, |p| {
+            // serde_ignored writes `?` for an enum variant's name, which it does not know.
+            let p = p.to_string().replace(".?", "");
+            warnings.push(format!("{}: unknown field `{p}` ignored", path.display()))
+        })
+        .map_err(|e| scene_err(e.to_string()))?;
+        Ok((req, warnings))
+    }
+
+    /// Writes the request as pretty JSON, atomically. An in-memory volume cannot be saved.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        if matches!(self.scene.volume, crate::VolumeSource::Memory(_)) {
+            return Err(EngineError::request(
+                "scene.volume",
+                "a volume in memory cannot be saved in a scene file; save it as NRRD first",
+            ));
+        }
+        let text = serde_json::to_string_pretty(self).map_err(|e| EngineError::SceneFile {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        volsplat_io::write_bytes_atomic(path, text.as_bytes())?;
+        Ok(())
+    }
+}
+
+impl Scene {
+    /// The orbit of the camera specification.
+    pub fn camera_orbit(&self) -> volsplat_core::Orbit {
+        match &self.camera {
+            crate::CameraSpec::Orbit(o) => *o,
+            crate::CameraSpec::Explicit { orbit, .. } => *orbit,
+        }
+    }
+}

@@ -1,0 +1,409 @@
+//! What is rendered: the volume, the camera, the transfer function and the lights.
+//!
+//! Every type here is plain data, serialisable with serde, so that a whole scene (and a whole
+//! [`crate::RenderRequest`]) is one JSON file; the camera and transfer function inside it are
+//! objects in the formats of the README's camera and transfer-function files.
+
+use crate::error::{EngineError, Result};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+use std::sync::Arc;
+use volsplat_core::phantom::{self, EllipsoidPhantom, GaussianBlobs, MarschnerLobb};
+use volsplat_core::{AnyVolume, Camera, Light, Orbit, ScalarType, TransferFunction, scenes};
+
+/// Built-in phantoms (world units as each phantom defines them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PhantomKind {
+    /// CT-like head in Hounsfield units (i16), face towards +z, top towards +y.
+    Head,
+    /// 3-D modified Shepp–Logan phantom (f32).
+    SheppLogan,
+    /// Gaussian blobs (f32) with closed-form line integrals.
+    Blobs,
+    /// Marschner–Lobb test function (f32, f_M = 6, α = 0.25).
+    MarschnerLobb,
+    /// Swan et al. Fig. 7a–b: a one-voxel sheet of red and white squares.
+    Checkerboard,
+    /// Swan et al. Fig. 7c–d: a fractal terrain height field with a detailed "photo" draped on it.
+    Terrain,
+    /// Swan et al. Fig. 7e–f: a dense tangle of thin bright fibres, finer than the image.
+    Filaments,
+}
+
+impl PhantomKind {
+    /// The transfer function a built-in scene is meant to be seen with (Swan et al.'s Fig. 7
+    /// scenes), if any.
+    pub fn scene_transfer_function(self) -> Option<TransferFunction> {
+        match self {
+            PhantomKind::Checkerboard => Some(scenes::checkerboard_tf()),
+            PhantomKind::Terrain => Some(scenes::terrain_tf()),
+            PhantomKind::Filaments => Some(scenes::filaments_tf()),
+            _ => None,
+        }
+    }
+}
+
+/// Largest built-in phantom, voxels (2³⁰: 4 GiB as f32).
+pub const PHANTOM_MAX_VOXELS: u128 = 1 << 30;
+
+/// Builds a phantom. `grid`: `None` for the phantom's own size; `[n]` for an n³ cube or
+/// `[x, y, z]` (each in 2..=4096, at most [`PHANTOM_MAX_VOXELS`]); for the checkerboard
+/// `[x, y]` or `[x, y, square]` (sheet sides in 1..=8192). Errors name `field`.
+pub fn make_phantom(kind: PhantomKind, grid: Option<&[usize]>, field: &str) -> Result<AnyVolume> {
+    let bad = |m: String| EngineError::request(field, m);
+    let cube = |g: &[usize]| -> Result<[usize; 3]> {
+        let dims = match *g {
+            [n] => [n; 3],
+            [x, y, z] => [x, y, z],
+            _ => return Err(bad(format!("expected N or X,Y,Z, got {g:?}"))),
+        };
+        if dims.iter().any(|d| !(2..=4096).contains(d)) {
+            return Err(bad(format!("each size must be in 2..=4096, got {dims:?}")));
+        }
+        let voxels: u128 = dims.iter().map(|&d| d as u128).product();
+        if voxels > PHANTOM_MAX_VOXELS {
+            return Err(bad(format!(
+                "{dims:?} is {voxels} voxels; built-in phantoms are limited to \
+                 {PHANTOM_MAX_VOXELS} (4 GiB as f32)"
+            )));
+        }
+        Ok(dims)
+    };
+    Ok(match kind {
+        PhantomKind::Checkerboard => {
+            let (nx, ny, sq) = scenes::CHECKERBOARD_PAPER;
+            let (nx, ny, sq) = match grid {
+                None => (nx, ny, sq),
+                Some(&[x, y]) => (x, y, sq),
+                Some(&[x, y, q]) => (x, y, q),
+                Some(g) => return Err(bad(format!("expected X,Y[,SQUARE], got {g:?}"))),
+            };
+            if !(1..=8192).contains(&nx) || !(1..=8192).contains(&ny) {
+                return Err(bad(format!(
+                    "sheet sides must be in 1..=8192, got {nx}x{ny}"
+                )));
+            }
+            scenes::checkerboard_sheet(nx, ny, sq)?.into()
+        }
+        PhantomKind::Terrain => {
+            let d = grid.map(cube).transpose()?.unwrap_or(scenes::TERRAIN_PAPER);
+            scenes::terrain(d[0], d[1], d[2], 1)?.into()
+        }
+        PhantomKind::Filaments => {
+            let d = grid
+                .map(cube)
+                .transpose()?
+                .unwrap_or(scenes::FILAMENTS_PAPER);
+            scenes::filaments(d[0], d[1], d[2], 1)?.into()
+        }
+        PhantomKind::Head => {
+            let d = grid.map(cube).transpose()?.unwrap_or([128, 160, 144]);
+            phantom::ct_head_volume(d)?.into()
+        }
+        PhantomKind::SheppLogan => {
+            let d = grid.map(cube).transpose()?.unwrap_or([128; 3]);
+            phantom::sample(&EllipsoidPhantom::shepp_logan_3d(), d, 2)?.into()
+        }
+        PhantomKind::Blobs => {
+            let d = grid.map(cube).transpose()?.unwrap_or([128; 3]);
+            phantom::sample(&GaussianBlobs::demo(), d, 1)?.into()
+        }
+        PhantomKind::MarschnerLobb => {
+            let d = grid.map(cube).transpose()?.unwrap_or([128; 3]);
+            let ml = MarschnerLobb {
+                f_m: 6.0,
+                alpha: 0.25,
+            };
+            phantom::sample(&ml, d, 1)?.into()
+        }
+    })
+}
+
+/// How a headerless raw file is laid out.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RawLayout {
+    /// Samples per axis, x fastest.
+    pub dims: [usize; 3],
+    /// Sample type name: `u8`, `i8`, `u16`, `i16`, `f32`.
+    pub scalar_type: String,
+    /// Voxel spacing, world units.
+    #[serde(default = "unit_spacing")]
+    pub spacing: [f64; 3],
+    /// World position of voxel (0, 0, 0).
+    #[serde(default)]
+    pub origin: [f64; 3],
+    /// Big-endian samples.
+    #[serde(default)]
+    pub big_endian: bool,
+    /// Bytes to skip before the first sample.
+    #[serde(default)]
+    pub header_bytes: u64,
+}
+
+fn unit_spacing() -> [f64; 3] {
+    [1.0; 3]
+}
+
+/// Where the volume comes from.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VolumeSource {
+    /// A volume file (format by extension: NRRD, MetaImage, …), or a headerless raw file with
+    /// its layout.
+    File {
+        /// The file.
+        path: PathBuf,
+        /// Layout of a headerless raw file.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        raw: Option<RawLayout>,
+    },
+    /// A built-in phantom; `grid` as in [`make_phantom`].
+    Phantom {
+        /// Which phantom.
+        phantom: PhantomKind,
+        /// Its grid (`None`: the phantom's own size).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        grid: Option<Vec<usize>>,
+    },
+    /// A volume already in memory (from a library caller). It cannot be saved in a scene file.
+    #[serde(skip)]
+    Memory(Arc<AnyVolume>),
+}
+
+impl PartialEq for VolumeSource {
+    fn eq(&self, other: &Self) -> bool {
+        match (self, other) {
+            (VolumeSource::File { path: a, raw: ra }, VolumeSource::File { path: b, raw: rb }) => {
+                a == b && ra == rb
+            }
+            (
+                VolumeSource::Phantom {
+                    phantom: a,
+                    grid: ga,
+                },
+                VolumeSource::Phantom {
+                    phantom: b,
+                    grid: gb,
+                },
+            ) => a == b && ga == gb,
+            (VolumeSource::Memory(a), VolumeSource::Memory(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        }
+    }
+}
+
+impl Default for VolumeSource {
+    /// The demo: the CT-like head phantom.
+    fn default() -> Self {
+        VolumeSource::Phantom {
+            phantom: PhantomKind::Head,
+            grid: None,
+        }
+    }
+}
+
+impl VolumeSource {
+    /// Loads (or builds) the volume.
+    pub fn load(&self) -> Result<Arc<AnyVolume>> {
+        Ok(match self {
+            VolumeSource::Memory(v) => Arc::clone(v),
+            VolumeSource::Phantom { phantom, grid } => {
+                Arc::new(make_phantom(*phantom, grid.as_deref(), "volume.grid")?)
+            }
+            VolumeSource::File { path, raw } => {
+                if path.is_dir() {
+                    return Err(EngineError::request(
+                        "volume.path",
+                        format!(
+                            "{} is a directory (reading folders of DICOM files is not supported yet)",
+                            path.display()
+                        ),
+                    ));
+                }
+                Arc::new(match raw {
+                    Some(r) => {
+                        let spec = volsplat_io::RawSpec {
+                            dims: r.dims,
+                            scalar_type: ScalarType::from_name(&r.scalar_type)?,
+                            spacing: r.spacing,
+                            origin: r.origin,
+                            big_endian: r.big_endian,
+                            header_bytes: r.header_bytes,
+                        };
+                        volsplat_io::read_raw(path, &spec)?
+                    }
+                    None => volsplat_io::read_volume(path)?,
+                })
+            }
+        })
+    }
+
+    /// A short label for messages: the file name or the phantom.
+    pub fn label(&self) -> String {
+        match self {
+            VolumeSource::File { path, .. } => path.display().to_string(),
+            VolumeSource::Phantom { phantom, .. } => format!("demo phantom `{phantom:?}`"),
+            VolumeSource::Memory(_) => "volume in memory".into(),
+        }
+    }
+
+    /// Whether this is the built-in demo head (whose default transfer function is `ct-skin`).
+    pub fn is_demo_head(&self) -> bool {
+        matches!(
+            self,
+            VolumeSource::Phantom {
+                phantom: PhantomKind::Head,
+                ..
+            }
+        )
+    }
+}
+
+/// The camera: VTK's reset view around the volume or a given camera, then view changes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraSpec {
+    /// VTK's `ResetCamera` view of the volume's bounds (looking down −z, +y up), then the orbit.
+    Orbit(Orbit),
+    /// A camera in the camera-file format (world units), then the orbit.
+    Explicit {
+        /// The camera.
+        camera: Camera,
+        /// View changes applied to it (none by default).
+        #[serde(default, skip_serializing_if = "Orbit::is_identity")]
+        orbit: Orbit,
+    },
+}
+
+impl Default for CameraSpec {
+    fn default() -> Self {
+        CameraSpec::Orbit(Orbit::default())
+    }
+}
+
+impl CameraSpec {
+    /// The camera for a volume whose world bounds are `lo..hi`.
+    pub fn resolve(
+        &self,
+        bounds: (volsplat_core::glam::DVec3, volsplat_core::glam::DVec3),
+    ) -> Result<Camera> {
+        Ok(match self {
+            CameraSpec::Orbit(o) => o.reset_camera(bounds.0, bounds.1)?,
+            CameraSpec::Explicit { camera, orbit } => {
+                camera.validate()?;
+                let mut c = camera.clone();
+                orbit.apply(&mut c)?;
+                c
+            }
+        })
+    }
+}
+
+/// The transfer function.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TransferSpec {
+    /// Chosen from the data and mode: a built-in scene's own function; for MIP and MinIP an
+    /// opaque grey window over the data range; `ct-skin` for the demo head; otherwise the
+    /// `ramp` preset over the data range.
+    #[default]
+    Auto,
+    /// A built-in preset (`ct-bone`, `ct-skin`, `mr`, `ramp`) over the data range.
+    Preset(String),
+    /// A transfer function in the transfer-function-file format (values in data units).
+    Function(TransferFunction),
+}
+
+/// A directional light, in the camera frame (x right, y up, z towards the viewer).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LightSpec {
+    /// Direction towards the light (any length but zero).
+    pub direction: [f64; 3],
+    /// Linear RGB colour (≥ 0; default white).
+    #[serde(default = "white")]
+    pub color: [f32; 3],
+}
+
+fn white() -> [f32; 3] {
+    [1.0; 3]
+}
+
+impl LightSpec {
+    /// The core light, checked: finite, non-zero direction; colour ≥ 0.
+    pub fn to_light(&self, field: &str) -> Result<Light> {
+        if self.direction.iter().any(|x| !x.is_finite()) || self.direction.iter().all(|&x| x == 0.0)
+        {
+            return Err(EngineError::request(
+                field,
+                format!(
+                    "direction must be finite and non-zero, got {:?}",
+                    self.direction
+                ),
+            ));
+        }
+        if self.color.iter().any(|&c| !(c >= 0.0 && c.is_finite())) {
+            return Err(EngineError::request(
+                field,
+                format!(
+                    "colour components must be finite and ≥ 0, got {:?}",
+                    self.color
+                ),
+            ));
+        }
+        Ok(Light {
+            direction: self.direction,
+            color: self.color,
+            ..Light::headlight()
+        })
+    }
+}
+
+/// Westover's shading switches (§3.6.1): which terms of the lighting model are kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ShadingTerms {
+    /// The emission (ambient) term.
+    pub emission: bool,
+    /// The diffuse term.
+    pub diffuse: bool,
+    /// The specular term.
+    pub specular: bool,
+}
+
+impl Default for ShadingTerms {
+    fn default() -> Self {
+        ShadingTerms {
+            emission: true,
+            diffuse: true,
+            specular: true,
+        }
+    }
+}
+
+/// Everything about what is seen: volume, camera, transfer function, lights.
+/// In a scene file `volume` is required; every other field has the default given.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Scene {
+    /// The volume (default: the demo head phantom; required in a scene file).
+    pub volume: VolumeSource,
+    /// The camera (default: VTK's reset view, orthographic).
+    #[serde(default)]
+    pub camera: CameraSpec,
+    /// The transfer function (default: chosen from the data and mode).
+    #[serde(default)]
+    pub transfer_function: TransferSpec,
+    /// Directional lights in the camera frame; empty means VTK's white headlight.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lights: Vec<LightSpec>,
+    /// Shading terms kept.
+    #[serde(default)]
+    pub shading: ShadingTerms,
+    /// Surface enhancement: opacity × a 0→1 ramp on gradient magnitude `[lo, hi]` (data units
+    /// per world unit), replacing gradient opacity.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_enhance: Option<[f64; 2]>,
+    /// Depth cueing: opacity × a ramp from `near` (front) to `far` (back), both in [0, 1].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_cue: Option<[f64; 2]>,
+}

@@ -1,0 +1,232 @@
+//! The engine facade: scene files round-trip bit for bit, the renderer keeps what a new camera
+//! does not change, progress can cancel, and bad scene files say what is wrong.
+
+use std::sync::Arc;
+use volsplat::core::{Orbit, ProjectionKind};
+use volsplat::{
+    CameraSpec, EngineError, Mode, PhantomKind, RenderRequest, Renderer, RendererChoice, Scene,
+    TransferSpec, UsedRenderer, VolumeSource,
+};
+
+fn blobs(grid: usize) -> Scene {
+    Scene {
+        volume: VolumeSource::Phantom {
+            phantom: PhantomKind::Blobs,
+            grid: Some(vec![grid]),
+        },
+        ..Scene::default()
+    }
+}
+
+fn orbit(azimuth: f64, elevation: f64, perspective: bool) -> CameraSpec {
+    CameraSpec::Orbit(Orbit {
+        azimuth: Some(azimuth),
+        elevation: Some(elevation),
+        projection: perspective.then_some(ProjectionKind::Perspective),
+        ..Orbit::default()
+    })
+}
+
+fn bits(out: &volsplat::Output) -> Vec<u32> {
+    let mut v: Vec<u32> = out
+        .image
+        .pixels()
+        .iter()
+        .flatten()
+        .map(|x| x.to_bits())
+        .collect();
+    if let Some(values) = &out.values {
+        v.extend(values.values().iter().map(|x| x.to_bits()));
+    }
+    v
+}
+
+/// `save` then `load` renders the same bytes, for orthographic, perspective, MIP and X-ray
+/// requests; the saved file holds the camera and transfer function resolved to objects.
+#[test]
+fn a_saved_request_renders_again_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    for (n, (mode, perspective)) in [
+        (Mode::Composite, false),
+        (Mode::Composite, true),
+        (Mode::Mip, false),
+        (Mode::Xray, false),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut scene = blobs(24);
+        scene.camera = orbit(35.0 + 10.0 * n as f64, 20.0, perspective);
+        let mut req = RenderRequest::new(scene, 40, 30);
+        req.mode = mode;
+        let mut r = Renderer::new();
+        let a = r.render(&req, &mut |_| true).unwrap();
+        // Resolve camera and transfer function as `render --save-scene` does.
+        let mut saved = req.clone();
+        saved.scene.camera = CameraSpec::Explicit {
+            camera: a.camera.clone(),
+            orbit: Orbit::default(),
+        };
+        saved.scene.transfer_function = TransferSpec::Function(a.transfer_function.clone());
+        let path = dir.path().join(format!("scene{n}.json"));
+        saved.save(&path).unwrap();
+        let (loaded, warnings) = RenderRequest::load(&path).unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(loaded, saved, "{mode:?} perspective {perspective}");
+        let b = Renderer::new().render(&loaded, &mut |_| true).unwrap();
+        assert_eq!(bits(&a), bits(&b), "{mode:?} perspective {perspective}");
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.contains("\"parallel_projection\"") && text.contains("\"scalar_opacity\""));
+    }
+}
+
+/// A second frame that changes only the camera reuses the volume, the tables and the splat
+/// list; changing the transfer function rebuilds the tables.
+#[test]
+fn a_second_frame_with_a_new_camera_reuses_volume_tables_and_list() {
+    for renderer in [RendererChoice::Auto, RendererChoice::SplatList] {
+        let mut req = RenderRequest::new(blobs(32), 48, 48);
+        req.renderer = renderer;
+        let mut r = Renderer::new();
+        let first = r.render(&req, &mut |_| true).unwrap();
+        assert!(first.stats.load_ms > 0.0 && first.stats.prepare_ms > 0.0);
+        req.scene.camera = orbit(40.0, 10.0, false);
+        let second = r.render(&req, &mut |_| true).unwrap();
+        assert_eq!(second.stats.load_ms, 0.0, "{renderer:?}");
+        assert_eq!(second.stats.prepare_ms, 0.0, "{renderer:?}");
+        assert_ne!(bits(&first), bits(&second));
+        // The cached second frame equals a fresh render of the same request.
+        let fresh = Renderer::new().render(&req, &mut |_| true).unwrap();
+        assert_eq!(bits(&second), bits(&fresh), "{renderer:?}");
+        req.scene.transfer_function = TransferSpec::Preset("ct-bone".into());
+        let third = r.render(&req, &mut |_| true).unwrap();
+        assert_eq!(third.stats.load_ms, 0.0);
+        assert!(third.stats.prepare_ms > 0.0);
+    }
+}
+
+#[test]
+fn perspective_uses_the_splat_list_and_the_dense_renderer_refuses_it() {
+    let mut scene = blobs(24);
+    scene.camera = orbit(10.0, 10.0, true);
+    let mut req = RenderRequest::new(scene, 32, 32);
+    let out = Renderer::new().render(&req, &mut |_| true).unwrap();
+    assert_eq!(out.stats.renderer, Some(UsedRenderer::SplatList));
+    assert_eq!(out.stats.projection, "perspective");
+    req.renderer = RendererChoice::Splat;
+    let e = Renderer::new().render(&req, &mut |_| true).unwrap_err();
+    assert!(
+        matches!(e, EngineError::Request { ref field, .. } if field == "renderer"),
+        "{e}"
+    );
+}
+
+#[test]
+fn progress_reports_and_cancels() {
+    let req = RenderRequest::new(blobs(32), 32, 32);
+    let mut seen = Vec::new();
+    Renderer::new()
+        .render(&req, &mut |p| {
+            seen.push(p.fraction);
+            true
+        })
+        .unwrap();
+    assert!(seen.len() > 3, "{seen:?}");
+    assert!(seen.windows(2).all(|w| w[1] >= w[0]), "{seen:?}");
+    assert_eq!(seen.last(), Some(&1.0));
+    // Cancel half way through the sheets.
+    let e = Renderer::new()
+        .render(&req, &mut |p| p.fraction < 0.5)
+        .unwrap_err();
+    assert!(matches!(e, EngineError::Cancelled), "{e}");
+}
+
+#[test]
+fn the_thread_count_does_not_change_the_bits() {
+    let mut req = RenderRequest::new(blobs(32), 40, 36);
+    req.scene.camera = orbit(25.0, 30.0, false);
+    req.threads = Some(1);
+    let a = Renderer::new().render(&req, &mut |_| true).unwrap();
+    req.threads = Some(3);
+    let b = Renderer::new().render(&req, &mut |_| true).unwrap();
+    assert_eq!(bits(&a), bits(&b));
+}
+
+#[test]
+fn a_volume_in_memory_renders_but_cannot_be_saved() {
+    let vol = volsplat::make_phantom(PhantomKind::Blobs, Some(&[20]), "grid").unwrap();
+    let scene = Scene {
+        volume: VolumeSource::Memory(Arc::new(vol)),
+        ..Scene::default()
+    };
+    let req = RenderRequest::new(scene, 24, 24);
+    let out = Renderer::new().render(&req, &mut |_| true).unwrap();
+    assert!(out.image.pixels().iter().any(|p| p[3] > 0.1));
+    let dir = tempfile::tempdir().unwrap();
+    let e = req.save(dir.path().join("s.json")).unwrap_err().to_string();
+    assert!(e.contains("in memory"), "{e}");
+}
+
+#[test]
+fn scene_files_warn_on_unknown_fields_and_name_missing_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("s.json");
+    std::fs::write(
+        &p,
+        r#"{"scene": {"volume": {"phantom": {"phantom": "blobs", "grid": [16]}},
+                      "camera": {"orbit": {"azimuth": 10, "azimth": 3}}, "colour": 1},
+            "width": 16, "height": 12, "extra": true}"#,
+    )
+    .unwrap();
+    let (req, warnings) = RenderRequest::load(&p).unwrap();
+    assert_eq!((req.width, req.height), (16, 12));
+    let all = warnings.join("\n");
+    for field in ["extra", "scene.colour", "scene.camera.azimth"] {
+        assert!(all.contains(&format!("`{field}`")), "{field}: {all}");
+    }
+    std::fs::write(
+        &p,
+        r#"{"scene": {"volume": {"phantom": {"phantom": "blobs"}}}, "height": 12}"#,
+    )
+    .unwrap();
+    let e = RenderRequest::load(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("missing field `width`") && e.contains("s.json"),
+        "{e}"
+    );
+    std::fs::write(&p, r#"{"scene": {}, "width": 1, "height": 1}"#).unwrap();
+    let e = RenderRequest::load(&p).unwrap_err().to_string();
+    assert!(e.contains("missing field `volume`"), "{e}");
+    std::fs::write(
+        &p,
+        r#"{"scene": {"volume": {"phantom": {"phantom": "cube"}}}, "width": 1, "height": 1}"#,
+    )
+    .unwrap();
+    let e = RenderRequest::load(&p).unwrap_err().to_string();
+    assert!(e.contains("cube"), "{e}");
+}
+
+#[test]
+fn bad_requests_name_the_field() {
+    let mut req = RenderRequest::new(blobs(16), 0, 10);
+    let e = Renderer::new()
+        .render(&req, &mut |_| true)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("width"), "{e}");
+    req.width = 10;
+    req.quality.subsample = 0;
+    let e = Renderer::new()
+        .render(&req, &mut |_| true)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("quality.subsample"), "{e}");
+    req.quality.subsample = 1;
+    req.renderer = RendererChoice::Sabella;
+    req.mode = Mode::Xray;
+    let e = Renderer::new()
+        .render(&req, &mut |_| true)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("mode"), "{e}");
+}
