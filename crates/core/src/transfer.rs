@@ -69,13 +69,19 @@ pub const TRANSFER_FUNCTION_FIELDS: &[&str] = &[
     "specular_power",
 ];
 
+/// Largest magnitude of a point's value (entry 0) in a transfer function, in data units (or
+/// data units per world unit for gradient opacity): `1e38`, so that every value and the span
+/// between any two (`≤ 2e38`) are finite `f32` numbers and the CRIO lookup tables built from
+/// them hold no NaN. Larger values are an error naming the point.
+pub const MAX_POINT_VALUE: f64 = 1e38;
+
 /// Evaluates a piecewise-linear function given by points `(x, y…)` sorted by x; values outside
 /// the points' range are clamped to the end points (VTK's default clamping).
 pub fn piecewise_linear<const N: usize>(points: &[(f64, [f64; N])], x: f64) -> [f64; N] {
     let Some(first) = points.first() else {
         return [0.0; N];
     };
-    if x <= first.0 {
+    if x <= first.0 || x.is_nan() {
         return first.1;
     }
     let last = points[points.len() - 1];
@@ -101,7 +107,7 @@ pub fn interpolate_rows<const M: usize>(rows: &[[f64; M]], x: f64) -> [f64; M] {
     let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
         return [0.0; M];
     };
-    if x <= first[0] {
+    if x <= first[0] || x.is_nan() {
         return *first;
     }
     if x >= last[0] {
@@ -122,7 +128,8 @@ pub fn interpolate_rows<const M: usize>(rows: &[[f64; M]], x: f64) -> [f64; M] {
 }
 
 impl TransferFunction {
-    /// Checks every field. Errors name the field and the point index. Each point list must be in
+    /// Checks every field. Errors name the field and the point index. Point values (entry 0)
+    /// must be finite and within ±[`MAX_POINT_VALUE`]; colour and opacity entries in [0, 1]. Each point list must be in
     /// non-decreasing order of value (equal consecutive values make a step, kept in the order
     /// written); points out of order are an error rather than sorted, so that a mistyped value
     /// is not silently moved elsewhere in the function.
@@ -345,6 +352,17 @@ fn check_point<const N: usize>(field: &str, p: &[f64; N]) -> Result<()> {
     if p.iter().any(|v| !v.is_finite()) {
         return Err(CoreError::invalid(field, p, "all entries must be finite"));
     }
+    if p[0].abs() > MAX_POINT_VALUE {
+        return Err(CoreError::invalid(
+            field,
+            p,
+            format!(
+                "the value {} is outside ±{MAX_POINT_VALUE:e}: lookup tables are built in f32 \
+                 over the span between the first and last points, which must stay finite",
+                p[0]
+            ),
+        ));
+    }
     if p[1..].iter().any(|v| !(0.0..=1.0).contains(v)) {
         return Err(CoreError::invalid(
             field,
@@ -411,6 +429,64 @@ mod tests {
         assert_eq!(tf.scalar_opacity[1], [0.5, 0.0]);
         assert_eq!(tf.opacity_at(0.25), 0.0);
         assert_eq!(tf.opacity_at(0.75), 1.0);
+    }
+
+    /// Fuzzing regression (issue 13): points at ±1e308 made the lookup-table span infinite and
+    /// building the CRIO tables panicked on NaN.
+    #[test]
+    fn huge_point_values_are_an_error_not_a_panic() {
+        for (lo, hi) in [
+            (-1e308, 1e308),
+            (0.0, 1e308),
+            (-1e39, 0.0),
+            (-f64::MAX, f64::MAX),
+        ] {
+            let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+            tf.color[0][0] = lo;
+            tf.color[1][0] = hi;
+            let e = crate::CrioTables::from_transfer_function(&tf, 256).unwrap_err();
+            assert!(
+                e.to_string().contains("color[") && e.to_string().contains("1e38"),
+                "{e}"
+            );
+            let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+            tf.scalar_opacity[0][0] = lo;
+            tf.scalar_opacity[1][0] = hi;
+            assert!(
+                tf.validate()
+                    .unwrap_err()
+                    .to_string()
+                    .contains("scalar_opacity[")
+            );
+            let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+            tf.gradient_opacity = Some(vec![[lo, 0.0], [hi, 1.0]]);
+            assert!(
+                tf.validate()
+                    .unwrap_err()
+                    .to_string()
+                    .contains("gradient_opacity[")
+            );
+        }
+        // The widest accepted span builds finite tables.
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.5);
+        tf.color[0][0] = -MAX_POINT_VALUE;
+        tf.color[1][0] = MAX_POINT_VALUE;
+        tf.scalar_opacity[0][0] = -MAX_POINT_VALUE;
+        tf.scalar_opacity[1][0] = MAX_POINT_VALUE;
+        let t = crate::CrioTables::from_transfer_function(&tf, 256).unwrap();
+        for x in [-3e38f32, -1e38, 0.0, 1e38, 3e38, f32::NAN] {
+            let [a] = t.opacity.lookup(x);
+            assert!(a.is_finite(), "{x}: {a}");
+        }
+        // NaN never reaches past the ends of the interpolation helpers.
+        assert_eq!(
+            interpolate_rows(&[[0.0, 1.0], [1.0, 2.0]], f64::NAN),
+            [0.0, 1.0]
+        );
+        assert_eq!(
+            piecewise_linear(&[(0.0, [1.0]), (1.0, [2.0])], f64::NAN),
+            [1.0]
+        );
     }
 
     #[test]

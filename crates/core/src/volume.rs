@@ -51,7 +51,11 @@ impl Grid {
                 ));
             }
         }
-        let count = dims.iter().map(|&d| d as u128).product::<u128>();
+        // Checked: three 64-bit sizes can overflow even u128 (2⁶³ · 2⁶³ · 4 = 2¹²⁸).
+        let count = dims
+            .iter()
+            .try_fold(1u128, |acc, &d| acc.checked_mul(d as u128))
+            .unwrap_or(u128::MAX);
         if count > MAX_VOXELS {
             return Err(CoreError::TooLarge {
                 what: "voxel count".into(),
@@ -421,6 +425,19 @@ impl_from_volume!(f32, F32);
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Fuzzing regression (issue 13): `2⁶³ · 2⁶³ · 4` wrapped to 0 in u128 and was accepted.
+    #[test]
+    fn overflowing_voxel_counts_are_rejected() {
+        for dims in [
+            [1usize << 63, 1 << 63, 4],
+            [usize::MAX; 3],
+            [1 << 40, 1 << 40, 1],
+        ] {
+            let e = Grid::with_dims(dims).unwrap_err();
+            assert!(matches!(e, CoreError::TooLarge { .. }), "{e}");
+        }
+    }
 
     #[test]
     fn world_index_round_trip_with_rotation_and_spacing() {

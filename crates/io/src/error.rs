@@ -167,6 +167,20 @@ pub enum IoError {
         /// Why it is invalid.
         reason: String,
     },
+    /// A path that must be a regular file names a device, FIFO, socket or directory (reading
+    /// `/dev/zero` or a FIFO could block or never end).
+    #[error(
+        "{path}: {what} is not a regular file ({kind}); refusing to read it",
+        path = .path.display()
+    )]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+        /// Which file it is (e.g. `data file`, `volume file`).
+        what: String,
+        /// What it is instead: `a directory`, or `a device, FIFO or socket`.
+        kind: &'static str,
+    },
     /// The file extension does not name a supported format.
     #[error(
         "{path}: unsupported file extension {extension:?}; supported: {supported}",

@@ -32,17 +32,19 @@ pub(crate) struct HeaderText {
 }
 
 /// Reads lines from the start of `path` until `classify` ends the header or the file ends.
-/// Errors if the header is longer than [`MAX_HEADER_BYTES`].
+/// Errors if the header is longer than `max_bytes`, or if `path` is not a regular file.
 pub(crate) fn read_header(
     path: &Path,
+    max_bytes: usize,
     mut classify: impl FnMut(usize, &str) -> LineAction,
 ) -> Result<HeaderText> {
+    crate::limits::require_regular_file(path, "header file")?;
     let file = File::open(path).map_err(|e| IoError::os(path, "open", e))?;
     let mut prefix = Vec::new();
-    file.take(MAX_HEADER_BYTES as u64 + 1)
+    file.take(max_bytes as u64 + 1)
         .read_to_end(&mut prefix)
         .map_err(|e| IoError::os(path, "read header", e))?;
-    let capped = prefix.len() > MAX_HEADER_BYTES;
+    let capped = prefix.len() > max_bytes;
     let mut lines = Vec::new();
     let mut pos = 0usize;
     let mut line_no = 0usize;
@@ -51,12 +53,12 @@ pub(crate) fn read_header(
         let (text_end, next) = match prefix[pos..].iter().position(|&b| b == b'\n') {
             Some(p) => (pos + p, pos + p + 1),
             None if capped => {
-                return Err(header_too_large(path));
+                return Err(header_too_large(path, max_bytes));
             }
             None => (prefix.len(), prefix.len()),
         };
-        if next > MAX_HEADER_BYTES {
-            return Err(header_too_large(path));
+        if next > max_bytes {
+            return Err(header_too_large(path, max_bytes));
         }
         let mut raw = &prefix[pos..text_end];
         if let Some(stripped) = raw.strip_suffix(b"\r") {
@@ -90,12 +92,12 @@ pub(crate) fn read_header(
     })
 }
 
-fn header_too_large(path: &Path) -> IoError {
+fn header_too_large(path: &Path, max_bytes: usize) -> IoError {
     IoError::TooLarge {
         path: path.to_path_buf(),
         what: "header size in bytes (no end of header found)".into(),
-        value: MAX_HEADER_BYTES as u128 + 1,
-        limit: MAX_HEADER_BYTES as u128,
+        value: max_bytes as u128 + 1,
+        limit: max_bytes as u128,
     }
 }
 

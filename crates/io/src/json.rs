@@ -10,6 +10,7 @@
 
 use crate::atomic::{write_atomic, write_err};
 use crate::error::{IoError, Result};
+use crate::limits::Limits;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use serde_json::{Map, Value};
@@ -41,8 +42,13 @@ pub const CAMERA_FIELDS: &[&str] = &[
 ///
 /// Returns the validated camera and one warning per unknown top-level field.
 pub fn load_camera(path: impl AsRef<Path>) -> Result<(Camera, Vec<String>)> {
+    load_camera_with(path, &Limits::default())
+}
+
+/// [`load_camera`] with caller-set [`Limits`] (`max_json_bytes`).
+pub fn load_camera_with(path: impl AsRef<Path>, limits: &Limits) -> Result<(Camera, Vec<String>)> {
     let path = path.as_ref();
-    let (object, warnings) = load_object(path, CAMERA_FIELDS)?;
+    let (object, warnings) = load_object(path, CAMERA_FIELDS, limits.max_json_bytes)?;
     let has_projection = object.contains_key("parallel_projection");
     let camera: Camera = from_object(path, object, serde_json::to_value(Camera::default()).ok())?;
     if !has_projection {
@@ -67,8 +73,16 @@ pub fn load_camera(path: impl AsRef<Path>) -> Result<(Camera, Vec<String>)> {
 ///
 /// Returns the validated transfer function and one warning per unknown top-level field.
 pub fn load_transfer_function(path: impl AsRef<Path>) -> Result<(TransferFunction, Vec<String>)> {
+    load_transfer_function_with(path, &Limits::default())
+}
+
+/// [`load_transfer_function`] with caller-set [`Limits`] (`max_json_bytes`).
+pub fn load_transfer_function_with(
+    path: impl AsRef<Path>,
+    limits: &Limits,
+) -> Result<(TransferFunction, Vec<String>)> {
     let path = path.as_ref();
-    let (object, warnings) = load_object(path, TRANSFER_FUNCTION_FIELDS)?;
+    let (object, warnings) = load_object(path, TRANSFER_FUNCTION_FIELDS, limits.max_json_bytes)?;
     let template = serde_json::to_value(TransferFunction::ramp(0.0, 1.0, 1.0)).ok();
     let mut tf: TransferFunction = from_object(path, object, template)?;
     tf.validate().map_err(|e| IoError::core(path, e))?;
@@ -99,18 +113,24 @@ fn save_pretty<T: Serialize>(path: &Path, value: &T) -> Result<()> {
 }
 
 /// Reads `path` as a JSON object; returns it and warnings for fields not in `known`.
-fn load_object(path: &Path, known: &[&str]) -> Result<(Map<String, Value>, Vec<String>)> {
+/// Files may be pipes (`--camera <(…)`): reading is bounded by `max_bytes`, not by a size
+/// found beforehand.
+fn load_object(
+    path: &Path,
+    known: &[&str],
+    max_bytes: u64,
+) -> Result<(Map<String, Value>, Vec<String>)> {
     let file = std::fs::File::open(path).map_err(|e| IoError::os(path, "open", e))?;
     let mut bytes = Vec::new();
-    file.take(MAX_JSON_BYTES + 1)
+    file.take(max_bytes.saturating_add(1))
         .read_to_end(&mut bytes)
         .map_err(|e| IoError::os(path, "read", e))?;
-    if bytes.len() as u64 > MAX_JSON_BYTES {
+    if bytes.len() as u64 > max_bytes {
         return Err(IoError::TooLarge {
             path: path.to_path_buf(),
             what: "JSON file size in bytes".into(),
             value: bytes.len() as u128,
-            limit: MAX_JSON_BYTES as u128,
+            limit: max_bytes as u128,
         });
     }
     let text = String::from_utf8(bytes).map_err(|e| IoError::Json {
@@ -237,6 +257,59 @@ mod tests {
   "scalar_opacity_unit_distance": 1.0,                     // world units; default 1
   "shade": false, "ambient": 0.1, "diffuse": 0.7, "specular": 0.2, "specular_power": 10.0 }
 "#;
+
+    /// Issue 13: saved floats reload bit-exactly (serde_json's `float_roundtrip`).
+    #[test]
+    fn saved_floats_reload_bit_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            // A double in [0, 1) with a full 52-bit random mantissa and a random exponent.
+            let m = f64::from_bits(0x3FF0_0000_0000_0000 | (state >> 12)) - 1.0;
+            m * 0.5f64.powi((state % 40) as i32)
+        };
+        let mut xs: Vec<f64> = (0..3000).map(|_| next() * 1e4 - 1.0).collect();
+        xs.sort_by(f64::total_cmp);
+        let mut tf = TransferFunction::ramp(0.0, 1.0, 1.0);
+        tf.color = xs.iter().map(|&x| [x, next(), next(), next()]).collect();
+        tf.scalar_opacity = xs.iter().map(|&x| [x, next()]).collect();
+        tf.scalar_opacity_unit_distance = 0.1 + next();
+        let p = dir.path().join("tf.json");
+        save_transfer_function(&p, &tf).unwrap();
+        let (back, _) = load_transfer_function(&p).unwrap();
+        for (a, b) in tf.color.iter().zip(&back.color) {
+            for (x, y) in a.iter().zip(b) {
+                assert_eq!(x.to_bits(), y.to_bits(), "{x:e} reloaded as {y:e}");
+            }
+        }
+        assert_eq!(back, tf);
+        let cam = Camera {
+            position: [next() * 1e3, 1e-300 * next(), 123.456 + next()],
+            parallel_scale: 1.0 + next(),
+            ..Camera::default()
+        };
+        let p = dir.path().join("c.json");
+        save_camera(&p, &cam).unwrap();
+        let (back, _) = load_camera(&p).unwrap();
+        assert_eq!(back, cam);
+    }
+
+    #[test]
+    fn json_limit_is_caller_set() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(dir.path(), "c.json", DESIGN_CAMERA);
+        let l = Limits {
+            max_json_bytes: 10,
+            ..Limits::default()
+        };
+        let e = load_camera_with(&p, &l).unwrap_err().to_string();
+        assert!(e.contains("exceeds the limit 10"), "{e}");
+        let e = load_transfer_function_with(&p, &l).unwrap_err().to_string();
+        assert!(e.contains("exceeds the limit 10"), "{e}");
+    }
 
     #[test]
     fn design_examples_load_with_comments() {

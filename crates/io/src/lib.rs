@@ -6,13 +6,26 @@
 //!
 //! ## Volumes (world space as in DESIGN.md §3: VTK's, in the file's units, usually mm)
 //!
-//! - [`read_volume`]: dispatch by extension: `.nrrd`, `.nhdr` → [`read_nrrd`]; `.mha`, `.mhd` →
-//!   [`read_metaimage`].
+//! Anatomical files are returned in **LPS** (DICOM/ITK's patient frame): NIfTI (always RAS) and
+//! NRRD `space: right-anterior-superior` / `left-anterior-superior` are converted by negating the
+//! world axes that differ (decision 0008). Files without an anatomical frame (VTK, TIFF,
+//! MetaImage, NRRD without `space`) keep their coordinates as written.
+//!
+//! - [`read_volume`] / [`read_volume_with`] (with [`ReadOptions`]: [`Limits`], `frame`,
+//!   `array`; returns a [`LoadedVolume`] with format, frame count and notes): dispatch by file
+//!   name ([`VolumeFormat`], [`VOLUME_EXTENSIONS`]); a folder of `.tif` files is a stack.
 //! - [`read_nrrd`]: NRRD with attached or detached header; raw, gzip or ascii encoding;
-//!   `space directions` / `space origin` geometry (no LPS/RAS flip, as in VTK). See [`nrrd`].
+//!   `space directions` / `space origin` geometry, RAS/LAS spaces converted to LPS. See [`nrrd`].
 //! - [`read_metaimage`]: MetaImage `.mha` / `.mhd`, raw or zlib-compressed. See [`metaimage`].
+//! - [`read_nifti`]: NIfTI-1 and NIfTI-2 (`.nii`, `.nii.gz`, `.hdr`/`.img`): sform, qform or
+//!   pixdim geometry, `scl_slope`/`scl_inter`, 4-D frames. See [`nifti`].
+//! - [`read_vti`]: VTK XML image data (ascii, base64, appended raw/base64, zlib). See [`vti`].
+//! - [`read_tiff`], [`read_tiff_dir`]: multi-page TIFF or a folder of slices; ImageJ / OME
+//!   spacing. See [`tiff_stack`].
 //! - [`read_raw`] with a [`RawSpec`]: headerless raw files, optionally `.gz`.
 //! - [`write_nrrd`]: attached-header NRRD (raw or gzip) that round-trips the grid.
+//!
+//! Each reader has a `*_with` form taking caller-set [`Limits`] (or [`ReadOptions`]).
 //!
 //! ## Images (premultiplied linear RGBA `f32`, row 0 at the top)
 //!
@@ -26,14 +39,17 @@
 //! - [`load_camera`], [`save_camera`]; [`load_transfer_function`], [`save_transfer_function`].
 //!   Unknown fields come back as warnings; `//` comments are allowed.
 //!
-//! ## Limits against untrusted input
+//! ## Limits against untrusted input ([`Limits`]; the defaults below)
 //!
 //! - Text headers (NRRD, MetaImage, `.npy`) at most [`MAX_HEADER_BYTES`] (1 MiB).
-//! - Voxel (element) counts at most [`volsplat_core::volume::MAX_VOXELS`], checked from the header
-//!   before anything is allocated; raw payloads are checked against the file size before
-//!   allocating; compressed payloads grow with the data actually decoded and are never inflated
-//!   past the needed size plus one byte.
-//! - JSON files at most [`MAX_JSON_BYTES`] (16 MiB).
+//! - Voxel (element) counts at most [`volsplat_core::volume::MAX_VOXELS`], computed with checked
+//!   arithmetic from the header before anything is allocated; raw payloads are checked against
+//!   the file size before allocating; compressed payloads grow with the data actually decoded
+//!   and are never inflated past the needed size plus one byte.
+//! - JSON files at most [`MAX_JSON_BYTES`] (16 MiB); VTK XML files at most 4 GiB.
+//! - Data and header files must be regular files: devices (`/dev/zero`), FIFOs and sockets are
+//!   refused, and line skipping stops at the end of the file as found.
+//! - Camera and transfer-function floats reload bit-exactly (`serde_json`'s `float_roundtrip`).
 //!
 //! ## Writing
 //!
@@ -43,54 +59,40 @@
 
 mod atomic;
 pub mod error;
+mod frame;
 mod header;
 mod image;
 mod json;
+mod limits;
 pub mod metaimage;
+pub mod nifti;
 mod npy;
 pub mod nrrd;
 mod payload;
 mod raw;
+mod read;
+pub mod tiff_stack;
+pub mod vti;
 
 pub use atomic::write_bytes_atomic;
 pub use error::{IoError, Result};
 pub use header::MAX_HEADER_BYTES;
 pub use image::{PngBitDepth, PngSettings, srgb_encode, write_png, write_png_gray};
 pub use json::{
-    CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_transfer_function, save_camera,
-    save_transfer_function,
+    CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_camera_with, load_transfer_function,
+    load_transfer_function_with, save_camera, save_transfer_function,
 };
-pub use metaimage::read_metaimage;
-pub use npy::{read_npy_f32, write_npy_rgba, write_npy_scalar};
-pub use nrrd::{read_nrrd, write_nrrd};
-pub use raw::{RawSpec, read_raw};
-
-use std::path::Path;
-use volsplat_core::AnyVolume;
-
-/// The volume file extensions [`read_volume`] understands.
-pub const VOLUME_EXTENSIONS: &[&str] = &["nrrd", "nhdr", "mha", "mhd"];
-
-/// Reads a volume, choosing the format by the file extension (case-insensitive): `.nrrd` and
-/// `.nhdr` ([`read_nrrd`]), `.mha` and `.mhd` ([`read_metaimage`]). Headerless raw files need a
-/// [`RawSpec`]: use [`read_raw`]. Any other extension is an error listing the supported ones.
-pub fn read_volume(path: impl AsRef<Path>) -> Result<AnyVolume> {
-    let path = path.as_ref();
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    match ext.as_str() {
-        "nrrd" | "nhdr" => read_nrrd(path),
-        "mha" | "mhd" => read_metaimage(path),
-        _ => Err(IoError::UnsupportedFormat {
-            path: path.to_path_buf(),
-            extension: ext,
-            supported: ".nrrd, .nhdr, .mha, .mhd (headerless raw: use read_raw with a RawSpec)"
-                .into(),
-        }),
-    }
-}
+pub use limits::Limits;
+pub use metaimage::{read_metaimage, read_metaimage_with};
+pub use nifti::{read_nifti, read_nifti_with};
+pub use npy::{read_npy_f32, read_npy_f32_with, write_npy_rgba, write_npy_scalar};
+pub use nrrd::{read_nrrd, read_nrrd_with, write_nrrd};
+pub use raw::{RawSpec, read_raw, read_raw_with};
+pub use read::{
+    LoadedVolume, ReadOptions, VOLUME_EXTENSIONS, VolumeFormat, read_volume, read_volume_with,
+};
+pub use tiff_stack::{read_tiff, read_tiff_dir, read_tiff_with};
+pub use vti::{read_vti, read_vti_with};
 
 #[cfg(test)]
 mod tests {
@@ -98,10 +100,10 @@ mod tests {
 
     #[test]
     fn unknown_extension_lists_supported() {
-        let e = read_volume("/tmp/does-not-matter.vti").unwrap_err();
+        let e = read_volume("/tmp/does-not-matter.xyz").unwrap_err();
         let s = e.to_string();
         assert!(
-            s.contains("\"vti\"") && s.contains(".nrrd") && s.contains(".mha"),
+            s.contains("\"xyz\"") && s.contains(".nrrd") && s.contains(".mha"),
             "{s}"
         );
         let e = read_volume("/tmp/noext").unwrap_err();

@@ -27,11 +27,11 @@ use crate::error::{IoError, Result, clip};
 use crate::header::{
     LineAction, normalize_words, parse_finite, parse_numbers, read_header, resolve_data_path,
 };
+use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
-use volsplat_core::volume::MAX_VOXELS;
 use volsplat_core::{AnyVolume, CoreError, Grid};
 
 struct Field {
@@ -43,8 +43,13 @@ struct Field {
 /// Reads a MetaImage volume (`.mha` or `.mhd`). See the [module documentation](self) for the
 /// keys understood, conversions and limits. Errors name the file, the key and its value.
 pub fn read_metaimage(path: impl AsRef<Path>) -> Result<AnyVolume> {
+    read_metaimage_with(path, &Limits::default())
+}
+
+/// [`read_metaimage`] with caller-set [`Limits`] (header bytes, voxel count).
+pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolume> {
     let path = path.as_ref();
-    let header = read_header(path, |_, line| {
+    let header = read_header(path, limits.max_header_bytes, |_, line| {
         let is_data_file = line
             .split_once('=')
             .is_some_and(|(k, _)| k.trim().eq_ignore_ascii_case("ElementDataFile"));
@@ -113,20 +118,7 @@ pub fn read_metaimage(path: impl AsRef<Path>) -> Result<AnyVolume> {
     let sizes: [u64; 3] = parse_numbers(path, &ds.name, &ds.value, "a whole number ≥ 1", |t| {
         t.parse::<u64>().ok().filter(|&v| v > 0)
     })?;
-    let count: u128 = sizes.iter().map(|&s| s as u128).product();
-    if count > MAX_VOXELS {
-        return Err(IoError::TooLarge {
-            path: path.to_path_buf(),
-            what: format!("voxel count from key `{}` ({})", ds.name, ds.value),
-            value: count,
-            limit: MAX_VOXELS,
-        });
-    }
-    let mut dims = [0usize; 3];
-    for (d, &s) in dims.iter_mut().zip(&sizes) {
-        *d = usize::try_from(s)
-            .map_err(|_| IoError::field(path, &ds.name, &ds.value, "too large"))?;
-    }
+    let dims = checked_dims(path, &ds.name, &ds.value, sizes, limits)?;
     if let Some(f) = get("elementnumberofchannels")
         && f.value.trim() != "1"
     {
@@ -367,6 +359,36 @@ mod tests {
         let vol = read_metaimage(file(dir.path(), "d.mha", h4, b"1.5 -2\n")).unwrap();
         assert_eq!(vol.scalar_type(), ScalarType::F32);
         assert_eq!(vol.to_f32().data(), &[1.5, -2.0]);
+    }
+
+    /// Fuzzing regression (issue 13): overflowing `DimSize` products were accepted.
+    #[test]
+    fn overflowing_dimsize_is_an_error_naming_the_key() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = "NDims = 3\nDimSize = 9223372036854775808 9223372036854775808 4\n\
+                 ElementType = MET_UCHAR\nElementDataFile = LOCAL\n";
+        let e = read_metaimage(file(dir.path(), "o.mha", h, &[0; 8]))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`DimSize`") && e.contains("exceeds the limit"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    #[cfg(unix)]
+    fn device_data_files_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let h =
+            "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = /dev/zero\n";
+        let e = read_metaimage(file(dir.path(), "d.mhd", h, b""))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("/dev/zero") && e.contains("not a regular file"),
+            "{e}"
+        );
     }
 
     #[test]

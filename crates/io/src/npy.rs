@@ -5,11 +5,9 @@
 
 use crate::atomic::{write_atomic, write_err};
 use crate::error::{IoError, Result};
-use crate::header::MAX_HEADER_BYTES;
 use std::fs::File;
 use std::io::{Read, Write};
 use std::path::Path;
-use volsplat_core::volume::MAX_VOXELS;
 use volsplat_core::{Image, ScalarImage};
 
 const MAGIC: &[u8; 6] = b"\x93NUMPY";
@@ -70,10 +68,21 @@ pub fn write_npy_scalar(path: impl AsRef<Path>, image: &ScalarImage) -> Result<(
 
 /// Reads a `.npy` file of 32-bit floats (`'<f4'` or `'>f4'`, C order, any shape): returns the
 /// shape and the values in C order. The header is limited to [`crate::MAX_HEADER_BYTES`] and the
-/// element count to [`MAX_VOXELS`]; the data size must match the shape exactly and is checked
+/// element count to [`volsplat_core::volume::MAX_VOXELS`]; the data size must match the shape exactly and is checked
 /// against the file size before allocating.
 pub fn read_npy_f32(path: impl AsRef<Path>) -> Result<(Vec<usize>, Vec<f32>)> {
+    read_npy_f32_with(path, &crate::Limits::default())
+}
+
+/// [`read_npy_f32`] with caller-set [`crate::Limits`] (header bytes, element count).
+pub fn read_npy_f32_with(
+    path: impl AsRef<Path>,
+    limits: &crate::Limits,
+) -> Result<(Vec<usize>, Vec<f32>)> {
     let path = path.as_ref();
+    let max_header = limits.max_header_bytes as u64;
+    let max_count = limits.voxel_limit();
+    crate::limits::require_regular_file(path, "npy file")?;
     let bad = |reason: String| IoError::Npy {
         path: path.to_path_buf(),
         reason,
@@ -104,12 +113,12 @@ pub fn read_npy_f32(path: impl AsRef<Path>) -> Result<(Vec<usize>, Vec<f32>)> {
         }
         v => return Err(bad(format!("unsupported format version {v}.{}", pre[7]))),
     };
-    if header_len > MAX_HEADER_BYTES as u64 {
+    if header_len > max_header {
         return Err(IoError::TooLarge {
             path: path.to_path_buf(),
             what: "npy header length".into(),
             value: header_len as u128,
-            limit: MAX_HEADER_BYTES as u128,
+            limit: max_header as u128,
         });
     }
     if prefix + header_len > file_len {
@@ -156,15 +165,24 @@ pub fn read_npy_f32(path: impl AsRef<Path>) -> Result<(Vec<usize>, Vec<f32>)> {
                 .map_err(|_| bad(format!("shape entry `{t}` is not a whole number")))?,
         );
     }
-    let count = shape
+    // Checked: the product of the shape can overflow even u128 (it used to, in the error path).
+    let product = shape
         .iter()
-        .try_fold(1u128, |acc, &d| acc.checked_mul(d as u128))
-        .filter(|&c| c <= MAX_VOXELS)
+        .try_fold(1u128, |acc, &d| acc.checked_mul(d as u128));
+    let count = product
+        .filter(|&c| c <= max_count)
         .ok_or_else(|| IoError::TooLarge {
             path: path.to_path_buf(),
-            what: format!("element count of shape {shape:?}"),
-            value: shape.iter().map(|&d| d as u128).product(),
-            limit: MAX_VOXELS,
+            what: format!(
+                "element count of shape {shape:?}{}",
+                if product.is_none() {
+                    " (the product overflows)"
+                } else {
+                    ""
+                }
+            ),
+            value: product.unwrap_or(u128::MAX),
+            limit: max_count,
         })?;
     let needed = (count * 4) as u64;
     let available = file_len - prefix - header_len;
@@ -270,6 +288,39 @@ mod tests {
         let head = String::from_utf8_lossy(&raw[10..128]);
         assert!(head.starts_with("{'descr': '<f4', 'fortran_order': False, 'shape': (3, 2), }"));
         assert!(head.ends_with(" \n"));
+    }
+
+    /// Fuzzing regression: a shape whose product overflows u128 panicked (in debug builds)
+    /// while building the error message.
+    #[test]
+    fn overflowing_shapes_are_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("o.npy");
+        let m = usize::MAX;
+        for shape in [
+            vec![m, m, m],
+            vec![1 << 63, 1 << 63, 4],
+            vec![100_000, 100_000, 100_000],
+        ] {
+            let mut bytes = header(&shape);
+            bytes.extend_from_slice(&[0; 16]);
+            std::fs::write(&p, &bytes).unwrap();
+            let e = read_npy_f32(&p).unwrap_err().to_string();
+            assert!(
+                e.contains("exceeds the limit") && e.contains("o.npy"),
+                "{e}"
+            );
+        }
+        let mut bytes = header(&[2, 2]);
+        bytes.extend_from_slice(&[0; 16]);
+        std::fs::write(&p, &bytes).unwrap();
+        assert!(read_npy_f32(&p).is_ok());
+        let small = crate::Limits {
+            max_voxels: 3,
+            ..crate::Limits::default()
+        };
+        let e = read_npy_f32_with(&p, &small).unwrap_err().to_string();
+        assert!(e.contains("exceeds the limit 3"), "{e}");
     }
 
     #[test]

@@ -16,8 +16,11 @@
 //! - Geometry: `space directions` (vectors such as `(1,0,0)`, or `none`) give per-axis spacing
 //!   (the vector's length, world units) and direction (the normalised vector, one column of
 //!   [`Grid::direction`]); `spacings` is used for axes without a direction vector (`nan` → 1);
-//!   `space origin` gives the world position of voxel (0,0,0) (default 0). The world frame is the
-//!   file's `space` as written: **no LPS/RAS flip is applied** (as in VTK's NRRD reader). The
+//!   `space origin` gives the world position of voxel (0,0,0) (default 0). **World frame LPS**
+//!   (decision 0008, as ITK): `space: right-anterior-superior` (`RAS`) and
+//!   `left-anterior-superior` (`LAS`) are converted by negating x and y (RAS) or y (LAS) of the
+//!   directions and origin; `LPS`, non-anatomical spaces (`scanner-xyz`, `3D-right-handed`, …)
+//!   and files without `space` are kept as written (VTK's NRRD reader never converts). The
 //!   directions must be orthogonal (sheared grids are rejected). Only 3-D spaces are accepted
 //!   (`space` such as `RAS`, `LPS`, `scanner-xyz`, `3D-right-handed`, or `space dimension: 3`).
 //! - Data: attached after the blank line ending the header, or in `data file` (`datafile`),
@@ -38,12 +41,12 @@ use crate::error::{IoError, Result};
 use crate::header::{
     LineAction, normalize_words, parse_finite, parse_numbers, read_header, resolve_data_path,
 };
+use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
-use volsplat_core::volume::MAX_VOXELS;
 use volsplat_core::{AnyVolume, CoreError, Grid, with_volume};
 
 /// The `type` spellings accepted, for error messages.
@@ -62,11 +65,20 @@ struct Field {
 
 /// Reads a NRRD volume (attached `.nrrd` or detached `.nhdr` header) into a runtime-typed volume.
 ///
-/// World space is the file's space as written (see the [module documentation](self) for the
+/// World space is LPS for RAS/LAS files, else the file's space as written (see the [module documentation](self) for the
 /// fields, conversions and limits). Errors name the file, the header field and its value.
 pub fn read_nrrd(path: impl AsRef<Path>) -> Result<AnyVolume> {
-    let path = path.as_ref();
-    let header = read_header(path, |n, line| {
+    read_nrrd_with(path, &Limits::default())
+}
+
+/// [`read_nrrd`] with caller-set [`Limits`] (header bytes, voxel count).
+pub fn read_nrrd_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolume> {
+    read_nrrd_impl(path.as_ref(), limits).map(|(v, _)| v)
+}
+
+/// Reads a NRRD file; also returns notes for the user (e.g. the world-frame conversion).
+pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String>)> {
+    let header = read_header(path, limits.max_header_bytes, |n, line| {
         if n > 1 && line.trim().is_empty() {
             LineAction::EndBefore
         } else {
@@ -167,27 +179,7 @@ pub fn read_nrrd(path: impl AsRef<Path>) -> Result<AnyVolume> {
         "a whole number ≥ 1",
         |t| t.parse::<u64>().ok().filter(|&v| v > 0),
     )?;
-    let count: u128 = sizes.iter().map(|&s| s as u128).product();
-    if count > MAX_VOXELS {
-        return Err(IoError::TooLarge {
-            path: path.to_path_buf(),
-            what: format!("voxel count from field `sizes` ({})", sizes_f.value),
-            value: count,
-            limit: MAX_VOXELS,
-        });
-    }
-    // Each size is ≤ MAX_VOXELS, so it fits in usize on 64-bit targets; check anyway.
-    let mut dims = [0usize; 3];
-    for (d, &s) in dims.iter_mut().zip(&sizes) {
-        *d = usize::try_from(s).map_err(|_| {
-            IoError::field(
-                path,
-                &sizes_f.name,
-                &sizes_f.value,
-                "too large for this platform",
-            )
-        })?;
-    }
+    let dims = checked_dims(path, &sizes_f.name, &sizes_f.value, sizes, limits)?;
 
     // type
     let type_f = require("type", "type")?;
@@ -231,6 +223,16 @@ pub fn read_nrrd(path: impl AsRef<Path>) -> Result<AnyVolume> {
     };
 
     let grid = parse_geometry(path, &fields, dims)?;
+    let mut notes = Vec::new();
+    let grid = match fields.get("space") {
+        Some(f) => {
+            let space = normalize_words(&f.value);
+            let (grid, note) = crate::frame::to_lps(path, &space, grid)?;
+            notes.extend(note);
+            grid
+        }
+        None => grid,
+    };
 
     // skips
     let line_skip = match get("lineskip") {
@@ -296,7 +298,7 @@ pub fn read_nrrd(path: impl AsRef<Path>) -> Result<AnyVolume> {
         big_endian,
         exact: false,
     };
-    read_payload(&spec, grid)
+    Ok((read_payload(&spec, grid)?, notes))
 }
 
 fn is_nrrd_magic(line: &str) -> bool {
@@ -524,7 +526,7 @@ fn parse_geometry(path: &Path, fields: &HashMap<String, Field>, dims: [usize; 3]
                 continue;
             }
             let v = parse_vector(path, f, item)?;
-            if v.length() < 1e-300 {
+            if robust_length(v) == 0.0 {
                 return Err(IoError::field(
                     path,
                     &f.name,
@@ -549,7 +551,7 @@ fn parse_geometry(path: &Path, fields: &HashMap<String, Field>, dims: [usize; 3]
     for axis in 0..3 {
         match steps[axis] {
             Some(v) => {
-                let len = v.length();
+                let len = robust_length(v);
                 spacing[axis] = len;
                 // Exact for axis-aligned steps: then len == |component| exactly.
                 cols[axis] = Some(v / len);
@@ -583,6 +585,17 @@ fn parse_geometry(path: &Path, fields: &HashMap<String, Field>, dims: [usize; 3]
         }
         _ => IoError::core(path, e),
     })
+}
+
+/// The Euclidean length of `v` without overflow or underflow in the squares (spacings of 1e-160
+/// or 1e200 round-trip): `m · |v / m|` with `m` the largest component magnitude. Exact for
+/// axis-aligned vectors.
+fn robust_length(v: DVec3) -> f64 {
+    let m = v.abs().max_element();
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    m * (v / m).length()
 }
 
 /// Fills missing direction columns: each missing axis `c` gets the first of `e_c, e_{c+1},
@@ -1039,7 +1052,7 @@ mod tests {
         assert_eq!(g.spacing, [2.0, 0.5, 3.0]);
         assert_eq!(g.origin, [10.0, -20.0, 30.5]);
         assert_eq!(g.direction, DMat3::from_cols(DVec3::Y, -DVec3::X, DVec3::Z));
-        // No LPS→RAS flip: world = the file's space as written.
+        // An LPS file: world = the file's space as written.
         assert_eq!(
             g.world_from_index(DVec3::new(1.0, 1.0, 1.0)),
             DVec3::new(9.5, -18.0, 33.5)
@@ -1080,7 +1093,11 @@ mod tests {
             .grid()
             .clone();
         assert_eq!(g.spacing, [2.0, 1.0, 3.0]);
-        assert_eq!(g.direction, DMat3::from_cols(DVec3::Z, DVec3::Y, DVec3::X));
+        // `space: RAS` is converted to LPS (decision 0008): x and y negated.
+        assert_eq!(
+            g.direction,
+            DMat3::from_cols(DVec3::Z, -DVec3::Y, -DVec3::X)
+        );
     }
 
     #[test]
@@ -1199,6 +1216,134 @@ mod tests {
             e.contains("line skip") && e.contains("expected 3 lines"),
             "{e}"
         );
+    }
+
+    /// Fuzzing regression (issue 13): a product of sizes overflowing even u128 was accepted.
+    #[test]
+    fn overflowing_sizes_are_an_error_naming_the_field() {
+        let dir = tempfile::tempdir().unwrap();
+        for sizes in [
+            "sizes: 9223372036854775808 9223372036854775808 4",
+            "sizes: 18446744073709551615 18446744073709551615 18446744073709551615",
+        ] {
+            let h = header_with("sizes", Some(sizes));
+            let e = err_of(dir.path(), &h, &[0; 8]);
+            assert!(
+                e.contains("`sizes`") && e.contains("exceeds the limit"),
+                "{e}"
+            );
+        }
+        // A caller-set limit applies.
+        let h = header_with("sizes", None).replace("NRRD0004\n", "NRRD0004\nsizes: 4 4 4\n");
+        let p = file(dir.path(), "l.nrrd", &h, &[0; 64]);
+        assert!(read_nrrd(&p).is_ok());
+        let small = Limits {
+            max_voxels: 63,
+            ..Limits::default()
+        };
+        let e = read_nrrd_with(&p, &small).unwrap_err().to_string();
+        assert!(e.contains("exceeds the limit 63"), "{e}");
+        let small = Limits {
+            max_header_bytes: 20,
+            ..Limits::default()
+        };
+        let e = read_nrrd_with(&p, &small).unwrap_err().to_string();
+        assert!(e.contains("header size"), "{e}");
+    }
+
+    /// Fuzzing regression (issue 13): `data file: /dev/zero` with `line skip` read forever.
+    #[test]
+    #[cfg(unix)]
+    fn device_data_files_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        for extra in ["line skip: 1\n", "", "encoding: gzip\n"] {
+            let enc = if extra.starts_with("encoding") {
+                ""
+            } else {
+                "encoding: raw\n"
+            };
+            let h = format!(
+                "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\n{enc}{extra}data file: /dev/zero\n"
+            );
+            let p = file(dir.path(), "z.nhdr", &h, b"");
+            let e = read_nrrd(&p).unwrap_err().to_string();
+            assert!(
+                e.contains("/dev/zero") && e.contains("not a regular file"),
+                "{e}"
+            );
+        }
+        // The header itself must be a file too.
+        let e = read_nrrd("/dev/zero").unwrap_err().to_string();
+        assert!(e.contains("not a regular file"), "{e}");
+        let e = read_nrrd(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("directory"), "{e}");
+    }
+
+    /// Line skipping stops at the end of the file as found, whatever `line skip` says.
+    #[test]
+    fn huge_line_skip_ends_at_the_end_of_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("d.raw"), vec![b'\n'; 100]).unwrap();
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\
+                 data file: d.raw\nline skip: 18446744073709551615\n";
+        let e = read_nrrd(file(dir.path(), "s.nhdr", h, b""))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line skip") && e.contains("found 100"), "{e}");
+    }
+
+    /// Fuzzing regression (issue 13): spacings below 1e-154 or above 1e154 did not round-trip
+    /// (the vector length squared under- or overflowed).
+    #[test]
+    fn extreme_spacings_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        for s in [1e-160, 3e-300, 1e154, 1e200, 1.7e300] {
+            let grid =
+                Grid::new([2, 1, 1], [s, 1.0, s * 0.5], [s, -s, 0.0], DMat3::IDENTITY).unwrap();
+            let v: AnyVolume = volsplat_core::Volume::new(grid, vec![1u8, 2])
+                .unwrap()
+                .into();
+            let p = dir.path().join("s.nrrd");
+            write_nrrd(&p, &v, false).unwrap();
+            let back = read_nrrd(&p).unwrap();
+            assert_eq!(back.grid(), v.grid(), "spacing {s}");
+            // A rotated direction too (to within a few ulps).
+            let c = std::f64::consts::FRAC_1_SQRT_2;
+            let rot = DMat3::from_cols(DVec3::new(c, c, 0.0), DVec3::new(-c, c, 0.0), DVec3::Z);
+            let grid = Grid::new([2, 1, 1], [s, 2.0 * s, 1.0], [0.0; 3], rot).unwrap();
+            let v: AnyVolume = volsplat_core::Volume::new(grid, vec![1u8, 2])
+                .unwrap()
+                .into();
+            write_nrrd(&p, &v, false).unwrap();
+            let back = read_nrrd(&p).unwrap();
+            for a in 0..3 {
+                let (x, y) = (back.grid().spacing[a], v.grid().spacing[a]);
+                assert!((x - y).abs() <= 4.0 * f64::EPSILON * y, "{x} vs {y}");
+            }
+        }
+    }
+
+    /// `space: RAS` files are converted to LPS (decision 0008).
+    #[test]
+    fn ras_space_is_converted_to_lps() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = "NRRD0004\ntype: uint8\ndimension: 3\nspace: right-anterior-superior\n\
+                 sizes: 2 1 1\nspace directions: (0.5,0,0) (0,2,0) (0,0,3)\n\
+                 space origin: (10,20,30)\nencoding: raw\n\n";
+        let (v, notes) =
+            read_nrrd_impl(&file(dir.path(), "r.nrrd", h, &[1, 2]), &Limits::default()).unwrap();
+        let g = v.grid();
+        assert_eq!(g.origin, [-10.0, -20.0, 30.0]);
+        assert_eq!(g.spacing, [0.5, 2.0, 3.0]);
+        assert_eq!(
+            g.direction,
+            DMat3::from_diagonal(DVec3::new(-1.0, -1.0, 1.0))
+        );
+        assert!(notes[0].contains("LPS"), "{notes:?}");
+        let h = h.replace("right-anterior-superior", "LPS");
+        let v = read_nrrd(file(dir.path(), "l.nrrd", &h, &[1, 2])).unwrap();
+        assert_eq!(v.grid().origin, [10.0, 20.0, 30.0]);
+        assert_eq!(v.grid().direction, DMat3::IDENTITY);
     }
 
     #[test]

@@ -129,6 +129,7 @@ pub(crate) fn read_payload(spec: &PayloadSpec<'_>, grid: Grid) -> Result<AnyVolu
             limit: usize::MAX as u128,
         })?;
 
+    crate::limits::require_regular_file(path, "data file")?;
     let mut file = File::open(path).map_err(|e| IoError::os(path, "open data file", e))?;
     let file_len = file
         .metadata()
@@ -147,7 +148,7 @@ pub(crate) fn read_payload(spec: &PayloadSpec<'_>, grid: Grid) -> Result<AnyVolu
         .map_err(|e| IoError::os(path, "seek", e))?;
     let pos = if spec.line_skip > 0 {
         let mut reader = BufReader::new(file);
-        let skipped = skip_lines(&mut reader, spec.line_skip, path)?;
+        let skipped = skip_lines(&mut reader, spec.line_skip, file_len - spec.start, path)?;
         file = reader.into_inner();
         let pos = spec.start + skipped;
         file.seek(SeekFrom::Start(pos))
@@ -379,11 +380,22 @@ fn read_capped<W: std::io::Write + ?Sized>(
     Ok(total)
 }
 
-/// Skips `n` lines (through their `\n`), returning the number of bytes consumed.
-fn skip_lines(reader: &mut BufReader<File>, n: u64, path: &Path) -> Result<u64> {
+/// Skips `n` lines (through their `\n`), returning the number of bytes consumed. Never reads
+/// more than `max_bytes` (the rest of the file as its size was found), so a file that grows or
+/// never ends cannot keep it reading.
+fn skip_lines(reader: &mut BufReader<File>, n: u64, max_bytes: u64, path: &Path) -> Result<u64> {
     let mut consumed = 0u64;
     let mut lines = 0u64;
     while lines < n {
+        if consumed >= max_bytes {
+            return Err(IoError::Truncated {
+                path: path.to_path_buf(),
+                what: "data file while skipping lines (`line skip`)".into(),
+                expected: n,
+                actual: lines,
+                unit: "lines",
+            });
+        }
         let buf = reader
             .fill_buf()
             .map_err(|e| IoError::os(path, "read (line skip)", e))?;

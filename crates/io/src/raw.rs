@@ -1,6 +1,7 @@
 //! Headerless raw volumes: the caller describes the layout with a [`RawSpec`].
 
 use crate::error::{IoError, Result};
+use crate::limits::{Limits, checked_voxel_count};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
 use std::path::Path;
 use volsplat_core::glam::DMat3;
@@ -47,7 +48,20 @@ impl RawSpec {
 /// [`volsplat_core::volume::MAX_VOXELS`] and the grid validated before any sample memory is
 /// allocated.
 pub fn read_raw(path: impl AsRef<Path>, spec: &RawSpec) -> Result<AnyVolume> {
+    read_raw_with(path, spec, &Limits::default())
+}
+
+/// [`read_raw`] with caller-set [`Limits`] (voxel count).
+pub fn read_raw_with(path: impl AsRef<Path>, spec: &RawSpec, limits: &Limits) -> Result<AnyVolume> {
     let path = path.as_ref();
+    let dims_text = format!("{:?}", spec.dims);
+    checked_voxel_count(
+        path,
+        "dims",
+        &dims_text,
+        &spec.dims.map(|d| d as u64),
+        limits,
+    )?;
     let grid = Grid::new(spec.dims, spec.spacing, spec.origin, DMat3::IDENTITY)
         .map_err(|e| IoError::core(path, e))?;
     let gz = path
@@ -217,6 +231,22 @@ mod tests {
         let spec = RawSpec::new([100_000, 100_000, 100_000], ScalarType::F32);
         let e = read_raw(&p, &spec).unwrap_err().to_string();
         assert!(e.contains("exceeds the limit"), "{e}");
+        // Fuzzing regression (issue 13): dims whose product overflows even u128.
+        let spec = RawSpec::new([1 << 63, 1 << 63, 4], ScalarType::U8);
+        let small = Limits {
+            max_voxels: 7,
+            ..Limits::default()
+        };
+        let spec2 = RawSpec::new([2, 2, 2], ScalarType::U8);
+        let e = read_raw_with(&p, &spec2, &small).unwrap_err().to_string();
+        assert!(e.contains("exceeds the limit 7"), "{e}");
+        let e = read_raw(&p, &spec).unwrap_err().to_string();
+        assert!(
+            e.contains("`dims`") && e.contains("exceeds the limit"),
+            "{e}"
+        );
+        let spec = RawSpec::new([usize::MAX; 3], ScalarType::F32);
+        assert!(read_raw(&p, &spec).is_err());
         let spec = RawSpec::new([2048, 2048, 2048], ScalarType::U8);
         let e = read_raw(&p, &spec).unwrap_err().to_string();
         assert!(e.contains("expected 8589934592 bytes"), "{e}");

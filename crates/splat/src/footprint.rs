@@ -24,6 +24,7 @@
 //! integral used by X-ray mode.
 
 use crate::aa::{Antialias, footprint_variance, sym_eigen, widen};
+use crate::error::{Result, SplatError};
 use crate::geometry::SplatGeometry;
 use volsplat_core::Kernel;
 use volsplat_core::glam::{DMat2, DVec2, DVec3};
@@ -39,6 +40,11 @@ pub struct FootprintSettings {
     pub max_entries: usize,
     /// Largest number of sub-pixel phases per axis.
     pub max_phases: usize,
+    /// Largest footprint block side, in pixels (default 1024): a footprint wider or taller
+    /// than this (one voxel projecting onto hundreds of pixels: an extreme zoom, a tiny camera
+    /// `parallel_scale`, or a spacing like `1 3e7 1`) is an error instead of a table of
+    /// gigabytes. At the default a table holds at most 4 × 1024² weights (16 MiB).
+    pub max_block_side: usize,
 }
 
 impl Default for FootprintSettings {
@@ -46,6 +52,7 @@ impl Default for FootprintSettings {
         FootprintSettings {
             max_entries: 1 << 15,
             max_phases: 64,
+            max_block_side: 1024,
         }
     }
 }
@@ -440,20 +447,48 @@ fn separable_line_integral(kernel: &Kernel, o: DVec3, g: DVec3) -> f64 {
     sum
 }
 
+/// A footprint block side (`2⌈h⌉ + 2` pixels) for messages.
+fn block_side(h: f64) -> String {
+    if h.is_finite() {
+        format!("{:.0}", 2.0 * h.ceil() + 2.0)
+    } else {
+        format!("{h}")
+    }
+}
+
 impl FootprintTable {
     /// Tabulates the footprint of `kernel` for the frame `geom`.
+    ///
+    /// Errors ([`SplatError::Settings`]) if the footprint's block (`2⌈half extent⌉ + 2` pixels
+    /// per axis) exceeds [`FootprintSettings::max_block_side`] or is not finite, before
+    /// anything is allocated.
     pub fn build(
         kernel: &Kernel,
         geom: &SplatGeometry,
         settings: &FootprintSettings,
         antialias: Antialias,
-    ) -> Self {
+    ) -> Result<Self> {
         let f = FootprintFunction::new(kernel, geom, antialias);
         Self::from_function(&f, settings)
     }
 
-    pub(crate) fn from_function(f: &FootprintFunction, settings: &FootprintSettings) -> Self {
+    pub(crate) fn from_function(
+        f: &FootprintFunction,
+        settings: &FootprintSettings,
+    ) -> Result<Self> {
         let [hx, hy] = f.half_extent;
+        let max_side = settings.max_block_side;
+        // The largest half extent whose block 2⌈h⌉ + 2 fits in max_side pixels.
+        let max_half = (max_side.saturating_sub(2) / 2) as f64;
+        if !(hx.is_finite() && hy.is_finite() && hx <= max_half && hy <= max_half) {
+            return Err(SplatError::Settings(format!(
+                "the footprint of one voxel would cover {} × {} pixels, more than the limit of \
+                 {max_side} × {max_side} (footprint max_block_side); the zoom is too large, the \
+                 camera's parallel_scale too small, or the grid spacing too uneven",
+                block_side(hx),
+                block_side(hy),
+            )));
+        }
         let point = matches!(f.kind, Kind::Point { .. });
         // Pixel offsets k ∈ [−⌈h⌉, ⌈h⌉ + 1] hold every pixel a sample with phase in [0, 1) covers.
         let (kx0, ky0) = (-(hx.ceil() as i32), -(hy.ceil() as i32));
@@ -542,7 +577,7 @@ impl FootprintTable {
         } else {
             f32::NEG_INFINITY
         };
-        FootprintTable {
+        Ok(FootprintTable {
             phases,
             blend: !point,
             floor,
@@ -555,7 +590,7 @@ impl FootprintTable {
                 width: tw as u32,
                 height: th as u32,
             },
-        }
+        })
     }
 
     /// A table from raw parts (tests): one phase.
@@ -756,7 +791,8 @@ mod tests {
             let l = ellipse_to_circle(q);
             assert!(l.is_finite(), "az {az} {w}×{h}: Q = {q}, L = {l}");
             let t =
-                FootprintTable::build(&Kernel::default(), &g, &Default::default(), Antialias::Swan);
+                FootprintTable::build(&Kernel::default(), &g, &Default::default(), Antialias::Swan)
+                    .unwrap();
             assert!(
                 t.entries.iter().all(|v| v.is_finite() && *v >= 0.0),
                 "az {az} {w}×{h}"
@@ -831,7 +867,8 @@ mod tests {
             (Kernel::MitchellNetravali { b: 0.0, c: 0.5 }, true),
         ] {
             let t =
-                FootprintTable::build(&kernel, &g, &FootprintSettings::default(), Antialias::Swan);
+                FootprintTable::build(&kernel, &g, &FootprintSettings::default(), Antialias::Swan)
+                    .unwrap();
             let b = t.block();
             let mut min = f32::INFINITY;
             let mut extrapolated = 0;
@@ -902,11 +939,60 @@ mod tests {
 
     /// Table sizing: phases² × block ≤ max_entries, phases ≤ max_phases; the single-point
     /// kernel has one phase.
+    /// Fuzzing regression (issue 13): a spacing like `1 3e7 1`, a zoom of 1e9 or a
+    /// parallel_scale of 1e-12 made footprint tables of gigabytes (or a capacity overflow).
+    #[test]
+    fn oversized_footprints_are_an_error() {
+        let s = FootprintSettings::default();
+        for (spacing, scale) in [
+            ([1.0, 3e7, 1.0], 2.0),
+            ([3e7, 1.0, 1.0], 2.0),
+            ([1.0, 1.0, 3e7], 2.0),
+            ([1.0; 3], 1e9),
+            ([1.0; 3], 3.2e13),
+            ([1.0; 3], 1000.0),
+        ] {
+            let g = geometry(spacing, 30.0, 20.0, scale);
+            // (Nearest covers only the in-sheet cell, which can stay small when the long axis
+            // is the sheet axis.)
+            for k in [Kernel::default(), Kernel::Tent] {
+                for aa in [Antialias::None, Antialias::Swan] {
+                    match FootprintTable::build(&k, &g, &s, aa) {
+                        Ok(t) => panic!(
+                            "{} {spacing:?} ×{scale}: built a table of half extent {:?}",
+                            k.name(),
+                            t.half_extent
+                        ),
+                        Err(e) => {
+                            let m = e.to_string();
+                            assert!(m.contains("max_block_side") && m.contains("1024"), "{m}");
+                        }
+                    }
+                }
+            }
+            // Point splats have no extent, whatever the view.
+            assert!(FootprintTable::build(&Kernel::SinglePoint, &g, &s, Antialias::None).is_ok());
+        }
+        // Just inside the limit builds; a raised limit admits more.
+        let g = geometry([1.0; 3], 0.0, 0.0, 100.0);
+        let t = FootprintTable::build(&Kernel::default(), &g, &s, Antialias::None)
+            .map_err(|e| e.to_string())
+            .unwrap();
+        assert!(t.block().width <= 1024 && t.block().height <= 1024);
+        let g = geometry([1.0; 3], 30.0, 20.0, 300.0);
+        let big = FootprintSettings {
+            max_block_side: 4096,
+            ..s
+        };
+        assert!(FootprintTable::build(&Kernel::default(), &g, &big, Antialias::None).is_ok());
+    }
+
     #[test]
     fn table_resolution_rule() {
         let g = geometry([1.0; 3], 0.0, 0.0, 2.0);
         for k in [Kernel::default(), Kernel::Tent, Kernel::Nearest] {
-            let t = FootprintTable::build(&k, &g, &FootprintSettings::default(), Antialias::None);
+            let t = FootprintTable::build(&k, &g, &FootprintSettings::default(), Antialias::None)
+                .unwrap();
             assert!(t.entry_count() <= 1 << 17, "{}", k.name());
             assert!(
                 t.phases >= 16 && t.phases <= 64,
@@ -921,16 +1007,19 @@ mod tests {
             &FootprintSettings {
                 max_entries: 1 << 17,
                 max_phases: 9,
+                ..FootprintSettings::default()
             },
             Antialias::None,
-        );
+        )
+        .unwrap();
         assert_eq!(t.phases, 9);
         let t = FootprintTable::build(
             &Kernel::SinglePoint,
             &g,
             &FootprintSettings::default(),
             Antialias::None,
-        );
+        )
+        .unwrap();
         assert_eq!(t.phases, 1);
     }
 
@@ -944,7 +1033,7 @@ mod tests {
         ] {
             let g = geometry([1.0, 1.3, 2.0], 20.0, 10.0, 2.0);
             let f = FootprintFunction::new(&k, &g, Antialias::None);
-            let t = FootprintTable::from_function(&f, &FootprintSettings::default());
+            let t = FootprintTable::from_function(&f, &FootprintSettings::default()).unwrap();
             let peak = f.weight(0.0, 0.0);
             for (x, y) in [(10.25f32, 7.8125f32), (3.1234, 9.87), (5.5, 5.5)] {
                 let loc = t.locate(x, y);

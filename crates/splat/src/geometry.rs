@@ -61,6 +61,14 @@ impl SplatGeometry {
         let raster_from_world = proj.raster_from_world_linear();
         let jacobian = raster_from_world * world_from_lattice;
         let origin_raster = proj.raster_from_world(DVec3::from(grid.origin));
+        if !(jacobian.is_finite() && origin_raster.is_finite()) {
+            return Err(SplatError::Settings(format!(
+                "the view maps the volume to non-finite raster coordinates (one voxel step = \
+                 {:?} pixels); the zoom, the camera's parallel_scale or the grid spacing is too \
+                 extreme",
+                jacobian.to_cols_array()
+            )));
+        }
         let lattice_from_world =
             DMat3::from_diagonal(DVec3::from(spacing).recip()) * grid.direction.transpose();
         let forward = proj.frame.forward;

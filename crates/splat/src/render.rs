@@ -266,7 +266,7 @@ pub fn render_with_progress<T: Scalar>(
         &geom,
         &settings.footprint,
         settings.antialias,
-    );
+    )?;
     let classifier = FrameClassifier::new(tables, &proj.frame, geom.sheet_spacing);
     let (w, h) = (settings.width, settings.height);
     let band_h = settings.band_height;

@@ -1,0 +1,167 @@
+//! Caps on what the readers accept from a file ([`Limits`]), and the checked size arithmetic
+//! every reader uses before allocating.
+
+use crate::error::{IoError, Result};
+use std::path::Path;
+use volsplat_core::volume::MAX_VOXELS;
+
+/// Limits against untrusted input, checked from headers before anything is allocated (as
+/// image-rs's `Limits`). [`Limits::default`] holds the crate's historical constants; a caller
+/// (the CLI's one flag, say) may raise or lower them.
+///
+/// ```
+/// // At most 512³ voxels, other limits as by default.
+/// let small = volsplat_io::Limits { max_voxels: 512 * 512 * 512, ..Default::default() };
+/// assert_eq!(small.voxel_limit(), 1 << 27);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Largest text header (NRRD, MetaImage, `.npy`, VTK XML document) accepted, in bytes.
+    /// Default [`crate::MAX_HEADER_BYTES`] (1 MiB); VTK XML files with inline data use
+    /// [`Limits::max_xml_bytes`] instead.
+    pub max_header_bytes: usize,
+    /// Largest number of voxels (samples of the one volume read), default
+    /// [`volsplat_core::volume::MAX_VOXELS`] (2³⁴). Raising it above that constant has no effect:
+    /// `volsplat_core::Grid` refuses larger grids.
+    pub max_voxels: u128,
+    /// Largest camera / transfer-function JSON file, in bytes; default [`crate::MAX_JSON_BYTES`]
+    /// (16 MiB).
+    pub max_json_bytes: u64,
+    /// Largest VTK XML (`.vti`) file read into memory whole, in bytes; default 4 GiB.
+    pub max_xml_bytes: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_header_bytes: crate::MAX_HEADER_BYTES,
+            max_voxels: MAX_VOXELS,
+            max_json_bytes: crate::MAX_JSON_BYTES,
+            max_xml_bytes: 4 << 30,
+        }
+    }
+}
+
+impl Limits {
+    /// The effective voxel limit: `max_voxels`, but never above the core's [`MAX_VOXELS`].
+    pub fn voxel_limit(&self) -> u128 {
+        self.max_voxels.min(MAX_VOXELS)
+    }
+}
+
+/// The product of `sizes` with checked arithmetic, compared with the voxel limit; errors name
+/// `field` (as spelled in the file format) and its text `value`.
+pub(crate) fn checked_voxel_count(
+    path: &Path,
+    field: &str,
+    value: &str,
+    sizes: &[u64],
+    limits: &Limits,
+) -> Result<u128> {
+    let limit = limits.voxel_limit();
+    let mut count: u128 = 1;
+    for &s in sizes {
+        count = match count.checked_mul(s as u128) {
+            Some(c) => c,
+            None => {
+                return Err(IoError::TooLarge {
+                    path: path.to_path_buf(),
+                    what: format!(
+                        "voxel count from field `{field}` ({}; the product overflows)",
+                        crate::error::clip(value)
+                    ),
+                    value: u128::MAX,
+                    limit,
+                });
+            }
+        };
+    }
+    if count > limit {
+        return Err(IoError::TooLarge {
+            path: path.to_path_buf(),
+            what: format!(
+                "voxel count from field `{field}` ({})",
+                crate::error::clip(value)
+            ),
+            value: count,
+            limit,
+        });
+    }
+    Ok(count)
+}
+
+/// Three sizes checked as [`checked_voxel_count`] and converted to `usize`.
+pub(crate) fn checked_dims(
+    path: &Path,
+    field: &str,
+    value: &str,
+    sizes: [u64; 3],
+    limits: &Limits,
+) -> Result<[usize; 3]> {
+    checked_voxel_count(path, field, value, &sizes, limits)?;
+    let mut dims = [0usize; 3];
+    for (d, &s) in dims.iter_mut().zip(&sizes) {
+        *d = usize::try_from(s)
+            .map_err(|_| IoError::field(path, field, value, "too large for this platform"))?;
+    }
+    Ok(dims)
+}
+
+/// Refuses anything but a regular file (or a symbolic link to one): reading a device such as
+/// `/dev/zero`, a FIFO or a socket could block or never end. `what` says which file it is
+/// (e.g. `data file`).
+pub(crate) fn require_regular_file(path: &Path, what: &str) -> Result<()> {
+    let meta = std::fs::metadata(path).map_err(|e| IoError::os(path, format!("open {what}"), e))?;
+    if meta.is_file() {
+        Ok(())
+    } else {
+        let kind = if meta.is_dir() {
+            "a directory"
+        } else {
+            "a device, FIFO or socket"
+        };
+        Err(IoError::NotAFile {
+            path: path.to_path_buf(),
+            what: what.to_string(),
+            kind,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overflowing_products_are_errors_naming_the_field() {
+        let p = Path::new("x.nrrd");
+        let l = Limits::default();
+        let big = 9223372036854775808u64;
+        let e = checked_voxel_count(p, "sizes", "v", &[big, big, 4], &l).unwrap_err();
+        let s = e.to_string();
+        assert!(s.contains("`sizes`") && s.contains("overflows"), "{s}");
+        let e = checked_voxel_count(p, "sizes", "v", &[u64::MAX, u64::MAX, u64::MAX], &l);
+        assert!(e.is_err());
+        assert_eq!(
+            checked_voxel_count(p, "sizes", "v", &[2, 3, 4], &l).unwrap(),
+            24
+        );
+        let small = Limits {
+            max_voxels: 10,
+            ..Limits::default()
+        };
+        let e = checked_voxel_count(p, "sizes", "v", &[2, 3, 4], &small).unwrap_err();
+        assert!(e.to_string().contains("exceeds the limit 10"), "{e}");
+    }
+
+    #[test]
+    #[cfg(unix)]
+    fn devices_and_directories_are_refused() {
+        let e = require_regular_file(Path::new("/dev/zero"), "data file").unwrap_err();
+        assert!(e.to_string().contains("/dev/zero"), "{e}");
+        assert!(e.to_string().contains("not a regular file"), "{e}");
+        let d = tempfile::tempdir().unwrap();
+        let e = require_regular_file(d.path(), "data file").unwrap_err();
+        assert!(e.to_string().contains("directory"), "{e}");
+    }
+}

@@ -1,0 +1,397 @@
+//! Choosing a volume reader by file name: [`read_volume`], [`read_volume_with`] and their
+//! options and result.
+
+use crate::error::{IoError, Result};
+use crate::limits::Limits;
+use crate::nifti::has_suffix;
+use std::path::Path;
+use volsplat_core::AnyVolume;
+
+/// The file-name endings [`read_volume`] understands (without the leading dot; compare
+/// case-insensitively with the end of the file name, so `nii.gz` matches `brain.NII.GZ`).
+pub const VOLUME_EXTENSIONS: &[&str] = &[
+    "nrrd", "nhdr", "mha", "mhd", "nii", "nii.gz", "hdr", "vti", "tif", "tiff",
+];
+
+const SUPPORTED: &str = ".nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr (+ .img), .vti, \
+     .tif, .tiff (headerless raw: use read_raw with a RawSpec)";
+
+/// The volume file formats, as told by the file name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VolumeFormat {
+    /// NRRD, `.nrrd` or `.nhdr` ([`crate::read_nrrd`]).
+    Nrrd,
+    /// MetaImage, `.mha` or `.mhd` ([`crate::read_metaimage`]).
+    MetaImage,
+    /// NIfTI-1/-2, `.nii`, `.nii.gz`, `.hdr` ([`crate::read_nifti`]).
+    Nifti,
+    /// VTK XML image data, `.vti` ([`crate::read_vti`]).
+    Vti,
+    /// A multi-page TIFF, `.tif` / `.tiff` ([`crate::read_tiff`]).
+    Tiff,
+}
+
+impl VolumeFormat {
+    /// The format named by `path`'s ending (case-insensitive), or `None`.
+    pub fn from_path(path: &Path) -> Option<Self> {
+        let ends = |s: &str| has_suffix(path, s);
+        Some(if ends(".nrrd") || ends(".nhdr") {
+            VolumeFormat::Nrrd
+        } else if ends(".mha") || ends(".mhd") {
+            VolumeFormat::MetaImage
+        } else if ends(".nii") || ends(".nii.gz") || ends(".hdr") || ends(".hdr.gz") {
+            VolumeFormat::Nifti
+        } else if ends(".vti") {
+            VolumeFormat::Vti
+        } else if ends(".tif") || ends(".tiff") {
+            VolumeFormat::Tiff
+        } else {
+            return None;
+        })
+    }
+
+    /// A short name for messages and `info` output (`NRRD`, `MetaImage`, `NIfTI`, `VTK image
+    /// data`, `TIFF`).
+    pub fn name(self) -> &'static str {
+        match self {
+            VolumeFormat::Nrrd => "NRRD",
+            VolumeFormat::MetaImage => "MetaImage",
+            VolumeFormat::Nifti => "NIfTI",
+            VolumeFormat::Vti => "VTK image data",
+            VolumeFormat::Tiff => "TIFF",
+        }
+    }
+}
+
+/// What [`read_volume_with`] should read, and within which limits.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Limits against untrusted input (header bytes, voxel count, ...).
+    pub limits: Limits,
+    /// Which volume of a file holding several (a 4-D NIfTI's time points, an ImageJ
+    /// hyperstack's frames), from 0; default 0.
+    /// Asking for a frame past the end is an error stating how many there are; a frame other
+    /// than 0 of a single-volume format is an error too.
+    pub frame: usize,
+    /// The point-data array to read from a VTK `.vti` file (default: the active scalars, else
+    /// the first array). Naming an array for another format is an error.
+    pub array: Option<String>,
+}
+
+/// A volume as read, with what the file said about it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedVolume {
+    /// The samples and their grid (world frame LPS for anatomical files: decision 0008).
+    pub volume: AnyVolume,
+    /// The format as read, e.g. `NRRD`, `MetaImage`, `NIfTI-1`, `NIfTI-2`, `VTK image data`,
+    /// `TIFF`.
+    pub format: String,
+    /// How many volumes (frames) the file holds; 1 for most files.
+    pub frames: usize,
+    /// Which frame was read (0-based).
+    pub frame: usize,
+    /// The point-data arrays in the file (VTK `.vti`); empty for other formats.
+    pub arrays: Vec<String>,
+    /// Notes for the user: conversions applied (RAS → LPS, type or scaling), where the geometry
+    /// came from, defaults assumed. Never errors; print them as information.
+    pub notes: Vec<String>,
+}
+
+impl LoadedVolume {
+    fn single(volume: AnyVolume, format: &str, notes: Vec<String>) -> Self {
+        LoadedVolume {
+            volume,
+            format: format.into(),
+            frames: 1,
+            frame: 0,
+            arrays: Vec::new(),
+            notes,
+        }
+    }
+}
+
+/// Reads a volume, choosing the format by the file name (case-insensitive): `.nrrd`, `.nhdr`
+/// ([`crate::read_nrrd`]), `.mha`, `.mhd` ([`crate::read_metaimage`]), `.nii`, `.nii.gz`, `.hdr`
+/// ([`crate::read_nifti`]), `.vti` ([`crate::read_vti`]), `.tif`, `.tiff`
+/// ([`crate::read_tiff`]); a folder holding `.tif`/`.tiff` files is a stack of slices
+/// ([`crate::read_tiff_dir`]). Headerless raw files need a [`crate::RawSpec`]: use
+/// [`crate::read_raw`]. Any other ending, or another folder, is an error listing the supported
+/// ones.
+pub fn read_volume(path: impl AsRef<Path>) -> Result<AnyVolume> {
+    read_volume_with(path, &ReadOptions::default()).map(|l| l.volume)
+}
+
+/// [`read_volume`] with [`ReadOptions`] (limits, frame, VTK array); the result also carries the
+/// format, the number of frames and notes.
+pub fn read_volume_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
+    let path = path.as_ref();
+    if path.is_dir() && !crate::tiff_stack::tiff_files(path)?.is_empty() {
+        if options.array.is_some() || options.frame != 0 {
+            return Err(IoError::invalid_argument(
+                path,
+                "array/frame",
+                "a folder of TIFF slices has one volume and no named arrays",
+            ));
+        }
+        return crate::tiff_stack::read_tiff_dir(path, options);
+    }
+    let Some(format) = VolumeFormat::from_path(path) else {
+        if path.is_dir() {
+            return Err(IoError::NotAFile {
+                path: path.to_path_buf(),
+                what: "volume file".into(),
+                kind: "a directory with no .tif/.tiff slices; folders of DICOM files are not \
+                       supported yet",
+            });
+        }
+        return Err(IoError::UnsupportedFormat {
+            path: path.to_path_buf(),
+            extension: path
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default(),
+            supported: SUPPORTED.into(),
+        });
+    };
+    if options.array.is_some() && format != VolumeFormat::Vti {
+        return Err(IoError::invalid_argument(
+            path,
+            "array",
+            format!(
+                "choosing an array applies to VTK .vti files only, not to {}",
+                format.name()
+            ),
+        ));
+    }
+    let single_frame = |path: &Path| -> Result<()> {
+        if options.frame != 0 {
+            return Err(IoError::invalid_argument(
+                path,
+                "frame",
+                format!(
+                    "frame {} requested, but the file holds 1 frame (0)",
+                    options.frame
+                ),
+            ));
+        }
+        Ok(())
+    };
+    match format {
+        VolumeFormat::Nrrd => {
+            single_frame(path)?;
+            let (v, notes) = crate::nrrd::read_nrrd_impl(path, &options.limits)?;
+            Ok(LoadedVolume::single(v, "NRRD", notes))
+        }
+        VolumeFormat::MetaImage => {
+            single_frame(path)?;
+            let v = crate::read_metaimage_with(path, &options.limits)?;
+            Ok(LoadedVolume::single(v, "MetaImage", Vec::new()))
+        }
+        VolumeFormat::Nifti => crate::read_nifti_with(path, options),
+        VolumeFormat::Vti => {
+            single_frame(path)?;
+            crate::read_vti_with(path, options)
+        }
+        VolumeFormat::Tiff => crate::read_tiff_with(path, options),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_by_name() {
+        for (name, f) in [
+            ("a.nrrd", Some(VolumeFormat::Nrrd)),
+            ("a.NHDR", Some(VolumeFormat::Nrrd)),
+            ("a.mha", Some(VolumeFormat::MetaImage)),
+            ("a.nii", Some(VolumeFormat::Nifti)),
+            ("a.Nii.Gz", Some(VolumeFormat::Nifti)),
+            ("a.hdr", Some(VolumeFormat::Nifti)),
+            ("a.vti", Some(VolumeFormat::Vti)),
+            ("a.tif", Some(VolumeFormat::Tiff)),
+            ("a.TIFF", Some(VolumeFormat::Tiff)),
+            ("a.raw.gz", None),
+            ("a.gz", None),
+        ] {
+            assert_eq!(VolumeFormat::from_path(Path::new(name)), f, "{name}");
+        }
+        for ext in VOLUME_EXTENSIONS {
+            let p = format!("x.{ext}");
+            assert!(VolumeFormat::from_path(Path::new(&p)).is_some(), "{p}");
+        }
+    }
+
+    #[test]
+    fn options_that_do_not_apply_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("v.nrrd");
+        std::fs::write(
+            &p,
+            b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 1 1\nencoding: raw\n\n\x01\x02",
+        )
+        .unwrap();
+        let l = read_volume_with(&p, &ReadOptions::default()).unwrap();
+        assert_eq!((l.format.as_str(), l.frames, l.frame), ("NRRD", 1, 0));
+        let o = ReadOptions {
+            frame: 1,
+            ..ReadOptions::default()
+        };
+        let e = read_volume_with(&p, &o).unwrap_err().to_string();
+        assert!(e.contains("frame 1") && e.contains("v.nrrd"), "{e}");
+        let o = ReadOptions {
+            array: Some("density".into()),
+            ..ReadOptions::default()
+        };
+        let e = read_volume_with(&p, &o).unwrap_err().to_string();
+        assert!(e.contains("array") && e.contains(".vti"), "{e}");
+        let e = read_volume(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("directory"), "{e}");
+    }
+
+    #[test]
+    fn nifti_through_the_dispatcher() {
+        let dir = tempfile::tempdir().unwrap();
+        let h = crate::nifti::tests::Hdr::new(&[2, 1, 1, 2], 2);
+        let p = dir.path().join("b.nii");
+        std::fs::write(&p, h.file(&[1, 2, 3, 4])).unwrap();
+        let o = ReadOptions {
+            frame: 1,
+            ..ReadOptions::default()
+        };
+        let l = read_volume_with(&p, &o).unwrap();
+        assert_eq!(l.format, "NIfTI-1");
+        assert_eq!((l.frames, l.frame), (2, 1));
+        assert_eq!(l.volume.to_f32().data(), &[3.0, 4.0]);
+        assert_eq!(read_volume(&p).unwrap().to_f32().data(), &[1.0, 2.0]);
+    }
+}
+
+/// Corrupted files never panic (a small, deterministic fuzz pass over each reader; the
+/// `fuzz/` targets of issue 13 go further).
+#[cfg(test)]
+mod corruption {
+    use super::*;
+    use std::io::Write;
+
+    fn mutations(seed: u64, valid: &[u8], n: usize) -> Vec<Vec<u8>> {
+        let mut state = seed | 1;
+        let mut rnd = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        (0..n)
+            .map(|k| {
+                let mut b = valid.to_vec();
+                match k % 4 {
+                    0 => b.truncate(rnd() as usize % (valid.len() + 1)),
+                    1 => {
+                        for _ in 0..1 + rnd() % 8 {
+                            let i = rnd() as usize % b.len();
+                            b[i] = rnd() as u8;
+                        }
+                    }
+                    2 => {
+                        // Overwrite a random 8-byte run with an extreme value.
+                        let i = rnd() as usize % b.len();
+                        let v = [0xFFu8, 0x7F, 0x80, 0x00][rnd() as usize % 4];
+                        for x in b.iter_mut().skip(i).take(8) {
+                            *x = v;
+                        }
+                    }
+                    _ => {
+                        let i = rnd() as usize % b.len();
+                        b.insert(i, rnd() as u8);
+                    }
+                }
+                b
+            })
+            .collect()
+    }
+
+    fn gz(data: &[u8]) -> Vec<u8> {
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        e.write_all(data).unwrap();
+        e.finish().unwrap()
+    }
+
+    #[test]
+    fn corrupted_files_are_errors_or_volumes_never_panics() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut valid: Vec<(&str, Vec<u8>)> = Vec::new();
+        let mut h = crate::nifti::tests::Hdr::new(&[3, 2, 2, 2], 4);
+        h.qform_code = 1;
+        h.quatern = [0.1, 0.2, 0.3];
+        h.slope = 2.0;
+        valid.push(("a.nii", h.file(&[1u8; 48])));
+        let mut h2 = h.clone();
+        h2.v2 = true;
+        h2.vox_offset = 544.0;
+        h2.sform_code = 1;
+        h2.srow = [
+            [2.0, 0.0, 0.0, 1.0],
+            [0.0, 3.0, 0.0, 2.0],
+            [0.0, 0.0, 4.0, 3.0],
+        ];
+        valid.push(("b.nii", h2.file(&[2u8; 48])));
+        valid.push(("c.nii.gz", gz(&h.file(&[1u8; 48]))));
+        valid.push((
+            "d.nrrd",
+            b"NRRD0004\ntype: short\ndimension: 3\nspace: RAS\nsizes: 2 2 2\n\
+              space directions: (1,0,0) (0,2,0) (0,0,3)\nendian: little\nencoding: raw\n\n"
+                .iter()
+                .copied()
+                .chain([7u8; 16])
+                .collect(),
+        ));
+        let data: Vec<u8> = (0..12u32).flat_map(|i| (i as f32).to_le_bytes()).collect();
+        let z = {
+            let mut e = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+            e.write_all(&data).unwrap();
+            e.finish().unwrap()
+        };
+        let mut header = Vec::new();
+        for w in [1u32, 48, 48, z.len() as u32] {
+            header.extend(w.to_le_bytes());
+        }
+        let mut vti = b"<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\" \
+            header_type=\"UInt32\" compressor=\"vtkZLibDataCompressor\"><ImageData \
+            WholeExtent=\"0 2 0 1 0 1\" Origin=\"0 0 0\" Spacing=\"1 1 1\"><Piece \
+            Extent=\"0 2 0 1 0 1\"><PointData><DataArray type=\"Float32\" Name=\"a\" \
+            format=\"appended\" offset=\"0\"/></PointData></Piece></ImageData>\
+            <AppendedData encoding=\"raw\">_"
+            .to_vec();
+        vti.extend(&header);
+        vti.extend(&z);
+        vti.extend(b"</AppendedData></VTKFile>");
+        valid.push(("e.vti", vti));
+        let tif = dir.path().join("valid.tif");
+        {
+            let f = std::fs::File::create(&tif).unwrap();
+            let mut enc = tiff::encoder::TiffEncoder::new(f).unwrap();
+            for k in 0..3u16 {
+                enc.write_image::<tiff::encoder::colortype::Gray16>(4, 3, &[k; 12])
+                    .unwrap();
+            }
+        }
+        valid.push(("f.tif", std::fs::read(&tif).unwrap()));
+
+        for (seed, (name, bytes)) in valid.iter().enumerate() {
+            let p = dir.path().join(name);
+            std::fs::write(&p, bytes).unwrap();
+            read_volume(&p).unwrap_or_else(|e| panic!("valid {name}: {e}"));
+            for (k, m) in mutations(seed as u64 + 17, bytes, 300).iter().enumerate() {
+                std::fs::write(&p, m).unwrap();
+                let o = ReadOptions {
+                    frame: k % 2,
+                    ..ReadOptions::default()
+                };
+                // Either outcome is fine; a panic fails the test.
+                let _ = read_volume_with(&p, &o);
+            }
+        }
+    }
+}
