@@ -550,29 +550,20 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
 }
 
 fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
-    use volsplat_filter::{TextureBenchSettings, run_texture_bench};
+    use volsplat_studies::TextureBenchSettings;
     let settings = match a.size {
         TextureBenchSize::Quick => TextureBenchSettings::quick(),
         TextureBenchSize::Default => TextureBenchSettings::default(),
         TextureBenchSize::Thesis => TextureBenchSettings::thesis_size(),
     };
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let pool = thread_pool(a.threads)?;
-    let report = pool.install(|| run_texture_bench(&settings))?;
-    for img in &report.images {
-        let path = a.out.join(format!("{}.png", img.name));
-        volsplat_io::write_png_gray(&path, &img.image, 0.0, 1.0, PngBitDepth::Eight)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    let md = report.to_markdown();
-    let path = a.out.join("report.md");
-    volsplat_io::write_bytes_atomic(&path, md.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))?;
-    println!("{md}");
+    let written =
+        pool.install(|| volsplat_studies::texture_bench::write_folder(&settings, &a.out))?;
+    println!("{}", written.markdown);
     eprintln!(
         "wrote {} and {} images to {}",
-        path.display(),
-        report.images.len(),
+        written.report.display(),
+        written.images,
         a.out.display()
     );
     Ok(())
@@ -749,5 +740,20 @@ mod tests {
             "{e}"
         );
         assert!(!path.exists());
+    }
+
+    #[test]
+    fn display_bench_needs_an_input_inside_or_outside_the_repository() {
+        // No default volume: the old default pointed outside the repository (issue 11).
+        let err = Cli::try_parse_from(["volsplat", "display-bench"]).unwrap_err();
+        assert_eq!(err.kind(), clap::error::ErrorKind::MissingRequiredArgument);
+        let cli = Cli::try_parse_from(["volsplat", "display-bench", "--input", "v.nrrd"]).unwrap();
+        match cli.command {
+            Command::DisplayBench(a) => {
+                assert_eq!(a.input, PathBuf::from("v.nrrd"));
+                assert_eq!(a.out, PathBuf::from("docs/nil-display"));
+            }
+            other => panic!("{other:?}"),
+        }
     }
 }

@@ -40,12 +40,9 @@ fn camera(parallel: bool) -> Camera {
     c
 }
 
+/// MSE on the 8-bit scale (255² × the MSE of values in [0, 1], not quantised).
 fn mse_8bit(a: &[f32], b: &[f32]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (255.0 * (*x as f64 - *y as f64)).powi(2))
-        .sum::<f64>()
-        / a.len() as f64
+    255.0 * 255.0 * volsplat_testkit::metrics::mse(a, b)
 }
 
 #[test]

@@ -23,7 +23,6 @@ pub mod geometry;
 pub mod list;
 pub mod refine;
 pub mod render;
-pub mod study;
 
 pub use aa::Antialias;
 pub use error::{Result, SplatError};

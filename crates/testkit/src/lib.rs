@@ -8,8 +8,10 @@
 //!   compositing ([`reference_composite`]) by marching each pixel's ray through the trilinear
 //!   field — and the closed-form X-ray image of a phantom ([`analytic_xray`]). It shares no code
 //!   with the splatting renderer beyond the core types and the CRIO classifier.
-//! - [`metrics`](mod@metrics): [`mse`], [`psnr`], [`relative_l2`], [`ssim_gray`] and helpers
-//!   that turn a premultiplied [`Image`](volsplat_core::Image) into comparable channels
+//! - [`metrics`](mod@metrics): the workspace's one image-metrics module: [`mse`], [`psnr`],
+//!   [`relative_l2`], [`ssim_gray`], the 8-bit MSE and SNR of Buchanan's §5-2
+//!   ([`mse_8bit`], [`snr_db`]), [`total_variation`], [`rms_rgb`], and helpers that turn a
+//!   premultiplied [`Image`](volsplat_core::Image) into comparable channels
 //!   ([`image_rgb_over`], [`image_psnr`], [`luminance`]).
 //! - [`fixtures`](mod@fixtures): the shaded transfer function shared by the oracle tests.
 //! - [`phantom`](mod@phantom): re-export of [`volsplat_core::phantom`] (Gaussian blobs, the
@@ -28,7 +30,10 @@ pub mod reference;
 
 pub use volsplat_core::phantom;
 
-pub use metrics::{image_psnr, image_rgb_over, luminance, mse, psnr, relative_l2, ssim_gray};
+pub use metrics::{
+    image_psnr, image_rgb_over, luminance, mse, mse_8bit, mse_8bit_where, psnr, relative_l2,
+    rms_rgb, snr_db, ssim_gray, to_8bit, total_variation,
+};
 pub use reference::{
     ReferenceSettings, analytic_xray, ray_box_interval, reference_composite, reference_minip,
     reference_mip, reference_xray, trilinear, voxel_gradients,

@@ -1,10 +1,13 @@
-//! Image comparison metrics: MSE, PSNR, relative L2 error and SSIM, plus helpers that turn a
-//! premultiplied [`Image`] into comparable channels.
+//! Image comparison metrics, the one implementation in the workspace (decision 0011): MSE,
+//! PSNR, relative L2 error and SSIM on data values; the 8-bit MSE and SNR of Buchanan's thesis
+//! §5-2 ([`mse_8bit`], [`mse_8bit_where`], [`snr_db`]); a blur measure ([`total_variation`]);
+//! masked RMS over RGB ([`rms_rgb`]); and helpers that turn a premultiplied [`Image`] into
+//! comparable channels. `volsplat-studies` re-exports this module as its `metrics`.
 //!
 //! Every function works on `f64` accumulators. Inputs of mismatched sizes, or empty inputs, give
 //! `NaN` rather than a panic, so any `metric < tolerance` assertion fails on them.
 
-use volsplat_core::Image;
+use volsplat_core::{Image, ScalarImage};
 
 /// Mean squared error `Σ (a − b)² / n` in squared data units. `NaN` if the lengths differ or
 /// the slices are empty.
@@ -157,9 +160,149 @@ pub fn luminance(img: &Image, bg: [f32; 3]) -> Vec<f32> {
         .collect()
 }
 
+/// Converts a grey value in `[0, 1]` to an 8-bit level (clamped, rounded; non-finite → 0).
+#[inline]
+pub fn to_8bit(v: f32) -> u8 {
+    if v.is_finite() {
+        (v.clamp(0.0, 1.0) * 255.0).round() as u8
+    } else {
+        0
+    }
+}
+
+/// Buchanan's `e²_ms = (1/NM) Σ (u − u*)²` (thesis §5-2, after Jain 1981) over the 8-bit
+/// versions ([`to_8bit`]) of two grey images in `[0, 1]`, in 8-bit levels². `NaN` if the lengths
+/// differ or the slices are empty.
+pub fn mse_8bit(a: &[f32], b: &[f32]) -> f64 {
+    if a.len() != b.len() || a.is_empty() {
+        return f64::NAN;
+    }
+    mse_8bit_where(a, b, |_| true)
+}
+
+/// The MSE of [`mse_8bit`] over the pixels (index into the slices) for which `keep` is true,
+/// averaged over those pixels. `NaN` if the lengths differ or no pixel is kept.
+pub fn mse_8bit_where(a: &[f32], b: &[f32], keep: impl Fn(usize) -> bool) -> f64 {
+    if a.len() != b.len() {
+        return f64::NAN;
+    }
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        if keep(i) {
+            let d = to_8bit(*x) as f64 - to_8bit(*y) as f64;
+            sum += d * d;
+            n += 1;
+        }
+    }
+    if n == 0 { f64::NAN } else { sum / n as f64 }
+}
+
+/// Buchanan's `SNR = 10·log₁₀(255² / MSE)` in dB for an 8-bit MSE ([`mse_8bit`]); `+∞` for
+/// MSE 0.
+pub fn snr_db(mse: f64) -> f64 {
+    10.0 * (255.0f64 * 255.0 / mse).log10()
+}
+
+/// Mean absolute difference between horizontally and vertically adjacent pixels of a grey
+/// image (a blur measure: lower = blurrier), in the image's units. 0 for an image with no
+/// neighbouring pixels.
+pub fn total_variation(img: &ScalarImage) -> f64 {
+    let (w, h) = (img.width(), img.height());
+    let v = img.values();
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for y in 0..h {
+        for x in 0..w {
+            let c = v[y * w + x] as f64;
+            if x + 1 < w {
+                sum += (v[y * w + x + 1] as f64 - c).abs();
+                n += 1;
+            }
+            if y + 1 < h {
+                sum += (v[(y + 1) * w + x] as f64 - c).abs();
+                n += 1;
+            }
+        }
+    }
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// RMS difference over the R, G, B channels of two premultiplied images, over the pixels where
+/// `mask` is true (every pixel if `None`). `NaN` if the sizes differ, the mask's length is not
+/// the pixel count, or no pixel is selected.
+pub fn rms_rgb(a: &Image, b: &Image, mask: Option<&[bool]>) -> f64 {
+    if a.width() != b.width()
+        || a.height() != b.height()
+        || mask.is_some_and(|m| m.len() != a.pixels().len())
+    {
+        return f64::NAN;
+    }
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for (i, (p, q)) in a.pixels().iter().zip(b.pixels()).enumerate() {
+        if mask.is_some_and(|m| !m[i]) {
+            continue;
+        }
+        for c in 0..3 {
+            let d = (p[c] - q[c]) as f64;
+            sum += d * d;
+        }
+        n += 3;
+    }
+    (sum / n as f64).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn thesis_table_pairs_f_b45() {
+        // MSE/SNR pairs printed in Buchanan's Tables 5.1–5.6.
+        for (mse, snr) in [
+            (115.0, 27.5),
+            (224.0, 24.6),
+            (2.18, 44.7),
+            (255.0, 24.0),
+            (165.0, 26.0),
+            (238.0, 24.3),
+            (138.0, 26.7),
+            (117.0, 27.5),
+            (196.0, 25.2),
+            (193.0, 25.3),
+            (192.0, 25.3),
+        ] {
+            assert!((snr_db(mse) - snr).abs() < 0.1, "{mse} → {}", snr_db(mse));
+        }
+        assert!((snr_db(6416.0) - 10.06).abs() < 0.01);
+        assert_eq!(snr_db(0.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn eight_bit_mse_and_total_variation() {
+        let a = [0.0f32, 1.0];
+        let b = [10.0 / 255.0, 1.0];
+        assert!((mse_8bit(&a, &b) - 50.0).abs() < 1e-12);
+        assert!(mse_8bit(&a, &[0.0]).is_nan() && mse_8bit(&[], &[]).is_nan());
+        assert!((mse_8bit_where(&a, &b, |i| i == 0) - 100.0).abs() < 1e-12);
+        assert_eq!(mse_8bit_where(&a, &b, |i| i == 1), 0.0);
+        assert!(mse_8bit_where(&a, &b, |_| false).is_nan());
+        assert_eq!(to_8bit(f32::NAN), 0);
+        assert_eq!(to_8bit(2.0), 255);
+        let img = ScalarImage::from_values(2, 1, a.to_vec()).unwrap();
+        assert_eq!(total_variation(&img), 1.0);
+        assert_eq!(total_variation(&ScalarImage::new(1, 1)), 0.0);
+    }
+
+    #[test]
+    fn masked_rms_rgb() {
+        let a = Image::from_pixels(2, 1, vec![[0.0; 4], [0.0; 4]]).unwrap();
+        let b = Image::from_pixels(2, 1, vec![[0.3, 0.3, 0.3, 1.0], [0.0; 4]]).unwrap();
+        assert!((rms_rgb(&a, &b, None) - (0.09f64 / 2.0).sqrt()).abs() < 1e-6);
+        assert!((rms_rgb(&a, &b, Some(&[true, false])) - 0.3).abs() < 1e-6);
+        assert!(rms_rgb(&a, &b, Some(&[false, false])).is_nan());
+        assert!(rms_rgb(&a, &b, Some(&[true])).is_nan());
+        assert!(rms_rgb(&a, &Image::new(1, 1), None).is_nan());
+    }
 
     #[test]
     fn mse_and_psnr() {

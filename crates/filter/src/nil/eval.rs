@@ -34,7 +34,7 @@ pub struct NilSettings {
     pub weighting: LevelWeighting,
     /// Scale-factor guard (decision A-4): if `Σ w b·B̄ ≤ guard · Σ w |b|·B̄`, the evaluation is
     /// reported as collapsed and the caller falls back (to a point sample in
-    /// [`crate::harness`]).
+    /// [`crate::render`]).
     pub guard: f64,
 }
 

@@ -1,8 +1,8 @@
 //! Runs the texture-bench evaluation and prints the Markdown report.
 //!
-//! `cargo run --release --example texture_bench [-- WIDTH HEIGHT]`
+//! `cargo run --release -p volsplat-studies --example texture_bench [-- WIDTH HEIGHT]`
 
-use volsplat_filter::harness::{TextureBenchSettings, run_texture_bench};
+use volsplat_studies::texture_bench::{TextureBenchSettings, run_texture_bench};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<usize> = std::env::args()
@@ -26,7 +26,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 img.image
                     .values()
                     .iter()
-                    .map(|v| volsplat_filter::metrics::to_8bit(*v)),
+                    .map(|v| volsplat_studies::metrics::to_8bit(*v)),
             );
             std::fs::write(format!("{dir}/{}.pgm", img.name), bytes)?;
         }
