@@ -85,8 +85,9 @@ pub enum OrderArg {
 /// Where the volume comes from.
 #[derive(Debug, Args)]
 pub struct InputArgs {
-    /// Volume file (.nrrd, .nhdr, .mha, .mhd, or raw with --raw-dims). Omit for the demo phantom.
-    /// A folder (e.g. of DICOM files) is not supported.
+    /// Volume file: NRRD (.nrrd, .nhdr), MetaImage (.mha, .mhd), NIfTI (.nii, .nii.gz, .hdr),
+    /// VTK image data (.vti), TIFF (.tif, .tiff, or a folder of TIFF slices), or raw with
+    /// --raw-dims. Omit for the demo phantom. Folders of DICOM files are not supported yet.
     pub input: Option<PathBuf>,
     /// Built-in phantom to use when no INPUT is given.
     #[arg(long, value_enum, default_value = "head", help_heading = "Input")]
@@ -120,6 +121,17 @@ pub struct InputArgs {
         help_heading = "Input"
     )]
     pub raw_skip: u64,
+    /// Which volume of a 4-D file (NIfTI, ImageJ hyperstack), from 0.
+    #[arg(long, value_name = "N", default_value_t = 0, help_heading = "Input")]
+    pub frame: usize,
+    /// Which point-data array of a VTK .vti file (default: the active scalars, else the first).
+    #[arg(
+        long,
+        value_name = "NAME",
+        hide_short_help = true,
+        help_heading = "Input"
+    )]
+    pub array: Option<String>,
 }
 
 // Camera and view. Without `--camera` the view starts from VTK's reset camera around the volume

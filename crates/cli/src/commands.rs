@@ -364,6 +364,11 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             .map_err(explain)
             .with_context(|| format!("rendering {label}"))?,
     };
+    if !a.quiet {
+        for n in &out.notes {
+            eprintln!("note: {n}");
+        }
+    }
     for w in &out.warnings {
         if w.starts_with("k = ") {
             if !a.quiet {
@@ -429,8 +434,11 @@ fn preview_path(output: &Path, subsample: usize) -> PathBuf {
 
 fn info_cmd(a: InfoArgs) -> Result<()> {
     let source = volume_source(&a.input)?;
-    let vol = source.load()?;
+    let (vol, notes) = source.load_with_notes()?;
     let label = source.label();
+    for n in notes {
+        println!("note:      {n}");
+    }
     let g = vol.grid();
     let (lo, hi) = vol.value_range();
     let (blo, bhi) = g.bounds_world();

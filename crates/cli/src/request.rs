@@ -119,12 +119,6 @@ pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
                 .transpose()?,
         },
         Some(path) => {
-            if path.is_dir() {
-                bail!(
-                    "{} is a directory (reading folders of DICOM files is not supported yet)",
-                    path.display()
-                );
-            }
             let raw = match &a.raw_dims {
                 None => None,
                 Some(dims) => {
@@ -142,6 +136,8 @@ pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
             VolumeSource::File {
                 path: path.clone(),
                 raw,
+                frame: a.frame,
+                array: a.array.clone(),
             }
         }
     })
@@ -190,9 +186,16 @@ pub fn build_request(
     let set = |id: &str| fresh || given.contains(id);
     let mut req = base.unwrap_or_else(|| RenderRequest::new(Scene::default(), 512, 512));
     let s = &mut req.scene;
-    if ["input", "phantom", "phantom_size", "raw_dims"]
-        .iter()
-        .any(|id| set(id))
+    if [
+        "input",
+        "phantom",
+        "phantom_size",
+        "raw_dims",
+        "frame",
+        "array",
+    ]
+    .iter()
+    .any(|id| set(id))
     {
         s.volume = volume_source(input)?;
     }

@@ -746,10 +746,9 @@ fn a_folder_as_input_is_a_clear_error() {
         assert_eq!(o.status.code(), Some(1), "{args:?}");
         let e = stderr(&o);
         assert!(
-            e.contains(&format!(
-                "{} is a directory (reading folders of DICOM files is not supported yet)",
-                series.display()
-            )),
+            e.contains(&series.display().to_string())
+                && e.contains("a directory with no .tif/.tiff slices")
+                && e.contains("DICOM files are not supported yet"),
             "{e}"
         );
     }
@@ -1110,4 +1109,75 @@ fn saved_scenes_render_again_bit_for_bit() {
         "{}",
         stderr(&o)
     );
+}
+
+/// The new readers are reachable from the command line: a VTK `.vti` file with two arrays,
+/// the array chosen with `--array`, renders, and `info` reads it.
+#[test]
+fn vti_files_render_with_the_chosen_array() {
+    let dir = tempfile::tempdir().unwrap();
+    let vti = dir.path().join("v.vti");
+    let n = 6usize;
+    let ramp: Vec<String> = (0..n * n * n).map(|i| (i % n).to_string()).collect();
+    let zero: Vec<String> = (0..n * n * n).map(|_| "0".to_string()).collect();
+    std::fs::write(
+        &vti,
+        format!(
+            r#"<?xml version="1.0"?>
+<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian">
+  <ImageData WholeExtent="0 5 0 5 0 5" Origin="0 0 0" Spacing="1 1 2">
+    <Piece Extent="0 5 0 5 0 5">
+      <PointData Scalars="zero">
+        <DataArray type="Float32" Name="zero" format="ascii">{}</DataArray>
+        <DataArray type="Float32" Name="ramp" format="ascii">{}</DataArray>
+      </PointData>
+    </Piece>
+  </ImageData>
+</VTKFile>"#,
+            zero.join(" "),
+            ramp.join(" ")
+        ),
+    )
+    .unwrap();
+    let o = volsplat(&["info", vti.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("6 x 6 x 6"), "{}", stdout(&o));
+    let (a, b) = (dir.path().join("a.npy"), dir.path().join("b.npy"));
+    for (out, array) in [(&a, "zero"), (&b, "ramp")] {
+        let o = volsplat(&[
+            "render",
+            vti.to_str().unwrap(),
+            "--array",
+            array,
+            "--mode",
+            "xray",
+            "--size",
+            "16",
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{array}: {}", stderr(&o));
+    }
+    let sum = |p: &Path| -> f64 {
+        let bytes = std::fs::read(p).unwrap();
+        let start = bytes.len() - 16 * 16 * 4;
+        bytes[start..]
+            .chunks(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
+            .sum()
+    };
+    assert_eq!(sum(&a), 0.0);
+    assert!(sum(&b) > 0.0);
+    let o = volsplat(&[
+        "render",
+        vti.to_str().unwrap(),
+        "--array",
+        "nope",
+        "-q",
+        "-o",
+        a.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("nope"), "{}", stderr(&o));
 }

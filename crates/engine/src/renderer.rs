@@ -160,8 +160,11 @@ pub struct Output {
     pub camera: Camera,
     /// The transfer function actually used (data units).
     pub transfer_function: TransferFunction,
-    /// Notes for the user (for example an option the chosen renderer does not use).
+    /// Warnings for the user (for example an option the chosen renderer does not use).
     pub warnings: Vec<String>,
+    /// Information from the volume reader (frames available, spacing assumed, …), given with
+    /// the frame that loaded the volume.
+    pub notes: Vec<String>,
 }
 
 impl Output {
@@ -231,7 +234,7 @@ fn cached<K: PartialEq, V>(
 /// ```
 #[derive(Default)]
 pub struct Renderer {
-    volume: Option<Cached<VolumeSource, Arc<AnyVolume>>>,
+    volume: Option<Cached<VolumeSource, (Arc<AnyVolume>, Vec<String>)>>,
     tables: Option<Cached<String, Arc<CrioTables>>>,
     list: Option<Cached<(String, u32, usize), Arc<SplatList>>>,
     display: Option<Cached<String, Arc<DisplayState>>>,
@@ -247,7 +250,11 @@ impl Renderer {
     /// The volume of `source`, loaded once and kept while the source stays the same.
     pub fn volume(&mut self, source: &VolumeSource) -> Result<Arc<AnyVolume>> {
         Ok(Arc::clone(
-            cached(&mut self.volume, source.clone(), || source.load())?.0,
+            &cached(&mut self.volume, source.clone(), || {
+                source.load_with_notes()
+            })?
+            .0
+            .0,
         ))
     }
 
@@ -300,6 +307,10 @@ impl Renderer {
             .is_some_and(|c| c.key == request.scene.volume);
         let vol = self.volume(&request.scene.volume)?;
         let load_ms = if vol_was_cached { 0.0 } else { ms(t0) };
+        let notes = match (&self.volume, vol_was_cached) {
+            (Some(c), false) => c.value.1.clone(),
+            _ => Vec::new(),
+        };
         let camera = request.scene.camera.resolve(vol.grid().bounds_world())?;
         let tf = resolve_tf(request, &vol)?;
         let threads = request.threads;
@@ -573,6 +584,7 @@ impl Renderer {
             camera,
             transfer_function: tf,
             warnings,
+            notes,
         })
     }
 }

@@ -141,6 +141,10 @@ pub struct RawLayout {
     pub header_bytes: u64,
 }
 
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
 fn unit_spacing() -> [f64; 3] {
     [1.0; 3]
 }
@@ -152,11 +156,18 @@ pub enum VolumeSource {
     /// A volume file (format by extension: NRRD, MetaImage, …), or a headerless raw file with
     /// its layout.
     File {
-        /// The file.
+        /// The file, or a folder of TIFF slices.
         path: PathBuf,
         /// Layout of a headerless raw file.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         raw: Option<RawLayout>,
+        /// Which volume of a 4-D file (NIfTI, ImageJ TIFF hyperstack), 0-based.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        frame: usize,
+        /// Which point-data array of a VTK `.vti` file (default: the active scalars, else the
+        /// first).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        array: Option<String>,
     },
     /// A built-in phantom; `grid` as in [`make_phantom`].
     Phantom {
@@ -172,23 +183,13 @@ pub enum VolumeSource {
 }
 
 impl PartialEq for VolumeSource {
+    /// Volumes in memory are equal when they are the same allocation; files and phantoms when
+    /// every field is.
     fn eq(&self, other: &Self) -> bool {
         match (self, other) {
-            (VolumeSource::File { path: a, raw: ra }, VolumeSource::File { path: b, raw: rb }) => {
-                a == b && ra == rb
-            }
-            (
-                VolumeSource::Phantom {
-                    phantom: a,
-                    grid: ga,
-                },
-                VolumeSource::Phantom {
-                    phantom: b,
-                    grid: gb,
-                },
-            ) => a == b && ga == gb,
             (VolumeSource::Memory(a), VolumeSource::Memory(b)) => Arc::ptr_eq(a, b),
-            _ => false,
+            (VolumeSource::Memory(_), _) | (_, VolumeSource::Memory(_)) => false,
+            _ => serde_json::to_value(self).ok() == serde_json::to_value(other).ok(),
         }
     }
 }
@@ -206,35 +207,53 @@ impl Default for VolumeSource {
 impl VolumeSource {
     /// Loads (or builds) the volume.
     pub fn load(&self) -> Result<Arc<AnyVolume>> {
+        Ok(self.load_with_notes()?.0)
+    }
+
+    /// Loads (or builds) the volume, with the reader's notes for the user (frames available,
+    /// spacing assumed, …).
+    pub fn load_with_notes(&self) -> Result<(Arc<AnyVolume>, Vec<String>)> {
         Ok(match self {
-            VolumeSource::Memory(v) => Arc::clone(v),
-            VolumeSource::Phantom { phantom, grid } => {
-                Arc::new(make_phantom(*phantom, grid.as_deref(), "volume.grid")?)
+            VolumeSource::Memory(v) => (Arc::clone(v), Vec::new()),
+            VolumeSource::Phantom { phantom, grid } => (
+                Arc::new(make_phantom(*phantom, grid.as_deref(), "volume.grid")?),
+                Vec::new(),
+            ),
+            VolumeSource::File {
+                path, raw: Some(r), ..
+            } => {
+                let spec = volsplat_io::RawSpec {
+                    dims: r.dims,
+                    scalar_type: ScalarType::from_name(&r.scalar_type)?,
+                    spacing: r.spacing,
+                    origin: r.origin,
+                    big_endian: r.big_endian,
+                    header_bytes: r.header_bytes,
+                };
+                (Arc::new(volsplat_io::read_raw(path, &spec)?), Vec::new())
             }
-            VolumeSource::File { path, raw } => {
-                if path.is_dir() {
-                    return Err(EngineError::request(
-                        "volume.path",
-                        format!(
-                            "{} is a directory (reading folders of DICOM files is not supported yet)",
-                            path.display()
-                        ),
+            VolumeSource::File {
+                path,
+                raw: None,
+                frame,
+                array,
+            } => {
+                let options = volsplat_io::ReadOptions {
+                    frame: *frame,
+                    array: array.clone(),
+                    ..Default::default()
+                };
+                let loaded = volsplat_io::read_volume_with(path, &options)?;
+                let mut notes = loaded.notes;
+                if loaded.frames > 1 {
+                    notes.push(format!(
+                        "{} holds {} volumes; rendering volume {} (choose with --frame)",
+                        path.display(),
+                        loaded.frames,
+                        loaded.frame
                     ));
                 }
-                Arc::new(match raw {
-                    Some(r) => {
-                        let spec = volsplat_io::RawSpec {
-                            dims: r.dims,
-                            scalar_type: ScalarType::from_name(&r.scalar_type)?,
-                            spacing: r.spacing,
-                            origin: r.origin,
-                            big_endian: r.big_endian,
-                            header_bytes: r.header_bytes,
-                        };
-                        volsplat_io::read_raw(path, &spec)?
-                    }
-                    None => volsplat_io::read_volume(path)?,
-                })
+                (Arc::new(loaded.volume), notes)
             }
         })
     }
