@@ -277,6 +277,17 @@ fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
     )
 }
 
+/// Writes one line to standard output. A closed pipe (`volsplat info f | head -1`) ends the
+/// output quietly instead of panicking as `println!` does.
+fn emit(line: &str) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{line}") {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        r => Ok(r?),
+    }
+}
+
 /// The command-line flag of a request field, for error messages.
 fn flag_of(field: &str) -> Option<&'static str> {
     Some(match field {
@@ -421,7 +432,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         );
     }
     if a.stats {
-        println!("{}", serde_json::to_string(&out.stats)?);
+        emit(&format!("{}", serde_json::to_string(&out.stats)?))?;
     }
     Ok(())
 }
@@ -437,35 +448,41 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
     let (vol, notes) = source.load_with_notes()?;
     let label = source.label();
     for n in notes {
-        println!("note:      {n}");
+        emit(&format!("note:      {n}"))?;
     }
     let g = vol.grid();
     let (lo, hi) = vol.value_range();
     let (blo, bhi) = g.bounds_world();
     let d = g.direction;
-    println!("source:    {label}");
-    println!("type:      {}", vol.scalar_type().name());
-    println!(
+    emit(&format!("source:    {label}"))?;
+    emit(&format!("type:      {}", vol.scalar_type().name()))?;
+    emit(&format!(
         "dims:      {} x {} x {} ({} voxels)",
         g.dims[0],
         g.dims[1],
         g.dims[2],
         g.voxel_count()
-    );
-    println!(
+    ))?;
+    emit(&format!(
         "spacing:   {} {} {}",
         g.spacing[0], g.spacing[1], g.spacing[2]
-    );
-    println!("origin:    {} {} {}", g.origin[0], g.origin[1], g.origin[2]);
+    ))?;
+    emit(&format!(
+        "origin:    {} {} {}",
+        g.origin[0], g.origin[1], g.origin[2]
+    ))?;
     for (n, c) in ["i", "j", "k"].iter().enumerate() {
         let col = d.col(n);
-        println!("axis {c}:    ({:.6}, {:.6}, {:.6})", col.x, col.y, col.z);
+        emit(&format!(
+            "axis {c}:    ({:.6}, {:.6}, {:.6})",
+            col.x, col.y, col.z
+        ))?;
     }
-    println!(
+    emit(&format!(
         "bounds:    ({:.3}, {:.3}, {:.3}) .. ({:.3}, {:.3}, {:.3})",
         blo.x, blo.y, blo.z, bhi.x, bhi.y, bhi.z
-    );
-    println!("range:     {lo} .. {hi}");
+    ))?;
+    emit(&format!("range:     {lo} .. {hi}"))?;
     Ok(())
 }
 
@@ -553,7 +570,7 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
     j["median_ms"] = json!(median);
     j["min_ms"] = json!(sorted[0]);
     j["max_ms"] = json!(sorted[sorted.len() - 1]);
-    println!("{j}");
+    emit(&format!("{j}"))?;
     Ok(())
 }
 
@@ -567,7 +584,7 @@ fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
     let pool = thread_pool(a.threads)?;
     let written =
         pool.install(|| volsplat_studies::texture_bench::write_folder(&settings, &a.out))?;
-    println!("{}", written.markdown);
+    emit(&format!("{}", written.markdown))?;
     eprintln!(
         "wrote {} and {} images to {}",
         written.report.display(),
