@@ -184,6 +184,9 @@ pub struct Preview<'a> {
     pub rendered: &'a Rendered,
 }
 
+/// A loaded volume and its reader's notes.
+type LoadedState = (Arc<AnyVolume>, Vec<String>);
+
 /// The Chapter 6 state kept between frames: densities, NIL map, and the map's build time (ms).
 type DisplayState = (DisplayVolume, Option<DiscreteNilMap>, f64);
 
@@ -234,7 +237,7 @@ fn cached<K: PartialEq, V>(
 /// ```
 #[derive(Default)]
 pub struct Renderer {
-    volume: Option<Cached<VolumeSource, (Arc<AnyVolume>, Vec<String>)>>,
+    volume: Option<Cached<VolumeSource, LoadedState>>,
     tables: Option<Cached<String, Arc<CrioTables>>>,
     list: Option<Cached<(String, u32, usize), Arc<SplatList>>>,
     display: Option<Cached<String, Arc<DisplayState>>>,
