@@ -432,7 +432,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         );
     }
     if a.stats {
-        emit(&format!("{}", serde_json::to_string(&out.stats)?))?;
+        emit(&serde_json::to_string(&out.stats)?)?;
     }
     Ok(())
 }
@@ -584,7 +584,7 @@ fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
     let pool = thread_pool(a.threads)?;
     let written =
         pool.install(|| volsplat_studies::texture_bench::write_folder(&settings, &a.out))?;
-    emit(&format!("{}", written.markdown))?;
+    emit(&written.markdown)?;
     eprintln!(
         "wrote {} and {} images to {}",
         written.report.display(),
