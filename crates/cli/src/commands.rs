@@ -253,18 +253,21 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// The request of a `--scene` file, its unknown fields printed as warnings.
+fn load_scene(path: Option<&Path>) -> Result<Option<RenderRequest>> {
+    let Some(p) = path else {
+        return Ok(None);
+    };
+    let (req, warnings) = RenderRequest::load(p)?;
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(Some(req))
+}
+
 /// The `given` ids of `a` plus the `--scene` request, translated into the engine's request.
 fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
-    let base = match &a.scene {
-        Some(p) => {
-            let (req, warnings) = RenderRequest::load(p)?;
-            for w in warnings {
-                eprintln!("warning: {w}");
-            }
-            Some(req)
-        }
-        None => None,
-    };
+    let base = load_scene(a.scene.as_deref())?;
     build_request(
         &a.input,
         &a.view,
@@ -518,16 +521,7 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
     if a.frames == 0 {
         bail!("--frames must be ≥ 1");
     }
-    let base = match &a.scene {
-        Some(p) => {
-            let (req, warnings) = RenderRequest::load(p)?;
-            for w in warnings {
-                eprintln!("warning: {w}");
-            }
-            Some(req)
-        }
-        None => None,
-    };
+    let base = load_scene(a.scene.as_deref())?;
     let mut req = build_request(
         &a.input,
         &a.view,
