@@ -203,15 +203,18 @@ fn cached<K: PartialEq, V>(
     key: K,
     build: impl FnOnce() -> Result<V>,
 ) -> Result<(&V, bool)> {
-    let hit = slot.as_ref().is_some_and(|c| c.key == key);
-    if !hit {
-        *slot = None;
-        *slot = Some(Cached {
-            key,
-            value: build()?,
-        });
-    }
-    Ok((&slot.as_ref().expect("just filled").value, !hit))
+    // Take the old value out first, so a rebuild never holds two copies in memory.
+    let (entry, fresh) = match slot.take() {
+        Some(c) if c.key == key => (c, false),
+        _ => (
+            Cached {
+                key,
+                value: build()?,
+            },
+            true,
+        ),
+    };
+    Ok((&slot.insert(entry).value, fresh))
 }
 
 /// Renders [`RenderRequest`]s, keeping between calls what the next frame can reuse: the loaded
@@ -241,7 +244,7 @@ pub struct Renderer {
     tables: Option<Cached<String, Arc<CrioTables>>>,
     list: Option<Cached<(String, u32, usize), Arc<SplatList>>>,
     display: Option<Cached<String, Arc<DisplayState>>>,
-    pool: Option<Cached<Option<usize>, rayon::ThreadPool>>,
+    pool: Option<Cached<Option<usize>, Arc<rayon::ThreadPool>>>,
 }
 
 impl Renderer {
@@ -317,17 +320,19 @@ impl Renderer {
         let camera = request.scene.camera.resolve(vol.grid().bounds_world())?;
         let tf = resolve_tf(request, &vol)?;
         let threads = request.threads;
-        cached(&mut self.pool, threads, || {
-            let mut b = rayon::ThreadPoolBuilder::new();
-            if let Some(n) = threads {
-                b = b.num_threads(n);
-            }
-            b.build().map_err(|e| EngineError::Threads {
-                threads: threads.unwrap_or(0),
-                message: e.to_string(),
-            })
-        })?;
-        let pool = &self.pool.as_ref().expect("just built").value;
+        let pool = Arc::clone(
+            cached(&mut self.pool, threads, || {
+                let mut b = rayon::ThreadPoolBuilder::new();
+                if let Some(n) = threads {
+                    b = b.num_threads(n);
+                }
+                b.build().map(Arc::new).map_err(|e| EngineError::Threads {
+                    threads: threads.unwrap_or(0),
+                    message: e.to_string(),
+                })
+            })?
+            .0,
+        );
         let mut warnings = Vec::new();
         let t_prep = Instant::now();
         report(progress, 0.05, "classify")?;

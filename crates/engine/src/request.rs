@@ -554,3 +554,28 @@ impl Scene {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every kernel choice maps to the kernel of its own name, not to the fallback default.
+    #[test]
+    fn every_kernel_choice_is_a_known_kernel() {
+        for (choice, name) in [
+            (KernelChoice::Gaussian, "gaussian"),
+            (KernelChoice::Point, "point"),
+            (KernelChoice::Nearest, "nearest"),
+            (KernelChoice::Tent, "tent"),
+            (KernelChoice::Bspline, "bspline"),
+            (KernelChoice::CatmullRom, "catmull-rom"),
+            (KernelChoice::Mitchell, "mitchell"),
+            (KernelChoice::CrawfisMax, "crawfis-max"),
+        ] {
+            let expect = volsplat_core::Kernel::from_name(name).unwrap();
+            assert_eq!(choice.kernel(), expect, "{name}");
+            // The serialised name is the one the command line accepts.
+            assert_eq!(serde_json::to_value(choice).unwrap(), name);
+        }
+    }
+}
