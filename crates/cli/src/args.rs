@@ -2,6 +2,9 @@
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
+pub use volsplat::{
+    AntialiasChoice, KernelChoice, Mode, OrderChoice, PhantomKind, VisibilityChoice,
+};
 
 /// Volume rendering by splatting (Westover 1991).
 #[derive(Debug, Parser)]
@@ -30,56 +33,6 @@ pub enum Command {
     /// Swan et al. 1997 anti-aliasing study: Fig. 7 figures (no AA | AA) and the aliasing,
     /// flicker and energy measurements, written to a folder with a Markdown report.
     AaFigures(crate::aa_figures::AaFiguresArgs),
-}
-
-/// Built-in phantoms.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum PhantomKind {
-    /// CT-like head in Hounsfield units (i16), face towards +z, top towards +y.
-    Head,
-    /// 3-D modified Shepp–Logan phantom (f32).
-    SheppLogan,
-    /// Gaussian blobs (f32) with closed-form line integrals.
-    Blobs,
-    /// Marschner–Lobb test function (f32, f_M = 6, α = 0.25).
-    MarschnerLobb,
-    /// Swan et al. Fig. 7a–b: a one-voxel sheet of red and white 10×10 squares, 498×398×1
-    /// (--phantom-size X,Y[,SQUARE] changes the sheet and the square size).
-    Checkerboard,
-    /// Swan et al. Fig. 7c–d: a fractal terrain height field with a detailed "photo" draped
-    /// on it, 512×512×103.
-    Terrain,
-    /// Swan et al. Fig. 7e–f: a dense tangle of thin bright fibres (a confocal-microscopy
-    /// stand-in), 420×468×62, finer than the image.
-    Filaments,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ModeArg {
-    /// Front-to-back compositing of the classified volume (colour and opacity from the
-    /// transfer function).
-    Composite,
-    /// Maximum intensity projection.
-    Mip,
-    /// Minimum intensity projection.
-    Minip,
-    /// X-ray: the line integral ∫ρ ds of the data along each ray. PNG output is scaled so that
-    /// the brightest pixel is white; .npy holds the unscaled values (data units × world units).
-    Xray,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum VisibilityArg {
-    /// Sheet buffers (Westover 1990/91).
-    Sheet,
-    /// Composite every sample (Westover 1989; bleeds).
-    Every,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum OrderArg {
-    Ftb,
-    Btf,
 }
 
 /// Where the volume comes from.
@@ -194,7 +147,7 @@ pub struct RenderOptions {
     /// Ray function. xray: the line integral ∫ρ ds; its PNG is scaled so that the brightest
     /// pixel is white, its .npy holds the unscaled values (data units × world units).
     #[arg(long, value_enum, default_value = "composite", help_heading = "Output")]
-    pub mode: ModeArg,
+    pub mode: Mode,
     /// Transfer-function JSON file (VTK's volume property; format in README.md, section
     /// "Files").
     #[arg(
@@ -245,15 +198,15 @@ pub struct RenderOptions {
     /// Leave out the specular term.
     #[arg(long, help_heading = "Transfer function", hide_short_help = true)]
     pub no_specular: bool,
-    /// Reconstruction kernel: gaussian, point, nearest, tent, bspline, catmull-rom, mitchell,
-    /// crawfis-max (perspective and --splat-list: gaussian or crawfis-max).
-    #[arg(long, default_value = "gaussian", help_heading = "Quality")]
-    pub kernel: String,
+    /// Reconstruction kernel (perspective views and --splat-list take the radial ones:
+    /// gaussian or crawfis-max).
+    #[arg(long, value_enum, default_value = "gaussian", help_heading = "Quality")]
+    pub kernel: KernelChoice,
     /// Anti-aliasing of voxels smaller than a pixel: Swan et al. 1997 eq. 4 and 8 (`swan`),
     /// its §4.6 perpendicular-distance estimate (`swan-perpendicular`), Zwicker et al.'s EWA
     /// screen filter (`ewa`), or none. Changes nothing where voxels cover a pixel or more.
     #[arg(long, value_enum, default_value = "swan", help_heading = "Quality")]
-    pub antialias: AntialiasArg,
+    pub antialias: AntialiasChoice,
     /// Sheet buffers or composite-every-sample.
     #[arg(
         long,
@@ -262,7 +215,7 @@ pub struct RenderOptions {
         help_heading = "Quality",
         hide_short_help = true
     )]
-    pub visibility: VisibilityArg,
+    pub visibility: VisibilityChoice,
     /// Traversal order.
     #[arg(
         long,
@@ -271,7 +224,7 @@ pub struct RenderOptions {
         help_heading = "Quality",
         hide_short_help = true
     )]
-    pub order: OrderArg,
+    pub order: OrderChoice,
     /// Splat every N-th voxel per axis (successive refinement preview).
     #[arg(
         long,
@@ -306,14 +259,6 @@ pub struct RenderOptions {
         hide_short_help = true
     )]
     pub list_threshold: f32,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum AntialiasArg {
-    Swan,
-    SwanPerpendicular,
-    Ewa,
-    None,
 }
 
 #[derive(Debug, Args)]

@@ -235,7 +235,7 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
         );
     }
     if a.renderer != RendererArg::Splat {
-        if a.options.mode != ModeArg::Composite {
+        if a.options.mode != Mode::Composite {
             bail!(
                 "--mode {:?}: the Chapter 6 displays (--renderer sabella|nil) have their own ray \
                  function; use --renderer splat for MIP, MinIP and X-ray",
@@ -502,7 +502,7 @@ fn phantom_cmd(a: PhantomArgs) -> Result<()> {
         .as_deref()
         .map(|s| parse_grid(s, "--grid"))
         .transpose()?;
-    let vol = volsplat::make_phantom(phantom_kind(a.kind), grid.as_deref(), "--grid")?;
+    let vol = volsplat::make_phantom(a.kind, grid.as_deref(), "--grid")?;
     volsplat::io::write_nrrd(&a.output, &vol, a.gzip)?;
     let g = vol.grid();
     eprintln!(

@@ -4,30 +4,7 @@
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-
-/// Displays of `--renderer nil`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum DisplayArg {
-    /// Linearised display, eq 6.1 (screen Gaussian × exp(−τ(t − t₀))).
-    Linearised,
-    /// Gaussian slice at --slice-depth, std --slice-width (§6-2).
-    Slice,
-    /// Maximum density along the ray (§6-3).
-    Max,
-    /// Density found by the ray search for --rho0 (Plate 6.10).
-    Search,
-    /// Search for --rho0, then a difference of Gaussians there (§6-3).
-    SampleFilter,
-}
-
-/// NIL control-point rule.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ControlArg {
-    /// L² projection of the filter onto each patch (default; never collapses).
-    Project,
-    /// Filter values at the Lagrange nodes (the thesis, App. B).
-    Interpolate,
-}
+use volsplat::{ControlChoice, DensityChoice, DisplayChoice};
 
 /// Options of the Chapter 6 displays (ignored by the splatting renderer).
 #[derive(Debug, Args)]
@@ -35,14 +12,14 @@ pub enum ControlArg {
 pub struct DisplayArgs {
     /// Chapter 6 display drawn by `--renderer nil`.
     #[arg(long, value_enum, default_value = "linearised", hide_short_help = true)]
-    pub display: DisplayArg,
+    pub display: DisplayChoice,
     /// Evaluate by direct quadrature instead of NIL maps.
     #[arg(long, hide_short_help = true)]
     pub direct: bool,
     /// Density: the transfer function's scalar opacity (`tf`) or the data value normalised to
     /// its range (`data`, as the thesis's [0, 1] densities).
-    #[arg(long, default_value = "tf", hide_short_help = true)]
-    pub density: String,
+    #[arg(long, value_enum, default_value = "tf", hide_short_help = true)]
+    pub density: DensityChoice,
     /// Attenuation τ per unit length (unit = largest extent of the volume).
     #[arg(long, default_value_t = 3.0, hide_short_help = true)]
     pub tau: f64,
@@ -64,7 +41,7 @@ pub struct DisplayArgs {
     /// NIL control points: `project` (L² projection of the filter, decision 0007) or
     /// `interpolate` (the thesis's filter values at the Lagrange nodes).
     #[arg(long, value_enum, default_value = "project", hide_short_help = true)]
-    pub control_points: ControlArg,
+    pub control_points: ControlChoice,
     /// NIL triggers per axis across the ray (default: 1 for the linearised display, 3 for
     /// slices and sample-filter, whose triggers fill a box).
     #[arg(long, hide_short_help = true)]

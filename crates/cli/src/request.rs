@@ -10,9 +10,8 @@ use anyhow::{Context, Result, anyhow, bail};
 use std::collections::HashSet;
 use volsplat::core::{Orbit, ProjectionKind, ScalarType};
 use volsplat::{
-    AntialiasChoice, CameraSpec, ControlChoice, DensityChoice, DisplayChoice, KernelChoice,
-    LightSpec, Mode, OrderChoice, RawLayout, RenderRequest, RendererChoice, Scene, TransferSpec,
-    VisibilityChoice, VolumeSource,
+    CameraSpec, LightSpec, RawLayout, RenderRequest, RendererChoice, Scene, TransferSpec,
+    VolumeSource,
 };
 
 /// The clap ids of the flags given on the command line.
@@ -75,43 +74,11 @@ pub fn parse_grid(s: &str, flag: &str) -> Result<Vec<usize>> {
         .collect()
 }
 
-/// The engine's phantom for the CLI's.
-pub fn phantom_kind(k: PhantomKind) -> volsplat::PhantomKind {
-    match k {
-        PhantomKind::Head => volsplat::PhantomKind::Head,
-        PhantomKind::SheppLogan => volsplat::PhantomKind::SheppLogan,
-        PhantomKind::Blobs => volsplat::PhantomKind::Blobs,
-        PhantomKind::MarschnerLobb => volsplat::PhantomKind::MarschnerLobb,
-        PhantomKind::Checkerboard => volsplat::PhantomKind::Checkerboard,
-        PhantomKind::Terrain => volsplat::PhantomKind::Terrain,
-        PhantomKind::Filaments => volsplat::PhantomKind::Filaments,
-    }
-}
-
-/// A kernel name as `--kernel` accepts it (the names and aliases of `Kernel::from_name`).
-pub fn kernel_choice(name: &str) -> Result<KernelChoice> {
-    Ok(match name {
-        "gaussian" => KernelChoice::Gaussian,
-        "point" | "single-point" => KernelChoice::Point,
-        "nearest" | "nearest-neighbour" | "nn" => KernelChoice::Nearest,
-        "tent" | "linear" => KernelChoice::Tent,
-        "bspline" | "b-spline" => KernelChoice::Bspline,
-        "catmull-rom" | "catmullrom" => KernelChoice::CatmullRom,
-        "mitchell" => KernelChoice::Mitchell,
-        "crawfis-max" | "crawfismax" => KernelChoice::CrawfisMax,
-        other => {
-            // The library's message lists the known names.
-            volsplat::core::Kernel::from_name(other).context("--kernel")?;
-            bail!("--kernel: `{other}` is not supported here")
-        }
-    })
-}
-
 /// The volume source of the input flags.
 pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
     Ok(match &a.input {
         None => VolumeSource::Phantom {
-            phantom: phantom_kind(a.phantom),
+            phantom: a.phantom,
             grid: a
                 .phantom_size
                 .as_deref()
@@ -284,12 +251,7 @@ pub fn build_request(
         (req.width, req.height) = parse_image_size(&o.size, "--size")?;
     }
     if set("mode") {
-        req.mode = match o.mode {
-            ModeArg::Composite => Mode::Composite,
-            ModeArg::Mip => Mode::Mip,
-            ModeArg::Minip => Mode::Minip,
-            ModeArg::Xray => Mode::Xray,
-        };
+        req.mode = o.mode;
     }
     if set("renderer") || set("splat_list") {
         req.renderer = match renderer {
@@ -301,27 +263,16 @@ pub fn build_request(
     }
     let q = &mut req.quality;
     if set("kernel") {
-        q.kernel = kernel_choice(&o.kernel)?;
+        q.kernel = o.kernel;
     }
     if set("antialias") {
-        q.antialias = match o.antialias {
-            AntialiasArg::Swan => AntialiasChoice::Swan,
-            AntialiasArg::SwanPerpendicular => AntialiasChoice::SwanPerpendicular,
-            AntialiasArg::Ewa => AntialiasChoice::Ewa,
-            AntialiasArg::None => AntialiasChoice::None,
-        };
+        q.antialias = o.antialias;
     }
     if set("visibility") {
-        q.visibility = match o.visibility {
-            VisibilityArg::Sheet => VisibilityChoice::Sheet,
-            VisibilityArg::Every => VisibilityChoice::Every,
-        };
+        q.visibility = o.visibility;
     }
     if set("order") {
-        q.order = match o.order {
-            OrderArg::Ftb => OrderChoice::Ftb,
-            OrderArg::Btf => OrderChoice::Btf,
-        };
+        q.order = o.order;
     }
     if set("opacity_cutoff") {
         q.opacity_cutoff = o.opacity_cutoff;
@@ -341,26 +292,13 @@ pub fn build_request(
     if let Some(d) = display {
         let t = &mut req.display;
         if set("display") {
-            t.display = match d.display {
-                crate::display::DisplayArg::Linearised => DisplayChoice::Linearised,
-                crate::display::DisplayArg::Slice => DisplayChoice::Slice,
-                crate::display::DisplayArg::Max => DisplayChoice::Max,
-                crate::display::DisplayArg::Search => DisplayChoice::Search,
-                crate::display::DisplayArg::SampleFilter => DisplayChoice::SampleFilter,
-            };
+            t.display = d.display;
         }
         if set("density") {
-            t.density = match d.density.as_str() {
-                "tf" => DensityChoice::Tf,
-                "data" => DensityChoice::Data,
-                other => bail!("--density: expected tf or data, got `{other}`"),
-            };
+            t.density = d.density;
         }
         if set("control_points") {
-            t.control_points = match d.control_points {
-                crate::display::ControlArg::Project => ControlChoice::Project,
-                crate::display::ControlArg::Interpolate => ControlChoice::Interpolate,
-            };
+            t.control_points = d.control_points;
         }
         if set("dog_sigma") {
             let sig: Vec<f64> = d

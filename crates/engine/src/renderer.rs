@@ -10,12 +10,14 @@ use std::time::Instant;
 use volsplat_core::{
     AnyVolume, Camera, CrioTables, Image, Light, Projection, ScalarImage, TransferFunction,
 };
-use volsplat_filter::display::{DisplayVolume, build_map, render_display};
+use volsplat_filter::display::{DisplayVolume, build_map, render_display_with_progress};
 use volsplat_filter::nil::DiscreteNilMap;
 use volsplat_filter::texture::Reconstruction;
 use volsplat_splat::list::{draw_depth_contour, k_distance, render_list_depth};
 use volsplat_splat::refine::{RefinementStep, render_ladder};
-use volsplat_splat::{ExtractSettings, Rendered, SplatList, render_list, render_with_progress};
+use volsplat_splat::{
+    ExtractSettings, Rendered, SplatList, render_list_with_progress, render_with_progress,
+};
 
 /// Progress of a render, passed to the caller's callback.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -184,6 +186,12 @@ pub struct Preview<'a> {
     pub rendered: &'a Rendered,
 }
 
+/// The overall fraction done when the render stage itself is `f` done: the render stage runs
+/// from 0.2 to 1 (loading and classification before it), never past 1 by rounding.
+fn render_fraction(f: f64) -> f64 {
+    (0.2 + 0.8 * f).clamp(0.2, 1.0)
+}
+
 /// A loaded volume and its reader's notes.
 type LoadedState = (Arc<AnyVolume>, Vec<String>);
 
@@ -245,19 +253,34 @@ pub struct Renderer {
     list: Option<Cached<(String, u32, usize), Arc<SplatList>>>,
     display: Option<Cached<String, Arc<DisplayState>>>,
     pool: Option<Cached<Option<usize>, Arc<rayon::ThreadPool>>>,
+    limits: volsplat_io::Limits,
 }
 
 impl Renderer {
-    /// A renderer with nothing cached.
+    /// A renderer with nothing cached and the readers' default limits.
     pub fn new() -> Self {
         Renderer::default()
+    }
+
+    /// A renderer whose file reads obey `limits` (largest header, voxel count, JSON and XML
+    /// sizes; [`volsplat_io::Limits`]) instead of the defaults.
+    pub fn with_limits(limits: volsplat_io::Limits) -> Self {
+        Renderer {
+            limits,
+            ..Renderer::default()
+        }
+    }
+
+    /// The reader limits in force.
+    pub fn limits(&self) -> &volsplat_io::Limits {
+        &self.limits
     }
 
     /// The volume of `source`, loaded once and kept while the source stays the same.
     pub fn volume(&mut self, source: &VolumeSource) -> Result<Arc<AnyVolume>> {
         Ok(Arc::clone(
             &cached(&mut self.volume, source.clone(), || {
-                source.load_with_notes()
+                source.load_with_limits(&self.limits)
             })?
             .0
             .0,
@@ -276,8 +299,10 @@ impl Renderer {
         resolve_tf(request, &vol)
     }
 
-    /// Renders `request`. `progress` is called between stages and, for the dense renderer,
-    /// after each batch of sheets; returning `false` cancels with [`EngineError::Cancelled`].
+    /// Renders `request`. `progress` is called between stages and during the render (after
+    /// each batch of sheets for the splatting renderers, about twenty times for the Chapter 6
+    /// displays); returning `false` cancels with [`EngineError::Cancelled`]. The callback
+    /// changes nothing in the image.
     pub fn render(
         &mut self,
         request: &RenderRequest,
@@ -396,8 +421,29 @@ impl Renderer {
                 report(progress, 0.2, "render")?;
                 let t_r = Instant::now();
                 let settings = d.settings(kind);
-                let img = pool
-                    .install(|| render_display(&dv.0, dv.1.as_ref(), &camera, w, h, &settings))?;
+                let mut cancelled = false;
+                let img = pool.install(|| {
+                    render_display_with_progress(
+                        &dv.0,
+                        dv.1.as_ref(),
+                        &camera,
+                        w,
+                        h,
+                        &settings,
+                        &mut |f| {
+                            let go = progress(&Progress {
+                                fraction: render_fraction(f),
+                                stage: "render",
+                            });
+                            cancelled |= !go;
+                            go
+                        },
+                    )
+                });
+                if cancelled {
+                    return Err(EngineError::Cancelled);
+                }
+                let img = img?;
                 let s = img.stats;
                 stats = Stats {
                     prepare_ms,
@@ -452,8 +498,24 @@ impl Renderer {
                     fresh |= fresh_list;
                     let prepare_ms = if fresh { ms(t_prep) } else { 0.0 };
                     report(progress, 0.2, "render")?;
-                    let mut out =
-                        pool.install(|| render_list(&list, &camera, &tables, &settings))?;
+                    let mut cancelled = false;
+                    let out = pool.install(|| {
+                        render_list_with_progress(&list, &camera, &tables, &settings, &mut |p| {
+                            let f = render_fraction(
+                                p.sheets_done as f64 / p.sheets_total.max(1) as f64,
+                            );
+                            let go = progress(&Progress {
+                                fraction: f,
+                                stage: "render",
+                            });
+                            cancelled |= !go;
+                            go
+                        })
+                    });
+                    if cancelled {
+                        return Err(EngineError::Cancelled);
+                    }
+                    let mut out = out?;
                     if let Some(color) = request.k_contour {
                         let proj = Projection::new(&camera, w, h)?;
                         match k_distance(vol.grid(), q.subsample, &proj) {
@@ -524,8 +586,9 @@ impl Renderer {
                                 volsplat_core::with_volume!(&*vol, v => render_with_progress(
                                     v, &camera, &tables, &settings,
                                     &mut |p| {
-                                        let f = 0.2 + 0.8 * p.sheets_done as f64
-                                            / p.sheets_total.max(1) as f64;
+                                        let f = render_fraction(
+                                            p.sheets_done as f64 / p.sheets_total.max(1) as f64,
+                                        );
                                         let go = progress(&Progress { fraction: f, stage: "render" });
                                         cancelled |= !go;
                                         go

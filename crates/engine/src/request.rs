@@ -13,6 +13,7 @@ use volsplat_splat::{Antialias, Order, RenderMode, RenderSettings, Visibility};
 /// What is computed along each ray.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Mode {
     /// Emission–absorption compositing of classified, shaded samples.
     #[default]
@@ -40,6 +41,7 @@ impl Mode {
 /// Which renderer draws the image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum RendererChoice {
     /// Splatting: the dense sheet renderer for orthographic views, the sparse splat list for
     /// perspective ones.
@@ -60,23 +62,30 @@ pub enum RendererChoice {
 /// Reconstruction kernels by name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum KernelChoice {
     /// Westover's Gaussian, σ = 0.6 voxel, radius 2.
     #[default]
     Gaussian,
     /// A single point at the nearest pixel.
+    #[cfg_attr(feature = "clap", value(aliases = ["single-point"]))]
     Point,
     /// The voxel's box (nearest neighbour).
+    #[cfg_attr(feature = "clap", value(aliases = ["nearest-neighbour", "nn"]))]
     Nearest,
     /// Trilinear (tent).
+    #[cfg_attr(feature = "clap", value(aliases = ["linear"]))]
     Tent,
     /// Cubic B-spline (Mitchell–Netravali B = 1, C = 0).
+    #[cfg_attr(feature = "clap", value(aliases = ["b-spline"]))]
     Bspline,
     /// Catmull–Rom (B = 0, C = ½); has negative lobes.
+    #[cfg_attr(feature = "clap", value(aliases = ["catmullrom"]))]
     CatmullRom,
     /// Mitchell–Netravali B = C = ⅓.
     Mitchell,
     /// Crawfis and Max's minimal-ripple radial cubic (decision 0005).
+    #[cfg_attr(feature = "clap", value(aliases = ["crawfismax"]))]
     CrawfisMax,
 }
 
@@ -101,6 +110,7 @@ impl KernelChoice {
 /// Anti-aliasing of voxels smaller than a pixel (Swan et al. 1997; [`Antialias`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum AntialiasChoice {
     /// Swan et al. eq. 4 and 8.
     #[default]
@@ -116,6 +126,7 @@ pub enum AntialiasChoice {
 /// Sheet buffers or composite-every-sample (Westover §3.8.1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum VisibilityChoice {
     /// Sheet buffers (Westover 1990/91).
     #[default]
@@ -127,6 +138,7 @@ pub enum VisibilityChoice {
 /// Traversal order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum OrderChoice {
     /// Front to back (allows early termination).
     #[default]
@@ -173,6 +185,7 @@ impl Default for Quality {
 /// The Chapter 6 display drawn by [`RendererChoice::Nil`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum DisplayChoice {
     /// Linearised display, eq 6.1.
     #[default]
@@ -190,6 +203,7 @@ pub enum DisplayChoice {
 /// Density of the Chapter 6 displays.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum DensityChoice {
     /// The transfer function's scalar opacity.
     #[default]
@@ -201,6 +215,7 @@ pub enum DensityChoice {
 /// NIL control-point rule (decision 0007).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum ControlChoice {
     /// L² projection of the filter onto each patch.
     #[default]

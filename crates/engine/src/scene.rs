@@ -14,6 +14,7 @@ use volsplat_core::{AnyVolume, Camera, Light, Orbit, ScalarType, TransferFunctio
 /// Built-in phantoms (world units as each phantom defines them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum PhantomKind {
     /// CT-like head in Hounsfield units (i16), face towards +z, top towards +y.
     Head,
@@ -211,8 +212,18 @@ impl VolumeSource {
     }
 
     /// Loads (or builds) the volume, with the reader's notes for the user (frames available,
-    /// spacing assumed, …).
+    /// spacing assumed, …), under the readers' default [`volsplat_io::Limits`].
     pub fn load_with_notes(&self) -> Result<(Arc<AnyVolume>, Vec<String>)> {
+        self.load_with_limits(&volsplat_io::Limits::default())
+    }
+
+    /// Like [`VolumeSource::load_with_notes`] with the caller's reader limits (largest header,
+    /// voxel count, JSON and XML sizes), for example a server that must refuse volumes larger
+    /// than its memory.
+    pub fn load_with_limits(
+        &self,
+        limits: &volsplat_io::Limits,
+    ) -> Result<(Arc<AnyVolume>, Vec<String>)> {
         Ok(match self {
             VolumeSource::Memory(v) => (Arc::clone(v), Vec::new()),
             VolumeSource::Phantom { phantom, grid } => (
@@ -230,7 +241,10 @@ impl VolumeSource {
                     big_endian: r.big_endian,
                     header_bytes: r.header_bytes,
                 };
-                (Arc::new(volsplat_io::read_raw(path, &spec)?), Vec::new())
+                (
+                    Arc::new(volsplat_io::read_raw_with(path, &spec, limits)?),
+                    Vec::new(),
+                )
             }
             VolumeSource::File {
                 path,
@@ -241,6 +255,7 @@ impl VolumeSource {
                 let options = volsplat_io::ReadOptions {
                     frame: *frame,
                     array: array.clone(),
+                    limits: *limits,
                     ..Default::default()
                 };
                 let loaded = volsplat_io::read_volume_with(path, &options)?;

@@ -121,24 +121,46 @@ fn perspective_uses_the_splat_list_and_the_dense_renderer_refuses_it() {
     );
 }
 
+/// Every renderer reports progress during the render (not only between stages), and a
+/// callback that says stop half way cancels it.
 #[test]
-fn progress_reports_and_cancels() {
-    let req = RenderRequest::new(blobs(32), 32, 32);
-    let mut seen = Vec::new();
-    Renderer::new()
-        .render(&req, &mut |p| {
-            seen.push(p.fraction);
-            true
-        })
-        .unwrap();
-    assert!(seen.len() > 3, "{seen:?}");
-    assert!(seen.windows(2).all(|w| w[1] >= w[0]), "{seen:?}");
-    assert_eq!(seen.last(), Some(&1.0));
-    // Cancel half way through the sheets.
-    let e = Renderer::new()
-        .render(&req, &mut |p| p.fraction < 0.5)
-        .unwrap_err();
-    assert!(matches!(e, EngineError::Cancelled), "{e}");
+fn progress_reports_and_cancels_for_every_renderer() {
+    let cases = [
+        ("dense", RendererChoice::Auto, false),
+        ("splat list, perspective", RendererChoice::Auto, true),
+        ("splat list, orthographic", RendererChoice::SplatList, false),
+        ("sabella", RendererChoice::Sabella, false),
+        ("nil", RendererChoice::Nil, false),
+    ];
+    for (name, renderer, perspective) in cases {
+        let mut req = RenderRequest::new(blobs(24), 32, 32);
+        req.renderer = renderer;
+        req.scene.camera = orbit(20.0, 10.0, perspective);
+        req.display.samples_per_ray = 32;
+        req.display.supersample = 1;
+        let mut seen = Vec::new();
+        let full = Renderer::new()
+            .render(&req, &mut |p| {
+                seen.push(p.fraction);
+                true
+            })
+            .unwrap();
+        let during: Vec<f64> = seen
+            .iter()
+            .copied()
+            .filter(|&f| f > 0.2 && f < 1.0)
+            .collect();
+        assert!(during.len() >= 2, "{name}: {seen:?}");
+        assert!(seen.windows(2).all(|w| w[1] >= w[0]), "{name}: {seen:?}");
+        assert_eq!(seen.last(), Some(&1.0), "{name}");
+        let e = Renderer::new()
+            .render(&req, &mut |p| p.fraction < 0.5)
+            .unwrap_err();
+        assert!(matches!(e, EngineError::Cancelled), "{name}: {e}");
+        // A callback that never stops changes no bit.
+        let again = Renderer::new().render(&req, &mut |_| true).unwrap();
+        assert_eq!(bits(&full), bits(&again), "{name}");
+    }
 }
 
 #[test]
@@ -229,4 +251,33 @@ fn bad_requests_name_the_field() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("mode"), "{e}");
+}
+
+/// Reader limits given to the renderer reach the file reader: a 24³ volume is refused under a
+/// 10 000-voxel limit with an error naming the file, and read under the default limits.
+#[test]
+fn the_renderers_reader_limits_reach_the_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("blobs.nrrd");
+    let vol = volsplat::make_phantom(PhantomKind::Blobs, Some(&[24]), "grid").unwrap();
+    volsplat::io::write_nrrd(&path, &vol, false).unwrap();
+    let scene = Scene {
+        volume: VolumeSource::File {
+            path: path.clone(),
+            raw: None,
+            frame: 0,
+            array: None,
+        },
+        ..Scene::default()
+    };
+    let req = RenderRequest::new(scene, 16, 16);
+    let limits = volsplat::io::Limits {
+        max_voxels: 10_000,
+        ..Default::default()
+    };
+    let mut small = Renderer::with_limits(limits);
+    let e = small.render(&req, &mut |_| true).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("blobs.nrrd") && msg.contains("10000"), "{msg}");
+    assert!(Renderer::new().render(&req, &mut |_| true).is_ok());
 }

@@ -37,6 +37,9 @@ pub enum FilterError {
         /// Why it cannot be used.
         reason: String,
     },
+    /// The progress callback asked to stop.
+    #[error("render cancelled")]
+    Cancelled,
     /// An error from `volsplat-core` (camera validation, grids).
     #[error(transparent)]
     Core(#[from] volsplat_core::CoreError),

@@ -117,4 +117,14 @@ pub mod render;
 pub mod scene;
 pub mod texture;
 
+pub use display::{
+    DisplayImage, DisplayKind, DisplaySettings, DisplayStats, DisplayVolume, build_map,
+    render_display, render_display_with_progress,
+};
 pub use error::{FilterError, Result};
+pub use render::{RegionKind, Rendered as TextureRendered, Technique, render as render_texture};
+pub use scene::{Scene as TextureScene, SceneSettings, Surface};
+pub use texture::{
+    ConstantTexture, CosineTexture, DiscreteTexture, MarbleTexture, Reconstruction, SolidTexture,
+    StepTexture,
+};

@@ -9,9 +9,72 @@ pub enum SplatError {
     /// Invalid camera, transfer function, kernel or volume.
     #[error(transparent)]
     Core(#[from] CoreError),
-    /// Invalid render settings; the message names the setting.
-    #[error("invalid render settings: {0}")]
-    Settings(String),
+    /// A render setting is outside its range.
+    #[error("invalid render setting {name} = {value}: {expected}")]
+    Setting {
+        /// The setting's field name (as in `RenderSettings` / the request file).
+        name: &'static str,
+        /// The value given, as text.
+        value: String,
+        /// What the setting accepts.
+        expected: &'static str,
+    },
+    /// One voxel's footprint would cover more pixels than `FootprintSettings::max_block_side`
+    /// allows (the zoom is too large, the camera's `parallel_scale` too small, or the grid
+    /// spacing too uneven).
+    #[error(
+        "the footprint of one voxel would cover {width} × {height} pixels, more than the limit \
+         of {limit} × {limit} (footprint max_block_side); the zoom is too large, the camera's \
+         parallel_scale too small, or the grid spacing too uneven"
+    )]
+    FootprintTooLarge {
+        /// Footprint block width in pixels (may be infinite or NaN).
+        width: f64,
+        /// Footprint block height in pixels (may be infinite or NaN).
+        height: f64,
+        /// The limit on either side, pixels.
+        limit: usize,
+    },
+    /// The view maps the volume to non-finite raster coordinates.
+    #[error(
+        "the view maps the volume to non-finite raster coordinates (one voxel step = {step:?} \
+         pixels); the zoom, the camera's parallel_scale or the grid spacing is too extreme"
+    )]
+    ExtremeView {
+        /// Raster displacement of one lattice step along i, j, k (column-major 3×3).
+        step: [f64; 9],
+    },
+    /// The view direction is perpendicular to every lattice axis (or not a number).
+    #[error("degenerate view direction: no lattice axis has a non-zero component along it")]
+    DegenerateView,
+    /// The splat-list (perspective) renderer needs a radially symmetric kernel.
+    #[error(
+        "the splat-list (perspective) renderer needs a radial kernel (gaussian, crawfis-max), \
+         got {kernel}"
+    )]
+    KernelNotRadial {
+        /// The kernel's name.
+        kernel: String,
+    },
+    /// A splat list would exceed its index range.
+    #[error("splat list too large: {what}")]
+    ListTooLarge {
+        /// What overflowed, with the numbers.
+        what: String,
+    },
+    /// Two images that must match in size do not.
+    #[error("image size mismatch: {what} is {got:?}, expected {expected:?} (width, height)")]
+    SizeMismatch {
+        /// Which image.
+        what: &'static str,
+        /// Its size, pixels.
+        got: (usize, usize),
+        /// The size it must have, pixels.
+        expected: (usize, usize),
+    },
+    /// A successive-refinement ladder with no step.
+    #[error("the refinement ladder is empty")]
+    EmptyLadder,
     /// The progress callback asked to stop.
     #[error("render cancelled")]
     Cancelled,

@@ -448,18 +448,19 @@ fn separable_line_integral(kernel: &Kernel, o: DVec3, g: DVec3) -> f64 {
 }
 
 /// A footprint block side (`2⌈h⌉ + 2` pixels) for messages.
-fn block_side(h: f64) -> String {
+/// The block side `2⌈h⌉ + 2` in pixels for a half extent `h` (non-finite stays as it is).
+fn block_side(h: f64) -> f64 {
     if h.is_finite() {
-        format!("{:.0}", 2.0 * h.ceil() + 2.0)
+        2.0 * h.ceil() + 2.0
     } else {
-        format!("{h}")
+        h
     }
 }
 
 impl FootprintTable {
     /// Tabulates the footprint of `kernel` for the frame `geom`.
     ///
-    /// Errors ([`SplatError::Settings`]) if the footprint's block (`2⌈half extent⌉ + 2` pixels
+    /// Errors ([`SplatError::FootprintTooLarge`]) if the footprint's block (`2⌈half extent⌉ + 2` pixels
     /// per axis) exceeds [`FootprintSettings::max_block_side`] or is not finite, before
     /// anything is allocated.
     pub fn build(
@@ -481,13 +482,11 @@ impl FootprintTable {
         // The largest half extent whose block 2⌈h⌉ + 2 fits in max_side pixels.
         let max_half = (max_side.saturating_sub(2) / 2) as f64;
         if !(hx.is_finite() && hy.is_finite() && hx <= max_half && hy <= max_half) {
-            return Err(SplatError::Settings(format!(
-                "the footprint of one voxel would cover {} × {} pixels, more than the limit of \
-                 {max_side} × {max_side} (footprint max_block_side); the zoom is too large, the \
-                 camera's parallel_scale too small, or the grid spacing too uneven",
-                block_side(hx),
-                block_side(hy),
-            )));
+            return Err(SplatError::FootprintTooLarge {
+                width: block_side(hx),
+                height: block_side(hy),
+                limit: max_side,
+            });
         }
         let point = matches!(f.kind, Kind::Point { .. });
         // Pixel offsets k ∈ [−⌈h⌉, ⌈h⌉ + 1] hold every pixel a sample with phase in [0, 1) covers.

@@ -53,7 +53,11 @@ impl SplatGeometry {
     /// Computes the frame geometry for `grid` subsampled by `stride` under `proj`.
     pub fn new(grid: &Grid, proj: &OrthoProjection, stride: usize, order: Order) -> Result<Self> {
         if stride == 0 {
-            return Err(SplatError::Settings("subsample stride must be ≥ 1".into()));
+            return Err(SplatError::Setting {
+                name: "subsample",
+                value: "0".into(),
+                expected: "a stride ≥ 1",
+            });
         }
         let dims = grid.dims.map(|d| d.div_ceil(stride));
         let spacing = grid.spacing.map(|s| s * stride as f64);
@@ -62,12 +66,9 @@ impl SplatGeometry {
         let jacobian = raster_from_world * world_from_lattice;
         let origin_raster = proj.raster_from_world(DVec3::from(grid.origin));
         if !(jacobian.is_finite() && origin_raster.is_finite()) {
-            return Err(SplatError::Settings(format!(
-                "the view maps the volume to non-finite raster coordinates (one voxel step = \
-                 {:?} pixels); the zoom, the camera's parallel_scale or the grid spacing is too \
-                 extreme",
-                jacobian.to_cols_array()
-            )));
+            return Err(SplatError::ExtremeView {
+                step: jacobian.to_cols_array(),
+            });
         }
         let lattice_from_world =
             DMat3::from_diagonal(DVec3::from(spacing).recip()) * grid.direction.transpose();
@@ -93,7 +94,7 @@ impl SplatGeometry {
         let in_sheet_reversed = in_sheet_axes.map(|a| !increasing(a));
         let cos_a = cosines[sheet_axis];
         if cos_a.is_nan() || cos_a <= 1e-9 {
-            return Err(SplatError::Settings("degenerate view direction".into()));
+            return Err(SplatError::DegenerateView);
         }
         let sheet_spacing = spacing[sheet_axis] / cos_a;
         let mut lo = f64::INFINITY;

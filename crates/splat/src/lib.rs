@@ -28,7 +28,7 @@ pub use aa::Antialias;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};
-pub use list::{ExtractSettings, SplatList, SplatRecord, render_list};
+pub use list::{ExtractSettings, SplatList, SplatRecord, render_list, render_list_with_progress};
 pub use render::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render, render_any,
     render_with_progress,

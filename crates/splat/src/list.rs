@@ -38,9 +38,9 @@ use crate::error::{Result, SplatError};
 use crate::footprint::metric_from;
 use crate::geometry::Order;
 use crate::render::{
-    BandState, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE, SINK_OVER_BTF,
-    SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit, finish,
-    gradient_at, ms, validate,
+    BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
+    SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit,
+    finish, gradient_at, ms, validate,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -117,21 +117,28 @@ impl SplatList {
     ) -> Result<Self> {
         let t0 = Instant::now();
         if !(s.threshold >= 0.0 && s.threshold < 1.0) {
-            return Err(SplatError::Settings(format!(
-                "splat-list threshold must be in [0, 1), got {}",
-                s.threshold
-            )));
+            return Err(SplatError::Setting {
+                name: "threshold",
+                value: s.threshold.to_string(),
+                expected: "a splat-list opacity threshold in [0, 1)",
+            });
         }
         if s.subsample == 0 {
-            return Err(SplatError::Settings("subsample must be ≥ 1".into()));
+            return Err(SplatError::Setting {
+                name: "subsample",
+                value: "0".into(),
+                expected: "a stride ≥ 1",
+            });
         }
         let grid = volume.grid().clone();
         let stride = s.subsample;
         let dims = grid.dims.map(|d| d.div_ceil(stride));
         if dims.iter().any(|&d| d > u16::MAX as usize) {
-            return Err(SplatError::Settings(format!(
-                "splat lists hold at most 65535 voxels per axis, the lattice is {dims:?}"
-            )));
+            return Err(SplatError::ListTooLarge {
+                what: format!(
+                    "splat lists hold at most 65535 voxels per axis, the lattice is {dims:?}"
+                ),
+            });
         }
         let frame = Camera::default().frame();
         let classifier = FrameClassifier::new(tables, &frame, tables.opacity_unit_distance);
@@ -183,9 +190,9 @@ impl SplatList {
             .collect();
         let total: usize = slices.iter().map(Vec::len).sum();
         if total > u32::MAX as usize {
-            return Err(SplatError::Settings(format!(
-                "{total} splats exceed the list's 2^32 limit"
-            )));
+            return Err(SplatError::ListTooLarge {
+                what: format!("{total} splats exceed the list's 2^32 limit"),
+            });
         }
         let mut records = Vec::with_capacity(total);
         for sl in slices {
@@ -387,7 +394,22 @@ pub fn render_list(
     tables: &CrioTables,
     settings: &RenderSettings,
 ) -> Result<Rendered> {
-    render_inner(list, camera, tables, settings, Payload::Shaded)
+    render_inner(list, camera, tables, settings, Payload::Shaded, &mut |_| {
+        true
+    })
+}
+
+/// Like [`render_list`], calling `progress` after each batch of sheets
+/// (`settings.sheets_per_batch`); returning `false` from it cancels the render with
+/// [`SplatError::Cancelled`]. The image does not depend on the batch size or on the callback.
+pub fn render_list_with_progress(
+    list: &SplatList,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+    progress: &mut dyn FnMut(&Progress) -> bool,
+) -> Result<Rendered> {
+    render_inner(list, camera, tables, settings, Payload::Shaded, progress)
 }
 
 /// The opacity-weighted eye-space depth (world units) of what [`render_list`] draws, per pixel:
@@ -403,7 +425,7 @@ pub fn render_list_depth(
         mode: RenderMode::Composite,
         ..settings.clone()
     };
-    let r = render_inner(list, camera, tables, &s, Payload::Depth)?;
+    let r = render_inner(list, camera, tables, &s, Payload::Depth, &mut |_| true)?;
     let (w, h) = (s.width, s.height);
     let values = r
         .image
@@ -411,8 +433,11 @@ pub fn render_list_depth(
         .iter()
         .map(|p| if p[3] > 1e-3 { p[0] / p[3] } else { f32::NAN })
         .collect();
-    ScalarImage::from_values(w, h, values)
-        .ok_or_else(|| SplatError::Settings("depth image size mismatch".into()))
+    ScalarImage::from_values(w, h, values).ok_or(SplatError::SizeMismatch {
+        what: "depth image",
+        got: (r.image.width(), r.image.height()),
+        expected: (w, h),
+    })
 }
 
 /// Paints `color` (premultiplied, opaque) on the pixels of `image` where `depth` crosses `k`
@@ -426,11 +451,11 @@ pub fn draw_depth_contour(
 ) -> Result<()> {
     let (w, h) = (depth.width(), depth.height());
     if image.width() != w || image.height() != h {
-        return Err(SplatError::Settings(format!(
-            "depth image {w}×{h} does not match the image {}×{}",
-            image.width(),
-            image.height()
-        )));
+        return Err(SplatError::SizeMismatch {
+            what: "image",
+            got: (image.width(), image.height()),
+            expected: (w, h),
+        });
     }
     let d = depth.values();
     let side = |v: f32| if v.is_nan() { None } else { Some(v >= k) };
@@ -464,16 +489,15 @@ fn render_inner(
     tables: &CrioTables,
     settings: &RenderSettings,
     payload: Payload,
+    progress: &mut dyn FnMut(&Progress) -> bool,
 ) -> Result<Rendered> {
     let t_start = Instant::now();
     validate(settings)?;
     settings.kernel.validate()?;
     if !settings.kernel.is_radial() {
-        return Err(SplatError::Settings(format!(
-            "the splat-list (perspective) renderer needs a radial kernel (gaussian, \
-             crawfis-max), got {}",
-            settings.kernel.name()
-        )));
+        return Err(SplatError::KernelNotRadial {
+            kernel: settings.kernel.name(),
+        });
     }
     let (w, h) = (settings.width, settings.height);
     let proj = Projection::new(camera, w, h)?;
@@ -490,7 +514,7 @@ fn render_inner(
         .max_by(|&a, &b| cosines[a].total_cmp(&cosines[b]).then(b.cmp(&a)))
         .unwrap_or(2);
     if cosines[axis].is_nan() || cosines[axis] <= 1e-9 {
-        return Err(SplatError::Settings("degenerate view direction".into()));
+        return Err(SplatError::DegenerateView);
     }
     let axis_dir = grid.direction.col(axis);
     let frame_spacing = spacing[axis] / cosines[axis];
@@ -617,6 +641,7 @@ fn render_inner(
     stats.setup_ms = ms(t_start);
     let batch = settings.sheets_per_batch;
     let mut slots: Vec<SheetBuckets> = (0..batch).map(|_| SheetBuckets::default()).collect();
+    let mut done = 0;
     for sheets in sheet_order.chunks(batch) {
         let t0 = Instant::now();
         let classified = &mut slots[..sheets.len()];
@@ -641,6 +666,15 @@ fn render_inner(
                 }
             });
         stats.splat_ms += ms(t1);
+        done += sheets.len();
+        let p = Progress {
+            sheets_done: done,
+            sheets_total: sheet_order.len(),
+            accumulation: &acc,
+        };
+        if !progress(&p) {
+            return Err(SplatError::Cancelled);
+        }
     }
     let (splat_cpu, comp_cpu) = bands
         .iter()

@@ -65,7 +65,7 @@ pub fn render_ladder<T: Scalar>(
             break;
         }
     }
-    last.ok_or_else(|| crate::SplatError::Settings("refinement ladder is empty".into()))
+    last.ok_or(crate::SplatError::EmptyLadder)
 }
 
 #[cfg(test)]

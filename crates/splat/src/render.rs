@@ -367,24 +367,45 @@ pub fn render_with_progress<T: Scalar>(
 }
 
 pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
-    let bad = |m: &str| Err(SplatError::Settings(m.into()));
-    if s.width == 0 || s.height == 0 {
-        return bad("image width and height must be ≥ 1");
-    }
-    if (s.width as u128) * (s.height as u128) > 1 << 28 {
-        return bad("image larger than 2^28 pixels");
+    let bad = |name: &'static str, value: String, expected: &'static str| {
+        Err(SplatError::Setting {
+            name,
+            value,
+            expected,
+        })
+    };
+    if s.width == 0 || s.height == 0 || (s.width as u128) * (s.height as u128) > 1 << 28 {
+        return bad(
+            "width × height",
+            format!("{} × {}", s.width, s.height),
+            "each side ≥ 1 and at most 2^28 pixels in all",
+        );
     }
     if s.subsample == 0 {
-        return bad("subsample must be ≥ 1");
+        return bad("subsample", "0".into(), "a stride ≥ 1");
     }
-    if s.band_height == 0 || s.sheets_per_batch == 0 || !s.band_height.is_multiple_of(TILE) {
-        return bad("band_height must be a positive multiple of 4 and sheets_per_batch ≥ 1");
+    if s.band_height == 0 || !s.band_height.is_multiple_of(TILE) {
+        return bad(
+            "band_height",
+            s.band_height.to_string(),
+            "a positive multiple of 4 rows",
+        );
+    }
+    if s.sheets_per_batch == 0 {
+        return bad("sheets_per_batch", "0".into(), "≥ 1");
     }
     if s.opacity_cutoff.is_nan() || s.opacity_cutoff <= 0.0 {
-        return bad("opacity_cutoff must be > 0");
+        return bad(
+            "opacity_cutoff",
+            s.opacity_cutoff.to_string(),
+            "an opacity > 0 (VTK stops rays at 0.99)",
+        );
     }
-    if s.footprint.max_entries == 0 || s.footprint.max_phases == 0 {
-        return bad("footprint max_entries and max_phases must be ≥ 1");
+    if s.footprint.max_entries == 0 {
+        return bad("footprint.max_entries", "0".into(), "≥ 1");
+    }
+    if s.footprint.max_phases == 0 {
+        return bad("footprint.max_phases", "0".into(), "≥ 1");
     }
     Ok(())
 }

@@ -520,5 +520,20 @@ pub fn render_display(
     height: usize,
     settings: &DisplaySettings,
 ) -> Result<DisplayImage> {
-    render::render(vol, map, camera, width, height, settings)
+    render::render(vol, map, camera, width, height, settings, &mut |_| true)
+}
+
+/// Like [`render_display`], calling `progress` with the fraction of rows done (in `(0, 1]`)
+/// about twenty times; returning `false` cancels with [`FilterError::Cancelled`]. The image does
+/// not depend on the callback.
+pub fn render_display_with_progress(
+    vol: &DisplayVolume,
+    map: Option<&DiscreteNilMap>,
+    camera: &Camera,
+    width: usize,
+    height: usize,
+    settings: &DisplaySettings,
+    progress: &mut dyn FnMut(f64) -> bool,
+) -> Result<DisplayImage> {
+    render::render(vol, map, camera, width, height, settings, progress)
 }

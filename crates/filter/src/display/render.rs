@@ -52,6 +52,7 @@ pub(crate) fn render(
     width: usize,
     height: usize,
     s: &DisplaySettings,
+    progress: &mut dyn FnMut(f64) -> bool,
 ) -> Result<DisplayImage> {
     let start = Instant::now();
     s.validate()?;
@@ -274,15 +275,22 @@ pub(crate) fn render(
         px
     };
 
-    let rows: Vec<(Vec<Pixel>, DisplayStats)> = (0..height)
-        .into_par_iter()
-        .map(|y| {
+    // Rows in blocks, so that `progress` hears from the render about 20 times; every pixel is
+    // computed independently, so the blocks change nothing in the image.
+    let block = (height / 20).max(4 * rayon::current_num_threads()).max(1);
+    let mut rows: Vec<(Vec<Pixel>, DisplayStats)> = Vec::with_capacity(height);
+    for y0 in (0..height).step_by(block) {
+        let y1 = (y0 + block).min(height);
+        rows.par_extend((y0..y1).into_par_iter().map(|y| {
             let mut sc = Scratch::default();
             let mut st = DisplayStats::default();
             let row = (0..width).map(|x| pixel(x, y, &mut sc, &mut st)).collect();
             (row, st)
-        })
-        .collect();
+        }));
+        if !progress(y1 as f64 / height as f64) {
+            return Err(FilterError::Cancelled);
+        }
+    }
     let mut stats = DisplayStats::default();
     let n = width * height;
     let mut value = Vec::with_capacity(n);
