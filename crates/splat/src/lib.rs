@@ -17,6 +17,7 @@
 #![deny(missing_docs)]
 
 pub mod aa;
+pub mod clip;
 pub mod error;
 pub mod footprint;
 pub mod geometry;
@@ -25,6 +26,7 @@ pub mod refine;
 pub mod render;
 
 pub use aa::Antialias;
+pub use clip::ClipPlane;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};

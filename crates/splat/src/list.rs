@@ -34,13 +34,14 @@
 //! bit-identical for any thread count.
 
 use crate::aa::{footprint_variance, widen};
+use crate::clip::LatticeClip;
 use crate::error::{Result, SplatError};
 use crate::footprint::metric_from;
 use crate::geometry::Order;
 use crate::render::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
     SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit,
-    finish, gradient_at, ms, validate,
+    finish, gradient_at, ms, scale_kept, validate,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -383,6 +384,8 @@ struct Frame<'a> {
     table: Vec<f32>,
     band_h: usize,
     n_bands: usize,
+    /// Clipping planes in lattice terms (empty: none).
+    clip: LatticeClip,
 }
 
 /// Renders a splat list seen by `camera` (orthographic or perspective); see the module docs.
@@ -619,6 +622,7 @@ fn render_inner(
         table,
         band_h,
         n_bands,
+        clip: LatticeClip::new(&settings.clip, &list.grid, &settings.kernel, list.stride),
     };
     let init: Rgba = match settings.mode {
         RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
@@ -725,8 +729,19 @@ impl Frame<'_> {
         let mode = s.mode;
         let frame = *self.proj.frame();
         let needs_gradient = mode == RenderMode::Composite && self.classifier.needs_gradient;
+        let stride = self.list.stride as f64;
         self.list.for_each_in_slice(axis, c, |r| {
             let lattice = DVec3::new(r.ijk[0] as f64, r.ijk[1] as f64, r.ijk[2] as f64);
+            // Smooth clipping: the kernel's share on the kept side of every plane.
+            let keep = if self.clip.is_empty() {
+                1.0
+            } else {
+                let k = self.clip.weight((lattice * stride).to_array()) as f32;
+                if k <= 0.0 || (mode == RenderMode::Minip && k < 0.5) {
+                    return;
+                }
+                k
+            };
             let p = self.origin + self.world_from_lattice * lattice;
             let d = p - frame.eye;
             let z = d.dot(frame.forward);
@@ -794,6 +809,11 @@ impl Frame<'_> {
                 }
                 RenderMode::Xray => [r.density, 0.0, 0.0, 0.0],
                 RenderMode::Mip | RenderMode::Minip => [r.density, 1.0, 0.0, 0.0],
+            };
+            let v = if keep < 1.0 {
+                scale_kept(v, keep, mode)
+            } else {
+                v
             };
             out.splatted += 1;
             let (b0, b1) = (

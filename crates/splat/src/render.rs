@@ -13,6 +13,7 @@
 //! thread count, and the output is bit-identical for any number of threads.
 
 use crate::aa::Antialias;
+use crate::clip::{ClipPlane, LatticeClip};
 use crate::error::{Result, SplatError};
 use crate::footprint::{FootprintSettings, FootprintTable};
 use crate::geometry::{Order, SplatGeometry};
@@ -84,6 +85,9 @@ pub struct RenderSettings {
     /// Anti-aliasing of footprints finer than a pixel (Swan et al. 1997; default
     /// [`Antialias::Swan`]). Changes nothing where every voxel spans at least a pixel.
     pub antialias: Antialias,
+    /// Clipping planes (world frame; a crop box is six of them), cut smoothly by weighting each
+    /// voxel with its kernel's share on the kept side ([`crate::clip`]). Empty: no clipping.
+    pub clip: Vec<ClipPlane>,
 }
 
 impl Default for RenderSettings {
@@ -102,6 +106,7 @@ impl Default for RenderSettings {
             band_height: 16,
             sheets_per_batch: 8,
             antialias: Antialias::default(),
+            clip: Vec::new(),
         }
     }
 }
@@ -407,6 +412,13 @@ pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
     if s.footprint.max_phases == 0 {
         return bad("footprint.max_phases", "0".into(), "≥ 1");
     }
+    if let Some(p) = s.clip.iter().find(|p| !p.is_valid()) {
+        return bad(
+            "clip",
+            format!("normal {:?}, offset {}", p.normal, p.offset),
+            "a plane needs a finite, non-zero normal and a finite offset",
+        );
+    }
     Ok(())
 }
 
@@ -433,6 +445,8 @@ struct ClassifyContext<'a, T> {
     width: usize,
     height: usize,
     depth_scale: f64,
+    /// Clipping planes in lattice terms (empty: none).
+    clip: LatticeClip,
 }
 
 impl<'a, T: Scalar> ClassifyContext<'a, T> {
@@ -463,6 +477,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
             width: settings.width,
             height: settings.height,
             depth_scale: if dhi > dlo { 1.0 / (dhi - dlo) } else { 0.0 },
+            clip: LatticeClip::new(&settings.clip, grid, &settings.kernel, geom.stride),
         }
     }
 
@@ -566,7 +581,21 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                         continue;
                     }
                 }
-                let value: Rgba = match self.mode {
+                // Smooth clipping: the kernel's share on the kept side of every plane.
+                let keep = if self.clip.is_empty() {
+                    1.0
+                } else {
+                    let mut l = [0.0; 3];
+                    l[sa] = (sheet * stride) as f64;
+                    l[ua] = (u * stride) as f64;
+                    l[va] = (v * stride) as f64;
+                    let k = self.clip.weight(l) as f32;
+                    if k <= 0.0 || (self.mode == RenderMode::Minip && k < 0.5) {
+                        continue;
+                    }
+                    k
+                };
+                let mut value: Rgba = match self.mode {
                     RenderMode::Composite => {
                         let gradient = if self.needs_gradient {
                             let mut l = [0usize; 3];
@@ -591,6 +620,9 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     RenderMode::Xray => [density * ds, 0.0, 0.0, 0.0],
                     RenderMode::Mip | RenderMode::Minip => [density, 1.0, 0.0, 0.0],
                 };
+                if keep < 1.0 {
+                    value = scale_kept(value, keep, self.mode);
+                }
                 splatted += 1;
                 let s = Splat { x, y, v: value };
                 for b in &mut out.buckets[b0..=b1] {
@@ -601,6 +633,18 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         out.visited = (nu * nv) as u64;
         out.splatted = splatted;
         out.skipped = skipped;
+    }
+}
+
+/// A splat's value weighted by the kept share `k` of its kernel ([`crate::clip`]): premultiplied
+/// colour and opacity (composite), density (X-ray) or value (MIP) times `k`; MinIP unchanged
+/// (its splats are kept or dropped at `k = ½`).
+#[inline]
+pub(crate) fn scale_kept(v: Rgba, k: f32, mode: RenderMode) -> Rgba {
+    match mode {
+        RenderMode::Composite => [v[0] * k, v[1] * k, v[2] * k, v[3] * k],
+        RenderMode::Xray | RenderMode::Mip => [v[0] * k, v[1], v[2], v[3]],
+        RenderMode::Minip => v,
     }
 }
 
