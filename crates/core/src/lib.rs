@@ -6,7 +6,9 @@
 //!   [`Volume<T>`] / [`AnyVolume`] for u8, i8, u16, i16 and f32 samples.
 //! - [`camera`]: VTK-compatible [`Camera`], its [`ViewFrame`], and the [`OrthoProjection`] from
 //!   world to raster coordinates.
-//! - [`transfer`]: VTK-style [`TransferFunction`] files and presets.
+//! - [`transfer`]: VTK-style [`TransferFunction`] files.
+//! - [`presets`]: 3D Slicer's volume-rendering [`Preset`]s and the automatic transfer function
+//!   fitted to a [`Histogram`] ([`AutoTransfer`]).
 //! - [`crio`]: Westover's four CRIO tables, lights and shading, and the per-frame
 //!   [`FrameClassifier`].
 //! - [`kernel`]: reconstruction kernels (Gaussian, single-point, nearest, tent, Mitchell–Netravali,
@@ -27,6 +29,7 @@ pub mod error;
 pub mod image;
 pub mod kernel;
 pub mod phantom;
+pub mod presets;
 pub mod scenes;
 pub mod transfer;
 pub mod volume;
@@ -38,6 +41,7 @@ pub use crio::{CrioTables, FrameClassifier, Light, LookupTable, SampleInput, Sha
 pub use error::{CoreError, Result};
 pub use image::{Image, Rgba, ScalarImage};
 pub use kernel::Kernel;
+pub use presets::{AutoTransfer, BackgroundRule, Histogram, Preset};
 pub use transfer::TransferFunction;
 pub use volume::{AnyVolume, Grid, Scalar, ScalarType, Volume};
 

@@ -1,4 +1,5 @@
-//! Transfer functions in VTK's terms (`vtkVolumeProperty`), with built-in presets.
+//! Transfer functions in VTK's terms (`vtkVolumeProperty`); built-in presets and the automatic
+//! transfer function are in [`crate::presets`].
 //!
 //! A [`TransferFunction`] is what users write in a transfer-function JSON file (DESIGN.md §3):
 //! piecewise-linear colour and scalar-opacity points over the data's own units, optional
@@ -7,6 +8,8 @@
 //! with [`crate::crio::CrioTables::from_transfer_function`].
 
 use crate::error::{CoreError, Result};
+use crate::presets::{AutoTransfer, Histogram, Preset};
+use crate::volume::AnyVolume;
 use serde::{Deserialize, Serialize};
 
 fn one() -> f64 {
@@ -220,8 +223,8 @@ impl TransferFunction {
         }
     }
 
-    /// A grey ramp over `[lo, hi]`: colour black → white, opacity 0 → `max_opacity`, unshaded.
-    /// Used when the user gives no transfer function.
+    /// A grey ramp over `[lo, hi]` (data units; `hi ≤ lo` is taken as `lo + 1`): colour black →
+    /// white, opacity 0 → `max_opacity` (in [0, 1]), unshaded. The `ramp` preset uses 0.5.
     pub fn ramp(lo: f64, hi: f64, max_opacity: f64) -> Self {
         let hi = if hi > lo { hi } else { lo + 1.0 };
         TransferFunction {
@@ -237,95 +240,31 @@ impl TransferFunction {
         }
     }
 
-    /// Names of the built-in presets.
-    pub const PRESETS: &'static [&'static str] = &["ct-bone", "ct-skin", "mr", "ramp"];
+    /// Names of the built-in presets ([`Preset::NAMES`]): 3D Slicer's volume-rendering presets
+    /// and volsplat's `ct-skin` and `ramp`.
+    pub const PRESETS: &'static [&'static str] = &Preset::NAMES;
 
-    /// A built-in preset. `ct-bone`, `ct-skin` are in Hounsfield units; `mr` is for 8-bit MR
-    /// intensities (0–255); `ramp` spans `data_range`.
-    ///
-    /// `ct-bone` and `mr` follow 3D Slicer's `CT-Bone` and `MR-Default` presets; `ct-skin` is ours
-    /// (translucent skin over opaque bone).
+    /// A built-in preset by name or alias, matched case-insensitively (see [`Preset`]; `ct-bone`,
+    /// `ct-skin`, `mr` and `ramp` keep working). Control points are in the preset's own units
+    /// ([`Preset::units`]: Hounsfield units for CT); only `ramp` depends on `data_range`
+    /// (smallest and largest sample, data units), which it spans. An unknown name is
+    /// [`CoreError::UnknownName`] listing every name.
     pub fn preset(name: &str, data_range: (f64, f64)) -> Result<Self> {
-        let base = TransferFunction::ramp(data_range.0, data_range.1, 0.5);
-        let tf = match name {
-            "ct-bone" => TransferFunction {
-                color: vec![
-                    [-3024.0, 0.0, 0.0, 0.0],
-                    [-16.4458, 0.729412, 0.254902, 0.301961],
-                    [641.385, 0.905882, 0.815686, 0.552941],
-                    [3071.0, 1.0, 1.0, 1.0],
-                ],
-                scalar_opacity: vec![
-                    [-3024.0, 0.0],
-                    [-16.4458, 0.0],
-                    [641.385, 0.715686],
-                    [3071.0, 0.705882],
-                ],
-                shade: true,
-                ambient: 0.1,
-                diffuse: 0.9,
-                specular: 0.2,
-                specular_power: 10.0,
-                ..base
-            },
-            "ct-skin" => TransferFunction {
-                color: vec![
-                    [-1024.0, 0.0, 0.0, 0.0],
-                    [-500.0, 0.55, 0.25, 0.15],
-                    [-100.0, 0.93, 0.77, 0.63],
-                    [200.0, 0.95, 0.80, 0.68],
-                    [400.0, 1.0, 0.98, 0.92],
-                    [3071.0, 1.0, 1.0, 1.0],
-                ],
-                scalar_opacity: vec![
-                    [-1024.0, 0.0],
-                    [-600.0, 0.0],
-                    [-300.0, 0.006],
-                    [250.0, 0.006],
-                    [500.0, 0.6],
-                    [3071.0, 0.9],
-                ],
-                shade: true,
-                ambient: 0.15,
-                diffuse: 0.85,
-                specular: 0.25,
-                specular_power: 15.0,
-                ..base
-            },
-            "mr" => TransferFunction {
-                color: vec![
-                    [0.0, 0.0, 0.0, 0.0],
-                    [20.0, 0.168627, 0.0, 0.0],
-                    [40.0, 0.403922, 0.145098, 0.0784314],
-                    [120.0, 0.780392, 0.607843, 0.380392],
-                    [220.0, 0.847059, 0.835294, 0.788235],
-                    [1024.0, 1.0, 1.0, 1.0],
-                ],
-                scalar_opacity: vec![
-                    [0.0, 0.0],
-                    [20.0, 0.0],
-                    [40.0, 0.15],
-                    [120.0, 0.3],
-                    [220.0, 0.375],
-                    [1024.0, 0.5],
-                ],
-                shade: true,
-                ambient: 0.2,
-                diffuse: 1.0,
-                specular: 0.0,
-                specular_power: 1.0,
-                ..base
-            },
-            "ramp" => base,
-            _ => {
-                return Err(CoreError::UnknownName {
-                    kind: "preset".into(),
-                    name: name.into(),
-                    known: Self::PRESETS.join(", "),
-                });
-            }
-        };
-        Ok(tf)
+        Ok(name.parse::<Preset>()?.transfer_function(data_range))
+    }
+
+    /// The automatic transfer function for a histogram of the data (values in data units):
+    /// background transparent, opacity and colour ramped over robust percentiles of the rest.
+    /// See [`AutoTransfer`] for the rule; `scalar_opacity_unit_distance` is 1 world unit.
+    pub fn auto_from_histogram(histogram: &Histogram) -> Self {
+        AutoTransfer::from_histogram(histogram).transfer_function
+    }
+
+    /// The automatic transfer function of a volume ([`AutoTransfer::from_volume`]): as
+    /// [`TransferFunction::auto_from_histogram`] of all its samples, with
+    /// `scalar_opacity_unit_distance` the smallest voxel spacing (world units).
+    pub fn auto_from_volume(volume: &AnyVolume) -> Self {
+        AutoTransfer::from_volume(volume).transfer_function
     }
 }
 
@@ -516,6 +455,6 @@ mod tests {
                 .unwrap();
         }
         let e = TransferFunction::preset("nope", (0.0, 1.0)).unwrap_err();
-        assert!(e.to_string().contains("ct-bone"));
+        assert!(e.to_string().contains("CT-Bone"), "{e}");
     }
 }
