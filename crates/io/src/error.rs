@@ -181,6 +181,30 @@ pub enum IoError {
         /// What it is instead: `a directory`, or `a device, FIFO or socket`.
         kind: &'static str,
     },
+    /// A DICOM file that is malformed or cannot be read (the message names the element, byte
+    /// offset or frame where known).
+    #[error("{path}: DICOM: {message}", path = .path.display())]
+    Dicom {
+        /// The file (or folder).
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A folder holds several DICOM series and none was chosen, or the one asked for is not
+    /// there; `series` lists what the folder holds.
+    #[error(
+        "{path}: {reason}; series in the folder: {list}",
+        path = .path.display(),
+        list = crate::dicom::series_summary(.series)
+    )]
+    DicomSeries {
+        /// The folder or file given.
+        path: PathBuf,
+        /// Why no series could be read.
+        reason: String,
+        /// Every image series found.
+        series: Vec<crate::DicomSeries>,
+    },
     /// The file extension does not name a supported format.
     #[error(
         "{path}: unsupported file extension {extension:?}; supported: {supported}",

@@ -53,9 +53,9 @@ impl PngBitDepth {
 pub struct PngSettings {
     /// Bits per channel (default 8).
     pub bits: PngBitDepth,
-    /// `true` (default): encode linear values with the sRGB transfer curve and write an `sRGB`
-    /// chunk. `false` (`--linear`): store linear values and write `gAMA` = 1.0. Applies to both
-    /// bit depths.
+    /// `false` (default; decision 0012): store linear values, as VTK, ParaView and 3D Slicer
+    /// write their framebuffers, and write `gAMA` = 1.0. `true` (`--srgb`): encode linear values
+    /// with the sRGB transfer curve and write an `sRGB` chunk. Applies to both bit depths.
     pub srgb: bool,
     /// Opaque background colour, linear RGB in [0, 1], that the image is composited over
     /// (default black).
@@ -66,7 +66,7 @@ impl Default for PngSettings {
     fn default() -> Self {
         PngSettings {
             bits: PngBitDepth::Eight,
-            srgb: true,
+            srgb: false,
             background: [0.0; 3],
         }
     }
@@ -144,6 +144,22 @@ fn write_png_data(
     })
 }
 
+/// The RGB code values [`write_png`] stores for `image` (row-major, three per pixel): each
+/// premultiplied pixel composited over `settings.background` (`c + (1 − a)·background`, linear),
+/// clamped to [0, 1] (NaN → 0), encoded (linear or sRGB) and quantised to the bit depth.
+pub fn rgb_codes(image: &Image, settings: &PngSettings) -> Vec<u16> {
+    let bg = settings.background;
+    let mut codes = Vec::with_capacity(image.pixels().len() * 3);
+    for p in image.pixels() {
+        let t = 1.0 - p[3] as f64;
+        for c in 0..3 {
+            let v = p[c] as f64 + t * bg[c] as f64;
+            codes.push(quantize(v, settings.srgb, settings.bits));
+        }
+    }
+    codes
+}
+
 /// Writes a premultiplied RGBA float image as an opaque RGB PNG.
 ///
 /// Each pixel is composited over `settings.background` (`c + (1 − a)·background`, linear), clamped
@@ -153,23 +169,15 @@ fn write_png_data(
 pub fn write_png(path: impl AsRef<Path>, image: &Image, settings: &PngSettings) -> Result<()> {
     let path = path.as_ref();
     let (w, h) = check_size(path, image.width(), image.height())?;
+    let codes = rgb_codes(image, settings);
     let bytes_per = if settings.bits == PngBitDepth::Sixteen {
-        6
+        2
     } else {
-        3
+        1
     };
-    let mut data = Vec::with_capacity(image.pixels().len() * bytes_per);
-    let bg = settings.background;
-    for p in image.pixels() {
-        let t = 1.0 - p[3] as f64;
-        for c in 0..3 {
-            let v = p[c] as f64 + t * bg[c] as f64;
-            push_code(
-                &mut data,
-                quantize(v, settings.srgb, settings.bits),
-                settings.bits,
-            );
-        }
+    let mut data = Vec::with_capacity(codes.len() * bytes_per);
+    for &c in &codes {
+        push_code(&mut data, c, settings.bits);
     }
     write_png_data(
         path,
@@ -269,6 +277,7 @@ mod tests {
         });
         let s = PngSettings {
             background: [1.0, 1.0, 1.0],
+            srgb: true,
             ..PngSettings::default()
         };
         write_png(&p, &img, &s).unwrap();
@@ -282,6 +291,12 @@ mod tests {
         // red: 0.5 + 0.5·1 = 1 → 255; green, blue: 0 + 0.5·1 = 0.5 → 188.
         assert_eq!(&buf[6..9], &[255, 188, 188]);
         assert_eq!(&buf[9..12], &[255, 255, 255]);
+    }
+
+    /// Decision 0012: the default is linear, as VTK writes PNGs.
+    #[test]
+    fn png_default_is_linear() {
+        assert!(!PngSettings::default().srgb);
     }
 
     #[test]
@@ -314,6 +329,7 @@ mod tests {
 
         let s16srgb = PngSettings {
             bits: PngBitDepth::Sixteen,
+            srgb: true,
             ..PngSettings::default()
         };
         write_png(&p, &img, &s16srgb).unwrap();

@@ -12,8 +12,10 @@
 //! MetaImage, NRRD without `space`) keep their coordinates as written.
 //!
 //! - [`read_volume`] / [`read_volume_with`] (with [`ReadOptions`]: [`Limits`], `frame`,
-//!   `array`; returns a [`LoadedVolume`] with format, frame count and notes): dispatch by file
-//!   name ([`VolumeFormat`], [`VOLUME_EXTENSIONS`]); a folder of `.tif` files is a stack.
+//!   `array`, `series`; returns a [`LoadedVolume`] with format, frame count, DICOM series and
+//!   notes): dispatch by file name ([`VolumeFormat`], [`VOLUME_EXTENSIONS`]); a folder of `.tif`
+//!   files is a stack, a folder of DICOM files a series.
+//! - [`volume_info`] / [`VolumeInfo`]: a serialisable summary of a volume file (`info --json`).
 //! - [`read_nrrd`]: NRRD with attached or detached header; raw, gzip or ascii encoding;
 //!   `space directions` / `space origin` geometry, RAS/LAS spaces converted to LPS. See [`nrrd`].
 //! - [`read_metaimage`]: MetaImage `.mha` / `.mhd`, raw or zlib-compressed. See [`metaimage`].
@@ -22,6 +24,10 @@
 //! - [`read_vti`]: VTK XML image data (ascii, base64, appended raw/base64, zlib). See [`vti`].
 //! - [`read_tiff`], [`read_tiff_dir`]: multi-page TIFF or a folder of slices; ImageJ / OME
 //!   spacing. See [`tiff_stack`].
+//! - [`read_dicom_with`] (also [`read_dicom`], [`read_dicom_files`]): DICOM series from a
+//!   folder, a list of files or one file of the series; sorted by ImagePositionPatient along the
+//!   slice normal, rescaled, enhanced multi-frame, uncompressed/deflate/RLE/JPEG transfer
+//!   syntaxes; [`list_dicom_series`] lists a folder's series ([`DicomSeries`]). See [`dicom`].
 //! - [`read_raw`] with a [`RawSpec`]: headerless raw files, optionally `.gz`.
 //! - [`write_nrrd`]: attached-header NRRD (raw or gzip) that round-trips the grid.
 //!
@@ -46,7 +52,9 @@
 //!   arithmetic from the header before anything is allocated; raw payloads are checked against
 //!   the file size before allocating; compressed payloads grow with the data actually decoded
 //!   and are never inflated past the needed size plus one byte.
-//! - JSON files at most [`MAX_JSON_BYTES`] (16 MiB); VTK XML files at most 4 GiB.
+//! - JSON files at most [`MAX_JSON_BYTES`] (16 MiB); VTK XML files at most 4 GiB; a DICOM file
+//!   at most 4 bytes per voxel of the voxel limit plus 64 MiB, its structure checked (every
+//!   declared length within the file, sequences at most 32 deep) before dicom-rs parses it.
 //! - Data and header files must be regular files: devices (`/dev/zero`), FIFOs and sockets are
 //!   refused, and line skipping stops at the end of the file as found.
 //! - Camera and transfer-function floats reload bit-exactly (`serde_json`'s `float_roundtrip`).
@@ -58,13 +66,16 @@
 #![deny(missing_docs)]
 
 mod atomic;
+pub mod dicom;
 pub mod error;
 mod frame;
 mod header;
 mod image;
+mod info;
 mod json;
 mod limits;
 pub mod metaimage;
+pub mod movie;
 pub mod nifti;
 mod npy;
 pub mod nrrd;
@@ -75,15 +86,20 @@ pub mod tiff_stack;
 pub mod vti;
 
 pub use atomic::write_bytes_atomic;
+pub use dicom::{
+    DicomSeries, is_dicom_file, list_dicom_series, read_dicom, read_dicom_files, read_dicom_with,
+};
 pub use error::{IoError, Result};
 pub use header::MAX_HEADER_BYTES;
-pub use image::{PngBitDepth, PngSettings, srgb_encode, write_png, write_png_gray};
+pub use image::{PngBitDepth, PngSettings, rgb_codes, srgb_encode, write_png, write_png_gray};
+pub use info::{VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
 pub use json::{
     CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_camera_with, load_transfer_function,
     load_transfer_function_with, save_camera, save_transfer_function,
 };
 pub use limits::Limits;
 pub use metaimage::{read_metaimage, read_metaimage_with};
+pub use movie::{MovieFormat, MovieSettings, MovieWriter};
 pub use nifti::{read_nifti, read_nifti_with};
 pub use npy::{read_npy_f32, read_npy_f32_with, write_npy_rgba, write_npy_scalar};
 pub use nrrd::{read_nrrd, read_nrrd_with, write_nrrd};

@@ -197,6 +197,8 @@ pub fn read_nifti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<
         frames: frames as usize,
         frame: options.frame,
         arrays: Vec::new(),
+        series: Vec::new(),
+        series_uid: None,
         notes,
     })
 }

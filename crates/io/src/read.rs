@@ -10,11 +10,12 @@ use volsplat_core::AnyVolume;
 /// The file-name endings [`read_volume`] understands (without the leading dot; compare
 /// case-insensitively with the end of the file name, so `nii.gz` matches `brain.NII.GZ`).
 pub const VOLUME_EXTENSIONS: &[&str] = &[
-    "nrrd", "nhdr", "mha", "mhd", "nii", "nii.gz", "hdr", "vti", "tif", "tiff",
+    "nrrd", "nhdr", "mha", "mhd", "nii", "nii.gz", "hdr", "vti", "tif", "tiff", "dcm",
 ];
 
 const SUPPORTED: &str = ".nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr (+ .img), .vti, \
-     .tif, .tiff (headerless raw: use read_raw with a RawSpec)";
+     .tif, .tiff, .dcm or any DICOM file, a folder of DICOM or TIFF files (headerless raw: use \
+     read_raw with a RawSpec)";
 
 /// The volume file formats, as told by the file name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,6 +30,8 @@ pub enum VolumeFormat {
     Vti,
     /// A multi-page TIFF, `.tif` / `.tiff` ([`crate::read_tiff`]).
     Tiff,
+    /// A DICOM file, `.dcm` (its series is read: [`crate::read_dicom_with`]).
+    Dicom,
 }
 
 impl VolumeFormat {
@@ -45,13 +48,15 @@ impl VolumeFormat {
             VolumeFormat::Vti
         } else if ends(".tif") || ends(".tiff") {
             VolumeFormat::Tiff
+        } else if ends(".dcm") {
+            VolumeFormat::Dicom
         } else {
             return None;
         })
     }
 
     /// A short name for messages and `info` output (`NRRD`, `MetaImage`, `NIfTI`, `VTK image
-    /// data`, `TIFF`).
+    /// data`, `TIFF`, `DICOM`).
     pub fn name(self) -> &'static str {
         match self {
             VolumeFormat::Nrrd => "NRRD",
@@ -59,6 +64,7 @@ impl VolumeFormat {
             VolumeFormat::Nifti => "NIfTI",
             VolumeFormat::Vti => "VTK image data",
             VolumeFormat::Tiff => "TIFF",
+            VolumeFormat::Dicom => "DICOM",
         }
     }
 }
@@ -76,6 +82,10 @@ pub struct ReadOptions {
     /// The point-data array to read from a VTK `.vti` file (default: the active scalars, else
     /// the first array). Naming an array for another format is an error.
     pub array: Option<String>,
+    /// The DICOM series to read from a folder holding several: its SeriesInstanceUID, or its
+    /// SeriesNumber where that is unique (default: the only series, or the series of the file
+    /// given). Naming a series for another format is an error.
+    pub series: Option<String>,
 }
 
 /// A volume as read, with what the file said about it.
@@ -92,6 +102,11 @@ pub struct LoadedVolume {
     pub frame: usize,
     /// The point-data arrays in the file (VTK `.vti`); empty for other formats.
     pub arrays: Vec<String>,
+    /// The image series found beside a DICOM series read (in its folder, or among the files
+    /// given), ordered by SeriesNumber; empty for other formats.
+    pub series: Vec<crate::DicomSeries>,
+    /// The SeriesInstanceUID read (DICOM); `None` for other formats.
+    pub series_uid: Option<String>,
     /// Notes for the user: conversions applied (RAS → LPS, type or scaling), where the geometry
     /// came from, defaults assumed. Never errors; print them as information.
     pub notes: Vec<String>,
@@ -105,6 +120,8 @@ impl LoadedVolume {
             frames: 1,
             frame: 0,
             arrays: Vec::new(),
+            series: Vec::new(),
+            series_uid: None,
             notes,
         }
     }
@@ -114,18 +131,50 @@ impl LoadedVolume {
 /// ([`crate::read_nrrd`]), `.mha`, `.mhd` ([`crate::read_metaimage`]), `.nii`, `.nii.gz`, `.hdr`
 /// ([`crate::read_nifti`]), `.vti` ([`crate::read_vti`]), `.tif`, `.tiff`
 /// ([`crate::read_tiff`]); a folder holding `.tif`/`.tiff` files is a stack of slices
-/// ([`crate::read_tiff_dir`]). Headerless raw files need a [`crate::RawSpec`]: use
-/// [`crate::read_raw`]. Any other ending, or another folder, is an error listing the supported
-/// ones.
+/// ([`crate::read_tiff_dir`]); a folder holding DICOM files, a `.dcm` file, or a file of
+/// another name that starts like a DICOM file is a DICOM series ([`crate::read_dicom_with`]).
+/// Headerless raw files need a [`crate::RawSpec`]: use [`crate::read_raw`]. Any other ending,
+/// or another folder, is an error listing the supported ones.
 pub fn read_volume(path: impl AsRef<Path>) -> Result<AnyVolume> {
     read_volume_with(path, &ReadOptions::default()).map(|l| l.volume)
 }
 
-/// [`read_volume`] with [`ReadOptions`] (limits, frame, VTK array); the result also carries the
-/// format, the number of frames and notes.
+/// [`read_volume`] with [`ReadOptions`] (limits, frame, VTK array, DICOM series); the result
+/// also carries the format, the number of frames, the DICOM series found and notes.
 pub fn read_volume_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
-    if path.is_dir() && !crate::tiff_stack::tiff_files(path)?.is_empty() {
+    let dicom = |path: &Path| -> Result<LoadedVolume> {
+        if options.array.is_some() {
+            return Err(IoError::invalid_argument(
+                path,
+                "array",
+                "choosing an array applies to VTK .vti files only, not to DICOM",
+            ));
+        }
+        crate::dicom::read_dicom_with(path, options)
+    };
+    if options.series.is_some()
+        && !path.is_dir()
+        && VolumeFormat::from_path(path).is_some_and(|f| f != VolumeFormat::Dicom)
+    {
+        return Err(IoError::invalid_argument(
+            path,
+            "series",
+            "choosing a series applies to DICOM folders and files only",
+        ));
+    }
+    if path.is_dir() && crate::tiff_stack::tiff_files(path)?.is_empty() {
+        if crate::dicom::dir_has_dicom(path)? {
+            return dicom(path);
+        }
+    } else if path.is_dir() {
+        if options.series.is_some() {
+            return Err(IoError::invalid_argument(
+                path,
+                "series",
+                "choosing a series applies to DICOM folders and files only",
+            ));
+        }
         if options.array.is_some() || options.frame != 0 {
             return Err(IoError::invalid_argument(
                 path,
@@ -140,9 +189,11 @@ pub fn read_volume_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result
             return Err(IoError::NotAFile {
                 path: path.to_path_buf(),
                 what: "volume file".into(),
-                kind: "a directory with no .tif/.tiff slices; folders of DICOM files are not \
-                       supported yet",
+                kind: "a directory with no .tif/.tiff slices and no DICOM files",
             });
+        }
+        if crate::dicom::is_dicom_file(path) {
+            return dicom(path);
         }
         return Err(IoError::UnsupportedFormat {
             path: path.to_path_buf(),
@@ -193,6 +244,7 @@ pub fn read_volume_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result
             crate::read_vti_with(path, options)
         }
         VolumeFormat::Tiff => crate::read_tiff_with(path, options),
+        VolumeFormat::Dicom => dicom(path),
     }
 }
 
@@ -318,9 +370,9 @@ mod corruption {
         e.finish().unwrap()
     }
 
-    #[test]
-    fn corrupted_files_are_errors_or_volumes_never_panics() {
-        let dir = tempfile::tempdir().unwrap();
+    /// One small valid file of each volume format (written in `dir` where a writer needs a
+    /// file).
+    fn valid_files(dir: &Path) -> Vec<(&'static str, Vec<u8>)> {
         let mut valid: Vec<(&str, Vec<u8>)> = Vec::new();
         let mut h = crate::nifti::tests::Hdr::new(&[3, 2, 2, 2], 4);
         h.qform_code = 1;
@@ -368,7 +420,7 @@ mod corruption {
         vti.extend(&z);
         vti.extend(b"</AppendedData></VTKFile>");
         valid.push(("e.vti", vti));
-        let tif = dir.path().join("valid.tif");
+        let tif = dir.join("valid.tif");
         {
             let f = std::fs::File::create(&tif).unwrap();
             let mut enc = tiff::encoder::TiffEncoder::new(f).unwrap();
@@ -378,8 +430,21 @@ mod corruption {
             }
         }
         valid.push(("f.tif", std::fs::read(&tif).unwrap()));
+        let _ = std::fs::remove_file(&tif);
+        let mut ct = crate::dicom::tests::Slice::ct(0.0, 0);
+        valid.push(("g.dcm", ct.bytes("1.2.3.1")));
+        ct.ts = crate::dicom::tests::RLE;
+        valid.push(("h.dcm", ct.bytes("1.2.3.2")));
+        valid
+    }
 
+    #[test]
+    fn corrupted_files_are_errors_or_volumes_never_panics() {
+        let dir = tempfile::tempdir().unwrap();
+        let valid = valid_files(dir.path());
         for (seed, (name, bytes)) in valid.iter().enumerate() {
+            // DICOM files stand for their folder's series: one file per folder.
+            let dir = tempfile::tempdir().unwrap();
             let p = dir.path().join(name);
             std::fs::write(&p, bytes).unwrap();
             read_volume(&p).unwrap_or_else(|e| panic!("valid {name}: {e}"));
@@ -392,6 +457,96 @@ mod corruption {
                 // Either outcome is fine; a panic fails the test.
                 let _ = read_volume_with(&p, &o);
             }
+        }
+    }
+
+    /// Seeds for the cargo-fuzz targets (`fuzz/seeds/<target>/`): `VOLSPLAT_FUZZ_SEEDS=fuzz/seeds
+    /// cargo test -p volsplat-io write_fuzz_seeds -- --ignored`.
+    #[test]
+    #[ignore]
+    fn write_fuzz_seeds() {
+        let Some(root) = std::env::var_os("VOLSPLAT_FUZZ_SEEDS") else {
+            return;
+        };
+        let root = std::path::PathBuf::from(root);
+        let tmp = tempfile::tempdir().unwrap();
+        let target = |name: &str| {
+            let ext = name.rsplit_once('.').map(|(_, e)| e).unwrap_or("");
+            match ext {
+                "nii" | "gz" => "nifti",
+                "nrrd" => "nrrd",
+                "vti" => "vti",
+                "tif" => "tiff",
+                "dcm" => "dicom",
+                _ => "other",
+            }
+        };
+        let mut all = valid_files(tmp.path());
+        all.push((
+            "i.mha",
+            b"ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementSpacing = 1 2 3\n\
+              ElementType = MET_SHORT\nElementDataFile = LOCAL\n"
+                .iter()
+                .copied()
+                .chain([1u8; 8])
+                .collect(),
+        ));
+        use crate::dicom::tests as dt;
+        for (name, ts) in [
+            ("j.dcm", dt::JPEG_BASELINE),
+            ("k.dcm", dt::DEFLATED),
+            ("l.dcm", dt::IMPLICIT_LE),
+            ("m.dcm", dt::EXPLICIT_BE),
+        ] {
+            let mut s = dt::Slice::ct(0.0, 0);
+            s.ts = ts;
+            if ts == dt::JPEG_BASELINE {
+                s.bits = 8;
+                s.values = (0..12).map(|p| p * 20).collect();
+            }
+            all.push((name, s.bytes("1.2.3.9")));
+        }
+        for (name, mut bytes) in all {
+            let t = if name.ends_with(".mha") {
+                "metaimage"
+            } else {
+                target(name)
+            };
+            if t == "nifti" {
+                // The nifti target's first byte chooses .nii.gz (odd) or .nii (even).
+                bytes.insert(0, u8::from(name.ends_with(".gz")));
+            }
+            let d = root.join(t);
+            std::fs::create_dir_all(&d).unwrap();
+            std::fs::write(d.join(name), bytes).unwrap();
+        }
+        let npy = tmp.path().join("a.npy");
+        crate::write_npy_scalar(&npy, &volsplat_core::ScalarImage::new(3, 2)).unwrap();
+        let d = root.join("npy");
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::copy(&npy, d.join("a.npy")).unwrap();
+        for (t, name, text) in [
+            (
+                "camera",
+                "c.json",
+                r#"{ "position": [394.4, 802.9, 284.5], "focal_point": [122.0, 122.0, 80.25],
+                  "view_up": [0, 0, 1], "parallel_projection": true, "parallel_scale": 194.1,
+                  "view_angle": 30.0 }"#,
+            ),
+            (
+                "transfer_function",
+                "t.json",
+                r#"{ "color": [[-1024, 0, 0, 0], [400, 1.0, 0.9, 0.75], [3071, 1, 1, 1]],
+                  "scalar_opacity": [[-1024, 0.0], [400, 0.3], [3071, 0.9]],
+                  "gradient_opacity": [[0, 1.0], [500, 1.0]],
+                  "scalar_opacity_unit_distance": 1.0, // comment
+                  "shade": false, "ambient": 0.1, "diffuse": 0.7, "specular": 0.2,
+                  "specular_power": 10.0 }"#,
+            ),
+        ] {
+            let d = root.join(t);
+            std::fs::create_dir_all(&d).unwrap();
+            std::fs::write(d.join(name), text).unwrap();
         }
     }
 }

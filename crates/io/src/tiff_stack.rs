@@ -179,6 +179,8 @@ impl Stack {
             frames: self.frames.max(1) as usize,
             frame: self.frame as usize,
             arrays: Vec::new(),
+            series: Vec::new(),
+            series_uid: None,
             notes,
         })
     }

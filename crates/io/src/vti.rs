@@ -384,6 +384,8 @@ fn finish(
         frames: 1,
         frame: 0,
         arrays,
+        series: Vec::new(),
+        series_uid: None,
         notes,
     })
 }

@@ -1,0 +1,558 @@
+//! A check of a DICOM file's structure before `dicom-object` parses it.
+//!
+//! `dicom-parser` allocates (and zero-fills) each value's declared length before reading it, so
+//! a 100-byte file that declares a 4 GiB element would allocate 4 GiB; and it builds nested
+//! sequences by recursion, so a file of a million nested sequences would overflow the stack.
+//! This walk follows the parser's own state machine (`dicom_parser::dataset::read::
+//! DataSetReader` 0.10, and `dicom_object::meta::FileMetaTable::read_from` for the file meta
+//! group) over the same bytes, reading headers only, and refuses a file in which any length the
+//! parser would allocate runs past the end of the data, or sequences nest deeper than
+//! [`MAX_NESTING`]. The file encoding is PS3.10 §7 (preamble, `DICM`, file meta group in
+//! explicit VR little endian) and PS3.5 §7 (data elements), §7.5 (nested data sets) and §A.4
+//! (encapsulated pixel data).
+
+use crate::error::{IoError, Result};
+use dicom_core::Tag;
+use dicom_core::VR;
+use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
+use dicom_dictionary_std::StandardDataDictionary;
+use dicom_encoding::Codec;
+use dicom_encoding::transfer_syntax::{Endianness, TransferSyntaxIndex};
+use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
+use std::io::Read;
+use std::path::Path;
+
+/// Deepest nesting of sequences and items accepted (each nested sequence counts twice: the
+/// sequence and its item). Real files nest a few levels.
+pub(super) const MAX_NESTING: usize = 64;
+
+const PIXEL_DATA: Tag = Tag(0x7FE0, 0x0010);
+const ITEM_END: Tag = Tag(0xFFFE, 0xE00D);
+const IMPLICIT_VR_LE: &str = "1.2.840.10008.1.2";
+
+/// What the walk found.
+#[derive(Debug, Clone)]
+pub(super) struct Walked {
+    /// The transfer syntax UID (trailing NUL and spaces removed).
+    pub ts_uid: String,
+    /// The transfer syntax name from dicom-rs's registry.
+    pub ts_name: String,
+}
+
+/// How the data set after the file meta group is encoded.
+#[derive(Debug, Clone, Copy)]
+struct Enc {
+    explicit: bool,
+    big_endian: bool,
+}
+
+fn err(path: &Path, at: u64, what: String) -> IoError {
+    IoError::Dicom {
+        path: path.to_path_buf(),
+        message: format!("byte {at}: {what}"),
+    }
+}
+
+/// Walks `bytes` (a DICOM file from its `DICM` magic on: the 128-byte preamble, if any, already
+/// removed; `offset` is where `DICM` was in the file, added to byte positions in messages).
+/// `until_pixel_data`: stop at the first top-level element at or after Pixel Data
+/// (7FE0,0010), as `OpenFileOptions::read_until(PIXEL_DATA)` does. `max_inflated`: the most
+/// bytes a deflated data set (PS3.5 §A.5) may inflate to.
+pub(super) fn walk(
+    path: &Path,
+    bytes: &[u8],
+    offset: u64,
+    until_pixel_data: bool,
+    max_inflated: u64,
+) -> Result<Walked> {
+    if bytes.len() < 4 || &bytes[..4] != b"DICM" {
+        return Err(IoError::Dicom {
+            path: path.to_path_buf(),
+            message: "not a DICOM file (no `DICM` magic after the 128-byte preamble; PS3.10 \
+                      §7.1)"
+                .into(),
+        });
+    }
+    let (ts_uid, meta_end) = walk_meta(path, bytes, offset)?;
+    let ts = TransferSyntaxRegistry.get(&ts_uid).ok_or_else(|| {
+        IoError::unsupported(
+            path,
+            "TransferSyntaxUID (0002,0010)",
+            &ts_uid,
+            "the transfer syntaxes known to dicom-rs",
+        )
+    })?;
+    let enc = Enc {
+        explicit: ts_uid != IMPLICIT_VR_LE,
+        big_endian: ts.endianness() == Endianness::Big,
+    };
+    let rest = &bytes[meta_end..];
+    if matches!(ts.codec(), Codec::Dataset(_)) {
+        // Deflated data set (PS3.5 §A.5): raw deflate after the meta group.
+        let mut inflated = Vec::new();
+        let r = flate2::read::DeflateDecoder::new(rest)
+            .take(max_inflated.saturating_add(1))
+            .read_to_end(&mut inflated);
+        if let Err(e) = r {
+            return Err(IoError::Decompress {
+                path: path.to_path_buf(),
+                what: "deflated data set".into(),
+                error: e,
+            });
+        }
+        if inflated.len() as u64 > max_inflated {
+            return Err(IoError::TooLarge {
+                path: path.to_path_buf(),
+                what: "inflated size of the deflated data set (bytes)".into(),
+                value: inflated.len() as u128,
+                limit: max_inflated as u128,
+            });
+        }
+        walk_dataset(path, &inflated, 0, enc, until_pixel_data)?;
+    } else {
+        walk_dataset(path, rest, offset + meta_end as u64, enc, until_pixel_data)?;
+    }
+    Ok(Walked {
+        ts_uid,
+        ts_name: ts.name().to_string(),
+    })
+}
+
+/// A byte cursor that never reads past the end.
+struct Cur<'a> {
+    b: &'a [u8],
+    pos: usize,
+    be: bool,
+}
+
+impl Cur<'_> {
+    fn remaining(&self) -> usize {
+        self.b.len() - self.pos
+    }
+    fn take(&mut self, n: usize) -> Option<&[u8]> {
+        if self.remaining() < n {
+            return None;
+        }
+        let s = &self.b[self.pos..self.pos + n];
+        self.pos += n;
+        Some(s)
+    }
+    fn u16(&mut self) -> Option<u16> {
+        let s = self.take(2)?;
+        let a = [s[0], s[1]];
+        Some(if self.be {
+            u16::from_be_bytes(a)
+        } else {
+            u16::from_le_bytes(a)
+        })
+    }
+    fn u32(&mut self) -> Option<u32> {
+        let s = self.take(4)?;
+        let a = [s[0], s[1], s[2], s[3]];
+        Some(if self.be {
+            u32::from_be_bytes(a)
+        } else {
+            u32::from_le_bytes(a)
+        })
+    }
+}
+
+/// VRs with a 2-byte length in explicit VR encodings (PS3.5 §7.1.2, Table 7.1-2).
+fn short_length(vr: VR) -> bool {
+    matches!(
+        vr,
+        VR::AE
+            | VR::AS
+            | VR::AT
+            | VR::CS
+            | VR::DA
+            | VR::DS
+            | VR::DT
+            | VR::FL
+            | VR::FD
+            | VR::IS
+            | VR::LO
+            | VR::LT
+            | VR::PN
+            | VR::SH
+            | VR::SL
+            | VR::SS
+            | VR::ST
+            | VR::TM
+            | VR::UI
+            | VR::UL
+            | VR::US
+    )
+}
+
+const UNDEFINED: u32 = 0xFFFF_FFFF;
+
+/// A data element header as the parser reads it: `None` at a clean end (no bytes, or a partial
+/// tag, as the parser ends gracefully there), `Err` for a header cut after its tag.
+fn element_header(
+    c: &mut Cur<'_>,
+    enc: Enc,
+    path: &Path,
+    base: u64,
+) -> Result<Option<(Tag, VR, u32)>> {
+    let at = base + c.pos as u64;
+    let (Some(g), Some(e)) = (c.u16(), c.u16()) else {
+        return Ok(None);
+    };
+    let tag = Tag(g, e);
+    let cut = || err(path, at, format!("element {tag} header is truncated"));
+    if g == 0xFFFE {
+        let len = c.u32().ok_or_else(cut)?;
+        return Ok(Some((tag, VR::UN, len)));
+    }
+    if !enc.explicit {
+        let len = c.u32().ok_or_else(cut)?;
+        let vr = if tag == PIXEL_DATA || (g >> 8 == 0x60 && e == 0x3000) {
+            VR::OW
+        } else {
+            StandardDataDictionary
+                .by_tag(tag)
+                .map(|entry| entry.vr().relaxed())
+                .unwrap_or(VR::UN)
+        };
+        return Ok(Some((tag, vr, len)));
+    }
+    let v = c.take(2).ok_or_else(cut)?;
+    let vr = VR::from_binary([v[0], v[1]]).unwrap_or(VR::UN);
+    let len = if short_length(vr) {
+        u32::from(c.u16().ok_or_else(cut)?)
+    } else {
+        c.take(2).ok_or_else(cut)?;
+        c.u32().ok_or_else(cut)?
+    };
+    Ok(Some((tag, vr, len)))
+}
+
+/// Checks that a value of `len` bytes at the cursor lies within the data, then skips it.
+fn skip_value(c: &mut Cur<'_>, len: u32, tag: Tag, path: &Path, base: u64) -> Result<()> {
+    let at = base + c.pos as u64;
+    if len as usize > c.remaining() {
+        return Err(err(
+            path,
+            at,
+            format!(
+                "element {tag} declares {len} bytes but only {} remain (truncated or corrupt \
+                 file)",
+                c.remaining()
+            ),
+        ));
+    }
+    c.pos += len as usize;
+    Ok(())
+}
+
+/// The file meta group (PS3.10 §7.1): explicit VR little endian, `(0002,0000)` first giving the
+/// group's length. Returns the transfer syntax UID and where the data set starts.
+fn walk_meta(path: &Path, bytes: &[u8], base: u64) -> Result<(String, usize)> {
+    let mut c = Cur {
+        b: bytes,
+        pos: 4,
+        be: false,
+    };
+    let enc = Enc {
+        explicit: true,
+        big_endian: false,
+    };
+    let first = element_header(&mut c, enc, path, base)?;
+    let Some((Tag(0x0002, 0x0000), _, 4)) = first else {
+        return Err(err(
+            path,
+            base + 4,
+            "the file meta group must start with (0002,0000) FileMetaInformationGroupLength \
+             of 4 bytes (PS3.10 §7.1)"
+                .into(),
+        ));
+    };
+    let group_length = c.u32().ok_or_else(|| {
+        err(
+            path,
+            base + c.pos as u64,
+            "file meta group is truncated".into(),
+        )
+    })?;
+    let mut total: u32 = 0;
+    let mut ts = None;
+    while total < group_length {
+        let at = c.pos as u64;
+        let (tag, _, len) = element_header(&mut c, enc, path, base)?
+            .ok_or_else(|| err(path, base + at, "file meta group is truncated".into()))?;
+        if len == UNDEFINED {
+            return Err(err(
+                path,
+                base + at,
+                format!("file meta element {tag} has an undefined length"),
+            ));
+        }
+        let header_bytes = (c.pos as u64 - at) as u32;
+        let start = c.pos;
+        skip_value(&mut c, len, tag, path, base)?;
+        if tag == Tag(0x0002, 0x0010) {
+            let v = &bytes[start..c.pos];
+            ts = Some(
+                String::from_utf8_lossy(v)
+                    .trim_end_matches(['\0', ' '])
+                    .to_string(),
+            );
+        }
+        total = total.saturating_add(header_bytes).saturating_add(len);
+    }
+    let ts = ts.ok_or_else(|| IoError::missing(path, "TransferSyntaxUID (0002,0010)"))?;
+    Ok((ts, c.pos))
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Kind {
+    Sequence,
+    Item,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Token {
+    kind: Kind,
+    pixel: bool,
+    len: u32,
+    /// The parser's position (see [`Walker::logical`]) where the sequence or item starts.
+    base: u64,
+}
+
+/// Bytes the parser actually reads for a value of `len` bytes: numeric VRs read whole numbers
+/// only (`dicom_parser::stateful::decode`, e.g. `read_value_od` reads `len >> 3` doubles),
+/// while its position still advances by `len`.
+fn consumed(vr: VR, len: u32) -> u32 {
+    match vr {
+        VR::US | VR::OW | VR::SS => len & !1,
+        VR::AT | VR::FL | VR::OF | VR::UL | VR::OL | VR::SL => len & !3,
+        VR::FD | VR::OD | VR::UV | VR::OV | VR::SV => len & !7,
+        _ => len,
+    }
+}
+
+/// The data set walk: the stream position (`c.pos`, bytes actually read) and the parser's own
+/// position counter (`logical`, which sequence and item lengths are compared with) differ once
+/// a numeric value's length is not a multiple of its size.
+struct Walker<'a> {
+    c: Cur<'a>,
+    logical: u64,
+    path: &'a Path,
+    base: u64,
+}
+
+impl Walker<'_> {
+    fn at(&self) -> u64 {
+        self.base + self.c.pos as u64
+    }
+
+    fn fail(&self, what: String) -> IoError {
+        err(self.path, self.at(), what)
+    }
+
+    /// A value the parser allocates `len` bytes for and reads `read` bytes of.
+    fn value(&mut self, tag: Tag, len: u32, read: u32) -> Result<()> {
+        if len as usize > self.c.remaining() {
+            return Err(self.fail(format!(
+                "element {tag} declares {len} bytes but only {} remain (truncated or corrupt \
+                 file)",
+                self.c.remaining()
+            )));
+        }
+        self.c.pos += read as usize;
+        self.logical += len as u64;
+        Ok(())
+    }
+
+    /// An item header (tag and length, no VR); `None` at the end of the data.
+    fn item_header(&mut self) -> Option<(Tag, u32)> {
+        let (g, e, len) = (self.c.u16()?, self.c.u16()?, self.c.u32()?);
+        self.logical += 8;
+        Some((Tag(g, e), len))
+    }
+}
+
+/// The data set, as `DataSetReader` tokenises it. `base` (the data set's offset in the file)
+/// is added to positions in messages.
+fn walk_dataset(path: &Path, bytes: &[u8], base: u64, enc: Enc, until_pixel: bool) -> Result<()> {
+    let mut w = Walker {
+        c: Cur {
+            b: bytes,
+            pos: 0,
+            be: enc.big_endian,
+        },
+        logical: 0,
+        path,
+        base,
+    };
+    let mut stack: Vec<Token> = Vec::new();
+    let mut in_sequence = false;
+    let mut last_header: Option<(Tag, VR, u32)> = None;
+    let mut check_pending = false;
+    let mut offset_table_next = false;
+    let too_deep = |w: &Walker<'_>| {
+        w.fail(format!(
+            "sequences nest deeper than {} levels",
+            MAX_NESTING / 2
+        ))
+    };
+    loop {
+        if check_pending {
+            if let Some(top) = stack.last().copied()
+                && top.len != UNDEFINED
+            {
+                let end = top.base + top.len as u64;
+                if end == w.logical {
+                    stack.pop();
+                    in_sequence = top.kind == Kind::Item;
+                    continue;
+                }
+                if end < w.logical {
+                    return Err(w.fail(format!(
+                        "a sequence or item of {} bytes ends inside an element",
+                        top.len
+                    )));
+                }
+            }
+            check_pending = false;
+        }
+        if in_sequence {
+            // An item header: (FFFE,E000) item, (FFFE,E00D) item end, (FFFE,E0DD) sequence end.
+            let Some((tag, len)) = w.item_header() else {
+                return Ok(());
+            };
+            match (tag.0, tag.1) {
+                (0xFFFE, 0xE000) => {
+                    in_sequence = false;
+                    let Some(parent) = stack.last().copied() else {
+                        return Err(w.fail("item outside a sequence".into()));
+                    };
+                    if stack.len() >= MAX_NESTING {
+                        return Err(too_deep(&w));
+                    }
+                    stack.push(Token {
+                        kind: Kind::Item,
+                        pixel: parent.pixel,
+                        len,
+                        base: w.logical,
+                    });
+                    if len == 0 {
+                        check_pending = true;
+                    }
+                }
+                (0xFFFE, 0xE00D) => {
+                    stack.pop();
+                    in_sequence = true;
+                    check_pending = true;
+                }
+                (0xFFFE, 0xE0DD) => {
+                    stack.pop();
+                    in_sequence = false;
+                    check_pending = true;
+                }
+                _ => {
+                    return Err(w.fail(format!("expected an item tag (FFFE,E000), found {tag}")));
+                }
+            }
+        } else if let Some(top) = stack.last().copied()
+            && top.kind == Kind::Item
+            && top.pixel
+        {
+            // The basic offset table or a fragment of encapsulated pixel data (PS3.5 §A.4).
+            if top.len == UNDEFINED {
+                return Err(w.fail("pixel data fragment of undefined length".into()));
+            }
+            if offset_table_next {
+                offset_table_next = false;
+                w.value(PIXEL_DATA, top.len, top.len & !3)?;
+                // The parser advances by the u32 values read, not by the length.
+                w.logical -= (top.len & 3) as u64;
+            } else {
+                w.value(PIXEL_DATA, top.len, top.len)?;
+            }
+            check_pending = true;
+        } else if let Some((tag, vr, len)) = last_header.take() {
+            if tag == PIXEL_DATA && len == UNDEFINED {
+                if stack.len() + 2 > MAX_NESTING {
+                    return Err(too_deep(&w));
+                }
+                stack.push(Token {
+                    kind: Kind::Sequence,
+                    pixel: true,
+                    len: UNDEFINED,
+                    base: w.logical,
+                });
+                let Some((itag, ilen)) = w.item_header() else {
+                    return Err(w.fail("encapsulated pixel data is truncated".into()));
+                };
+                match (itag.0, itag.1) {
+                    (0xFFFE, 0xE000) => {
+                        in_sequence = false;
+                        stack.push(Token {
+                            kind: Kind::Item,
+                            pixel: true,
+                            len: ilen,
+                            base: w.logical,
+                        });
+                        if ilen == 0 {
+                            check_pending = true;
+                        } else {
+                            offset_table_next = true;
+                        }
+                    }
+                    (0xFFFE, 0xE0DD) => {
+                        stack.pop();
+                        in_sequence = false;
+                    }
+                    _ => {
+                        return Err(w.fail(format!(
+                            "expected the basic offset table item (FFFE,E000) in encapsulated \
+                             pixel data, found {itag}"
+                        )));
+                    }
+                }
+            } else {
+                let read = if len == 0 { 0 } else { consumed(vr, len) };
+                w.value(tag, len, read)?;
+                check_pending = true;
+            }
+        } else {
+            let before = w.c.pos;
+            let Some((tag, vr, len)) = element_header(&mut w.c, enc, path, base)? else {
+                return Ok(());
+            };
+            w.logical += (w.c.pos - before) as u64;
+            if until_pixel && stack.is_empty() && tag >= PIXEL_DATA {
+                return Ok(());
+            }
+            if vr == VR::SQ || (len == UNDEFINED && !(tag == PIXEL_DATA || tag == ITEM_END)) {
+                // A sequence: explicit SQ, or any other element of undefined length (the
+                // parser reads those as sequences too, PS3.5 §7.5.1 and §6.2.2 note 4).
+                if stack.len() >= MAX_NESTING {
+                    return Err(too_deep(&w));
+                }
+                in_sequence = true;
+                stack.push(Token {
+                    kind: Kind::Sequence,
+                    pixel: false,
+                    len,
+                    base: w.logical,
+                });
+                if len == 0 {
+                    check_pending = true;
+                }
+            } else if tag == ITEM_END {
+                // An item delimiter where an element is expected: ends the item (ignored at
+                // the top level).
+                if !stack.is_empty() {
+                    in_sequence = true;
+                    stack.pop();
+                    check_pending = true;
+                }
+            } else {
+                last_header = Some((tag, vr, len));
+            }
+        }
+    }
+}
