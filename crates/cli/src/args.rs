@@ -18,8 +18,15 @@ pub struct Cli {
 pub enum Command {
     /// Render a volume (or the built-in demo phantom) to a PNG or .npy image.
     Render(Box<RenderArgs>),
+    /// Render a turntable or a keyframed camera flight to PNG frames, GIF, APNG or video.
+    Movie(Box<crate::movie::MovieArgs>),
     /// Print a volume's dimensions, type, spacing, orientation and value range.
     Info(InfoArgs),
+    /// List the built-in transfer-function presets, one line each.
+    Presets,
+    /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, keeping
+    /// its geometry (world frame LPS).
+    Convert(ConvertArgs),
     /// Write a built-in phantom as an NRRD file.
     Phantom(PhantomArgs),
     /// Time repeated renders of an orbit around the volume; prints the median per frame.
@@ -39,14 +46,16 @@ pub enum Command {
 #[derive(Debug, Args)]
 pub struct InputArgs {
     /// Volume file: NRRD (.nrrd, .nhdr), MetaImage (.mha, .mhd), NIfTI (.nii, .nii.gz, .hdr),
-    /// VTK image data (.vti), TIFF (.tif, .tiff, or a folder of TIFF slices), or raw with
-    /// --raw-dims. Omit for the demo phantom. Folders of DICOM files are not supported yet.
+    /// VTK image data (.vti), TIFF (.tif, .tiff, or a folder of TIFF slices), DICOM (a folder
+    /// of a series, or one of its files; --series chooses), or raw with --raw-dims. Omit for
+    /// the built-in MRI head.
     pub input: Option<PathBuf>,
-    /// Built-in phantom to use when no INPUT is given.
-    #[arg(long, value_enum, default_value = "head", help_heading = "Input")]
-    pub phantom: PhantomKind,
+    /// Built-in volume to use when no INPUT is given. Default: `brain`, the MRI head built into
+    /// the binary; `head` when only --phantom-size is given.
+    #[arg(long, value_enum, help_heading = "Input")]
+    pub phantom: Option<PhantomKind>,
     /// Phantom grid size: N (cube) or X,Y,Z (checkerboard: X,Y[,SQUARE]). Default: the
-    /// phantom's own size.
+    /// phantom's own size (the built-in MRI has a fixed grid).
     #[arg(long, value_name = "N|X,Y,Z", help_heading = "Input")]
     pub phantom_size: Option<String>,
     /// Headerless raw input: dimensions X,Y,Z.
@@ -85,6 +94,20 @@ pub struct InputArgs {
         help_heading = "Input"
     )]
     pub array: Option<String>,
+    /// The DICOM series to read from a folder holding several: its SeriesInstanceUID or its
+    /// SeriesNumber (`volsplat info FOLDER` lists them).
+    #[arg(long, value_name = "UID|NUMBER", help_heading = "Input")]
+    pub series: Option<String>,
+    /// Reader limits against untrusted or unusually large files, KEY=VALUE[,KEY=VALUE…]:
+    /// voxels (default 2^34), header-bytes (1 MiB), json-bytes (16 MiB), xml-bytes (4 GiB);
+    /// values may use exponents (voxels=4e10).
+    #[arg(
+        long,
+        value_name = "KEY=VALUE,…",
+        hide_short_help = true,
+        help_heading = "Input"
+    )]
+    pub limits: Option<String>,
 }
 
 // Camera and view. Without `--camera` the view starts from VTK's reset camera around the volume
@@ -97,6 +120,11 @@ pub struct ViewArgs {
     /// --elevation, --roll, --zoom, --dolly and --perspective/--view-angle are applied to it.
     #[arg(long, value_name = "FILE")]
     pub camera: Option<PathBuf>,
+    /// Start from an anatomical view of the patient frame (LPS): anterior, posterior, left,
+    /// right, superior or inferior (head up; superior/inferior: anterior up), as 3D Slicer's
+    /// view buttons. The rotations below then apply to it.
+    #[arg(long, value_name = "SIDE", value_parser = parse_view)]
+    pub view: Option<volsplat::core::AnatomicalView>,
     /// Degrees about the view-up axis (VTK's Azimuth) [default: 0].
     #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
     pub azimuth: Option<f64>,
@@ -157,9 +185,16 @@ pub struct RenderOptions {
         help_heading = "Transfer function"
     )]
     pub tf: Option<PathBuf>,
-    /// Built-in transfer function: ct-bone, ct-skin, mr, ramp. Default: ct-skin for the demo
-    /// head, otherwise a ramp over the data range (opaque grey window for MIP/MinIP).
-    #[arg(long, value_name = "NAME", help_heading = "Transfer function")]
+    /// Built-in transfer function: 3D Slicer's presets (CT-Bone, CT-AAA, MR-Default, …; in
+    /// absolute data units, e.g. Hounsfield) and volsplat's ct-skin and ramp; `volsplat presets`
+    /// lists them. `auto` (the default): a function from the volume's histogram that makes the
+    /// background transparent (ct-skin for the demo head; an opaque grey window for MIP/MinIP).
+    #[arg(
+        long,
+        value_name = "NAME",
+        value_parser = parse_preset,
+        help_heading = "Transfer function"
+    )]
     pub preset: Option<String>,
     /// Surface enhancement: modulate opacity by a 0→1 ramp on gradient magnitude LO:HI
     /// (data units per world unit). Replaces gradient opacity.
@@ -170,6 +205,32 @@ pub struct RenderOptions {
         hide_short_help = true
     )]
     pub surface_enhance: Option<String>,
+    /// Crop box in voxel indices, X0:X1,Y0:Y1,Z0:Z1 (inclusive, may be fractional): keeps those
+    /// voxels, cut smoothly half a voxel outside them (as VTK's cropping region).
+    #[arg(
+        long,
+        value_name = "X0:X1,Y0:Y1,Z0:Z1",
+        conflicts_with = "crop_mm",
+        help_heading = "Clipping"
+    )]
+    pub crop: Option<String>,
+    /// Crop box in world coordinates (mm for medical volumes, LPS), X0:X1,Y0:Y1,Z0:Z1.
+    #[arg(
+        long,
+        value_name = "X0:X1,Y0:Y1,Z0:Z1",
+        allow_hyphen_values = true,
+        help_heading = "Clipping"
+    )]
+    pub crop_mm: Option<String>,
+    /// A clipping plane NX,NY,NZ,D (world frame): keeps the points with N·x + D ≥ 0, the side
+    /// the normal points to, as VTK. Repeat for several; the cut is smooth, not voxel-stepped.
+    #[arg(
+        long,
+        value_name = "NX,NY,NZ,D",
+        allow_hyphen_values = true,
+        help_heading = "Clipping"
+    )]
+    pub clip_plane: Vec<String>,
     /// Depth cueing: modulate opacity from NEAR (front) to FAR (back), both in [0, 1].
     #[arg(
         long,
@@ -261,23 +322,25 @@ pub struct RenderOptions {
     pub list_threshold: f32,
 }
 
-#[derive(Debug, Args)]
-pub struct RenderArgs {
-    #[command(flatten)]
-    pub input: InputArgs,
-    /// Output image: .png (8-bit sRGB, or 16-bit with --bits 16) or .npy (float32 H×W×4,
-    /// premultiplied; H×W line integrals for --mode xray). Its folder must exist.
-    #[arg(short, long, value_name = "FILE", help_heading = "Output")]
-    pub output: PathBuf,
-    #[command(flatten)]
-    pub view: ViewArgs,
-    #[command(flatten)]
-    pub options: RenderOptions,
-    /// PNG bit depth (8 or 16).
-    #[arg(long, default_value_t = 8, help_heading = "Output")]
+/// How images become PNG files (render and movie).
+#[derive(Debug, Clone, Args)]
+pub struct ImageOptions {
+    /// PNG bit depth: 8 or 16.
+    #[arg(
+        long = "bit-depth",
+        id = "bits",
+        visible_alias = "bits",
+        value_name = "8|16",
+        default_value_t = 8,
+        help_heading = "Output"
+    )]
     pub bits: u8,
-    /// Write linear values to PNG instead of sRGB-encoding them.
+    /// Encode PNG values with the sRGB transfer curve. Default: linear values, as VTK, ParaView
+    /// and 3D Slicer write their framebuffers (docs/decisions/0012).
     #[arg(long, help_heading = "Output")]
+    pub srgb: bool,
+    /// Linear PNG values: the default now; kept so that older command lines still work.
+    #[arg(long, hide = true, conflicts_with = "srgb")]
     pub linear: bool,
     /// Background colour R,G,B in [0, 1] (linear), composited under the image.
     #[arg(
@@ -287,6 +350,72 @@ pub struct RenderArgs {
         help_heading = "Output"
     )]
     pub background: String,
+    /// Grey window for --mode mip, minip and xray: values LO..HI (data units; X-ray: data units
+    /// × world units) map to black..white, linearly; values outside are clamped. Default: MIP and
+    /// MinIP through the transfer function, X-ray from 0 to its brightest pixel.
+    #[arg(
+        long,
+        value_name = "LO:HI",
+        allow_hyphen_values = true,
+        conflicts_with = "wl",
+        help_heading = "Output"
+    )]
+    pub window: Option<String>,
+    /// The same grey window as radiologists give it: LEVEL,WIDTH (centre and width; CT bone is
+    /// 300,1500), i.e. --window LEVEL−WIDTH/2:LEVEL+WIDTH/2.
+    #[arg(
+        long,
+        value_name = "LEVEL,WIDTH",
+        allow_hyphen_values = true,
+        help_heading = "Output"
+    )]
+    pub wl: Option<String>,
+}
+
+/// A `--view` value (also A, P, L, R, S, I).
+fn parse_view(s: &str) -> Result<volsplat::core::AnatomicalView, String> {
+    use volsplat::core::AnatomicalView as V;
+    Ok(match s.to_ascii_lowercase().as_str() {
+        "anterior" | "a" | "front" => V::Anterior,
+        "posterior" | "p" | "back" => V::Posterior,
+        "left" | "l" => V::Left,
+        "right" | "r" => V::Right,
+        "superior" | "s" | "top" => V::Superior,
+        "inferior" | "i" | "bottom" => V::Inferior,
+        _ => {
+            return Err(format!(
+                "`{s}`: expected anterior, posterior, left, right, superior or inferior"
+            ));
+        }
+    })
+}
+
+/// A `--preset` value: `auto`, or a preset's canonical name (case and `_`/`-` as the user
+/// likes; an unknown name is a usage error listing the names).
+fn parse_preset(s: &str) -> Result<String, String> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok("auto".into());
+    }
+    s.parse::<volsplat::core::Preset>()
+        .map(|p| p.name().to_string())
+        .map_err(|e| e.to_string())
+}
+
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Output image: .png (8-bit linear values as VTK writes them; --srgb encodes, --bit-depth 16)
+    /// or .npy (float32 H×W×4, premultiplied; H×W line integrals for --mode xray). Its folder
+    /// must exist.
+    #[arg(short, long, value_name = "FILE", help_heading = "Output")]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub view: ViewArgs,
+    #[command(flatten)]
+    pub options: RenderOptions,
+    #[command(flatten)]
+    pub image: ImageOptions,
     /// Print per-stage timings and counters as one JSON object on stdout.
     #[arg(long, help_heading = "Output")]
     pub stats: bool,
@@ -377,6 +506,25 @@ pub enum RendererArg {
 pub struct InfoArgs {
     #[command(flatten)]
     pub input: InputArgs,
+    /// Print one JSON object (stable field names, documented in README.md "Files") instead of
+    /// text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct ConvertArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Output NRRD file (.nrrd, attached header; --gzip compresses the payload).
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    /// Gzip the payload.
+    #[arg(long)]
+    pub gzip: bool,
+    /// Don't print what was written.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]

@@ -9,16 +9,19 @@ use std::time::Instant;
 use volsplat::core::{Image, ScalarImage};
 use volsplat::io::{PngBitDepth, PngSettings};
 use volsplat::{
-    CameraSpec, Mode, RenderRequest, Renderer, TransferSpec, UsedRenderer, default_ladder,
-    renderer_name,
+    CameraSpec, Mode, RenderRequest, Renderer, TransferSpec, UsedRenderer, VolumeSource,
+    default_ladder, renderer_name,
 };
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render(a) => render_cmd(*a),
         Command::Info(a) => info_cmd(a),
+        Command::Presets => presets_cmd(),
+        Command::Convert(a) => convert_cmd(a),
         Command::Phantom(a) => phantom_cmd(a),
         Command::Bench(a) => bench_cmd(*a),
+        Command::Movie(a) => crate::movie::movie_cmd(*a),
         Command::TextureBench(a) => texture_bench_cmd(a),
         Command::DisplayBench(a) => crate::display::display_bench_cmd(*a),
         Command::AaFigures(a) => crate::aa_figures::aa_figures_cmd(a),
@@ -37,7 +40,7 @@ pub(crate) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 }
 
 /// The image formats `render -o` writes, by extension (case-insensitive).
-const OUTPUT_EXTENSIONS: &[&str] = &["png", "npy"];
+const OUTPUT_EXTENSIONS: &[&str] = volsplat::OUTPUT_EXTENSIONS;
 
 /// Checks, before any work, that `path` (given with `flag`) can be written: not a folder, its
 /// folder exists, and, if `extensions` is not empty, it ends in one of them.
@@ -121,9 +124,27 @@ impl std::fmt::Display for NonFiniteOutput {
 
 impl std::error::Error for NonFiniteOutput {}
 
-/// Whether `render` writes the X-ray line integrals (rather than the RGBA image).
-fn writes_values(values: Option<&ScalarImage>, req: &RenderRequest) -> bool {
-    req.mode == Mode::Xray && values.is_some()
+/// A grey window `(lo, hi)` from `--window LO:HI` or `--wl LEVEL,WIDTH`, if one is given.
+pub(crate) fn grey_window(o: &ImageOptions) -> Result<Option<(f32, f32)>> {
+    let w = match (&o.window, &o.wl) {
+        (Some(w), _) => {
+            let [lo, hi] = pair(w, ':', "--window")?;
+            (lo as f32, hi as f32, "--window")
+        }
+        (None, Some(wl)) => {
+            let [level, width] = pair(wl, ',', "--wl")?.map(|v| v as f32);
+            if width.is_nan() || width <= 0.0 {
+                bail!("--wl {wl}: the width must be > 0");
+            }
+            (level - 0.5 * width, level + 0.5 * width, "--wl")
+        }
+        (None, None) => return Ok(None),
+    };
+    let (lo, hi, flag) = w;
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        bail!("{flag}: the window needs finite values with LO < HI, got {lo}:{hi}");
+    }
+    Ok(Some((lo, hi)))
 }
 
 /// Pixels of what would be written that hold a non-finite value: the line integrals if
@@ -154,7 +175,15 @@ fn write_checked(
     stage: &str,
     written: &[PathBuf],
 ) -> Result<()> {
-    let bad = non_finite_pixels(image, values, writes_values(values, req));
+    let window = grey_window(&a.image)?;
+    let grey = volsplat::writes_values(values.is_some(), req.mode, window);
+    let bad = match (grey, req.mode, values) {
+        // MIP and MinIP values are NaN where no sample covers the pixel, by design.
+        (true, Mode::Mip | Mode::Minip, Some(v)) => {
+            v.values().iter().filter(|x| x.is_infinite()).count()
+        }
+        _ => non_finite_pixels(image, values, grey),
+    };
     if bad > 0 {
         return Err(NonFiniteOutput {
             stage: stage.to_string(),
@@ -164,52 +193,44 @@ fn write_checked(
         }
         .into());
     }
-    write_output(path, image, values, req, a).with_context(|| format!("writing {}", path.display()))
+    volsplat::write_image(path, image, values, req.mode, &write_options(&a.image)?)
+        .map_err(explain)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
-fn write_output(
-    path: &Path,
-    image: &Image,
-    values: Option<&ScalarImage>,
-    req: &RenderRequest,
-    a: &RenderArgs,
-) -> Result<()> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let xray = writes_values(values, req);
-    match ext.as_deref() {
-        Some("png") => {
-            let bits = png_bits(a)?;
-            if let (true, Some(values)) = (xray, values) {
-                // X-ray PNGs are scaled so that the brightest pixel is white (--mode help).
-                let max = values.values().iter().fold(0.0f32, |m, &v| m.max(v));
-                volsplat::io::write_png_gray(path, values, 0.0, max.max(f32::MIN_POSITIVE), bits)?;
-            } else {
-                let settings = PngSettings {
-                    bits,
-                    srgb: !a.linear,
-                    background: triple::<f32>(&a.background, "--background")?,
-                };
-                volsplat::io::write_png(path, image, &settings)?;
-            }
-        }
-        Some("npy") => match (xray, values) {
-            (true, Some(values)) => volsplat::io::write_npy_scalar(path, values)?,
-            _ => volsplat::io::write_npy_rgba(path, image)?,
+/// The engine's write options of the image flags.
+pub(crate) fn write_options(o: &ImageOptions) -> Result<volsplat::WriteOptions> {
+    Ok(volsplat::WriteOptions {
+        png: PngSettings {
+            bits: png_bits(o)?,
+            srgb: o.srgb,
+            background: triple::<f32>(&o.background, "--background")?,
         },
-        _ => bail!(
-            "-o {}: unsupported extension; use .png or .npy",
-            path.display()
-        ),
+        window: grey_window(o)?,
+    })
+}
+
+pub(crate) fn png_bits(o: &ImageOptions) -> Result<PngBitDepth> {
+    PngBitDepth::from_bits(o.bits as u32)
+        .ok_or_else(|| anyhow!("--bit-depth must be 8 or 16, got {}", o.bits))
+}
+
+/// The checks of the image options that need no volume.
+pub(crate) fn check_image_options(o: &ImageOptions, mode: Mode) -> Result<()> {
+    png_bits(o)?;
+    triple::<f32>(&o.background, "--background")?;
+    if grey_window(o)?.is_some() && mode == Mode::Composite {
+        bail!(
+            "{}: a grey window applies to --mode mip, minip and xray; composite images take their \
+             colours from the transfer function",
+            if o.window.is_some() {
+                "--window"
+            } else {
+                "--wl"
+            }
+        );
     }
     Ok(())
-}
-
-fn png_bits(a: &RenderArgs) -> Result<PngBitDepth> {
-    PngBitDepth::from_bits(a.bits as u32)
-        .ok_or_else(|| anyhow!("--bits must be 8 or 16, got {}", a.bits))
 }
 
 /// The checks of `render` that need no volume: output paths, image size, PNG options. Run
@@ -223,8 +244,7 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
         check_output_path(p, "--save-scene", &["json"])?;
     }
     parse_image_size(&a.options.size, "--size")?;
-    png_bits(a)?;
-    triple::<f32>(&a.background, "--background")?;
+    check_image_options(&a.image, a.options.mode)?;
     if let Some(c) = &a.draw_k {
         triple::<f32>(c, "--draw-k")?;
     }
@@ -254,7 +274,7 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
 }
 
 /// The request of a `--scene` file, its unknown fields printed as warnings.
-fn load_scene(path: Option<&Path>) -> Result<Option<RenderRequest>> {
+pub(crate) fn load_scene(path: Option<&Path>) -> Result<Option<RenderRequest>> {
     let Some(p) = path else {
         return Ok(None);
     };
@@ -282,7 +302,7 @@ fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
 
 /// Writes one line to standard output. A closed pipe (`volsplat info f | head -1`) ends the
 /// output quietly instead of panicking as `println!` does.
-fn emit(line: &str) -> Result<()> {
+pub(crate) fn emit(line: &str) -> Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
     match writeln!(out, "{line}") {
@@ -311,7 +331,7 @@ fn flag_of(field: &str) -> Option<&'static str> {
 }
 
 /// An engine error worded for the command line: request fields name their flag too.
-fn explain(e: volsplat::EngineError) -> anyhow::Error {
+pub(crate) fn explain(e: volsplat::EngineError) -> anyhow::Error {
     match e {
         volsplat::EngineError::Request { field, message } => match flag_of(&field) {
             Some(flag) => anyhow!("{flag} ({field}): {message}"),
@@ -325,7 +345,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     let t0 = Instant::now();
     check_render_args(&a)?;
     let req = render_request(&a)?;
-    let mut renderer = Renderer::new();
+    let mut renderer = Renderer::with_limits(reader_limits(&a.input)?);
     let label = req.scene.volume.label();
     let mut written: Vec<PathBuf> = Vec::new();
     let out = if a.ladder {
@@ -362,7 +382,10 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             Ok(true)
         })
     } else {
-        renderer.render(&req, &mut |_| true)
+        let bar = crate::progress::Bar::fraction("render", a.quiet);
+        let out = renderer.render(&req, &mut bar.callback());
+        bar.clear();
+        out
     };
     let out = match out {
         Err(volsplat::EngineError::NonFinite { stage, count }) => {
@@ -446,46 +469,166 @@ fn preview_path(output: &Path, subsample: usize) -> PathBuf {
     output.with_file_name(format!("{stem}.preview-s{subsample}.{ext}"))
 }
 
-fn info_cmd(a: InfoArgs) -> Result<()> {
-    let source = volume_source(&a.input)?;
-    let (vol, notes) = source.load_with_notes()?;
+/// The volume of the input flags as read, with what the reader reported.
+fn load_info(a: &InputArgs) -> Result<(String, volsplat::io::LoadedVolume)> {
+    let limits = reader_limits(a)?;
+    let source = volume_source(a)?;
     let label = source.label();
-    for n in notes {
+    if let (
+        VolumeSource::File {
+            path, raw: None, ..
+        },
+        false,
+    ) = (&source, a.raw_dims.is_some())
+    {
+        let options = volsplat::io::ReadOptions {
+            limits,
+            frame: a.frame,
+            array: a.array.clone(),
+            series: a.series.clone(),
+        };
+        let loaded = volsplat::io::read_volume_with(path, &options)?;
+        return Ok((path.display().to_string(), loaded));
+    }
+    let (vol, notes) = source.load_with_limits(&limits)?;
+    let format = match &source {
+        VolumeSource::Phantom { .. } => "built-in",
+        _ => "raw",
+    };
+    let loaded = volsplat::io::LoadedVolume {
+        volume: std::sync::Arc::unwrap_or_clone(vol),
+        format: format.into(),
+        frames: 1,
+        frame: 0,
+        arrays: Vec::new(),
+        series: Vec::new(),
+        series_uid: None,
+        notes,
+    };
+    Ok((label, loaded))
+}
+
+fn info_cmd(a: InfoArgs) -> Result<()> {
+    let (label, loaded) = load_info(&a.input)?;
+    let info = volsplat::io::VolumeInfo::new(Path::new(&label), &loaded);
+    if a.json {
+        return emit(&info.to_json_pretty());
+    }
+    for n in &info.notes {
         emit(&format!("note:      {n}"))?;
     }
-    let g = vol.grid();
-    let (lo, hi) = vol.value_range();
-    let (blo, bhi) = g.bounds_world();
-    let d = g.direction;
+    let d = info.direction;
     emit(&format!("source:    {label}"))?;
-    emit(&format!("type:      {}", vol.scalar_type().name()))?;
+    emit(&format!("format:    {}", info.format))?;
+    emit(&format!("type:      {}", info.scalar_type))?;
     emit(&format!(
         "dims:      {} x {} x {} ({} voxels)",
-        g.dims[0],
-        g.dims[1],
-        g.dims[2],
-        g.voxel_count()
+        info.dims[0], info.dims[1], info.dims[2], info.voxels
     ))?;
     emit(&format!(
         "spacing:   {} {} {}",
-        g.spacing[0], g.spacing[1], g.spacing[2]
+        info.spacing[0], info.spacing[1], info.spacing[2]
     ))?;
     emit(&format!(
         "origin:    {} {} {}",
-        g.origin[0], g.origin[1], g.origin[2]
+        info.origin[0], info.origin[1], info.origin[2]
     ))?;
     for (n, c) in ["i", "j", "k"].iter().enumerate() {
-        let col = d.col(n);
         emit(&format!(
             "axis {c}:    ({:.6}, {:.6}, {:.6})",
-            col.x, col.y, col.z
+            d[0][n], d[1][n], d[2][n]
         ))?;
     }
+    let [blo, bhi] = info.bounds;
     emit(&format!(
         "bounds:    ({:.3}, {:.3}, {:.3}) .. ({:.3}, {:.3}, {:.3})",
-        blo.x, blo.y, blo.z, bhi.x, bhi.y, bhi.z
+        blo[0], blo[1], blo[2], bhi[0], bhi[1], bhi[2]
     ))?;
-    emit(&format!("range:     {lo} .. {hi}"))?;
+    emit(&format!(
+        "range:     {} .. {}",
+        info.value_range[0], info.value_range[1]
+    ))?;
+    if info.frames > 1 {
+        emit(&format!(
+            "frames:    {} (reading {}; --frame N)",
+            info.frames, info.frame
+        ))?;
+    }
+    if !info.arrays.is_empty() {
+        emit(&format!(
+            "arrays:    {} (--array NAME)",
+            info.arrays.join(", ")
+        ))?;
+    }
+    if !info.series.is_empty() {
+        emit(&format!(
+            "series:    {} in the folder (--series UID|NUMBER):",
+            info.series.len()
+        ))?;
+        for s in &info.series {
+            let here = if info.series_uid.as_deref() == Some(s.uid.as_str()) {
+                "*"
+            } else {
+                " "
+            };
+            emit(&format!("  {here} {s}"))?;
+        }
+    }
+    Ok(())
+}
+
+/// `convert`: any readable volume to an attached-header NRRD, geometry kept.
+fn convert_cmd(a: ConvertArgs) -> Result<()> {
+    check_output_path(&a.output, "-o", &["nrrd"])?;
+    let (label, loaded) = load_info(&a.input)?;
+    volsplat::io::write_nrrd(&a.output, &loaded.volume, a.gzip)
+        .with_context(|| format!("writing {}", a.output.display()))?;
+    if !a.quiet {
+        for n in &loaded.notes {
+            eprintln!("note: {n}");
+        }
+        let g = loaded.volume.grid();
+        eprintln!(
+            "wrote {} ({} {}×{}×{} {}, from {label})",
+            a.output.display(),
+            loaded.format,
+            g.dims[0],
+            g.dims[1],
+            g.dims[2],
+            loaded.volume.scalar_type().name()
+        );
+    }
+    Ok(())
+}
+
+/// `presets`: every built-in transfer function with its units and one line of description.
+fn presets_cmd() -> Result<()> {
+    use volsplat::core::Preset;
+    use volsplat::core::presets::PRESET_ALIASES;
+    let width = Preset::ALL
+        .iter()
+        .map(|p| p.name().len())
+        .max()
+        .unwrap_or(0);
+    emit(
+        "auto (default): from the volume's histogram: background transparent, opacity ramped over the foreground's percentiles",
+    )?;
+    for p in Preset::ALL {
+        emit(&format!(
+            "{:width$}  [{}] {}",
+            p.name(),
+            p.units(),
+            p.description()
+        ))?;
+    }
+    let aliases: Vec<String> = PRESET_ALIASES
+        .iter()
+        .map(|(a, p)| format!("{a} = {}", p.name()))
+        .collect();
+    emit(&format!("aliases: {}", aliases.join(", ")))?;
+    emit(
+        "Slicer presets are in absolute units (CT: Hounsfield) and are not rescaled to the data.",
+    )?;
     Ok(())
 }
 
@@ -532,10 +675,12 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
         &a.given.iter().cloned().collect(),
         base,
     )?;
-    let mut renderer = Renderer::new();
+    let mut renderer = Renderer::with_limits(reader_limits(&a.input)?);
     let label = req.scene.volume.label();
+    let bar = crate::progress::Bar::items(a.frames as u64 + 1, "bench", false);
     // Warm-up: loads and classifies.
     let first = renderer.render(&req, &mut |_| true).map_err(explain)?;
+    bar.inc();
     let mut camera = first.camera.clone();
     let step = a.orbit.unwrap_or(360.0 / a.frames as f64);
     let mut times = Vec::with_capacity(a.frames);
@@ -547,9 +692,11 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
             orbit: volsplat::core::Orbit::default(),
         };
         let out = renderer.render(&req, &mut |_| true).map_err(explain)?;
+        bar.inc();
         times.push(out.stats.render_ms);
         last = Some(out);
     }
+    bar.clear();
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
     let median = sorted[sorted.len() / 2];

@@ -70,8 +70,9 @@ pub struct DisplayArgs {
     /// DoG display gain (value = ½ + gain·response).
     #[arg(long, default_value_t = 8.0, hide_short_help = true)]
     pub dog_gain: f64,
-    /// Largest NIL map (stored f64 values).
-    #[arg(long, default_value_t = 1 << 27, hide_short_help = true)]
+    /// Largest NIL map, in stored f64 values (8 bytes each). 0 (default): half the available
+    /// memory; a volume whose map would not fit is averaged down until it does (a note says so).
+    #[arg(long, default_value_t = 0, hide_short_help = true)]
     pub max_map_values: usize,
     /// Grey output for Sabella (default: red = intensity, green = maximum density).
     #[arg(long, hide_short_help = true)]

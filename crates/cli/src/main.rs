@@ -7,6 +7,8 @@ mod aa_figures;
 mod args;
 mod commands;
 mod display;
+mod movie;
+mod progress;
 mod request;
 
 use clap::{CommandFactory, FromArgMatches};
@@ -23,6 +25,10 @@ fn main() -> std::process::ExitCode {
             .collect()
     };
     if let (args::Command::Bench(b), Some(("bench", m))) = (&mut cli.command, matches.subcommand())
+    {
+        b.given = given(m);
+    }
+    if let (args::Command::Movie(b), Some(("movie", m))) = (&mut cli.command, matches.subcommand())
     {
         b.given = given(m);
     }

@@ -34,7 +34,7 @@ pub fn triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
         .map_err(|_| anyhow!("{flag}: expected three values"))
 }
 
-fn pair(s: &str, sep: char, flag: &str) -> Result<[f64; 2]> {
+pub fn pair(s: &str, sep: char, flag: &str) -> Result<[f64; 2]> {
     let (a, b) = s
         .split_once(sep)
         .ok_or_else(|| anyhow!("{flag}: expected A{sep}B, got `{s}`"))?;
@@ -74,11 +74,91 @@ pub fn parse_grid(s: &str, flag: &str) -> Result<Vec<usize>> {
         .collect()
 }
 
+/// A crop box `X0:X1,Y0:Y1,Z0:Z1`.
+fn parse_crop(s: &str, flag: &str, units: volsplat::CropUnits) -> Result<volsplat::CropBox> {
+    let axes: Vec<&str> = s.split(',').map(str::trim).collect();
+    if axes.len() != 3 {
+        bail!("{flag} {s}: expected X0:X1,Y0:Y1,Z0:Z1");
+    }
+    let mut min = [0.0; 3];
+    let mut max = [0.0; 3];
+    for (k, a) in axes.iter().enumerate() {
+        let [lo, hi] = pair(a, ':', flag)?;
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            bail!(
+                "{flag} {s}: axis {} needs LO ≤ HI, got {a}",
+                ["X", "Y", "Z"][k]
+            );
+        }
+        (min[k], max[k]) = (lo, hi);
+    }
+    Ok(volsplat::CropBox { min, max, units })
+}
+
+/// A clipping plane `NX,NY,NZ,D`.
+fn parse_plane(s: &str) -> Result<volsplat::PlaneSpec> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| anyhow!("--clip-plane {s}: expected four numbers NX,NY,NZ,D"))?;
+    let [nx, ny, nz, d] = v[..] else {
+        bail!("--clip-plane {s}: expected four numbers NX,NY,NZ,D");
+    };
+    if !(nx.is_finite() && ny.is_finite() && nz.is_finite() && d.is_finite())
+        || nx == 0.0 && ny == 0.0 && nz == 0.0
+    {
+        bail!("--clip-plane {s}: the normal must be finite and non-zero, D finite");
+    }
+    Ok(volsplat::PlaneSpec {
+        normal: [nx, ny, nz],
+        offset: d,
+    })
+}
+
+/// The reader limits of `--limits` (the defaults where not given).
+pub fn reader_limits(a: &InputArgs) -> Result<volsplat::io::Limits> {
+    let mut l = volsplat::io::Limits::default();
+    let Some(text) = &a.limits else {
+        return Ok(l);
+    };
+    for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let (key, value) = item
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--limits {item}: expected KEY=VALUE"))?;
+        let v: f64 = value
+            .trim()
+            .parse()
+            .map_err(|_| anyhow!("--limits {item}: `{value}` is not a number"))?;
+        if !(1.0..=1.8e19).contains(&v) {
+            bail!("--limits {item}: must be a whole number from 1 to 1.8e19");
+        }
+        let n = v.round() as u64;
+        match key.trim() {
+            "voxels" => l.max_voxels = n as u128,
+            "header-bytes" => l.max_header_bytes = n.min(usize::MAX as u64) as usize,
+            "json-bytes" => l.max_json_bytes = n,
+            "xml-bytes" => l.max_xml_bytes = n,
+            other => bail!(
+                "--limits {item}: unknown limit `{other}`; use voxels, header-bytes, json-bytes \
+                 or xml-bytes"
+            ),
+        }
+    }
+    Ok(l)
+}
+
 /// The volume source of the input flags.
 pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
     Ok(match &a.input {
         None => VolumeSource::Phantom {
-            phantom: a.phantom,
+            // The synthetic head is the one with a size to choose (and was the demo before the
+            // built-in MRI), so `--phantom-size` alone keeps meaning it.
+            phantom: a.phantom.unwrap_or(if a.phantom_size.is_some() {
+                PhantomKind::Head
+            } else {
+                PhantomKind::Brain
+            }),
             grid: a
                 .phantom_size
                 .as_deref()
@@ -105,6 +185,7 @@ pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
                 raw,
                 frame: a.frame,
                 array: a.array.clone(),
+                series: a.series.clone(),
             }
         }
     })
@@ -194,6 +275,9 @@ pub fn build_request(
             *field = flag;
         }
     }
+    if view.view.is_some() {
+        orbit.view = view.view;
+    }
     if view.perspective {
         orbit.projection = Some(ProjectionKind::Perspective);
     } else if view.orthographic {
@@ -215,7 +299,11 @@ pub fn build_request(
         }
         s.transfer_function = TransferSpec::Function(tf);
     } else if let Some(name) = &o.preset {
-        s.transfer_function = TransferSpec::Preset(name.clone());
+        s.transfer_function = if name == "auto" {
+            TransferSpec::Auto
+        } else {
+            TransferSpec::Preset(name.clone())
+        };
     }
     if set("light") && (fresh || !o.light.is_empty()) {
         s.lights = o
@@ -239,6 +327,20 @@ pub fn build_request(
             .as_deref()
             .map(|v| pair(v, ':', "--surface-enhance"))
             .transpose()?;
+    }
+    if set("crop") || set("crop_mm") {
+        s.clipping.crop = match (&o.crop, &o.crop_mm) {
+            (Some(c), _) => Some(parse_crop(c, "--crop", volsplat::CropUnits::Voxels)?),
+            (None, Some(c)) => Some(parse_crop(c, "--crop-mm", volsplat::CropUnits::World)?),
+            (None, None) => None,
+        };
+    }
+    if set("clip_plane") {
+        s.clipping.planes = o
+            .clip_plane
+            .iter()
+            .map(|p| parse_plane(p))
+            .collect::<Result<_>>()?;
     }
     if set("depth_cue") {
         s.depth_cue = o

@@ -36,8 +36,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         0x3173c65bfc844768,
     ),
     (
-        "demo head, PNG",
+        // sRGB-encoded, the default before decision 0012 made PNGs linear.
+        "demo head, PNG --srgb",
         &[
+            "--srgb",
             "--phantom-size",
             "40",
             "--size",
@@ -69,6 +71,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "splat list, orthographic",
         &[
+            // The function these hashes were recorded with (the default before the automatic
+            // transfer function of issue 15).
+            "--preset",
+            "ramp",
             "--phantom",
             "blobs",
             "--phantom-size",
@@ -119,6 +125,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "Sabella display",
         &[
+            // The function these hashes were recorded with (the default before the automatic
+            // transfer function of issue 15).
+            "--preset",
+            "ramp",
             "--phantom",
             "blobs",
             "--phantom-size",
@@ -136,6 +146,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "NIL display",
         &[
+            // The function these hashes were recorded with (the default before the automatic
+            // transfer function of issue 15).
+            "--preset",
+            "ramp",
             "--phantom",
             "blobs",
             "--phantom-size",

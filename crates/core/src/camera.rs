@@ -251,6 +251,64 @@ pub struct Orbit {
     /// Switch to this projection. Switching a perspective camera to orthographic sets its
     /// parallel scale to the half-height of the perspective view at the focal point.
     pub projection: Option<ProjectionKind>,
+    /// Start from an anatomical view of the patient frame (LPS) instead of VTK's default
+    /// direction; the rotations then apply to it. Reset view only ([`Orbit::reset_camera`]);
+    /// [`Orbit::apply`] turns the given camera to it, keeping its focal point and distance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub view: Option<AnatomicalView>,
+}
+
+/// Views of the patient frame (volsplat's world frame is LPS: +x left, +y posterior, +z
+/// superior; DESIGN.md §3), as 3D Slicer's view buttons: the named side faces the viewer, the
+/// head up (superior and inferior views: anterior up).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AnatomicalView {
+    /// From the front: eye at −y (anterior), +z up.
+    Anterior,
+    /// From behind: eye at +y, +z up.
+    Posterior,
+    /// From the patient's left: eye at +x, +z up.
+    Left,
+    /// From the patient's right: eye at −x, +z up.
+    Right,
+    /// From above: eye at +z, anterior (−y) up.
+    Superior,
+    /// From below: eye at −z, anterior (−y) up.
+    Inferior,
+}
+
+impl AnatomicalView {
+    /// Every view.
+    pub const ALL: [AnatomicalView; 6] = [
+        AnatomicalView::Anterior,
+        AnatomicalView::Posterior,
+        AnatomicalView::Left,
+        AnatomicalView::Right,
+        AnatomicalView::Superior,
+        AnatomicalView::Inferior,
+    ];
+
+    /// The direction from the focal point to the eye and the view-up, world (LPS) unit vectors.
+    pub fn eye_and_up(self) -> (DVec3, DVec3) {
+        match self {
+            AnatomicalView::Anterior => (-DVec3::Y, DVec3::Z),
+            AnatomicalView::Posterior => (DVec3::Y, DVec3::Z),
+            AnatomicalView::Left => (DVec3::X, DVec3::Z),
+            AnatomicalView::Right => (-DVec3::X, DVec3::Z),
+            AnatomicalView::Superior => (DVec3::Z, -DVec3::Y),
+            AnatomicalView::Inferior => (-DVec3::Z, -DVec3::Y),
+        }
+    }
+
+    /// Turns `camera` to this view about its focal point, keeping the distance and projection.
+    pub fn orient(self, camera: &mut Camera) {
+        let fp = DVec3::from(camera.focal_point);
+        let dist = (DVec3::from(camera.position) - fp).length();
+        let (eye, up) = self.eye_and_up();
+        camera.position = (fp + eye * dist).to_array();
+        camera.view_up = up.to_array();
+    }
 }
 
 impl Orbit {
@@ -310,6 +368,9 @@ impl Orbit {
             cam.position = (fp + DVec3::Z * dist).to_array();
             cam.view_angle = angle;
         }
+        if let Some(v) = self.view {
+            v.orient(&mut cam);
+        }
         self.rotate_and_scale(&mut cam)?;
         Ok(cam)
     }
@@ -334,6 +395,9 @@ impl Orbit {
         }
         if let Some(angle) = self.view_angle {
             camera.view_angle = angle;
+        }
+        if let Some(v) = self.view {
+            v.orient(camera);
         }
         self.rotate_and_scale(camera)
     }
@@ -726,5 +790,50 @@ mod tests {
         let c = Camera::default();
         let e = OrthoProjection::new(&c, 10, 10).unwrap_err();
         assert!(e.to_string().contains("parallel_projection"));
+    }
+
+    /// `--view`: each anatomical view looks at the named side of an LPS volume with the head up,
+    /// keeps the reset view's focal point and distance, and the rotations apply after it.
+    #[test]
+    fn anatomical_views_look_at_their_side_of_the_patient() {
+        let (lo, hi) = (DVec3::new(-10.0, -20.0, -5.0), DVec3::new(30.0, 40.0, 25.0));
+        let reset = Camera::reset_to_bounds(lo, hi, true);
+        let dist = |c: &Camera| (DVec3::from(c.position) - DVec3::from(c.focal_point)).length();
+        for v in AnatomicalView::ALL {
+            let orbit = Orbit {
+                view: Some(v),
+                ..Orbit::default()
+            };
+            let c = orbit.reset_camera(lo, hi).unwrap();
+            let f = c.frame();
+            let (eye, up) = v.eye_and_up();
+            assert!((f.forward + eye).length() < 1e-12, "{v:?}: {:?}", f.forward);
+            assert!((f.up - up).length() < 1e-12, "{v:?}");
+            assert_eq!(c.focal_point, reset.focal_point);
+            assert!((dist(&c) - dist(&reset)).abs() < 1e-9);
+        }
+        // Anterior: facing the patient, the patient's left (+x) is on the image's right.
+        let a = Orbit {
+            view: Some(AnatomicalView::Anterior),
+            ..Orbit::default()
+        }
+        .reset_camera(lo, hi)
+        .unwrap();
+        assert!((a.frame().right - DVec3::X).length() < 1e-12);
+        // Azimuth 90 from anterior about +z (up) gives the left view.
+        let turned = Orbit {
+            view: Some(AnatomicalView::Anterior),
+            azimuth: Some(90.0),
+            ..Orbit::default()
+        }
+        .reset_camera(lo, hi)
+        .unwrap();
+        let left = Orbit {
+            view: Some(AnatomicalView::Left),
+            ..Orbit::default()
+        }
+        .reset_camera(lo, hi)
+        .unwrap();
+        assert!((turned.frame().forward - left.frame().forward).length() < 1e-9);
     }
 }

@@ -35,7 +35,8 @@ pub mod transfer;
 pub mod volume;
 
 pub use camera::{
-    Camera, Orbit, OrthoProjection, PerspectiveProjection, Projection, ProjectionKind, ViewFrame,
+    AnatomicalView, Camera, Orbit, OrthoProjection, PerspectiveProjection, Projection,
+    ProjectionKind, ViewFrame,
 };
 pub use crio::{CrioTables, FrameClassifier, Light, LookupTable, SampleInput, Shading, TableIndex};
 pub use error::{CoreError, Result};

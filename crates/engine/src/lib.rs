@@ -25,10 +25,13 @@
 //! Output does not depend on the thread count.
 #![deny(missing_docs)]
 
+pub mod demo;
 pub mod error;
+pub mod movie;
 pub mod renderer;
 pub mod request;
 pub mod scene;
+pub mod write;
 
 pub use error::{EngineError, Result};
 pub use renderer::{
@@ -40,9 +43,11 @@ pub use request::{
     Mode, OrderChoice, Quality, RenderRequest, RendererChoice, VisibilityChoice,
 };
 pub use scene::{
-    CameraSpec, LightSpec, PhantomKind, RawLayout, Scene, ShadingTerms, TransferSpec, VolumeSource,
-    make_phantom,
+    CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,
+    ShadingTerms, TransferSpec, VolumeSource, make_phantom,
 };
+
+pub use write::{OUTPUT_EXTENSIONS, WriteOptions, write_image, writes_values};
 
 /// The libraries underneath, for callers that need their types (cameras, volumes, images).
 pub use volsplat_core as core;

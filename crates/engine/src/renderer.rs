@@ -8,7 +8,8 @@ use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
 use volsplat_core::{
-    AnyVolume, Camera, CrioTables, Image, Light, Projection, ScalarImage, TransferFunction,
+    AnyVolume, AutoTransfer, Camera, CrioTables, Image, Light, Preset, Projection, ScalarImage,
+    TransferFunction,
 };
 use volsplat_filter::display::{DisplayVolume, build_map, render_display_with_progress};
 use volsplat_filter::nil::DiscreteNilMap;
@@ -192,6 +193,10 @@ fn render_fraction(f: f64) -> f64 {
     (0.2 + 0.8 * f).clamp(0.2, 1.0)
 }
 
+/// What a splat list is built from: the volume, the classification tables' key, the opacity
+/// threshold's bits and the subsampling.
+type ListKey = (VolumeSource, String, u32, usize);
+
 /// A loaded volume and its reader's notes.
 type LoadedState = (Arc<AnyVolume>, Vec<String>);
 
@@ -250,9 +255,11 @@ fn cached<K: PartialEq, V>(
 pub struct Renderer {
     volume: Option<Cached<VolumeSource, LoadedState>>,
     tables: Option<Cached<String, Arc<CrioTables>>>,
-    list: Option<Cached<(String, u32, usize), Arc<SplatList>>>,
-    display: Option<Cached<String, Arc<DisplayState>>>,
+    list: Option<Cached<ListKey, Arc<SplatList>>>,
+    display: Option<Cached<(VolumeSource, String), Arc<DisplayState>>>,
     pool: Option<Cached<Option<usize>, Arc<rayon::ThreadPool>>>,
+    /// The automatic transfer function and its description, per volume (keyed by address).
+    auto_tf: Option<Cached<VolumeSource, (TransferFunction, String)>>,
     limits: volsplat_io::Limits,
 }
 
@@ -296,7 +303,7 @@ impl Renderer {
     /// The transfer function `request` resolves to for its volume and mode.
     pub fn transfer_function(&mut self, request: &RenderRequest) -> Result<TransferFunction> {
         let vol = self.volume(&request.scene.volume)?;
-        resolve_tf(request, &vol)
+        Ok(resolve_tf(request, &vol, &mut self.auto_tf)?.0)
     }
 
     /// Renders `request`. `progress` is called between stages and during the render (after
@@ -338,12 +345,13 @@ impl Renderer {
             .is_some_and(|c| c.key == request.scene.volume);
         let vol = self.volume(&request.scene.volume)?;
         let load_ms = if vol_was_cached { 0.0 } else { ms(t0) };
-        let notes = match (&self.volume, vol_was_cached) {
+        let mut notes = match (&self.volume, vol_was_cached) {
             (Some(c), false) => c.value.1.clone(),
             _ => Vec::new(),
         };
         let camera = request.scene.camera.resolve(vol.grid().bounds_world())?;
-        let tf = resolve_tf(request, &vol)?;
+        let (tf, tf_warning, tf_note) = resolve_tf(request, &vol, &mut self.auto_tf)?;
+        notes.extend(tf_note);
         let threads = request.threads;
         let pool = Arc::clone(
             cached(&mut self.pool, threads, || {
@@ -358,7 +366,7 @@ impl Renderer {
             })?
             .0,
         );
-        let mut warnings = Vec::new();
+        let mut warnings: Vec<String> = tf_warning.into_iter().collect();
         let t_prep = Instant::now();
         report(progress, 0.05, "classify")?;
         let renderer = match request.renderer {
@@ -398,24 +406,80 @@ impl Renderer {
         let mut stats;
         let (image, values) = match renderer {
             UsedRenderer::Sabella | UsedRenderer::Nil => {
+                if !request.scene.clipping.is_empty() {
+                    return Err(EngineError::request(
+                        "scene.clipping",
+                        "cropping and clipping planes apply to the splatting renderers; the \
+                         Chapter 6 displays (sabella, nil) do not cut the volume",
+                    ));
+                }
                 let d = &request.display;
                 let kind = d.kind(request.renderer);
-                let key = serde_json::json!({
-                    "volume": format!("{:p}", Arc::as_ptr(&vol)),
-                    "tf": &tf, "density": d.density, "map": d.needs_map(kind).then_some(d.patch_order),
-                    "max": d.max_map_values,
-                })
-                .to_string();
+                let key = (
+                    request.scene.volume.clone(),
+                    serde_json::json!({
+                        "tf": &tf, "density": d.density,
+                        "map": d.needs_map(kind).then_some(d.patch_order),
+                        "max": d.max_map_values,
+                    })
+                    .to_string(),
+                );
+                let mut budget_note = None;
                 let (dv, fresh) = cached(&mut self.display, key, || {
-                    let dv = display_volume(&vol, &tf, d.density)?;
+                    let mut dv = display_volume(&vol, &tf, d.density, 1)?;
                     let tm = Instant::now();
                     let map = if d.needs_map(kind) {
-                        Some(build_map(&dv, d.patch_order, None, d.max_map_values)?)
+                        let budget = if d.max_map_values == 0 {
+                            auto_map_budget()
+                        } else {
+                            d.max_map_values
+                        };
+                        // Average the volume down until its map fits the budget.
+                        let need = |dv: &DisplayVolume| {
+                            DiscreteNilMap::values_needed_for(
+                                dv.texture().dims(),
+                                d.patch_order,
+                                None,
+                                1,
+                            )
+                        };
+                        let full = need(&dv);
+                        let mut factor = 1;
+                        while need(&dv) > budget as u128 {
+                            factor += 1;
+                            if factor > 16 {
+                                return Err(EngineError::request(
+                                    "display.max_map_values",
+                                    format!(
+                                        "even a 16× coarser volume needs a NIL map larger than \
+                                         the budget of {budget} values; raise it"
+                                    ),
+                                ));
+                            }
+                            dv = display_volume(&vol, &tf, d.density, factor)?;
+                        }
+                        if factor > 1 {
+                            let g = vol.grid().dims;
+                            budget_note = Some(format!(
+                                "NIL map: the full {}×{}×{} volume needs {}, over the budget of \
+                                 {}; built from a {factor}× coarser volume ({}). Raise the \
+                                 budget (display.max_map_values, --max-map-values) for full \
+                                 resolution",
+                                g[0],
+                                g[1],
+                                g[2],
+                                map_size(full),
+                                map_size(budget as u128),
+                                map_size(need(&dv)),
+                            ));
+                        }
+                        Some(build_map(&dv, d.patch_order, None, budget)?)
                     } else {
                         None
                     };
                     Ok(Arc::new((dv, map, ms(tm))))
                 })?;
+                notes.extend(budget_note);
                 let dv = Arc::clone(dv);
                 let prepare_ms = if fresh { ms(t_prep) } else { 0.0 };
                 report(progress, 0.2, "render")?;
@@ -473,12 +537,14 @@ impl Renderer {
                         Ok(Arc::new(build_tables(request, &tf)?))
                     })?;
                 let tables = Arc::clone(tables);
-                let settings = request.splat_settings();
+                let mut settings = request.splat_settings();
+                settings.clip = request.scene.clipping.world_planes(vol.grid())?;
                 let mut fresh = fresh_tables;
                 let rendered = if renderer == UsedRenderer::SplatList {
                     let q = &request.quality;
                     let key = (
-                        tables_key(request, &tf) + &format!("{:p}", Arc::as_ptr(&vol)),
+                        request.scene.volume.clone(),
+                        tables_key(request, &tf),
                         q.list_threshold.to_bits(),
                         q.subsample,
                     );
@@ -688,29 +754,55 @@ fn ms(t: Instant) -> f64 {
 }
 
 /// The transfer function for `request` on `vol` (see [`TransferSpec::Auto`]).
-fn resolve_tf(request: &RenderRequest, vol: &AnyVolume) -> Result<TransferFunction> {
+/// The transfer function of `request` for `vol`: the scene's, a preset, or the automatic
+/// choice (see [`TransferSpec::Auto`]). `auto` caches the histogram rule per volume; the
+/// returned strings are a warning (a preset that misses the data) and a note (what the
+/// automatic rule found), each given when the function is first made.
+fn resolve_tf(
+    request: &RenderRequest,
+    vol: &Arc<AnyVolume>,
+    auto: &mut Option<Cached<VolumeSource, (TransferFunction, String)>>,
+) -> Result<(TransferFunction, Option<String>, Option<String>)> {
     let range = vol.value_range();
     let scene = match &request.scene.volume {
         VolumeSource::Phantom { phantom, .. } => phantom.scene_transfer_function(),
         _ => None,
     };
+    let (mut warning, mut note) = (None, None);
     let mut tf = match &request.scene.transfer_function {
         TransferSpec::Function(tf) => tf.clone(),
-        TransferSpec::Preset(name) => TransferFunction::preset(name, range)?,
+        TransferSpec::Preset(name) => {
+            let preset: Preset = name.parse().map_err(|e: volsplat_core::CoreError| {
+                EngineError::request("scene.transfer_function.preset", e.to_string())
+            })?;
+            warning = preset.range_warning(range);
+            preset.transfer_function(range)
+        }
         TransferSpec::Auto => match scene {
             Some(tf) => tf,
             None if matches!(request.mode, Mode::Mip | Mode::Minip) => {
                 // Projections without a transfer function: an opaque grey window over the data.
                 TransferFunction::ramp(range.0, range.1, 1.0)
             }
-            None if request.scene.volume.is_demo_head() => {
-                TransferFunction::preset("ct-skin", range)?
+            None if request.scene.volume.is_demo_head() => Preset::CtSkin.transfer_function(range),
+            None => {
+                // The histogram rule reads the whole volume: once per volume.
+                // Keyed by the source, never by the volume's address, which a later volume may
+                // reuse; a `Memory` source holds its volume alive.
+                let key = request.scene.volume.clone();
+                let (entry, fresh) = cached(auto, key, || {
+                    let a = AutoTransfer::from_volume(vol);
+                    Ok((a.transfer_function.clone(), a.describe()))
+                })?;
+                if fresh {
+                    note = Some(entry.1.clone());
+                }
+                entry.0.clone()
             }
-            None => TransferFunction::preset("ramp", range)?,
         },
     };
     tf.validate()?;
-    Ok(tf)
+    Ok((tf, warning, note))
 }
 
 /// The key of the classification tables: everything they are built from.
@@ -750,10 +842,14 @@ fn build_tables(request: &RenderRequest, tf: &TransferFunction) -> Result<CrioTa
 
 /// Densities of a volume for the Chapter 6 displays: the transfer function's scalar opacity
 /// or the data normalised to its range.
+/// The densities of the Chapter 6 displays for `vol`, averaged over `factor`³ blocks (1: as
+/// is; the last block of an axis averages what it holds; the grid keeps its direction, with
+/// spacing × `factor` and the origin at the first block's centre).
 fn display_volume(
     vol: &AnyVolume,
     tf: &TransferFunction,
     density: DensityChoice,
+    factor: usize,
 ) -> Result<DisplayVolume> {
     let f = vol.to_f32();
     let (lo, hi) = vol.value_range();
@@ -762,7 +858,74 @@ fn display_volume(
         DensityChoice::Tf => f.data().iter().map(|&v| tf.opacity_at(v as f64)).collect(),
         DensityChoice::Data => f.data().iter().map(|&v| (v as f64 - lo) / span).collect(),
     };
-    Ok(DisplayVolume::new(f.grid(), &d, Reconstruction::Trilinear)?)
+    if factor <= 1 {
+        return Ok(DisplayVolume::new(f.grid(), &d, Reconstruction::Trilinear)?);
+    }
+    let g = f.grid();
+    let [nx, ny, nz] = g.dims;
+    let dims = g.dims.map(|n| n.div_ceil(factor).max(2));
+    let mut sum = vec![0.0f64; dims[0] * dims[1] * dims[2]];
+    let mut count = vec![0u32; sum.len()];
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let c = [
+                    (x / factor).min(dims[0] - 1),
+                    (y / factor).min(dims[1] - 1),
+                    (z / factor).min(dims[2] - 1),
+                ];
+                let i = c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+                sum[i] += d[x + nx * (y + ny * z)];
+                count[i] += 1;
+            }
+        }
+    }
+    let avg: Vec<f64> = sum
+        .iter()
+        .zip(&count)
+        .map(|(&s, &n)| if n > 0 { s / n as f64 } else { 0.0 })
+        .collect();
+    let half = (factor as f64 - 1.0) * 0.5;
+    let offset = g.direction
+        * volsplat_core::glam::DVec3::new(
+            half * g.spacing[0],
+            half * g.spacing[1],
+            half * g.spacing[2],
+        );
+    let origin = (volsplat_core::glam::DVec3::from(g.origin) + offset).to_array();
+    let grid = volsplat_core::Grid::new(
+        dims,
+        g.spacing.map(|s| s * factor as f64),
+        origin,
+        g.direction,
+    )?;
+    Ok(DisplayVolume::new(&grid, &avg, Reconstruction::Trilinear)?)
+}
+
+/// A NIL map size for messages: values and bytes (8 per value).
+fn map_size(values: u128) -> String {
+    let bytes = values as f64 * 8.0;
+    let (b, unit) = if bytes >= 1e9 {
+        (bytes / 1e9, "GB")
+    } else {
+        (bytes / 1e6, "MB")
+    };
+    format!("{values} values ({b:.1} {unit})")
+}
+
+/// Half the memory the system reports available, in f64 values (2 GiB where unknown).
+fn auto_map_budget() -> usize {
+    let available = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| {
+            m.lines()
+                .find(|l| l.starts_with("MemAvailable:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<u64>().ok())
+        })
+        .map(|kb| kb.saturating_mul(1024))
+        .unwrap_or(4 << 30);
+    (available / 2 / 8).min(usize::MAX as u64) as usize
 }
 
 /// Renders without a [`Renderer`] (nothing kept): the one-shot convenience.

@@ -268,7 +268,10 @@ pub struct DisplayOptions {
     pub dog_sigma: [f64; 2],
     /// DoG display gain.
     pub dog_gain: f64,
-    /// Largest NIL map (stored f64 values).
+    /// Largest NIL map, in stored f64 values (8 bytes each). `0` (the default): half the memory
+    /// the system reports available (`MemAvailable`; 2 GiB where it is not known). A volume
+    /// whose map would not fit is averaged down 2×, 3×, … per axis until it does, and the
+    /// output notes say so ([`crate::Output::notes`]); raise the budget to keep full resolution.
     pub max_map_values: usize,
     /// Grey output for Sabella (default: red = intensity, green = maximum density).
     pub grey: bool,
@@ -296,7 +299,7 @@ impl Default for DisplayOptions {
             closest: false,
             dog_sigma: [0.01, 0.02],
             dog_gain: 8.0,
-            max_map_values: 1 << 27,
+            max_map_values: 0,
             grey: false,
         }
     }

@@ -16,6 +16,9 @@ use volsplat_core::{AnyVolume, Camera, Light, Orbit, ScalarType, TransferFunctio
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum PhantomKind {
+    /// An MRI of a head built into the binary (VolPack's `brainsmall`, 84 × 128 × 128 u8, BSD-3;
+    /// [`crate::demo`]), face towards +z, top towards +y: the demo. Its grid is fixed.
+    Brain,
     /// CT-like head in Hounsfield units (i16), face towards +z, top towards +y.
     Head,
     /// 3-D modified Shepp–Logan phantom (f32).
@@ -72,6 +75,16 @@ pub fn make_phantom(kind: PhantomKind, grid: Option<&[usize]>, field: &str) -> R
         Ok(dims)
     };
     Ok(match kind {
+        PhantomKind::Brain => {
+            if let Some(g) = grid {
+                return Err(bad(format!(
+                    "the built-in MRI has a fixed grid of {:?} voxels; a grid ({g:?}) applies \
+                     to the synthetic phantoms (e.g. head)",
+                    crate::demo::BRAIN_DIMS
+                )));
+            }
+            crate::demo::brain_volume()?
+        }
         PhantomKind::Checkerboard => {
             let (nx, ny, sq) = scenes::CHECKERBOARD_PAPER;
             let (nx, ny, sq) = match grid {
@@ -169,6 +182,10 @@ pub enum VolumeSource {
         /// first).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         array: Option<String>,
+        /// Which DICOM series of a folder holding several: its SeriesInstanceUID, or its
+        /// SeriesNumber where that is unique (default: the only one).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        series: Option<String>,
     },
     /// A built-in phantom; `grid` as in [`make_phantom`].
     Phantom {
@@ -196,10 +213,10 @@ impl PartialEq for VolumeSource {
 }
 
 impl Default for VolumeSource {
-    /// The demo: the CT-like head phantom.
+    /// The demo: the built-in MRI head.
     fn default() -> Self {
         VolumeSource::Phantom {
-            phantom: PhantomKind::Head,
+            phantom: PhantomKind::Brain,
             grid: None,
         }
     }
@@ -251,12 +268,13 @@ impl VolumeSource {
                 raw: None,
                 frame,
                 array,
+                series,
             } => {
                 let options = volsplat_io::ReadOptions {
                     frame: *frame,
                     array: array.clone(),
+                    series: series.clone(),
                     limits: *limits,
-                    ..Default::default()
                 };
                 let loaded = volsplat_io::read_volume_with(path, &options)?;
                 let mut notes = loaded.notes;
@@ -277,7 +295,13 @@ impl VolumeSource {
     pub fn label(&self) -> String {
         match self {
             VolumeSource::File { path, .. } => path.display().to_string(),
-            VolumeSource::Phantom { phantom, .. } => format!("demo phantom `{phantom:?}`"),
+            VolumeSource::Phantom { phantom, .. } => format!(
+                "built-in `{}`",
+                serde_json::to_value(phantom)
+                    .ok()
+                    .and_then(|v| v.as_str().map(str::to_string))
+                    .unwrap_or_else(|| format!("{phantom:?}"))
+            ),
             VolumeSource::Memory(_) => "volume in memory".into(),
         }
     }
@@ -340,10 +364,13 @@ impl CameraSpec {
 pub enum TransferSpec {
     /// Chosen from the data and mode: a built-in scene's own function; for MIP and MinIP an
     /// opaque grey window over the data range; `ct-skin` for the demo head; otherwise the
-    /// `ramp` preset over the data range.
+    /// automatic function from the volume's histogram (background made transparent, opacity
+    /// ramped over robust percentiles of the foreground; [`volsplat_core::AutoTransfer`],
+    /// docs/presets.md).
     #[default]
     Auto,
-    /// A built-in preset (`ct-bone`, `ct-skin`, `mr`, `ramp`) over the data range.
+    /// A built-in preset by name ([`volsplat_core::Preset`]: 3D Slicer's `CT-Bone`, `MR-Default`,
+    /// … in absolute data units, and volsplat's `ct-skin` and `ramp`; case-insensitive).
     Preset(String),
     /// A transfer function in the transfer-function-file format (values in data units).
     Function(TransferFunction),
@@ -440,4 +467,129 @@ pub struct Scene {
     /// Depth cueing: opacity × a ramp from `near` (front) to `far` (back), both in [0, 1].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub depth_cue: Option<[f64; 2]>,
+    /// Cropping and clipping planes (splatting renderers), cut smoothly.
+    #[serde(default, skip_serializing_if = "Clipping::is_empty")]
+    pub clipping: Clipping,
+}
+
+/// A clipping plane: keeps the world points `x` with `normal·x + offset ≥ 0` (the side the
+/// normal points to, as VTK's clipping planes).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneSpec {
+    /// Normal in world coordinates (any non-zero length).
+    pub normal: [f64; 3],
+    /// Offset, world units × |normal|.
+    pub offset: f64,
+}
+
+/// The units of a [`CropBox`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CropUnits {
+    /// Voxel indices (0-based, may be fractional); the box keeps voxels `min..=max` whole, its
+    /// faces half a voxel outside them.
+    #[default]
+    Voxels,
+    /// World coordinates (usually mm, LPS for medical volumes); faces exactly at `min` and `max`.
+    World,
+}
+
+/// A crop box (VTK's cropping region): keeps what lies inside, cut smoothly at its faces.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CropBox {
+    /// Lower corner (x, y, z) in `units`.
+    pub min: [f64; 3],
+    /// Upper corner (x, y, z) in `units`; each ≥ the lower.
+    pub max: [f64; 3],
+    /// Voxel indices or world coordinates.
+    #[serde(default)]
+    pub units: CropUnits,
+}
+
+/// Cropping and clipping of a scene.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Clipping {
+    /// A crop box.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop: Option<CropBox>,
+    /// Clipping planes; a point is kept when every plane keeps it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub planes: Vec<PlaneSpec>,
+}
+
+impl Clipping {
+    /// Whether nothing is cut.
+    pub fn is_empty(&self) -> bool {
+        self.crop.is_none() && self.planes.is_empty()
+    }
+
+    /// The world-space planes of the crop box and the clipping planes for a volume on `grid`;
+    /// errors name the field (`scene.clipping.crop`, `scene.clipping.planes[i]`).
+    pub fn world_planes(
+        &self,
+        grid: &volsplat_core::Grid,
+    ) -> Result<Vec<volsplat_splat::ClipPlane>> {
+        use volsplat_core::glam::DVec3;
+        use volsplat_splat::ClipPlane;
+        let mut out = Vec::new();
+        if let Some(c) = &self.crop {
+            for k in 0..3 {
+                if !(c.min[k].is_finite() && c.max[k].is_finite() && c.min[k] <= c.max[k]) {
+                    return Err(EngineError::request(
+                        "scene.clipping.crop",
+                        format!(
+                            "axis {k}: min {} and max {} must be finite with min ≤ max",
+                            c.min[k], c.max[k]
+                        ),
+                    ));
+                }
+            }
+            let origin = DVec3::from(grid.origin);
+            for k in 0..3 {
+                let (normal, lo, hi) = match c.units {
+                    CropUnits::World => (DVec3::AXES[k], c.min[k], c.max[k]),
+                    // Lattice coordinate l_k = (d_k · (x − o)) / s_k.
+                    CropUnits::Voxels => (
+                        grid.direction.col(k) / grid.spacing[k],
+                        c.min[k] - 0.5,
+                        c.max[k] + 0.5,
+                    ),
+                };
+                let base = match c.units {
+                    CropUnits::World => 0.0,
+                    CropUnits::Voxels => normal.dot(origin),
+                };
+                // normal·x − base − lo ≥ 0 and −normal·x + base + hi ≥ 0.
+                out.push(ClipPlane {
+                    normal: normal.to_array(),
+                    offset: -base - lo,
+                });
+                out.push(ClipPlane {
+                    normal: (-normal).to_array(),
+                    offset: base + hi,
+                });
+            }
+        }
+        for (i, p) in self.planes.iter().enumerate() {
+            let plane = ClipPlane {
+                normal: p.normal,
+                offset: p.offset,
+            };
+            if !plane.is_valid() {
+                return Err(EngineError::request(
+                    format!("scene.clipping.planes[{i}]"),
+                    format!(
+                        "normal {:?}, offset {}: needs a finite, non-zero normal and a finite \
+                         offset",
+                        p.normal, p.offset
+                    ),
+                ));
+            }
+            out.push(plane);
+        }
+        Ok(out)
+    }
 }

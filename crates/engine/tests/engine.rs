@@ -267,6 +267,7 @@ fn the_renderers_reader_limits_reach_the_reader() {
             raw: None,
             frame: 0,
             array: None,
+            series: None,
         },
         ..Scene::default()
     };
@@ -280,4 +281,101 @@ fn the_renderers_reader_limits_reach_the_reader() {
     let msg = e.to_string();
     assert!(msg.contains("blobs.nrrd") && msg.contains("10000"), "{msg}");
     assert!(Renderer::new().render(&req, &mut |_| true).is_ok());
+}
+
+/// Cropping and clipping: a crop box in voxels equals the same box given as planes in world
+/// coordinates, survives a scene file, and the Chapter 6 displays refuse it rather than ignore it.
+#[test]
+fn crop_boxes_round_trip_and_match_their_planes() {
+    use volsplat::{Clipping, CropBox, CropUnits, PlaneSpec};
+    let mut req = RenderRequest::new(blobs(24), 32, 32);
+    req.mode = Mode::Xray;
+    req.scene.camera = orbit(20.0, 10.0, false);
+    let full = Renderer::new().render(&req, &mut |_| true).unwrap();
+    req.scene.clipping = Clipping {
+        crop: Some(CropBox {
+            min: [0.0, 0.0, 0.0],
+            max: [11.0, 23.0, 23.0],
+            units: CropUnits::Voxels,
+        }),
+        planes: Vec::new(),
+    };
+    let mut renderer = Renderer::new();
+    let cropped = renderer.render(&req, &mut |_| true).unwrap();
+    let sum = |o: &volsplat::Output| -> f64 {
+        o.values
+            .as_ref()
+            .unwrap()
+            .values()
+            .iter()
+            .map(|&v| v as f64)
+            .sum()
+    };
+    // The blobs are symmetric enough that about half the mass remains.
+    let ratio = sum(&cropped) / sum(&full);
+    assert!(ratio > 0.2 && ratio < 0.8, "{ratio}");
+    // The same box as six world planes, half a voxel outside the kept voxels (the phantom's
+    // grid is axis-aligned).
+    let vol = renderer.volume(&req.scene.volume).unwrap();
+    let g = vol.grid();
+    let at = |k: usize, l: f64| g.origin[k] + l * g.spacing[k];
+    let mut six = Vec::new();
+    for (k, hi) in [(0, 11.5), (1, 23.5), (2, 23.5)] {
+        let mut n = [0.0; 3];
+        n[k] = 1.0;
+        six.push(PlaneSpec {
+            normal: n,
+            offset: -at(k, -0.5),
+        });
+        n[k] = -1.0;
+        six.push(PlaneSpec {
+            normal: n,
+            offset: at(k, hi),
+        });
+    }
+    let mut planes = req.clone();
+    planes.scene.clipping = Clipping {
+        crop: None,
+        planes: six,
+    };
+    let by_plane = Renderer::new().render(&planes, &mut |_| true).unwrap();
+    let (a, b) = (sum(&cropped), sum(&by_plane));
+    assert!((a - b).abs() < 1e-5 * a, "{a} vs {b}");
+    // Round trip through a scene file.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.json");
+    req.save(&path).unwrap();
+    let (back, warnings) = RenderRequest::load(&path).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(back.scene.clipping, req.scene.clipping);
+    // Chapter 6 displays do not cut: an error naming the field.
+    req.renderer = RendererChoice::Sabella;
+    req.mode = Mode::Composite;
+    let e = Renderer::new().render(&req, &mut |_| true).unwrap_err();
+    assert!(e.to_string().contains("scene.clipping"), "{e}");
+}
+
+/// `--renderer nil` never fails for memory: a map over the budget is built from a coarser
+/// volume, said in the notes, and still draws the volume.
+#[test]
+fn a_nil_map_over_budget_is_built_coarser_and_says_so() {
+    let mut req = RenderRequest::new(blobs(40), 24, 20);
+    req.renderer = RendererChoice::Nil;
+    let full = Renderer::new().render(&req, &mut |_| true).unwrap();
+    assert!(
+        !full.notes.iter().any(|n| n.contains("coarser")),
+        "{:?}",
+        full.notes
+    );
+    req.display.max_map_values = 500_000;
+    let out = Renderer::new().render(&req, &mut |_| true).unwrap();
+    let note = out.notes.iter().find(|n| n.contains("coarser"));
+    assert!(note.is_some_and(|n| n.contains("500")), "{:?}", out.notes);
+    let lit = |o: &volsplat::Output| o.image.pixels().iter().filter(|p| p[3] > 0.05).count();
+    assert!(
+        lit(&out) > lit(&full) / 2,
+        "{} vs {}",
+        lit(&out),
+        lit(&full)
+    );
 }

@@ -114,7 +114,10 @@ fn an_oblique_cut_follows_the_plane_not_the_lattice() {
                 worst = worst.max((w[1].1 - w[0].1).abs());
             }
         }
-        assert!(worst < 3.0, "{name}: pixels on one line along the cut differ by {worst}");
+        assert!(
+            worst < 3.0,
+            "{name}: pixels on one line along the cut differ by {worst}"
+        );
         // And the profile is the kernel-smoothed step: half the depth on the plane.
         let near: Vec<f32> = samples
             .iter()

@@ -140,12 +140,46 @@ fn phases(n: usize, gamma: i32) -> usize {
 }
 
 impl DiscreteNilMap {
+    /// The number of stored values (f64) of a map of a texture with `dims` samples, patch order
+    /// `order` (M), levels `0..=gamma_max` (`None`: the natural `⌈log₂ max(n)⌉ + 1`) and
+    /// `channels` channels: `Σ_γ Π_axes phases(n, γ) · M³ · channels`, what [`Self::build`]
+    /// checks against [`DiscreteNilSettings::max_values`]. Odd sizes keep every phase at every
+    /// level, so a texture padded to even sizes needs far fewer.
+    pub fn values_needed_for(
+        dims: [usize; 3],
+        order: usize,
+        gamma_max: Option<i32>,
+        channels: usize,
+    ) -> u128 {
+        let natural = dims
+            .iter()
+            .map(|&n| (n as f64).log2().ceil() as i32)
+            .max()
+            .unwrap_or(0)
+            + 1;
+        Self::values_needed(
+            dims,
+            order,
+            gamma_max.unwrap_or(natural).clamp(0, 30),
+            channels,
+        )
+    }
+
+    fn values_needed(dims: [usize; 3], m: usize, gamma_max: i32, channels: usize) -> u128 {
+        let m3 = (m * m * m) as u128;
+        (0..=gamma_max)
+            .map(|g| {
+                let cells: u128 = dims.iter().map(|&n| phases(n, g) as u128).product();
+                cells * m3 * channels as u128
+            })
+            .sum()
+    }
+
     /// Builds the pyramid (thesis Table 5.9: `O(M³ x³ log x)`).
     pub fn build(texture: &DiscreteTexture, settings: &DiscreteNilSettings) -> Result<Self> {
         let start = Instant::now();
         let basis = PatchBasis::new(settings.order)?;
         let m = basis.order();
-        let m3 = m * m * m;
         let dims = texture.dims();
         let natural = dims
             .iter()
@@ -162,11 +196,7 @@ impl DiscreteNilMap {
             ));
         }
         let channels = settings.transfer.map_or(1, |t| t.len());
-        let mut total: u128 = 0;
-        for g in 0..=gamma_max {
-            let cells: u128 = dims.iter().map(|&n| phases(n, g) as u128).product();
-            total += cells * m3 as u128 * channels as u128;
-        }
+        let total = Self::values_needed(dims, m, gamma_max, channels);
         if total > settings.max_values as u128 {
             return Err(FilterError::TooLarge {
                 what: "NIL map values".into(),

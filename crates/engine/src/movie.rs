@@ -1,0 +1,633 @@
+//! Camera paths for movies: turntables about an axis, and keyframed flights interpolated
+//! smoothly. A movie is many [`crate::RenderRequest`]s through one [`crate::Renderer`], each with
+//! an explicit camera from here, so frames reuse the classification and splat list.
+//!
+//! Interpolation between keyframes (times in seconds):
+//! - orientation: the camera frame's unit quaternions (consecutive ones in the same hemisphere,
+//!   i.e. the shorter arc; Shoemake 1985, *Animating rotation with quaternion curves*) through the
+//!   spline below component-wise, renormalised: continuous angular velocity, unlike piecewise
+//!   slerp, and exact at the keys;
+//! - focal point: a Catmull–Rom spline with non-uniform knots (tangent
+//!   `(p₍ᵢ₊₁₎ − p₍ᵢ₋₁₎)/(t₍ᵢ₊₁₎ − t₍ᵢ₋₁₎)`, one-sided at the ends), evaluated in cubic Hermite form;
+//! - distance from the focal point and `parallel_scale`: the same spline on their logarithms, so
+//!   zooms are smooth in ratio and stay positive; `view_angle` on its value;
+//! - transfer functions: linearly, point by point after resampling both onto the union of their
+//!   control-point positions (colours, opacities and gradient opacities; shading coefficients
+//!   linearly).
+//!
+//! World frame and units as everywhere in volsplat (VTK's: world units, degrees).
+
+use crate::error::{EngineError, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use volsplat_core::glam::{DMat3, DQuat, DVec3};
+use volsplat_core::{Camera, Orbit, TransferFunction};
+
+/// The axis of a turntable.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TurnAxis {
+    /// The camera's view-up vector (a turntable in VTK's azimuth sense).
+    ViewUp,
+    /// A direction in world coordinates (LPS for medical volumes: +x left, +y posterior,
+    /// +z superior); need not be unit length, must not be zero.
+    World(DVec3),
+}
+
+/// Rotates `camera` (eye and view-up) by `degrees` about `axis` through its focal point,
+/// right-handed: for `axis` = view-up this is VTK's `Azimuth(degrees)`.
+pub fn rotate_camera(camera: &Camera, axis: DVec3, degrees: f64) -> Camera {
+    let mut c = camera.clone();
+    if degrees == 0.0 {
+        return c;
+    }
+    let rot = DMat3::from_axis_angle(axis.normalize(), degrees.to_radians());
+    let fp = DVec3::from(c.focal_point);
+    c.position = (fp + rot * (DVec3::from(c.position) - fp)).to_array();
+    c.view_up = (rot * DVec3::from(c.view_up)).to_array();
+    c
+}
+
+/// The cameras of a turntable of `frames` frames starting at `base`: frame `i` is `base` turned
+/// by `i·degrees/frames` about `axis` when `degrees` is a whole number of turns (the loop closes
+/// without repeating frame 0), else by `i·degrees/(frames − 1)` (a sweep that ends at
+/// `degrees`). Frame 0 is `base` exactly.
+pub fn turntable(
+    base: &Camera,
+    axis: TurnAxis,
+    degrees: f64,
+    frames: usize,
+) -> Result<Vec<Camera>> {
+    if frames == 0 {
+        return Err(EngineError::request(
+            "frames",
+            "a movie needs at least one frame",
+        ));
+    }
+    if !degrees.is_finite() {
+        return Err(EngineError::request(
+            "degrees",
+            format!("the sweep must be a finite angle, got {degrees}"),
+        ));
+    }
+    let axis = match axis {
+        TurnAxis::ViewUp => DVec3::from(base.view_up),
+        TurnAxis::World(a) => a,
+    };
+    if !(axis.is_finite() && axis.length() > 1e-12) {
+        return Err(EngineError::request(
+            "axis",
+            format!("the turntable axis must be a non-zero direction, got {axis:?}"),
+        ));
+    }
+    let turns = degrees / 360.0;
+    let closed = degrees != 0.0 && (turns - turns.round()).abs() < 1e-9;
+    let step = if closed || frames == 1 {
+        degrees / frames as f64
+    } else {
+        degrees / (frames - 1) as f64
+    };
+    Ok((0..frames)
+        .map(|i| rotate_camera(base, axis, step * i as f64))
+        .collect())
+}
+
+/// One keyframe of a camera flight.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Keyframe {
+    /// Time in seconds from the start of the movie (≥ 0, strictly increasing over the file).
+    pub time: f64,
+    /// The camera at this time (VTK camera-file object). Default: the movie's base camera (the
+    /// render flags' camera).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<Camera>,
+    /// A view change applied to `camera` (or the base camera): azimuth, elevation, roll, zoom,
+    /// dolly, as `render`'s flags.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub orbit: Option<Orbit>,
+    /// The transfer function at this time (VTK transfer-function object). Keyframes without one
+    /// use the movie's transfer function.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transfer_function: Option<TransferFunction>,
+}
+
+/// A keyframe file: `{"fps": 24, "keyframes": [{"time": 0, "orbit": {...}}, ...]}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KeyframeFile {
+    /// Frames per second (default: the command's `--fps`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    /// At least two keyframes in increasing time.
+    pub keyframes: Vec<Keyframe>,
+}
+
+impl KeyframeFile {
+    /// Reads a keyframe file (JSON, at most 16 MiB), naming the file and the field on error.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let scene_err = |message: String| EngineError::SceneFile {
+            path: path.to_path_buf(),
+            message,
+        };
+        let meta = std::fs::metadata(path).map_err(|e| scene_err(e.to_string()))?;
+        if meta.len() > volsplat_io::MAX_JSON_BYTES {
+            return Err(scene_err(format!(
+                "{} bytes; keyframe files are limited to {} bytes",
+                meta.len(),
+                volsplat_io::MAX_JSON_BYTES
+            )));
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| scene_err(e.to_string()))?;
+        let file: KeyframeFile =
+            serde_json::from_str(&text).map_err(|e| scene_err(e.to_string()))?;
+        file.check().map_err(|e| scene_err(e.to_string()))?;
+        Ok(file)
+    }
+
+    fn check(&self) -> Result<()> {
+        if self.keyframes.len() < 2 {
+            return Err(EngineError::request(
+                "keyframes",
+                format!(
+                    "a flight needs at least two keyframes, got {}",
+                    self.keyframes.len()
+                ),
+            ));
+        }
+        if let Some(f) = self.fps
+            && !(f.is_finite() && f > 0.0 && f <= 1000.0)
+        {
+            return Err(EngineError::request(
+                "fps",
+                format!("must be in (0, 1000], got {f}"),
+            ));
+        }
+        let mut last = f64::NEG_INFINITY;
+        for (i, k) in self.keyframes.iter().enumerate() {
+            if !(k.time.is_finite() && k.time >= 0.0 && k.time > last) {
+                return Err(EngineError::request(
+                    format!("keyframes[{i}].time"),
+                    format!(
+                        "times must be finite, ≥ 0 and increasing; got {} after {last}",
+                        k.time
+                    ),
+                ));
+            }
+            last = k.time;
+            if let Some(o) = &k.orbit {
+                o.validate().map_err(|e| {
+                    EngineError::request(format!("keyframes[{i}].orbit"), e.to_string())
+                })?;
+            }
+            if let Some(c) = &k.camera {
+                c.validate().map_err(|e| {
+                    EngineError::request(format!("keyframes[{i}].camera"), e.to_string())
+                })?;
+            }
+            if let Some(tf) = &k.transfer_function {
+                tf.clone().validate().map_err(|e| {
+                    EngineError::request(format!("keyframes[{i}].transfer_function"), e.to_string())
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Duration in seconds (first to last keyframe).
+    pub fn duration(&self) -> f64 {
+        match (self.keyframes.first(), self.keyframes.last()) {
+            (Some(a), Some(b)) => b.time - a.time,
+            _ => 0.0,
+        }
+    }
+}
+
+/// A camera reduced to what is interpolated.
+#[derive(Debug, Clone, Copy)]
+struct CamKey {
+    time: f64,
+    focal: DVec3,
+    log_distance: f64,
+    rotation: DQuat,
+    view_angle: f64,
+    log_parallel_scale: f64,
+}
+
+/// A smooth camera path through keyframed cameras (see the module docs).
+#[derive(Debug, Clone)]
+pub struct CameraPath {
+    keys: Vec<CamKey>,
+    parallel_projection: bool,
+}
+
+/// The rotation whose columns are the camera's right, up and backward (−forward) vectors.
+fn frame_rotation(c: &Camera) -> DQuat {
+    let f = c.frame();
+    DQuat::from_mat3(&DMat3::from_cols(f.right, f.up, -f.forward)).normalize()
+}
+
+impl CameraPath {
+    /// A path through `cameras` at `times` (seconds, increasing). Every camera must have the
+    /// same projection (a path cannot morph orthographic into perspective).
+    pub fn new(times: &[f64], cameras: &[Camera]) -> Result<Self> {
+        if times.len() != cameras.len() || cameras.is_empty() {
+            return Err(EngineError::request(
+                "keyframes",
+                "a camera path needs as many times as cameras, and at least one",
+            ));
+        }
+        let parallel = cameras[0].parallel_projection;
+        let mut keys: Vec<CamKey> = Vec::with_capacity(cameras.len());
+        for (i, (c, &t)) in cameras.iter().zip(times).enumerate() {
+            c.validate().map_err(|e| {
+                EngineError::request(format!("keyframes[{i}].camera"), e.to_string())
+            })?;
+            if c.parallel_projection != parallel {
+                return Err(EngineError::request(
+                    format!("keyframes[{i}].camera.parallel_projection"),
+                    "every keyframe must use the same projection as the first",
+                ));
+            }
+            let f = c.frame();
+            let mut rotation = frame_rotation(c);
+            // Shorter arc: keep consecutive quaternions in the same hemisphere.
+            if let Some(prev) = keys.last()
+                && prev.rotation.dot(rotation) < 0.0
+            {
+                rotation = -rotation;
+            }
+            keys.push(CamKey {
+                time: t,
+                focal: f.focal,
+                log_distance: (f.focal - f.eye).length().ln(),
+                rotation,
+                view_angle: c.view_angle,
+                log_parallel_scale: c.parallel_scale.ln(),
+            });
+        }
+        Ok(CameraPath {
+            keys,
+            parallel_projection: parallel,
+        })
+    }
+
+    /// The camera at time `t` (seconds; clamped to the keyframes' span). At a keyframe's time
+    /// the camera is that keyframe's (up to rounding).
+    pub fn sample(&self, t: f64) -> Camera {
+        let k = &self.keys;
+        let n = k.len();
+        let (i, u) = if n == 1 || t <= k[0].time {
+            (0, 0.0)
+        } else if t >= k[n - 1].time {
+            (n - 2, 1.0)
+        } else {
+            let i = k.windows(2).position(|w| t < w[1].time).unwrap_or(n - 2);
+            (i, (t - k[i].time) / (k[i + 1].time - k[i].time))
+        };
+        let j = (i + 1).min(n - 1);
+        // Cubic Hermite between keys i and j with Catmull–Rom tangents for non-uniform times.
+        let hermite = |get: &dyn Fn(&CamKey) -> [f64; 4]| -> [f64; 4] {
+            if i == j {
+                return get(&k[i]);
+            }
+            let tangent = |idx: usize| -> [f64; 4] {
+                let (a, b) = (idx.saturating_sub(1), (idx + 1).min(n - 1));
+                let (pa, pb) = (get(&k[a]), get(&k[b]));
+                let dt = k[b].time - k[a].time;
+                std::array::from_fn(|c| (pb[c] - pa[c]) / dt)
+            };
+            let h = k[j].time - k[i].time;
+            let (u2, u3) = (u * u, u * u * u);
+            let h00 = 2.0 * u3 - 3.0 * u2 + 1.0;
+            let h10 = u3 - 2.0 * u2 + u;
+            let h01 = -2.0 * u3 + 3.0 * u2;
+            let h11 = u3 - u2;
+            let (p0, p1, m0, m1) = (get(&k[i]), get(&k[j]), tangent(i), tangent(j));
+            std::array::from_fn(|c| {
+                p0[c] * h00 + m0[c] * (h10 * h) + p1[c] * h01 + m1[c] * (h11 * h)
+            })
+        };
+        let focal = hermite(&|c| [c.focal.x, c.focal.y, c.focal.z, 0.0]);
+        let focal = DVec3::new(focal[0], focal[1], focal[2]);
+        let scalars = hermite(&|c| [c.log_distance, c.view_angle, c.log_parallel_scale, 0.0]);
+        // Orientation: the same spline on the (hemisphere-aligned) quaternion components, then
+        // normalised — a rotation spline with continuous angular velocity that passes through
+        // every key exactly (piecewise slerp jumps in speed at the keys).
+        let q = hermite(&|c| c.rotation.to_array());
+        let rotation = DQuat::from_array(q).normalize();
+        let m = DMat3::from_quat(rotation);
+        let (up, back) = (m.col(1), m.col(2));
+        let distance = scalars[0].exp();
+        Camera {
+            position: (focal + back * distance).to_array(),
+            focal_point: focal.to_array(),
+            view_up: up.to_array(),
+            view_angle: scalars[1].clamp(1e-3, 179.0),
+            parallel_projection: self.parallel_projection,
+            parallel_scale: scalars[2].exp(),
+        }
+    }
+}
+
+/// Piecewise-linear rows resampled at `xs` (constant beyond the ends).
+fn resample<const M: usize>(rows: &[[f64; M]], xs: &[f64]) -> Vec<[f64; M]> {
+    xs.iter()
+        .map(|&x| volsplat_core::transfer::interpolate_rows(rows, x))
+        .collect()
+}
+
+fn union_x<const M: usize>(a: &[[f64; M]], b: &[[f64; M]]) -> Vec<f64> {
+    let mut xs: Vec<f64> = a.iter().chain(b).map(|r| r[0]).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    xs
+}
+
+fn lerp_rows<const M: usize>(a: &[[f64; M]], b: &[[f64; M]], u: f64) -> Vec<[f64; M]> {
+    let xs = union_x(a, b);
+    let (ra, rb) = (resample(a, &xs), resample(b, &xs));
+    ra.iter()
+        .zip(&rb)
+        .map(|(p, q)| {
+            let mut r = *p;
+            for c in 1..M {
+                r[c] = p[c] + (q[c] - p[c]) * u;
+            }
+            r
+        })
+        .collect()
+}
+
+/// The transfer function a fraction `u` ∈ [0, 1] of the way from `a` to `b` (see the module
+/// docs). `u = 0` gives `a`'s curves resampled (the same function), `u = 1` gives `b`'s.
+pub fn lerp_transfer_function(
+    a: &TransferFunction,
+    b: &TransferFunction,
+    u: f64,
+) -> TransferFunction {
+    let u = u.clamp(0.0, 1.0);
+    let mix = |x: f64, y: f64| x + (y - x) * u;
+    let gradient_opacity = match (&a.gradient_opacity, &b.gradient_opacity) {
+        (None, None) => None,
+        (ga, gb) => {
+            let one = vec![[0.0, 1.0]];
+            Some(lerp_rows(
+                ga.as_ref().unwrap_or(&one),
+                gb.as_ref().unwrap_or(&one),
+                u,
+            ))
+        }
+    };
+    TransferFunction {
+        color: lerp_rows(&a.color, &b.color, u),
+        scalar_opacity: lerp_rows(&a.scalar_opacity, &b.scalar_opacity, u),
+        gradient_opacity,
+        scalar_opacity_unit_distance: mix(
+            a.scalar_opacity_unit_distance,
+            b.scalar_opacity_unit_distance,
+        ),
+        shade: if u < 0.5 { a.shade } else { b.shade },
+        ambient: mix(a.ambient, b.ambient),
+        diffuse: mix(a.diffuse, b.diffuse),
+        specular: mix(a.specular, b.specular),
+        specular_power: mix(a.specular_power, b.specular_power),
+    }
+}
+
+/// One frame of a keyframed movie: its time, camera and transfer function (`None`: the movie's
+/// own).
+#[derive(Debug, Clone)]
+pub struct FlightFrame {
+    /// Seconds from the first keyframe.
+    pub time: f64,
+    /// The camera.
+    pub camera: Camera,
+    /// The transfer function, when the keyframes set one.
+    pub transfer_function: Option<TransferFunction>,
+}
+
+/// The frames of a keyframe file at `fps` frames per second: frame `n` at time
+/// `t₀ + n/fps`, up to the last keyframe; keyframe cameras default to `base` (then their orbit is
+/// applied), keyframe transfer functions to `base_tf`.
+pub fn flight(
+    file: &KeyframeFile,
+    base: &Camera,
+    base_tf: &TransferFunction,
+    fps: f64,
+) -> Result<Vec<FlightFrame>> {
+    file.check()?;
+    let fps = file.fps.unwrap_or(fps);
+    if !(fps.is_finite() && fps > 0.0 && fps <= 1000.0) {
+        return Err(EngineError::request(
+            "fps",
+            format!("must be in (0, 1000], got {fps}"),
+        ));
+    }
+    let mut cameras = Vec::with_capacity(file.keyframes.len());
+    for (i, k) in file.keyframes.iter().enumerate() {
+        let mut c = k.camera.clone().unwrap_or_else(|| base.clone());
+        if let Some(o) = &k.orbit {
+            o.apply(&mut c).map_err(|e| {
+                EngineError::request(format!("keyframes[{i}].orbit"), e.to_string())
+            })?;
+        }
+        cameras.push(c);
+    }
+    let times: Vec<f64> = file.keyframes.iter().map(|k| k.time).collect();
+    let path = CameraPath::new(&times, &cameras)?;
+    let any_tf = file.keyframes.iter().any(|k| k.transfer_function.is_some());
+    let tfs: Vec<&TransferFunction> = file
+        .keyframes
+        .iter()
+        .map(|k| k.transfer_function.as_ref().unwrap_or(base_tf))
+        .collect();
+    let t0 = times[0];
+    let count = ((file.duration() * fps) + 1e-9).floor() as usize + 1;
+    if count > 1_000_000 {
+        return Err(EngineError::request(
+            "keyframes",
+            format!("{count} frames at {fps} fps; at most 1 000 000"),
+        ));
+    }
+    Ok((0..count)
+        .map(|n| {
+            let t = t0 + n as f64 / fps;
+            // Keyframe times land exactly on their keyframe camera.
+            let camera = match times.iter().position(|&kt| kt == t) {
+                Some(i) => cameras[i].clone(),
+                None => path.sample(t),
+            };
+            let transfer_function = any_tf.then(|| {
+                let i = times
+                    .windows(2)
+                    .position(|w| t < w[1])
+                    .unwrap_or(times.len() - 2);
+                let u = ((t - times[i]) / (times[i + 1] - times[i])).clamp(0.0, 1.0);
+                if u == 0.0 {
+                    tfs[i].clone()
+                } else {
+                    lerp_transfer_function(tfs[i], tfs[i + 1], u)
+                }
+            });
+            FlightFrame {
+                time: t - t0,
+                camera,
+                transfer_function,
+            }
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam() -> Camera {
+        Camera::reset_to_bounds(DVec3::splat(-1.0), DVec3::splat(1.0), false)
+    }
+
+    #[test]
+    fn a_turntable_about_view_up_is_vtks_azimuth_and_closes_the_loop() {
+        let base = cam();
+        let frames = turntable(&base, TurnAxis::ViewUp, 360.0, 8).unwrap();
+        assert_eq!(frames.len(), 8);
+        assert_eq!(frames[0], base);
+        for (i, f) in frames.iter().enumerate() {
+            let mut a = base.clone();
+            a.azimuth(45.0 * i as f64);
+            for c in 0..3 {
+                assert!((f.position[c] - a.position[c]).abs() < 1e-9, "{i}");
+            }
+        }
+        // A partial sweep ends at its angle.
+        let sweep = turntable(&base, TurnAxis::ViewUp, 90.0, 4).unwrap();
+        let mut end = base.clone();
+        end.azimuth(90.0);
+        let last = sweep.last().unwrap();
+        assert!((DVec3::from(last.position) - DVec3::from(end.position)).length() < 1e-9);
+    }
+
+    #[test]
+    fn a_turntable_about_a_world_axis_keeps_the_distance_and_turns_view_up() {
+        let base = cam();
+        let frames = turntable(&base, TurnAxis::World(DVec3::X), 360.0, 4).unwrap();
+        let d0 = (DVec3::from(base.position) - DVec3::from(base.focal_point)).length();
+        for f in &frames {
+            let d = (DVec3::from(f.position) - DVec3::from(f.focal_point)).length();
+            assert!((d - d0).abs() < 1e-9);
+            // view-up stays perpendicular to the view direction.
+            let fr = f.frame();
+            assert!(fr.forward.dot(DVec3::from(f.view_up)).abs() < 1e-9);
+        }
+        // A quarter turn about +x takes the eye from +z to −y (right-handed).
+        let eye = DVec3::from(frames[1].position) - DVec3::from(frames[1].focal_point);
+        assert!(eye.y < -0.99 * d0, "{eye:?}");
+        assert!(turntable(&base, TurnAxis::World(DVec3::ZERO), 360.0, 4).is_err());
+        assert!(turntable(&base, TurnAxis::ViewUp, 360.0, 0).is_err());
+    }
+
+    #[test]
+    fn a_camera_path_passes_through_its_keys_and_moves_smoothly() {
+        let a = cam();
+        let mut b = a.clone();
+        b.azimuth(90.0);
+        b.zoom(2.0);
+        let mut c = b.clone();
+        c.elevation(40.0);
+        c.orthogonalize_view_up();
+        let path = CameraPath::new(&[0.0, 1.0, 3.0], &[a.clone(), b.clone(), c.clone()]).unwrap();
+        for (t, want) in [(0.0, &a), (1.0, &b), (3.0, &c)] {
+            let got = path.sample(t);
+            let d = DVec3::from(got.position) - DVec3::from(want.position);
+            assert!(d.length() < 1e-9, "t = {t}: {d:?}");
+            assert!((got.view_angle - want.view_angle).abs() < 1e-9);
+        }
+        // Smooth: the eye's step between samples changes little from one step to the next.
+        let eyes: Vec<DVec3> = (0..=300)
+            .map(|n| DVec3::from(path.sample(n as f64 * 0.01).position))
+            .collect();
+        let steps: Vec<DVec3> = eyes.windows(2).map(|w| w[1] - w[0]).collect();
+        let worst = steps
+            .windows(2)
+            .map(|w| (w[1] - w[0]).length())
+            .fold(0.0, f64::max);
+        let typical = steps.iter().map(|s| s.length()).fold(0.0, f64::max);
+        assert!(worst < 0.2 * typical, "{worst} vs {typical}");
+        // The distance to the focal point stays between the keys' (no overshoot for equal keys).
+        let d = |c: &Camera| (DVec3::from(c.position) - DVec3::from(c.focal_point)).length();
+        for n in 0..=30 {
+            let s = path.sample(n as f64 * 0.1);
+            assert!((d(&s) - d(&a)).abs() < 1e-6, "{}", d(&s));
+        }
+    }
+
+    #[test]
+    fn transfer_functions_blend_point_by_point() {
+        let mut a = TransferFunction::ramp(0.0, 100.0, 1.0);
+        a.scalar_opacity = vec![[0.0, 0.0], [100.0, 1.0]];
+        let mut b = a.clone();
+        b.scalar_opacity = vec![[50.0, 0.0], [60.0, 0.5]];
+        let m = lerp_transfer_function(&a, &b, 0.5);
+        for x in [0.0, 25.0, 50.0, 55.0, 60.0, 80.0, 100.0] {
+            let want = 0.5 * (a.opacity_at(x) + b.opacity_at(x));
+            assert!((m.opacity_at(x) - want).abs() < 1e-12, "{x}");
+        }
+        let e = lerp_transfer_function(&a, &b, 0.0);
+        for x in [0.0, 33.0, 100.0] {
+            assert_eq!(e.opacity_at(x), a.opacity_at(x));
+        }
+    }
+
+    #[test]
+    fn keyframe_files_are_checked() {
+        let bad = KeyframeFile {
+            fps: None,
+            keyframes: vec![
+                Keyframe {
+                    time: 1.0,
+                    camera: None,
+                    orbit: None,
+                    transfer_function: None,
+                },
+                Keyframe {
+                    time: 0.5,
+                    camera: None,
+                    orbit: None,
+                    transfer_function: None,
+                },
+            ],
+        };
+        let e = bad.check().unwrap_err().to_string();
+        assert!(e.contains("keyframes[1].time"), "{e}");
+        let ok = KeyframeFile {
+            fps: Some(10.0),
+            keyframes: vec![
+                Keyframe {
+                    time: 0.0,
+                    camera: None,
+                    orbit: None,
+                    transfer_function: None,
+                },
+                Keyframe {
+                    time: 2.0,
+                    camera: None,
+                    orbit: Some(Orbit {
+                        azimuth: Some(90.0),
+                        ..Orbit::default()
+                    }),
+                    transfer_function: None,
+                },
+            ],
+        };
+        let base = cam();
+        let frames = flight(&ok, &base, &TransferFunction::ramp(0.0, 100.0, 1.0), 24.0).unwrap();
+        assert_eq!(frames.len(), 21);
+        assert_eq!(frames[0].camera, base);
+        let mut end = base.clone();
+        end.azimuth(90.0);
+        let last = &frames[20].camera;
+        assert!((DVec3::from(last.position) - DVec3::from(end.position)).length() < 1e-9);
+        assert!(frames.iter().all(|f| f.transfer_function.is_none()));
+    }
+}

@@ -1,0 +1,101 @@
+//! Writing an [`Output`] as the command line writes `-o FILE`: one rule for every front end (the
+//! CLI, the Python package), so their files cannot drift apart.
+//!
+//! By extension: `.png` holds the premultiplied linear image composited over a background
+//! (decision 0012: linear code values unless `srgb`), or — for X-ray always, and for MIP/MinIP when
+//! a grey window is given — the scalar values through a grey window (X-ray without a window:
+//! 0 to its brightest pixel); `.npy` holds the float32 `H×W×4` image or the `H×W` values.
+
+use crate::error::{EngineError, Result};
+use crate::renderer::Output;
+use crate::request::Mode;
+use std::path::Path;
+use volsplat_core::{Image, ScalarImage};
+use volsplat_io::PngSettings;
+
+/// The image extensions [`Output::write`] knows.
+pub const OUTPUT_EXTENSIONS: &[&str] = &["png", "npy"];
+
+/// How an [`Output`] becomes a file.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct WriteOptions {
+    /// PNG bit depth, encoding (linear or sRGB) and background.
+    pub png: PngSettings,
+    /// Grey window `(lo, hi)` for MIP, MinIP and X-ray values: `lo` → black, `hi` → white, in the
+    /// values' units (data units; X-ray: data units × world units).
+    pub window: Option<(f32, f32)>,
+}
+
+/// Whether a render in `mode` is written as its scalar values (when it has them) rather than
+/// its RGBA image: X-ray always, MIP and MinIP when `window` is given.
+pub fn writes_values(has_values: bool, mode: Mode, window: Option<(f32, f32)>) -> bool {
+    has_values
+        && match mode {
+            Mode::Xray => true,
+            Mode::Mip | Mode::Minip => window.is_some(),
+            Mode::Composite => false,
+        }
+}
+
+impl Output {
+    /// Writes the image (or the values) of a render in `mode` to `path`: [`write_image`].
+    pub fn write(&self, path: &Path, mode: Mode, options: &WriteOptions) -> Result<()> {
+        write_image(path, &self.image, self.values.as_ref(), mode, options)
+    }
+}
+
+/// Writes `image` (or `values`, see [`writes_values`]) of a render in `mode` to `path`,
+/// atomically; see the module docs. Errors name the file: an unknown extension, a window that is
+/// not finite with `lo < hi`, a window on a composite image, or the writer's own errors.
+pub fn write_image(
+    path: &Path,
+    image: &Image,
+    values: Option<&ScalarImage>,
+    mode: Mode,
+    options: &WriteOptions,
+) -> Result<()> {
+    let bad = |message: String| EngineError::request("output", message);
+    if let Some((lo, hi)) = options.window {
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(bad(format!(
+                "{}: a grey window needs finite values with lo < hi, got {lo}:{hi}",
+                path.display()
+            )));
+        }
+        if mode == Mode::Composite {
+            return Err(bad(format!(
+                "{}: a grey window applies to MIP, MinIP and X-ray; composite images take their \
+                 colours from the transfer function",
+                path.display()
+            )));
+        }
+    }
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let grey = writes_values(values.is_some(), mode, options.window);
+    match (ext.as_deref(), grey, values) {
+        (Some("png"), true, Some(values)) => {
+            let (lo, hi) = options.window.unwrap_or_else(|| {
+                let max = values
+                    .values()
+                    .iter()
+                    .filter(|v| v.is_finite())
+                    .fold(0.0f32, |m, &v| m.max(v));
+                (0.0, max.max(f32::MIN_POSITIVE))
+            });
+            volsplat_io::write_png_gray(path, values, lo, hi, options.png.bits)?
+        }
+        (Some("png"), _, _) => volsplat_io::write_png(path, image, &options.png)?,
+        (Some("npy"), true, Some(values)) => volsplat_io::write_npy_scalar(path, values)?,
+        (Some("npy"), _, _) => volsplat_io::write_npy_rgba(path, image)?,
+        _ => {
+            return Err(bad(format!(
+                "{}: unsupported extension; use .png or .npy",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
