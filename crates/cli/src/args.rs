@@ -25,7 +25,7 @@ pub enum Command {
     /// List the built-in transfer-function presets, one line each.
     Presets,
     /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, keeping
-    /// its geometry (world frame LPS).
+    /// its geometry (world frame LPS), or to .npy (samples only, shape z, y, x).
     Convert(ConvertArgs),
     /// Write a built-in phantom as an NRRD file.
     Phantom(PhantomArgs),
@@ -516,7 +516,8 @@ pub struct InfoArgs {
 pub struct ConvertArgs {
     #[command(flatten)]
     pub input: InputArgs,
-    /// Output NRRD file (.nrrd, attached header; --gzip compresses the payload).
+    /// Output: .nrrd (attached header, geometry kept; --gzip compresses the payload) or .npy
+    /// (the samples in their own type, shape (z, y, x), no geometry).
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
     /// Gzip the payload.

@@ -579,10 +579,27 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
 
 /// `convert`: any readable volume to an attached-header NRRD, geometry kept.
 fn convert_cmd(a: ConvertArgs) -> Result<()> {
-    check_output_path(&a.output, "-o", &["nrrd"])?;
+    check_output_path(&a.output, "-o", &["nrrd", "npy"])?;
+    let npy = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    if npy && a.gzip {
+        bail!("--gzip applies to NRRD output; .npy files are not compressed");
+    }
     let (label, loaded) = load_info(&a.input)?;
-    volsplat::io::write_nrrd(&a.output, &loaded.volume, a.gzip)
-        .with_context(|| format!("writing {}", a.output.display()))?;
+    if npy {
+        volsplat::io::write_npy_volume(&a.output, &loaded.volume)
+    } else {
+        volsplat::io::write_nrrd(&a.output, &loaded.volume, a.gzip)
+    }
+    .with_context(|| format!("writing {}", a.output.display()))?;
+    if npy && !a.quiet {
+        eprintln!(
+            "note: .npy keeps the samples, shape (z, y, x), but not the geometry (spacing, origin, \
+             direction); NRRD keeps both"
+        );
+    }
     if !a.quiet {
         for n in &loaded.notes {
             eprintln!("note: {n}");

@@ -127,20 +127,19 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
     let label = req.scene.volume.label();
     let camera = renderer.camera(&req).map_err(explain)?;
     let tf = renderer.transfer_function(&req).map_err(explain)?;
-    // Every frame: its camera, and its transfer function if the keyframes change it.
-    let frames: Vec<(
-        volsplat::core::Camera,
-        Option<volsplat::core::TransferFunction>,
-    )> = match &keyframes {
-        Some(k) => flight(k, &camera, &tf, a.fps)
-            .map_err(explain)?
-            .into_iter()
-            .map(|f| (f.camera, f.transfer_function))
-            .collect(),
+    // Every frame: its camera, and its transfer function and clipping if the keyframes change
+    // them.
+    let frames: Vec<volsplat::movie::FlightFrame> = match &keyframes {
+        Some(k) => flight(k, &camera, &tf, &req.scene.clipping, a.fps).map_err(explain)?,
         None => turntable(&camera, axis, a.degrees, a.frames)
             .map_err(explain)?
             .into_iter()
-            .map(|c| (c, None))
+            .map(|camera| volsplat::movie::FlightFrame {
+                time: 0.0,
+                camera,
+                transfer_function: None,
+                clipping: None,
+            })
             .collect(),
     };
     let fps = keyframes.as_ref().and_then(|k| k.fps).unwrap_or(a.fps);
@@ -159,7 +158,11 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
     let mut times = Vec::with_capacity(frames.len());
     let mut last_stats = None;
     let mut first_ms = 0.0;
-    for (n, (cam, frame_tf)) in frames.into_iter().enumerate() {
+    for (n, frame) in frames.into_iter().enumerate() {
+        let (cam, frame_tf) = (frame.camera, frame.transfer_function);
+        if let Some(c) = frame.clipping {
+            req.scene.clipping = c;
+        }
         req.scene.camera = CameraSpec::Explicit {
             camera: cam,
             orbit: volsplat::core::Orbit::default(),

@@ -302,7 +302,7 @@ pub fn build_request(
         s.transfer_function = if name == "auto" {
             TransferSpec::Auto
         } else {
-            TransferSpec::Preset(name.clone())
+            TransferSpec::Preset(name.parse()?)
         };
     }
     if set("light") && (fresh || !o.light.is_empty()) {

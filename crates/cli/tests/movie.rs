@@ -141,3 +141,53 @@ fn video_without_ffmpeg_is_a_clear_error() {
     assert!(e.contains("ffmpeg") && e.contains("PATH"), "{e}");
     assert!(!out.exists());
 }
+
+/// Keyframes move clipping planes: a plane that keeps everything at t = 0 and nothing at t = 1
+/// gives the plain render first and an empty frame last; keyframes whose clippings differ in
+/// kind are refused before rendering, naming the keyframe.
+#[test]
+fn keyframes_move_clipping_planes() {
+    let dir = tempfile::tempdir().unwrap();
+    let keys = dir.path().join("keys.json");
+    std::fs::write(
+        &keys,
+        r#"{ "keyframes": [
+              { "time": 0, "clipping": { "planes": [ { "normal": [1, 0, 0], "offset": 1000 } ] } },
+              { "time": 1, "clipping": { "planes": [ { "normal": [1, 0, 0], "offset": -1000 } ] } } ] }"#,
+    )
+    .unwrap();
+    let out = dir.path().join("c_%d.png");
+    let o = run(
+        "movie",
+        &["--keyframes", keys.to_str().unwrap(), "--fps", "2"],
+        &out,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let still = dir.path().join("still.png");
+    assert!(run("render", &[], &still).status.success());
+    assert_eq!(
+        std::fs::read(dir.path().join("c_0.png")).unwrap(),
+        std::fs::read(&still).unwrap()
+    );
+    let last = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(dir.path().join("c_2.png")).unwrap(),
+    ));
+    let mut reader = last.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut buf).unwrap();
+    assert!(buf.iter().all(|&b| b == 0), "the last frame keeps nothing");
+
+    std::fs::write(
+        &keys,
+        r#"{ "keyframes": [ { "time": 0 },
+              { "time": 1, "clipping": { "planes": [ { "normal": [1, 0, 0], "offset": 0 } ] } } ] }"#,
+    )
+    .unwrap();
+    let o = run("movie", &["--keyframes", keys.to_str().unwrap()], &out);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("keyframes[1].clipping"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -412,6 +412,21 @@ impl fmt::Display for Preset {
     }
 }
 
+/// Serialised as its name ([`Preset::name`]), read back with [`Preset::from_str`] (any case,
+/// aliases accepted), so scene files hold `"preset": "CT-Bone"`.
+impl serde::Serialize for Preset {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Preset {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        name.parse().map_err(serde::de::Error::custom)
+    }
+}
+
 impl FromStr for Preset {
     type Err = CoreError;
 

@@ -18,6 +18,7 @@
 //! World frame and units as everywhere in volsplat (VTK's: world units, degrees).
 
 use crate::error::{EngineError, Result};
+use crate::scene::{Clipping, CropBox, PlaneSpec};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use volsplat_core::glam::{DMat3, DQuat, DVec3};
@@ -109,6 +110,12 @@ pub struct Keyframe {
     /// use the movie's transfer function.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transfer_function: Option<TransferFunction>,
+    /// Cropping and clipping at this time (the scene-file object). Keyframes without one use the
+    /// movie's. Between keyframes the box corners and plane coefficients move linearly; the two
+    /// keyframes must have the same kind of clipping (a box in the same units or none, and the
+    /// same number of planes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clipping: Option<Clipping>,
 }
 
 /// A keyframe file: `{"fps": 24, "keyframes": [{"time": 0, "orbit": {...}}, ...]}`.
@@ -405,6 +412,50 @@ pub struct FlightFrame {
     pub camera: Camera,
     /// The transfer function, when the keyframes set one.
     pub transfer_function: Option<TransferFunction>,
+    /// The clipping, when the keyframes set one.
+    pub clipping: Option<Clipping>,
+}
+
+/// The clipping a fraction `u` ∈ [0, 1] of the way from `a` to `b`: corners and plane
+/// coefficients linearly. Errors (naming `field`) if the two differ in kind.
+pub fn lerp_clipping(a: &Clipping, b: &Clipping, u: f64, field: &str) -> Result<Clipping> {
+    let mix = |x: f64, y: f64| x + (y - x) * u;
+    let mix3 = |x: [f64; 3], y: [f64; 3]| [mix(x[0], y[0]), mix(x[1], y[1]), mix(x[2], y[2])];
+    let crop = match (&a.crop, &b.crop) {
+        (None, None) => None,
+        (Some(p), Some(q)) if p.units == q.units => Some(CropBox {
+            min: mix3(p.min, q.min),
+            max: mix3(p.max, q.max),
+            units: p.units,
+        }),
+        _ => {
+            return Err(EngineError::request(
+                field,
+                "consecutive keyframes need the same kind of crop box (both none, or both in \
+                 the same units) to move between them",
+            ));
+        }
+    };
+    if a.planes.len() != b.planes.len() {
+        return Err(EngineError::request(
+            field,
+            format!(
+                "consecutive keyframes need the same number of clipping planes ({} and {})",
+                a.planes.len(),
+                b.planes.len()
+            ),
+        ));
+    }
+    let planes = a
+        .planes
+        .iter()
+        .zip(&b.planes)
+        .map(|(p, q)| PlaneSpec {
+            normal: mix3(p.normal, q.normal),
+            offset: mix(p.offset, q.offset),
+        })
+        .collect();
+    Ok(Clipping { crop, planes })
 }
 
 /// The frames of a keyframe file at `fps` frames per second: frame `n` at time
@@ -414,6 +465,7 @@ pub fn flight(
     file: &KeyframeFile,
     base: &Camera,
     base_tf: &TransferFunction,
+    base_clipping: &Clipping,
     fps: f64,
 ) -> Result<Vec<FlightFrame>> {
     file.check()?;
@@ -442,6 +494,23 @@ pub fn flight(
         .iter()
         .map(|k| k.transfer_function.as_ref().unwrap_or(base_tf))
         .collect();
+    let any_clip = file.keyframes.iter().any(|k| k.clipping.is_some());
+    let clips: Vec<&Clipping> = file
+        .keyframes
+        .iter()
+        .map(|k| k.clipping.as_ref().unwrap_or(base_clipping))
+        .collect();
+    if any_clip {
+        // Check every segment once, before rendering anything.
+        for i in 0..clips.len() - 1 {
+            lerp_clipping(
+                clips[i],
+                clips[i + 1],
+                0.5,
+                &format!("keyframes[{}].clipping", i + 1),
+            )?;
+        }
+    }
     let t0 = times[0];
     let count = ((file.duration() * fps) + 1e-9).floor() as usize + 1;
     if count > 1_000_000 {
@@ -470,10 +539,24 @@ pub fn flight(
                     lerp_transfer_function(tfs[i], tfs[i + 1], u)
                 }
             });
+            let clipping = if any_clip {
+                let i = times
+                    .windows(2)
+                    .position(|w| t < w[1])
+                    .unwrap_or(times.len() - 2);
+                let u = ((t - times[i]) / (times[i + 1] - times[i])).clamp(0.0, 1.0);
+                // Checked above: consecutive clippings are of one kind.
+                lerp_clipping(clips[i], clips[i + 1], u, "keyframes")
+                    .ok()
+                    .or_else(|| Some(clips[i].clone()))
+            } else {
+                None
+            };
             FlightFrame {
                 time: t - t0,
                 camera,
                 transfer_function,
+                clipping,
             }
         })
         .collect())
@@ -589,12 +672,14 @@ mod tests {
                     camera: None,
                     orbit: None,
                     transfer_function: None,
+                    clipping: None,
                 },
                 Keyframe {
                     time: 0.5,
                     camera: None,
                     orbit: None,
                     transfer_function: None,
+                    clipping: None,
                 },
             ],
         };
@@ -608,6 +693,7 @@ mod tests {
                     camera: None,
                     orbit: None,
                     transfer_function: None,
+                    clipping: None,
                 },
                 Keyframe {
                     time: 2.0,
@@ -617,11 +703,19 @@ mod tests {
                         ..Orbit::default()
                     }),
                     transfer_function: None,
+                    clipping: None,
                 },
             ],
         };
         let base = cam();
-        let frames = flight(&ok, &base, &TransferFunction::ramp(0.0, 100.0, 1.0), 24.0).unwrap();
+        let frames = flight(
+            &ok,
+            &base,
+            &TransferFunction::ramp(0.0, 100.0, 1.0),
+            &Clipping::default(),
+            24.0,
+        )
+        .unwrap();
         assert_eq!(frames.len(), 21);
         assert_eq!(frames[0].camera, base);
         let mut end = base.clone();

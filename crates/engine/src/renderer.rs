@@ -771,10 +771,7 @@ fn resolve_tf(
     let (mut warning, mut note) = (None, None);
     let mut tf = match &request.scene.transfer_function {
         TransferSpec::Function(tf) => tf.clone(),
-        TransferSpec::Preset(name) => {
-            let preset: Preset = name.parse().map_err(|e: volsplat_core::CoreError| {
-                EngineError::request("scene.transfer_function.preset", e.to_string())
-            })?;
+        TransferSpec::Preset(preset) => {
             warning = preset.range_warning(range);
             preset.transfer_function(range)
         }

@@ -9,7 +9,9 @@ use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::sync::Arc;
 use volsplat_core::phantom::{self, EllipsoidPhantom, GaussianBlobs, MarschnerLobb};
-use volsplat_core::{AnyVolume, Camera, Light, Orbit, ScalarType, TransferFunction, scenes};
+use volsplat_core::{
+    AnyVolume, Camera, Light, Orbit, Preset, ScalarType, TransferFunction, scenes,
+};
 
 /// Built-in phantoms (world units as each phantom defines them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -371,7 +373,7 @@ pub enum TransferSpec {
     Auto,
     /// A built-in preset by name ([`volsplat_core::Preset`]: 3D Slicer's `CT-Bone`, `MR-Default`,
     /// … in absolute data units, and volsplat's `ct-skin` and `ramp`; case-insensitive).
-    Preset(String),
+    Preset(Preset),
     /// A transfer function in the transfer-function-file format (values in data units).
     Function(TransferFunction),
 }

@@ -98,7 +98,7 @@ fn a_second_frame_with_a_new_camera_reuses_volume_tables_and_list() {
         // The cached second frame equals a fresh render of the same request.
         let fresh = Renderer::new().render(&req, &mut |_| true).unwrap();
         assert_eq!(bits(&second), bits(&fresh), "{renderer:?}");
-        req.scene.transfer_function = TransferSpec::Preset("ct-bone".into());
+        req.scene.transfer_function = TransferSpec::Preset("ct-bone".parse().unwrap());
         let third = r.render(&req, &mut |_| true).unwrap();
         assert_eq!(third.stats.load_ms, 0.0);
         assert!(third.stats.prepare_ms > 0.0);

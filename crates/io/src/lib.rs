@@ -101,7 +101,9 @@ pub use limits::Limits;
 pub use metaimage::{read_metaimage, read_metaimage_with};
 pub use movie::{MovieFormat, MovieSettings, MovieWriter};
 pub use nifti::{read_nifti, read_nifti_with};
-pub use npy::{read_npy_f32, read_npy_f32_with, write_npy_rgba, write_npy_scalar};
+pub use npy::{
+    read_npy_f32, read_npy_f32_with, write_npy_rgba, write_npy_scalar, write_npy_volume,
+};
 pub use nrrd::{read_nrrd, read_nrrd_with, write_nrrd};
 pub use raw::{RawSpec, read_raw, read_raw_with};
 pub use read::{

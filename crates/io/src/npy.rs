@@ -14,13 +14,18 @@ const MAGIC: &[u8; 6] = b"\x93NUMPY";
 
 /// The version-1.0 header (magic, version, length, dictionary, padding) for `<f4` data of `shape`.
 fn header(shape: &[usize]) -> Vec<u8> {
+    header_typed(shape, "<f4")
+}
+
+/// The version-1.0 header for data of NumPy type `descr` (e.g. `|u1`, `<i2`, `<f4`) and `shape`.
+fn header_typed(shape: &[usize], descr: &str) -> Vec<u8> {
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
     let shape_str = if dims.len() == 1 {
         format!("({},)", dims[0])
     } else {
         format!("({})", dims.join(", "))
     };
-    let dict = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_str}, }}");
+    let dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_str}, }}");
     let unpadded = MAGIC.len() + 2 + 2 + dict.len() + 1;
     let pad = (64 - unpadded % 64) % 64;
     let header_len = dict.len() + pad + 1;
@@ -54,6 +59,36 @@ pub fn write_npy_rgba(path: impl AsRef<Path>, image: &Image) -> Result<()> {
         &[image.height(), image.width(), 4],
         image.pixels().iter().flatten().copied(),
     )
+}
+
+/// Writes a volume's samples as `.npy` in their own type (`|u1`, `|i1`, `<u2`, `<i2`, `<f4`),
+/// shape `(nz, ny, nx)` in C order — the (z, y, x) order of NumPy, SimpleITK and napari, with x
+/// fastest as in the volume. The geometry (spacing, origin, direction) is not stored: `.npy`
+/// has no place for it. Written atomically.
+pub fn write_npy_volume(path: impl AsRef<Path>, volume: &volsplat_core::AnyVolume) -> Result<()> {
+    use volsplat_core::AnyVolume as V;
+    let path = path.as_ref();
+    let [nx, ny, nz] = volume.grid().dims;
+    let shape = [nz, ny, nx];
+    let descr = match volume {
+        V::U8(_) => "|u1",
+        V::I8(_) => "|i1",
+        V::U16(_) => "<u2",
+        V::I16(_) => "<i2",
+        V::F32(_) => "<f4",
+    };
+    let head = header_typed(&shape, descr);
+    write_atomic(path, |w| {
+        w.write_all(&head).map_err(write_err(path))?;
+        let bytes: Vec<u8> = match volume {
+            V::U8(v) => v.data().to_vec(),
+            V::I8(v) => v.data().iter().map(|&x| x as u8).collect(),
+            V::U16(v) => v.data().iter().flat_map(|x| x.to_le_bytes()).collect(),
+            V::I16(v) => v.data().iter().flat_map(|x| x.to_le_bytes()).collect(),
+            V::F32(v) => v.data().iter().flat_map(|x| x.to_le_bytes()).collect(),
+        };
+        w.write_all(&bytes).map_err(write_err(path))
+    })
 }
 
 /// Writes a scalar image (e.g. X-ray line integrals, data units × world units) as `.npy`:
@@ -378,5 +413,41 @@ mod tests {
         std::fs::write(&p, &file).unwrap();
         let e = read_npy_f32(&p).unwrap_err();
         assert!(matches!(e, IoError::Truncated { .. }), "{e}");
+    }
+
+    /// Volumes are written in their own type, shape (z, y, x), x fastest: an f32 volume reads
+    /// back through the reader; an i16 volume's bytes follow its header.
+    #[test]
+    fn volumes_are_written_zyx_in_their_own_type() {
+        use volsplat_core::{AnyVolume, Grid, Volume};
+        let dir = tempfile::tempdir().unwrap();
+        let grid = Grid::with_dims([3, 2, 4]).unwrap();
+        let f: Vec<f32> = (0..24).map(|i| i as f32 * 0.5).collect();
+        let p = dir.path().join("f.npy");
+        write_npy_volume(
+            &p,
+            &AnyVolume::F32(Volume::new(grid.clone(), f.clone()).unwrap()),
+        )
+        .unwrap();
+        let (shape, values) = read_npy_f32(&p).unwrap();
+        assert_eq!(shape, vec![4, 2, 3]);
+        assert_eq!(values, f);
+        let i: Vec<i16> = (0..24).map(|v| v as i16 * -7).collect();
+        let p = dir.path().join("i.npy");
+        write_npy_volume(&p, &AnyVolume::I16(Volume::new(grid, i.clone()).unwrap())).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let start = 10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        assert_eq!(start % 64, 0);
+        let text = String::from_utf8_lossy(&bytes[..start]).to_string();
+        assert!(
+            text.contains("'<i2'") && text.contains("(4, 2, 3)"),
+            "{text}"
+        );
+        assert_eq!(bytes.len(), start + 48);
+        let back: Vec<i16> = bytes[start..]
+            .chunks(2)
+            .map(|c| i16::from_le_bytes([c[0], c[1]]))
+            .collect();
+        assert_eq!(back, i);
     }
 }
