@@ -26,7 +26,10 @@ pub fn aa_figures_cmd(a: AaFiguresArgs) -> Result<()> {
         frames: a.frames,
     };
     let pool = crate::commands::thread_pool(a.threads)?;
-    let written = pool.install(|| volsplat_studies::write_figures(&settings))?;
+    let bar = crate::progress::Bar::spinner("aa-figures", false);
+    let written = pool.install(|| volsplat_studies::write_figures(&settings));
+    bar.clear();
+    let written = written?;
     eprintln!("wrote {}", written.report.display());
     Ok(())
 }

@@ -740,8 +740,10 @@ fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
         TextureBenchSize::Thesis => TextureBenchSettings::thesis_size(),
     };
     let pool = thread_pool(a.threads)?;
-    let written =
-        pool.install(|| volsplat_studies::texture_bench::write_folder(&settings, &a.out))?;
+    let bar = crate::progress::Bar::spinner("texture-bench", false);
+    let written = pool.install(|| volsplat_studies::texture_bench::write_folder(&settings, &a.out));
+    bar.clear();
+    let written = written?;
     emit(&written.markdown)?;
     eprintln!(
         "wrote {} and {} images to {}",

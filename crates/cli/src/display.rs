@@ -135,7 +135,10 @@ pub fn display_bench_cmd(a: DisplayBenchArgs) -> Result<()> {
         },
     };
     let pool = crate::commands::thread_pool(a.threads)?;
-    let written = pool.install(|| volsplat_studies::display_bench::run(&settings))?;
+    let bar = crate::progress::Bar::spinner("display-bench", false);
+    let written = pool.install(|| volsplat_studies::display_bench::run(&settings));
+    bar.clear();
+    let written = written?;
     println!("{}", written.markdown);
     Ok(())
 }

@@ -189,7 +189,7 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
         }
         times.push(out.stats.render_ms);
         let image = match (&out.values, crate::commands::grey_window(&a.image)?) {
-            (Some(values), Some((lo, hi))) => grey_image(values, lo, hi),
+            (Some(values), Some((lo, hi))) => volsplat::windowed_image(values, lo, hi),
             _ => out.image.clone(),
         };
         writer
@@ -235,18 +235,4 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
         emit(&format!("{j}"))?;
     }
     Ok(())
-}
-
-/// MIP/MinIP/X-ray values through a grey window as an opaque grey image (NaN → black).
-fn grey_image(values: &volsplat::core::ScalarImage, lo: f32, hi: f32) -> volsplat::core::Image {
-    let mut img = volsplat::core::Image::new(values.width(), values.height());
-    for (p, &v) in img.pixels_mut().iter_mut().zip(values.values()) {
-        let g = if v.is_nan() {
-            0.0
-        } else {
-            ((v - lo) / (hi - lo)).clamp(0.0, 1.0)
-        };
-        *p = [g, g, g, 1.0];
-    }
-    img
 }

@@ -45,6 +45,20 @@ impl Bar {
         b
     }
 
+    /// A spinner with the elapsed time, for work that reports no fraction (the study reports).
+    pub fn spinner(label: &str, quiet: bool) -> Self {
+        if quiet || !std::io::stderr().is_terminal() {
+            return Bar(None);
+        }
+        let style = ProgressStyle::with_template("{spinner} {prefix} {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner());
+        let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+        bar.set_style(style);
+        bar.set_prefix(label.to_string());
+        bar.enable_steady_tick(std::time::Duration::from_millis(120));
+        Bar(Some(bar))
+    }
+
     fn set_prefix(&self, label: &str) {
         if let Some(b) = &self.0 {
             b.set_prefix(label.to_string());

@@ -47,7 +47,7 @@ pub use scene::{
     ShadingTerms, TransferSpec, VolumeSource, make_phantom,
 };
 
-pub use write::{OUTPUT_EXTENSIONS, WriteOptions, write_image, writes_values};
+pub use write::{OUTPUT_EXTENSIONS, WriteOptions, windowed_image, write_image, writes_values};
 
 /// The libraries underneath, for callers that need their types (cameras, volumes, images).
 pub use volsplat_core as core;

@@ -99,3 +99,34 @@ pub fn write_image(
     }
     Ok(())
 }
+
+/// MIP, MinIP or X-ray values through a grey window as an opaque grey image: `lo` → black,
+/// `hi` → white, linear between, clamped outside, NaN (no sample) → black — the picture
+/// [`write_image`] writes for them, as an [`Image`] (for movies and viewers).
+pub fn windowed_image(values: &ScalarImage, lo: f32, hi: f32) -> Image {
+    let mut img = Image::new(values.width(), values.height());
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    for (p, &v) in img.pixels_mut().iter_mut().zip(values.values()) {
+        let g = if v.is_nan() {
+            0.0
+        } else {
+            ((v - lo) / span).clamp(0.0, 1.0)
+        };
+        *p = [g, g, g, 1.0];
+    }
+    img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn windows_map_linearly_clamp_and_blacken_uncovered_pixels() {
+        let v = ScalarImage::from_values(5, 1, vec![f32::NAN, -1.0, 2.0, 6.0, 20.0]).unwrap();
+        let img = windowed_image(&v, 2.0, 10.0);
+        let g: Vec<f32> = img.pixels().iter().map(|p| p[0]).collect();
+        assert_eq!(g, vec![0.0, 0.0, 0.0, 0.5, 1.0]);
+        assert!(img.pixels().iter().all(|p| p[3] == 1.0 && p[1] == p[0] && p[2] == p[0]));
+    }
+}
