@@ -3,8 +3,9 @@
 //! # What is read
 //!
 //! - `<VTKFile type="ImageData">` with `byte_order` (`LittleEndian`, `BigEndian`),
-//!   `header_type` (`UInt32`, the default, or `UInt64`) and `compressor` (none, or
-//!   `vtkZLibDataCompressor`; LZ4 and LZMA are rejected).
+//!   `header_type` (`UInt32`, the default, or `UInt64`) and `compressor` (none,
+//!   `vtkZLibDataCompressor`, or `vtkLZ4DataCompressor`, whose blocks are raw LZ4 blocks; LZMA is
+//!   rejected).
 //! - `<ImageData>`: `WholeExtent` (`x0 x1 y0 y1 z0 z1`, inclusive), `Origin`, `Spacing` and
 //!   `Direction` (row-major 3×3, VTK ≥ 9; default identity). The grid's voxel (0,0,0) is the
 //!   extent's first point: origin `Origin + D·(x0·sx, y0·sy, z0·sz)`. A negative spacing is folded
@@ -125,15 +126,16 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
             ));
         }
     };
-    let compressed = match attr("compressor") {
-        None | Some("") => false,
-        Some("vtkZLibDataCompressor") => true,
+    let (compressed, lz4) = match attr("compressor") {
+        None | Some("") => (false, false),
+        Some("vtkZLibDataCompressor") => (true, false),
+        Some("vtkLZ4DataCompressor") => (true, true),
         Some(other) => {
             return Err(IoError::unsupported(
                 path,
                 "compressor",
                 other,
-                "none, vtkZLibDataCompressor",
+                "none, vtkZLibDataCompressor, vtkLZ4DataCompressor",
             ));
         }
     };
@@ -293,6 +295,7 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
         header64,
         big_endian,
         compressed,
+        lz4,
         needed,
     };
     let format = array.attribute("format").unwrap_or("ascii");
@@ -561,6 +564,8 @@ struct Layout<'a> {
     header64: bool,
     big_endian: bool,
     compressed: bool,
+    /// Compressed blocks are raw LZ4 blocks (`vtkLZ4DataCompressor`) rather than zlib streams.
+    lz4: bool,
     /// Bytes of samples needed.
     needed: usize,
 }
@@ -738,7 +743,7 @@ impl Layout<'_> {
         c.raw_block(all)
     }
 
-    /// Inflates zlib blocks of the given compressed sizes into exactly `needed` bytes.
+    /// Inflates zlib (or LZ4) blocks of the given compressed sizes into exactly `needed` bytes.
     fn inflate_blocks(&self, data: &[u8], sizes: &[u64], bsize: u64, last: u64) -> Result<Vec<u8>> {
         // Grows with the data actually inflated (never past `needed`): the header's sizes are
         // not trusted for allocation.
@@ -764,15 +769,29 @@ impl Layout<'_> {
             };
             let want = (want as usize).min(self.needed - out.len());
             let before = out.len();
-            let mut z = flate2::read::ZlibDecoder::new(block).take(want as u64);
-            z.read_to_end(&mut out).map_err(|e| IoError::Decompress {
-                path: self.path.to_path_buf(),
-                what: format!("{} (zlib block {k})", self.what),
-                error: e,
-            })?;
+            let codec = if self.lz4 { "LZ4" } else { "zlib" };
+            if self.lz4 {
+                // A raw LZ4 block (LZ4_compress_default): decoded into at most `want` bytes.
+                let mut buf = vec![0u8; want];
+                let n = lz4_flex::block::decompress_into(block, &mut buf).map_err(|e| {
+                    IoError::Decompress {
+                        path: self.path.to_path_buf(),
+                        what: format!("{} (LZ4 block {k})", self.what),
+                        error: std::io::Error::new(std::io::ErrorKind::InvalidData, e),
+                    }
+                })?;
+                out.extend_from_slice(&buf[..n]);
+            } else {
+                let mut z = flate2::read::ZlibDecoder::new(block).take(want as u64);
+                z.read_to_end(&mut out).map_err(|e| IoError::Decompress {
+                    path: self.path.to_path_buf(),
+                    what: format!("{} (zlib block {k})", self.what),
+                    error: e,
+                })?;
+            }
             if out.len() - before < want {
                 return Err(self.truncated(
-                    &format!("zlib block {k}, decompressed"),
+                    &format!("{codec} block {k}, decompressed"),
                     want as u64,
                     (out.len() - before) as u64,
                 ));
@@ -875,6 +894,65 @@ mod tests {
         assert_eq!(g.direction.col(0), DVec3::Y);
         assert_eq!(g.direction.col(1), -DVec3::X);
         assert_eq!(l.arrays, vec!["other".to_string(), "density".to_string()]);
+    }
+
+    /// `vtkLZ4DataCompressor`: the same header as zlib, raw LZ4 blocks; inline and appended;
+    /// a damaged block is an error naming it.
+    #[test]
+    fn lz4_compressed_blocks() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = f32_bytes(&values());
+        let other = "        <DataArray type=\"UInt8\" Name=\"other\" format=\"ascii\">1 2 3 4 5 6 7 8 9 10 11 12</DataArray>\n";
+        for bs in [16usize, 1000] {
+            let chunks: Vec<Vec<u8>> = data.chunks(bs).map(lz4_flex::block::compress).collect();
+            let mut h = word(chunks.len(), false);
+            h.extend(word(bs, false));
+            h.extend(word(data.len() % bs, false));
+            for c in &chunks {
+                h.extend(word(c.len(), false));
+            }
+            let d = chunks.concat();
+            let header = "header_type=\"UInt32\" compressor=\"vtkLZ4DataCompressor\"";
+            let arrays = format!(
+                "{other}        <DataArray type=\"Float32\" Name=\"density\" format=\"binary\">\n  {}{}\n</DataArray>\n",
+                B64.encode(&h),
+                B64.encode(&d)
+            );
+            check(&write(
+                dir.path(),
+                "l.vti",
+                &doc(header, IMAGE, &arrays, b""),
+            ));
+            let mut app = b"  <AppendedData encoding=\"raw\">\n   _".to_vec();
+            app.extend_from_slice(&h);
+            app.extend_from_slice(&d);
+            app.extend_from_slice(b"\n  </AppendedData>\n");
+            let arrays = format!(
+                "{other}        <DataArray type=\"Float32\" Name=\"density\" format=\"appended\" offset=\"0\"/>\n"
+            );
+            check(&write(
+                dir.path(),
+                "m.vti",
+                &doc(header, IMAGE, &arrays, &app),
+            ));
+            // Damage the first block: a clear error, never a panic.
+            let mut bad = d.clone();
+            bad[0] = 0xFF;
+            bad.truncate(3);
+            let arrays = format!(
+                "{other}        <DataArray type=\"Float32\" Name=\"density\" format=\"binary\">\n  {}{}\n</DataArray>\n",
+                B64.encode(&h),
+                B64.encode(&bad)
+            );
+            let e = read_vti(write(
+                dir.path(),
+                "n.vti",
+                &doc(header, IMAGE, &arrays, b""),
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("n.vti"), "{e}");
+        }
     }
 
     #[test]
@@ -1050,7 +1128,7 @@ mod tests {
                 "`Direction`",
             ),
             (ok.replace("Float32", "Int64"), "type"),
-            (ok.replace("vtkZLib", "vtkLZ4"), "`compressor`"),
+            (ok.replace("vtkZLib", "vtkLZMA"), "`compressor`"),
             (
                 ok.replace("UInt32", "UInt16")
                     .replace("byte_order", "header_type=\"UInt16\" byte_order"),
