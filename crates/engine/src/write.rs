@@ -127,6 +127,10 @@ mod tests {
         let img = windowed_image(&v, 2.0, 10.0);
         let g: Vec<f32> = img.pixels().iter().map(|p| p[0]).collect();
         assert_eq!(g, vec![0.0, 0.0, 0.0, 0.5, 1.0]);
-        assert!(img.pixels().iter().all(|p| p[3] == 1.0 && p[1] == p[0] && p[2] == p[0]));
+        assert!(
+            img.pixels()
+                .iter()
+                .all(|p| p[3] == 1.0 && p[1] == p[0] && p[2] == p[0])
+        );
     }
 }
