@@ -127,6 +127,31 @@ pub struct FootprintTable {
     /// Per phase and row: the non-zero columns `[start, end)` of that row.
     row_spans: Vec<(u16, u16)>,
     block: PhaseBlock,
+    /// Blending tables only: per phase `(px, py)` in `0..P` × `0..P`, three planes of the block's
+    /// shape, `w₀₀`, `w₁₀ − w₀₀` and `w₀₁ − w₀₀` (the differences the first-order blend takes,
+    /// computed once per frame in the same f32 arithmetic, so blended weights keep their bits),
+    /// followed by [`BLEND_PAD`] zeros so that the row loops may read whole SIMD vectors.
+    blend_planes: Vec<f32>,
+}
+
+/// Zeros after the last blend plane: a row loop may read up to this many entries past its end.
+pub(crate) const BLEND_PAD: usize = 8;
+
+/// A sample's blend planes ([`FootprintTable::locate_planes`]): the weight at block index `i` is
+/// `max(floor, a[i] + fx·dx[i] + fy·dy[i])`, bit for bit [`Located::weight`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LocatedPlanes<'a> {
+    pub(crate) x0: i32,
+    pub(crate) y0: i32,
+    /// `w₀₀`, then `w₁₀ − w₀₀`, then `w₀₁ − w₀₀`, each followed by at least [`BLEND_PAD`]
+    /// readable entries.
+    pub(crate) a: &'a [f32],
+    pub(crate) dx: &'a [f32],
+    pub(crate) dy: &'a [f32],
+    pub(crate) fx: f32,
+    pub(crate) fy: f32,
+    pub(crate) floor: f32,
+    pub(crate) spans: &'a [(u16, u16)],
 }
 
 /// The continuous footprint of one frame, before tabulation.
@@ -576,6 +601,21 @@ impl FootprintTable {
         } else {
             f32::NEG_INFINITY
         };
+        let mut blend_planes = Vec::new();
+        if !point {
+            let wh = tw * th;
+            let block = |qx: usize, qy: usize| &entries[(qy * np + qx) * wh..][..wh];
+            blend_planes.reserve(phases * phases * 3 * wh + BLEND_PAD);
+            for py in 0..phases {
+                for px in 0..phases {
+                    let (a, b, c) = (block(px, py), block(px + 1, py), block(px, py + 1));
+                    blend_planes.extend_from_slice(a);
+                    blend_planes.extend(b.iter().zip(a).map(|(&b, &a)| b - a));
+                    blend_planes.extend(c.iter().zip(a).map(|(&c, &a)| c - a));
+                }
+            }
+            blend_planes.resize(blend_planes.len() + BLEND_PAD, 0.0);
+        }
         Ok(FootprintTable {
             phases,
             blend: !point,
@@ -589,6 +629,7 @@ impl FootprintTable {
                 width: tw as u32,
                 height: th as u32,
             },
+            blend_planes,
         })
     }
 
@@ -604,6 +645,7 @@ impl FootprintTable {
             entries,
             row_spans: spans,
             block,
+            blend_planes: Vec::new(),
         }
     }
 
@@ -678,6 +720,68 @@ impl FootprintTable {
             floor: self.floor,
             spans: &self.row_spans[(py * np + px) * h..][..h],
         }
+    }
+
+    /// Whether every weight is ≥ 0, so that blended weights are too ([`Located::floor`] = 0).
+    pub(crate) fn non_negative(&self) -> bool {
+        self.floor == 0.0
+    }
+
+    /// The image pixel of the block's first entry for a sample at `(x, y)`: `(x0, y0)` of
+    /// [`FootprintTable::locate`], computed the same way.
+    #[inline(always)]
+    pub(crate) fn origin(&self, x: f32, y: f32) -> (i32, i32) {
+        let floor = |v: f32| {
+            let i = v as i32;
+            if (i as f32) > v { i - 1 } else { i }
+        };
+        let (bx, by) = if self.blend {
+            (floor(x - 0.5), floor(y - 0.5))
+        } else {
+            (floor(x), floor(y))
+        };
+        (bx + self.block.kx0, by + self.block.ky0)
+    }
+
+    /// Like [`FootprintTable::locate`], for blending tables, with the blend's differences
+    /// precomputed ([`LocatedPlanes`]); `None` for the single-point kernel. The base pixel, phase
+    /// and fractions are computed exactly as `locate` computes them.
+    #[inline(always)]
+    pub(crate) fn locate_planes(&self, x: f32, y: f32) -> Option<LocatedPlanes<'_>> {
+        if !self.blend {
+            return None;
+        }
+        let p = self.phases as f32;
+        let (w, h) = (self.block.width as usize, self.block.height as usize);
+        let floor = |v: f32| {
+            let i = v as i32;
+            if (i as f32) > v { i - 1 } else { i }
+        };
+        let (cx, cy) = (x - 0.5, y - 0.5);
+        let (bx, by) = (floor(cx), floor(cy));
+        let last = (self.phases - 1) as f32;
+        let (tx, ty) = (
+            ((cx - bx as f32) * p).min(last + 0.999_9),
+            ((cy - by as f32) * p).min(last + 0.999_9),
+        );
+        let (px, py) = (
+            (tx as usize).min(self.phases - 1),
+            (ty as usize).min(self.phases - 1),
+        );
+        let (fx, fy) = (tx - px as f32, ty - py as f32);
+        let wh = w * h;
+        let planes = &self.blend_planes[(py * self.phases + px) * 3 * wh..];
+        Some(LocatedPlanes {
+            x0: bx + self.block.kx0,
+            y0: by + self.block.ky0,
+            a: planes,
+            dx: &planes[wh..],
+            dy: &planes[2 * wh..],
+            fx,
+            fy,
+            floor: self.floor,
+            spans: &self.row_spans[(py * (self.phases + 1) + px) * h..][..h],
+        })
     }
 }
 

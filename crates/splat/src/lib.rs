@@ -22,8 +22,10 @@ pub mod error;
 pub mod footprint;
 pub mod geometry;
 pub mod list;
+mod mipcull;
 pub mod refine;
 pub mod render;
+mod row;
 
 pub use aa::Antialias;
 pub use clip::ClipPlane;

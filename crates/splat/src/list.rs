@@ -41,7 +41,7 @@ use crate::geometry::Order;
 use crate::render::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
     SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit,
-    finish, gradient_at, ms, scale_kept, validate,
+    div_band, finish, gradient_at, ms, scale_kept, validate,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -381,7 +381,7 @@ struct Frame<'a> {
     near: f64,
     depth_lo: f64,
     depth_scale: f64,
-    table: Vec<f32>,
+    table: Box<[f32; LIST_TABLE_LEN]>,
     band_h: usize,
     n_bands: usize,
     /// Clipping planes in lattice terms (empty: none).
@@ -568,15 +568,13 @@ fn render_inner(
         dhi = dhi.max(z);
     }
     dlo = dlo.max(near);
-    let table: Vec<f32> = (0..LIST_TABLE_LEN)
-        .map(|n| {
-            let t = n as f64 / (LIST_TABLE_LEN - 1) as f64;
-            settings
-                .kernel
-                .line_integral_radial(radius * t.sqrt())
-                .unwrap_or(0.0) as f32
-        })
-        .collect();
+    let table: Box<[f32; LIST_TABLE_LEN]> = Box::new(std::array::from_fn(|n| {
+        let t = n as f64 / (LIST_TABLE_LEN - 1) as f64;
+        settings
+            .kernel
+            .line_integral_radial(radius * t.sqrt())
+            .unwrap_or(0.0) as f32
+    }));
     let xray = settings.mode == RenderMode::Xray;
     let ortho = match proj {
         Projection::Ortho(p) => {
@@ -817,8 +815,9 @@ impl Frame<'_> {
             };
             out.splatted += 1;
             let (b0, b1) = (
-                ((y - hy).max(0.0) as usize / self.band_h).min(self.n_bands - 1),
-                ((y + hy).min(h - 1.0).max(0.0) as usize / self.band_h).min(self.n_bands - 1),
+                div_band((y - hy).max(0.0) as usize, self.band_h).min(self.n_bands - 1),
+                div_band((y + hy).min(h - 1.0).max(0.0) as usize, self.band_h)
+                    .min(self.n_bands - 1),
             );
             let sp = PSplat {
                 x,
@@ -861,7 +860,9 @@ impl Frame<'_> {
             y_lo: (b * self.band_h) as i32,
             rows: rows as i32,
             width: w as i32,
-            terminate,
+            // No opaque tile in the band yet: nothing can be terminated, so skip the per-splat
+            // tile check (the outcome is the same).
+            terminate: terminate && st.opaque_tiles.contains(&true),
             opaque: &st.opaque_tiles,
             tx0: w,
             tx1: 0,
@@ -901,7 +902,12 @@ impl Frame<'_> {
 /// Deposits one splat's footprint over the pixel centres it covers within the band: weight
 /// `w·F(ρ)` with `F` the kernel's pre-integrated radial table (linear interpolation in `ρ²`).
 #[inline(always)]
-fn splat_one<const S: u8>(table: &[f32], sp: &PSplat, span: &mut SpanCtx, target: &mut [Rgba]) {
+fn splat_one<const S: u8>(
+    table: &[f32; LIST_TABLE_LEN],
+    sp: &PSplat,
+    span: &mut SpanCtx,
+    target: &mut [Rgba],
+) {
     // Pixel centres (x + ½) within the half extents.
     let x0 = (sp.x - sp.hx - 0.5).ceil() as i32;
     let x1 = (sp.x + sp.hx - 0.5).floor() as i32;
@@ -917,26 +923,37 @@ fn splat_one<const S: u8>(table: &[f32], sp: &PSplat, span: &mut SpanCtx, target
     let last = (LIST_TABLE_LEN - 1) as f32;
     let w = span.width as usize;
     let mut updates = 0u64;
+    // The loops below compute exactly what the per-pixel definition does (same f32 operations
+    // in the same order), with less bookkeeping: `px as f32 + 0.5` is carried as a float (exact:
+    // integers below 2²⁴), the table index is truncated through i32 (`u` lies in [0, 1023]),
+    // and the row is sliced once, so no bounds are checked per pixel.
+    let (xa, xb) = (xa as usize, xb as usize);
     for py in y0..=y1 {
         let dy = py as f32 + 0.5 - sp.y;
         let row = (py - span.y_lo) as usize * w;
         let (by, cy) = (2.0 * b * dy, c * dy * dy);
-        for px in xa..=xb {
-            let dx = px as f32 + 0.5 - sp.x;
+        let out = &mut target[row + xa..=row + xb];
+        let mut centre = xa as f32 + 0.5;
+        for px in out {
+            let dx = centre - sp.x;
+            centre += 1.0;
             let t = (a * dx + by) * dx + cy;
             if t < 1.0 {
-                let u = t.max(0.0) * last;
-                let i = (u as usize).min(LIST_TABLE_LEN - 2);
+                // `max(t, 0)` without `f32::max`'s NaN handling (t < 1 excludes NaN; a zero's
+                // sign cannot change the weight).
+                let u = if t > 0.0 { t } else { 0.0 } * last;
+                let i = (u as i32 as usize).min(LIST_TABLE_LEN - 2);
                 let f = u - i as f32;
-                let v = table[i] + f * (table[i + 1] - table[i]);
-                deposit::<S>(&mut target[row + px as usize], sp.w * v, &sp.v);
+                let (t0, t1) = (table[i], table[i + 1]);
+                let v = t0 + f * (t1 - t0);
+                deposit::<S>(px, sp.w * v, &sp.v);
                 updates += 1;
             }
         }
     }
     span.updates += updates;
-    span.tx0 = span.tx0.min(xa as usize);
-    span.tx1 = span.tx1.max(xb as usize + 1);
+    span.tx0 = span.tx0.min(xa);
+    span.tx1 = span.tx1.max(xb + 1);
 }
 
 #[cfg(test)]
