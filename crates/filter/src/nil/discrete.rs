@@ -133,6 +133,15 @@ fn gcd(a: usize, b: usize) -> usize {
     if b == 0 { a } else { gcd(b, a % b) }
 }
 
+/// The highest level whose cells cover the whole texture: `⌈log₂ max(n)⌉ + 1`.
+fn natural_gamma_max(dims: [usize; 3]) -> i32 {
+    dims.iter()
+        .map(|&n| (n as f64).log2().ceil() as i32)
+        .max()
+        .unwrap_or(0)
+        + 1
+}
+
 /// Phase classes of level-`γ` cells along an axis of `n` samples.
 fn phases(n: usize, gamma: i32) -> usize {
     let p = 1usize << gamma.clamp(0, 40);
@@ -151,18 +160,8 @@ impl DiscreteNilMap {
         gamma_max: Option<i32>,
         channels: usize,
     ) -> u128 {
-        let natural = dims
-            .iter()
-            .map(|&n| (n as f64).log2().ceil() as i32)
-            .max()
-            .unwrap_or(0)
-            + 1;
-        Self::values_needed(
-            dims,
-            order,
-            gamma_max.unwrap_or(natural).clamp(0, 30),
-            channels,
-        )
+        let gamma_max = gamma_max.unwrap_or_else(|| natural_gamma_max(dims));
+        Self::values_needed(dims, order, gamma_max.clamp(0, 30), channels)
     }
 
     fn values_needed(dims: [usize; 3], m: usize, gamma_max: i32, channels: usize) -> u128 {
@@ -181,13 +180,9 @@ impl DiscreteNilMap {
         let basis = PatchBasis::new(settings.order)?;
         let m = basis.order();
         let dims = texture.dims();
-        let natural = dims
-            .iter()
-            .map(|&n| (n as f64).log2().ceil() as i32)
-            .max()
-            .unwrap_or(0)
-            + 1;
-        let gamma_max = settings.gamma_max.unwrap_or(natural);
+        let gamma_max = settings
+            .gamma_max
+            .unwrap_or_else(|| natural_gamma_max(dims));
         if !(0..=30).contains(&gamma_max) {
             return Err(FilterError::invalid(
                 "gamma_max",
