@@ -675,6 +675,19 @@ fn phantom_cmd(a: PhantomArgs) -> Result<()> {
     Ok(())
 }
 
+/// The process's peak resident memory (`VmHWM` of `/proc/self/status`), in KiB; `None` where the
+/// system does not report it.
+fn peak_rss_kb() -> Option<u64> {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()?
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
 /// `bench`: the same request path as `render`, one [`Renderer`] for every frame, the camera
 /// turned by `--orbit` degrees of azimuth between frames.
 fn bench_cmd(a: BenchArgs) -> Result<()> {
@@ -726,6 +739,9 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
     j["volume_bytes"] = json!(vol.grid().voxel_count() * vol.scalar_type().size_bytes());
     j["frames_ms"] = json!(times);
     j["median_ms"] = json!(median);
+    if let Some(kb) = peak_rss_kb() {
+        j["peak_rss_kb"] = json!(kb);
+    }
     j["min_ms"] = json!(sorted[0]);
     j["max_ms"] = json!(sorted[sorted.len() - 1]);
     emit(&format!("{j}"))?;

@@ -1471,3 +1471,25 @@ fn anatomical_views_are_flags() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("anterior"), "{}", stderr(&o));
 }
+
+/// `bench` reports the process's peak memory, which holds at least the volume (Linux).
+#[cfg(target_os = "linux")]
+#[test]
+fn bench_reports_peak_memory() {
+    let o = volsplat(&[
+        "bench",
+        "--phantom",
+        "blobs",
+        "--phantom-size",
+        "64",
+        "--size",
+        "32",
+        "--frames",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let kb = j["peak_rss_kb"].as_u64().unwrap();
+    let volume = j["volume_bytes"].as_u64().unwrap();
+    assert!(kb * 1024 >= volume, "{kb} KiB for a {volume}-byte volume");
+}
