@@ -364,27 +364,19 @@ pub fn build_request(
         };
     }
     let q = &mut req.quality;
-    if set("kernel") {
-        q.kernel = o.kernel;
+    // Flags whose clap id is the quality field's name and whose type is the field's.
+    macro_rules! copy_quality {
+        ($($f:ident),*) => { $( if set(stringify!($f)) { q.$f = o.$f; } )* };
     }
-    if set("antialias") {
-        q.antialias = o.antialias;
-    }
-    if set("visibility") {
-        q.visibility = o.visibility;
-    }
-    if set("order") {
-        q.order = o.order;
-    }
-    if set("opacity_cutoff") {
-        q.opacity_cutoff = o.opacity_cutoff;
-    }
-    if set("subsample") {
-        q.subsample = o.subsample;
-    }
-    if set("list_threshold") {
-        q.list_threshold = o.list_threshold;
-    }
+    copy_quality!(
+        kernel,
+        antialias,
+        visibility,
+        order,
+        opacity_cutoff,
+        subsample,
+        list_threshold
+    );
     if set("threads") {
         req.threads = o.threads;
     }
@@ -393,15 +385,6 @@ pub fn build_request(
     }
     if let Some(d) = display {
         let t = &mut req.display;
-        if set("display") {
-            t.display = d.display;
-        }
-        if set("density") {
-            t.density = d.density;
-        }
-        if set("control_points") {
-            t.control_points = d.control_points;
-        }
         if set("dog_sigma") {
             let sig: Vec<f64> = d
                 .dog_sigma
@@ -418,6 +401,9 @@ pub fn build_request(
             ($($f:ident),*) => { $( if set(stringify!($f)) { t.$f = d.$f.clone(); } )* };
         }
         copy!(
+            display,
+            density,
+            control_points,
             direct,
             tau,
             screen_sigma,
