@@ -359,3 +359,20 @@ def test_errors_are_python_exceptions(vol, tmp_path):
         volsplat.render("not a volume.xyz")
     with pytest.raises(volsplat.InvalidInputError, match="volume"):
         volsplat.Scene(object())
+
+
+def test_clipping_is_a_scene_option(vol):
+    """The scene file's clipping object: a plane keeping everything changes nothing, one keeping
+    nothing empties the image, a crop removes part of it, and a bad plane names its field."""
+    plain = volsplat.render(vol, size=32, mode="xray")
+    keep = {"planes": [{"normal": (1, 0, 0), "offset": 1e4}]}
+    none = {"planes": [{"normal": (1, 0, 0), "offset": -1e4}]}
+    assert np.array_equal(volsplat.render(vol, size=32, mode="xray", clipping=keep).values,
+                          plain.values)
+    assert np.all(volsplat.render(vol, size=32, mode="xray", clipping=none).values == 0)
+    crop = {"crop": {"min": (0, 0, 0), "max": (3, 100, 100), "units": "voxels"}}
+    cropped = volsplat.render(vol, size=32, mode="xray", clipping=crop).values
+    # The blob's data have negative values too: compare magnitudes.
+    assert 0 < np.abs(cropped).sum() < 0.9 * np.abs(plain.values).sum()
+    with pytest.raises(volsplat.VolsplatError, match="clipping"):
+        volsplat.render(vol, size=32, clipping={"planes": [{"normal": (0, 0, 0), "offset": 0}]})

@@ -25,7 +25,7 @@ _QUALITY = (
     "subsample",
     "list_threshold",
 )
-_SCENE = ("lights", "shading", "surface_enhance", "depth_cue")
+_SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping")
 _ORBIT = ("azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
 OPTIONS: Tuple[str, ...] = (
     ("volume", "camera", "transfer_function", "size", "quality") + _TOP + _QUALITY + _SCENE + _ORBIT
@@ -91,6 +91,9 @@ class Scene:
     - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
       (``--light``); ``shading={"emission":…, "diffuse":…, "specular":…}``;
       ``surface_enhance=(lo, hi)``; ``depth_cue=(near, far)``; ``k_contour=(r, g, b)``.
+    - ``clipping``: a crop box and clipping planes, the scene file's object (``--crop``,
+      ``--clip-plane``): ``{"crop": {"min": (x, y, z), "max": (x, y, z), "units": "voxels"},
+      "planes": [{"normal": (nx, ny, nz), "offset": d}]}``; planes keep ``n·x + d ≥ 0``.
     - ``display={...}``: options of the Chapter 6 displays (``renderer="sabella"|"nil"``).
     - ``threads``: worker threads (default: all cores; the image does not depend on it).
 
@@ -198,6 +201,17 @@ class Scene:
             else:
                 raise InvalidInputError(
                     "shading: expected a dict such as {'specular': False}, got " + repr(s)
+                )
+        if "clipping" in options:
+            c = options["clipping"]
+            if c is None:
+                scene.pop("clipping", None)
+            elif isinstance(c, dict):
+                # Checked (and errors named) by the engine in _check.
+                scene["clipping"] = json.loads(dumps(c))
+            else:
+                raise InvalidInputError(
+                    "clipping: expected a dict with 'crop' and/or 'planes', got " + repr(c)
                 )
         for k in ("surface_enhance", "depth_cue"):
             if k in options:
