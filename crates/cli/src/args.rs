@@ -268,7 +268,8 @@ pub struct RenderOptions {
     /// screen filter (`ewa`), or none. Changes nothing where voxels cover a pixel or more.
     #[arg(long, value_enum, default_value = "swan", help_heading = "Quality")]
     pub antialias: AntialiasChoice,
-    /// Sheet buffers or composite-every-sample.
+    /// Visibility: Westover's sheet buffers, composite-every-sample, or image-aligned slabs
+    /// classified and shaded per pixel after reconstruction (`image`).
     #[arg(
         long,
         value_enum,
@@ -304,6 +305,15 @@ pub struct RenderOptions {
         hide_short_help = true
     )]
     pub opacity_cutoff: f32,
+    /// `--visibility image`: slab thickness (plane spacing along the view) in units of the
+    /// smallest voxel spacing, in [0.01, 16].
+    #[arg(
+        long,
+        default_value_t = 0.5,
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub slab: f64,
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
@@ -484,6 +494,7 @@ pub const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
     ("no_diffuse", "--no-diffuse"),
     ("no_specular", "--no-specular"),
     ("opacity_cutoff", "--opacity-cutoff"),
+    ("slab", "--slab"),
     ("antialias", "--antialias"),
     ("splat_list", "--splat-list"),
     ("list_threshold", "--list-threshold"),

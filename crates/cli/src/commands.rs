@@ -321,6 +321,7 @@ fn flag_of(field: &str) -> Option<&'static str> {
         "threads" => "--threads",
         "quality.subsample" => "--subsample",
         "quality.opacity_cutoff" => "--opacity-cutoff",
+        "quality.slab" => "--slab",
         "quality.list_threshold" => "--list-threshold",
         "volume.grid" => "--phantom-size",
         "display.dog_sigma" => "--dog-sigma",

@@ -375,7 +375,8 @@ pub fn build_request(
         order,
         opacity_cutoff,
         subsample,
-        list_threshold
+        list_threshold,
+        slab
     );
     if set("threads") {
         req.threads = o.threads;

@@ -2,7 +2,7 @@
 //! between frames.
 
 use crate::error::{EngineError, Result};
-use crate::request::{DensityChoice, Mode, RenderRequest, RendererChoice};
+use crate::request::{DensityChoice, Mode, RenderRequest, RendererChoice, VisibilityChoice};
 use crate::scene::{TransferSpec, VolumeSource};
 use serde::Serialize;
 use std::sync::Arc;
@@ -17,7 +17,8 @@ use volsplat_filter::texture::Reconstruction;
 use volsplat_splat::list::{draw_depth_contour, k_distance, render_list_depth};
 use volsplat_splat::refine::{RefinementStep, render_ladder};
 use volsplat_splat::{
-    ExtractSettings, Rendered, SplatList, render_list_with_progress, render_with_progress,
+    BrickGrid, ExtractSettings, Rendered, SplatList, render_list_with_progress, render_slabs_any,
+    render_with_progress,
 };
 
 /// Progress of a render, passed to the caller's callback.
@@ -38,6 +39,8 @@ pub enum UsedRenderer {
     Dense,
     /// The sparse splat list.
     SplatList,
+    /// Image-aligned, post-classified slabs (orthographic or perspective).
+    Slab,
     /// Sabella's display.
     Sabella,
     /// A Chapter 6 display with NIL maps or direct quadrature.
@@ -256,6 +259,8 @@ pub struct Renderer {
     volume: Option<Cached<VolumeSource, LoadedState>>,
     tables: Option<Cached<String, Arc<CrioTables>>>,
     list: Option<Cached<ListKey, Arc<SplatList>>>,
+    /// Min/max bricks of the volume (image-aligned slabs' empty-space skipping).
+    bricks: Option<Cached<VolumeSource, Arc<BrickGrid>>>,
     display: Option<Cached<(VolumeSource, String), Arc<DisplayState>>>,
     pool: Option<Cached<Option<usize>, Arc<rayon::ThreadPool>>>,
     /// The automatic transfer function and its description, per volume (keyed by address).
@@ -369,7 +374,10 @@ impl Renderer {
         let mut warnings: Vec<String> = tf_warning.into_iter().collect();
         let t_prep = Instant::now();
         report(progress, 0.05, "classify")?;
+        let slab =
+            request.quality.visibility == VisibilityChoice::Image && request.mode != Mode::Xray;
         let renderer = match request.renderer {
+            RendererChoice::Auto if slab => UsedRenderer::Slab,
             RendererChoice::Auto if camera.parallel_projection => UsedRenderer::Dense,
             RendererChoice::Auto | RendererChoice::SplatList => UsedRenderer::SplatList,
             RendererChoice::Splat => {
@@ -530,6 +538,64 @@ impl Renderer {
                     ..Stats::default()
                 };
                 (img.to_image(d.grey), None)
+            }
+            UsedRenderer::Slab => {
+                let (tables, fresh_tables) =
+                    cached(&mut self.tables, tables_key(request, &tf), || {
+                        Ok(Arc::new(build_tables(request, &tf)?))
+                    })?;
+                let tables = Arc::clone(tables);
+                let (bricks, fresh_bricks) =
+                    cached(&mut self.bricks, request.scene.volume.clone(), || {
+                        Ok(Arc::new(pool.install(
+                            || volsplat_core::with_volume!(&*vol, v => BrickGrid::build(v)),
+                        )))
+                    })?;
+                let bricks = Arc::clone(bricks);
+                let mut settings = request.splat_settings();
+                settings.clip = request.scene.clipping.world_planes(vol.grid())?;
+                let prepare_ms = if fresh_tables || fresh_bricks {
+                    ms(t_prep)
+                } else {
+                    0.0
+                };
+                report(progress, 0.2, "render")?;
+                let mut cancelled = false;
+                let out = pool.install(|| {
+                    render_slabs_any(&vol, &camera, &tables, &settings, Some(&bricks), &mut |p| {
+                        let f =
+                            render_fraction(p.sheets_done as f64 / p.sheets_total.max(1) as f64);
+                        let go = progress(&Progress {
+                            fraction: f,
+                            stage: "render",
+                        });
+                        cancelled |= !go;
+                        go
+                    })
+                });
+                if cancelled {
+                    return Err(EngineError::Cancelled);
+                }
+                let rendered = out?;
+                let s = &rendered.stats;
+                stats = Stats {
+                    prepare_ms,
+                    render_ms: s.total_ms,
+                    setup_ms: s.setup_ms,
+                    classify_ms: s.classify_ms,
+                    voxels: s.voxels,
+                    splats: s.splats,
+                    splats_terminated: s.splats_terminated,
+                    pixel_updates: s.pixel_updates,
+                    kernel: "tent".into(),
+                    antialias: "none",
+                    sheets: s.sheets,
+                    sheet_axis: "view",
+                    sheet_spacing: s.sheet_spacing,
+                    threads: s.threads,
+                    ..Stats::default()
+                };
+                (rendered.image, rendered.values)
             }
             UsedRenderer::Dense | UsedRenderer::SplatList => {
                 let (tables, fresh_tables) =
@@ -744,6 +810,7 @@ pub fn renderer_name(r: UsedRenderer) -> &'static str {
     match r {
         UsedRenderer::Dense => "splatting renderer",
         UsedRenderer::SplatList => "splat-list renderer",
+        UsedRenderer::Slab => "image-aligned slab renderer",
         UsedRenderer::Sabella => "Sabella display",
         UsedRenderer::Nil => "NIL renderer",
     }

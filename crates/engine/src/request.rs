@@ -133,6 +133,10 @@ pub enum VisibilityChoice {
     Sheet,
     /// Composite every sample (Westover 1989; bleeds).
     Every,
+    /// Image-aligned slabs classified and shaded per pixel after reconstruction (Mueller &
+    /// Crawfis 1998; Mueller, Möller & Crawfis 1999): no sheet-axis popping, no pre-classified
+    /// blur. Orthographic and perspective; X-ray keeps the exact sheet renderers.
+    Image,
 }
 
 /// Traversal order.
@@ -166,6 +170,9 @@ pub struct Quality {
     pub subsample: usize,
     /// Splat list: keep voxels whose opacity exceeds this, in [0, 1).
     pub list_threshold: f32,
+    /// Image-aligned visibility: slab thickness (plane spacing along the view) in units of the
+    /// smallest voxel spacing, in [0.01, 16].
+    pub slab: f64,
 }
 
 impl Default for Quality {
@@ -178,6 +185,7 @@ impl Default for Quality {
             opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
             subsample: 1,
             list_threshold: 0.0,
+            slab: volsplat_splat::slab::DEFAULT_SLAB,
         }
     }
 }
@@ -434,6 +442,15 @@ impl RenderRequest {
                 format!("must be in 1..=64, got {}", q.subsample),
             );
         }
+        if !(q.slab.is_finite() && (0.01..=16.0).contains(&q.slab)) {
+            return Err(EngineError::request(
+                "quality.slab",
+                format!(
+                    "must be a slab thickness in [0.01, 16] × the smallest voxel spacing, got {}",
+                    q.slab
+                ),
+            ));
+        }
         if !(q.opacity_cutoff.is_finite() && q.opacity_cutoff > 0.0) {
             return bad(
                 "quality.opacity_cutoff",
@@ -496,6 +513,7 @@ impl RenderRequest {
             visibility: match q.visibility {
                 VisibilityChoice::Sheet => Visibility::SheetBuffer,
                 VisibilityChoice::Every => Visibility::EverySample,
+                VisibilityChoice::Image => Visibility::ImageAligned,
             },
             order: match q.order {
                 OrderChoice::Ftb => Order::FrontToBack,
@@ -503,6 +521,7 @@ impl RenderRequest {
             },
             kernel: q.kernel.kernel(),
             subsample: q.subsample,
+            slab: q.slab,
             opacity_cutoff: q.opacity_cutoff,
             antialias: match q.antialias {
                 AntialiasChoice::Swan => Antialias::Swan,

@@ -17,6 +17,7 @@
 #![deny(missing_docs)]
 
 pub mod aa;
+pub mod bricks;
 pub mod clip;
 pub mod error;
 pub mod footprint;
@@ -26,8 +27,10 @@ mod mipcull;
 pub mod refine;
 pub mod render;
 mod row;
+pub mod slab;
 
 pub use aa::Antialias;
+pub use bricks::BrickGrid;
 pub use clip::ClipPlane;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
@@ -37,3 +40,4 @@ pub use render::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render, render_any,
     render_with_progress,
 };
+pub use slab::{render_slabs, render_slabs_any};

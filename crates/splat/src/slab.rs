@@ -1,0 +1,1037 @@
+//! Image-aligned, post-classified slabs (issue 16): Mueller & Crawfis, *Eliminating popping
+//! artifacts in sheet buffer-based splatting* (Visualization '98) for the slab structure, and
+//! Mueller, Möller & Crawfis, *Splatting without the blur* (Visualization '99) for classifying
+//! and shading per pixel after reconstruction.
+//!
+//! # What is computed
+//!
+//! The view volume is cut by planes parallel to the image plane, `Δ` world units apart, at the
+//! eye depths `d_j = Δ·j` (anchored to the eye, so they do not follow the volume as it turns:
+//! no popping when the sheet axis of Westover's sheets would switch). In each plane every pixel
+//! holds the reconstructed scalar `ρ̂ = Σ_v ρ_v·h(p − v)` summed over the voxels `v` whose
+//! kernel `h` reaches the pixel's point `p` on the plane (the kernel's section by the plane, as
+//! in Mueller & Crawfis' slicing of each kernel by the slabs it overlaps). Then, per pixel
+//! (Mueller, Möller & Crawfis §3): the transfer function classifies `ρ̂`, the gradient comes
+//! from central differences on the stack of planes, the lights shade it through the same
+//! tables as the other renderers ([`FrameClassifier`]), and the slab is composited front to
+//! back with its opacity corrected for its thickness `Δ` (along the ray: `Δ/cos θ` in
+//! perspective).
+//!
+//! # The kernel, and why the sum is gathered
+//!
+//! The kernel is the tent (trilinear) kernel `h(x) = Π_c max(0, 1 − |x_c|/s_c)`, separable on
+//! the grid axes: the reconstruction VTK's ray caster and the reference integrator sample, and
+//! the one whose sections are exact on anisotropic grids (docs/design/pipeline.md §2.3).
+//! For this kernel the sum over the voxels whose sections cover a pixel is, term for term, the
+//! trilinear interpolation of the eight voxels around `p`, so each plane is filled by
+//! evaluating that sum at each pixel ("gathering") instead of rasterising each voxel's section
+//! into the plane ("scattering"). The two give the same number; gathering reads each voxel a
+//! few times instead of writing ≈ 8 s² pixels per voxel and plane (s pixels per voxel), needs
+//! no normalisation by `Σw` (the tent's partition of unity is exact), and keeps each pixel's
+//! arithmetic independent of every other pixel, so the image is bit-identical for any thread
+//! count. The choice is recorded in `docs/decisions/0016-image-aligned-post-classified-slabs.md`.
+//!
+//! # Ray functions
+//!
+//! - Composite: as above; `opacity_cutoff` stops a pixel once its opacity reaches it.
+//! - MIP/MinIP: the largest/smallest `ρ̂` over the planes (NaN where no plane meets the volume).
+//! - X-ray is not drawn here: the sheet renderers' line integrals are exact (decision 0003).
+//!
+//! # Empty space
+//!
+//! [`BrickGrid`] bounds the values of every 8³ brick; a sample whose brick has no opacity under
+//! the transfer function (or, for shading, no such neighbour) is not reconstructed, and in MIP
+//! a sample whose brick cannot exceed the pixel's current maximum is skipped. Both skips are
+//! exact.
+
+use crate::bricks::{BRICK, BrickGrid};
+use crate::error::{Result, SplatError};
+use crate::render::{
+    Progress, RenderMode, RenderSettings, RenderStats, Rendered, finish, ms, validate,
+};
+use rayon::prelude::*;
+use std::time::Instant;
+use volsplat_core::glam::{DVec3, Vec3};
+use volsplat_core::image::{Rgba, over_front_to_back};
+use volsplat_core::{
+    AnyVolume, Camera, CrioTables, FrameClassifier, Projection, SampleInput, Scalar, Volume,
+    with_volume,
+};
+
+/// Default slab thickness (plane spacing), in units of the smallest grid spacing: VTK's ray
+/// caster samples at half the smallest spacing too (its `SampleDistance` in the comparisons of
+/// `docs/BENCHMARKS.md`).
+pub const DEFAULT_SLAB: f64 = 0.5;
+
+/// Renders any volume with image-aligned, post-classified slabs; see [`render_slabs`].
+pub fn render_slabs_any(
+    volume: &AnyVolume,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+    bricks: Option<&BrickGrid>,
+    progress: &mut dyn FnMut(&Progress) -> bool,
+) -> Result<Rendered> {
+    with_volume!(volume, v => render_slabs(v, camera, tables, settings, bricks, progress))
+}
+
+/// Renders `volume` seen by `camera` (orthographic or perspective) with image-aligned,
+/// post-classified slabs (module docs). `settings.slab` is the slab thickness in units of the
+/// smallest grid spacing; `settings.mode` may not be X-ray. `bricks` is the volume's brick grid
+/// if the caller keeps one across frames (built here otherwise). `progress` is called after
+/// each group of image bands, with `sheets_done`/`sheets_total` counting bands; returning
+/// `false` cancels with [`SplatError::Cancelled`].
+pub fn render_slabs<T: Scalar>(
+    volume: &Volume<T>,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+    bricks: Option<&BrickGrid>,
+    progress: &mut dyn FnMut(&Progress) -> bool,
+) -> Result<Rendered> {
+    let t_start = Instant::now();
+    validate(settings)?;
+    if settings.mode == RenderMode::Xray {
+        return Err(SplatError::Setting {
+            name: "mode",
+            value: "xray".into(),
+            expected: "composite, mip or minip with image-aligned slabs (X-ray line integrals \
+                       are exact in the sheet renderers)",
+        });
+    }
+    if !(settings.slab.is_finite() && (0.01..=16.0).contains(&settings.slab)) {
+        return Err(SplatError::Setting {
+            name: "slab",
+            value: settings.slab.to_string(),
+            expected: "a slab thickness in [0.01, 16] × the smallest voxel spacing",
+        });
+    }
+    let grid = volume.grid();
+    if grid.dims.contains(&0) {
+        return Err(SplatError::Setting {
+            name: "volume",
+            value: format!("{:?}", grid.dims),
+            expected: "at least one voxel per axis",
+        });
+    }
+    let owned;
+    let bricks = match bricks {
+        Some(b) if b.volume_dims == grid.dims => b,
+        _ => {
+            owned = BrickGrid::build(volume);
+            &owned
+        }
+    };
+    let proj = Projection::new(camera, settings.width, settings.height)?;
+    let frame = *proj.frame();
+    let min_spacing = grid.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
+    let delta = settings.slab * min_spacing;
+    let classifier = FrameClassifier::new(tables, &frame, delta);
+    let composite = settings.mode == RenderMode::Composite;
+    let shade = composite && classifier.needs_gradient;
+
+    // Depth range of the box of voxel centres, and the planes inside it.
+    let depths = grid
+        .corners_world()
+        .map(|c| (c - frame.eye).dot(frame.forward));
+    let dmin = depths.iter().fold(f64::INFINITY, |m, &d| m.min(d));
+    let dmax = depths.iter().fold(f64::NEG_INFINITY, |m, &d| m.max(d));
+    let perspective = matches!(proj, Projection::Perspective(_));
+    let mut j0 = (dmin / delta).ceil();
+    if perspective {
+        j0 = j0.max(1.0); // planes in front of the eye only
+    }
+    let j1 = (dmax / delta).floor();
+    let n_planes = if j1 >= j0 { (j1 - j0) as usize + 1 } else { 0 };
+    if n_planes > 1 << 24 {
+        return Err(SplatError::Setting {
+            name: "slab",
+            value: settings.slab.to_string(),
+            expected: "fewer than 2^24 planes across the volume; use a thicker slab",
+        });
+    }
+    let (w, h) = (settings.width, settings.height);
+    let pixel_size_mid = proj.pixel_size_at(0.5 * (dmin.max(delta) + dmax));
+    // Central-difference offsets of about one voxel: in pixels in the plane, in planes in depth.
+    let k_px = ((min_spacing / pixel_size_mid).round() as usize).clamp(1, 8);
+    let m_planes = (settings.slab.recip().round() as usize).clamp(1, 8);
+    let view = View::new(&proj, grid, w, h);
+    let active = bricks.active(
+        &tables.opacity,
+        (tables.opacity.hi - tables.opacity.lo) / 4095.0,
+        shade,
+    );
+    let all_active = active.iter().all(|&a| a);
+    let post = (composite && !shade)
+        .then(|| PostTable::new(tables, &classifier))
+        .flatten();
+    let ctx = Ctx {
+        data: volume.data(),
+        dims: grid.dims,
+        max_cell: grid.dims.map(|n| n.max(2) as i64 - 2),
+        stride: [1, grid.dims[0], grid.dims[0] * grid.dims[1]],
+        up: [
+            usize::from(grid.dims[0] > 1),
+            usize::from(grid.dims[1] > 1) * grid.dims[0],
+            usize::from(grid.dims[2] > 1) * grid.dims[0] * grid.dims[1],
+        ],
+        bricks,
+        active: &active,
+        skip_empty: composite && !all_active,
+        view,
+        classifier: &classifier,
+        post: post.as_ref(),
+        mode: settings.mode,
+        shade,
+        cutoff: settings.opacity_cutoff,
+        j0: j0 as i64,
+        n_planes,
+        delta,
+        dmin,
+        depth_scale: if dmax > dmin {
+            1.0 / (dmax - dmin)
+        } else {
+            0.0
+        },
+        k_px,
+        m_planes,
+        width: w,
+        height: h,
+        clip: settings
+            .clip
+            .iter()
+            .map(|p| {
+                let n = DVec3::from(p.normal);
+                (n, p.offset)
+            })
+            .collect(),
+    };
+    let init: Rgba = match settings.mode {
+        RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
+        _ => [0.0; 4],
+    };
+    let mut acc = vec![init; w * h];
+    let band_h = settings.band_height;
+    let n_bands = h.div_ceil(band_h);
+    let mut stats = RenderStats {
+        sheets: n_planes,
+        sheet_axis: 3,
+        sheet_spacing: delta,
+        threads: rayon::current_num_threads(),
+        ..RenderStats::default()
+    };
+    stats.setup_ms = ms(t_start);
+    let t_render = Instant::now();
+    let group = (2 * rayon::current_num_threads()).max(4);
+    let mut done = 0;
+    let mut counters = Counters::default();
+    let chunks: Vec<(usize, &mut [Rgba])> = acc.chunks_mut(band_h * w).enumerate().collect();
+    let mut chunks = chunks.into_iter().peekable();
+    while chunks.peek().is_some() {
+        let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group).collect();
+        let n = batch.len();
+        let c = batch
+            .into_par_iter()
+            .map(|(b, rows)| ctx.band(b * band_h, rows))
+            .reduce(Counters::default, Counters::add);
+        counters = counters.add(c);
+        done += n;
+        // The accumulation of finished bands is only visible after the loop (the bands hold
+        // it mutably); the callback gets the count.
+        if !progress(&Progress {
+            sheets_done: done,
+            sheets_total: n_bands,
+            accumulation: &[],
+        }) {
+            return Err(SplatError::Cancelled);
+        }
+    }
+    stats.classify_ms = ms(t_render);
+    stats.voxels = counters.samples;
+    stats.splats = counters.visible;
+    stats.pixel_updates = counters.visible;
+    stats.splats_terminated = counters.terminated;
+    let (image, values) = finish(acc, settings, tables, "image-aligned slab renderer")?;
+    stats.total_ms = ms(t_start);
+    Ok(Rendered {
+        image,
+        values,
+        stats,
+    })
+}
+
+#[derive(Default, Clone, Copy)]
+struct Counters {
+    /// Samples reconstructed.
+    samples: u64,
+    /// Samples with non-zero opacity composited (or MIP samples compared).
+    visible: u64,
+    /// Samples skipped because the pixel was opaque.
+    terminated: u64,
+}
+
+impl Counters {
+    fn add(self, o: Counters) -> Counters {
+        Counters {
+            samples: self.samples + o.samples,
+            visible: self.visible + o.visible,
+            terminated: self.terminated + o.terminated,
+        }
+    }
+}
+
+/// Sample positions: the point of pixel `(x, y)` (centre) on the plane at eye depth `d` is
+/// `P = eye + d·(f + u·r + v·u)` in perspective (`u, v` the pixel's tangent-plane offsets) and
+/// `P = eye + d·f + x_w·r + y_w·u` in orthographic views; both are affine in `x` along a row,
+/// so a row of a plane is a start and a step in index space.
+struct View {
+    perspective: bool,
+    /// Index-space position of the eye, and the index-space images of the world axes.
+    eye_q: DVec3,
+    right_q: DVec3,
+    up_q: DVec3,
+    fwd_q: DVec3,
+    /// World frame, for gradients.
+    right: Vec3,
+    up: Vec3,
+    fwd: Vec3,
+    eye: DVec3,
+    right_w: DVec3,
+    up_w: DVec3,
+    fwd_w: DVec3,
+    /// Orthographic: world units per pixel. Perspective: 1 / focal length in pixels.
+    scale: f64,
+    half_w: f64,
+    half_h: f64,
+}
+
+impl View {
+    fn new(proj: &Projection, grid: &volsplat_core::Grid, w: usize, h: usize) -> Self {
+        let fr = proj.frame();
+        let q0 = grid.index_from_world(DVec3::ZERO);
+        let lin = |v: DVec3| grid.index_from_world(v) - q0;
+        let (perspective, scale) = match proj {
+            Projection::Ortho(p) => (false, p.pixel_size),
+            Projection::Perspective(p) => (true, 1.0 / p.focal_px),
+        };
+        View {
+            perspective,
+            eye_q: grid.index_from_world(fr.eye),
+            right_q: lin(fr.right),
+            up_q: lin(fr.up),
+            fwd_q: lin(fr.forward),
+            right: fr.right.as_vec3(),
+            up: fr.up.as_vec3(),
+            fwd: fr.forward.as_vec3(),
+            eye: fr.eye,
+            right_w: fr.right,
+            up_w: fr.up,
+            fwd_w: fr.forward,
+            scale,
+            half_w: w as f64 * 0.5,
+            half_h: h as f64 * 0.5,
+        }
+    }
+
+    /// Tangent-plane (perspective: per unit depth; orthographic: world) offsets of the centre
+    /// of pixel `(x, y)` along right and up.
+    #[inline]
+    fn offsets(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            (x + 0.5 - self.half_w) * self.scale,
+            (self.half_h - y - 0.5) * self.scale,
+        )
+    }
+
+    /// Index-space position of pixel `(0, y)` on the plane at depth `d`, and the step per pixel
+    /// along the row.
+    fn row(&self, y: usize, d: f64) -> (DVec3, DVec3) {
+        let (u0, v) = self.offsets(0.0, y as f64);
+        if self.perspective {
+            let start = self.eye_q + (self.fwd_q + self.right_q * u0 + self.up_q * v) * d;
+            (start, self.right_q * (d * self.scale))
+        } else {
+            let start = self.eye_q + self.fwd_q * d + self.right_q * u0 + self.up_q * v;
+            (start, self.right_q * self.scale)
+        }
+    }
+
+    /// World position of pixel `(x, 0)`'s point at depth `d` and the world step per pixel along
+    /// x (for clipping planes).
+    fn row_world(&self, y: usize, d: f64) -> (DVec3, DVec3) {
+        let (u0, v) = self.offsets(0.0, y as f64);
+        if self.perspective {
+            (
+                self.eye + (self.fwd_w + self.right_w * u0 + self.up_w * v) * d,
+                self.right_w * (d * self.scale),
+            )
+        } else {
+            (
+                self.eye + self.fwd_w * d + self.right_w * u0 + self.up_w * v,
+                self.right_w * self.scale,
+            )
+        }
+    }
+}
+
+/// The pixels `x` in `[0, width)` with `lo ≤ a + x·b ≤ hi`, intersected with `range`.
+fn clip_linear(range: (i64, i64), a: f64, b: f64, lo: f64, hi: f64) -> (i64, i64) {
+    const SLACK: f64 = 1e-9;
+    let (lo, hi) = (lo - SLACK, hi + SLACK);
+    if b.abs() < 1e-300 {
+        return if a >= lo && a <= hi { range } else { (0, -1) };
+    }
+    let (t0, t1) = ((lo - a) / b, (hi - a) / b);
+    let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
+    let x0 = t0.ceil().max(range.0 as f64);
+    let x1 = t1.floor().min(range.1 as f64);
+    if x0 > x1 || !x0.is_finite() || !x1.is_finite() {
+        (0, -1)
+    } else {
+        (x0 as i64, x1 as i64)
+    }
+}
+
+struct Ctx<'a, T> {
+    data: &'a [T],
+    dims: [usize; 3],
+    /// Largest cell index per axis (`max(n, 2) − 2`).
+    max_cell: [i64; 3],
+    /// Index strides per axis.
+    stride: [usize; 3],
+    /// Offset to the next voxel per axis (0 along an axis of one voxel).
+    up: [usize; 3],
+    bricks: &'a BrickGrid,
+    active: &'a [bool],
+    skip_empty: bool,
+    view: View,
+    classifier: &'a FrameClassifier,
+    /// Unshaded, density-indexed classification as one premultiplied table.
+    post: Option<&'a PostTable>,
+    mode: RenderMode,
+    shade: bool,
+    cutoff: f32,
+    j0: i64,
+    n_planes: usize,
+    delta: f64,
+    dmin: f64,
+    depth_scale: f64,
+    k_px: usize,
+    m_planes: usize,
+    width: usize,
+    height: usize,
+    clip: Vec<(DVec3, f64)>,
+}
+
+impl<T: Scalar> Ctx<'_, T> {
+    fn depth(&self, plane: usize) -> f64 {
+        (self.j0 + plane as i64) as f64 * self.delta
+    }
+
+    /// Row `y` of the plane at depth `d` in 32.32 fixed-point index coordinates (VTK's ray
+    /// caster steps in 15-bit fixed point): integer steps are exact, so a pixel's position is
+    /// the same whichever pixels around it are skipped. The span holds the pixels whose point
+    /// lies in the box of voxel centres `[0, n − 1]³`, checked in fixed point, so no clamping is
+    /// needed below 0.
+    fn walk(&self, y: usize, d: f64) -> Walk {
+        let (start, step) = self.view.row(y, d);
+        let mut r = (0, self.width as i64 - 1);
+        for a in 0..3 {
+            r = clip_linear(r, start[a], step[a], 0.0, (self.dims[a] - 1) as f64);
+        }
+        let s = [0, 1, 2].map(|a| to_fixed(start[a]));
+        let st = [0, 1, 2].map(|a| to_fixed(step[a]));
+        let inside = |x: i64| {
+            (0..3).all(|a| {
+                let q = s[a] + x * st[a];
+                q >= 0 && q <= ((self.dims[a] - 1) as i64) << FRAC
+            })
+        };
+        while r.0 <= r.1 && !inside(r.0) {
+            r.0 += 1;
+        }
+        while r.1 >= r.0 && !inside(r.1) {
+            r.1 -= 1;
+        }
+        Walk { s, st, span: r }
+    }
+
+    /// The pixels of row `y` at depth `d` kept by every clipping plane.
+    fn clip_span(&self, y: usize, d: f64, r: (i64, i64)) -> (i64, i64) {
+        if self.clip.is_empty() || r.0 > r.1 {
+            return r;
+        }
+        let (p0, dp) = self.view.row_world(y, d);
+        let mut r = r;
+        for &(n, off) in &self.clip {
+            r = clip_linear(r, n.dot(p0) + off, n.dot(dp), 0.0, f64::INFINITY);
+        }
+        r
+    }
+
+    /// Reconstructs the pixels `span` (within `walk.span`) of a row into `out` (NaN elsewhere
+    /// and where the brick is skipped). Returns the number of samples reconstructed.
+    ///
+    /// Samples are gathered in blocks of [`BLOCK`]: positions and cells first, then the eight
+    /// corners of each, then the seven interpolations over the whole block, which the compiler
+    /// vectorises (one sample at a time, the interpolation's dependency chain left the core
+    /// idle). Every sample goes through the same arithmetic in either case.
+    fn sample_row(&self, walk: &Walk, span: (i64, i64), out: &mut [f32]) -> u64 {
+        out.fill(f32::NAN);
+        let mut blk = Block::default();
+        let mut count = 0;
+        let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+        let mut x = lo;
+        while x <= hi {
+            // The run of pixels whose cells stay in this brick (space leaping per row).
+            let end = if self.skip_empty {
+                let q = walk.at(x);
+                let (cell, _) = self.cell(q);
+                let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
+                if !self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
+                    x = end + 1;
+                    continue;
+                }
+                end
+            } else {
+                hi
+            };
+            for x in x..=end {
+                let (cell, frac) = self.cell(walk.at(x));
+                self.push(&mut blk, x, cell, frac, out, &mut count);
+            }
+            x = end + 1;
+        }
+        count += blk.n as u64;
+        self.flush(&mut blk, out);
+        count
+    }
+
+    #[inline(always)]
+    fn push(
+        &self,
+        blk: &mut Block,
+        x: i64,
+        cell: [usize; 3],
+        frac: [f32; 3],
+        out: &mut [f32],
+        count: &mut u64,
+    ) {
+        {
+            let n = blk.n;
+            blk.x[n] = x as u32;
+            blk.base[n] = cell[0] + cell[1] * self.stride[1] + cell[2] * self.stride[2];
+            blk.f[0][n] = frac[0];
+            blk.f[1][n] = frac[1];
+            blk.f[2][n] = frac[2];
+            blk.n += 1;
+            if blk.n == BLOCK {
+                self.flush(blk, out);
+                *count += BLOCK as u64;
+            }
+        }
+    }
+
+    /// Interpolates the block's samples into `out` and empties the block.
+    #[inline(always)]
+    fn flush(&self, blk: &mut Block, out: &mut [f32]) {
+        let n = blk.n;
+        if n == 0 {
+            return;
+        }
+        let [ux, uy, uz] = self.up;
+        let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
+        let mut v = [[0.0f32; BLOCK]; 8];
+        for (i, &b) in blk.base[..n].iter().enumerate() {
+            for (c, &o) in offs.iter().enumerate() {
+                v[c][i] = self.data[b + o].to_f32();
+            }
+        }
+        let mut r = [0.0f32; BLOCK];
+        let [fx, fy, fz] = &blk.f;
+        #[allow(clippy::needless_range_loop)] // one index into nine arrays: vectorised as is
+        for i in 0..BLOCK {
+            let c00 = lerp(v[0][i], v[1][i], fx[i]);
+            let c10 = lerp(v[2][i], v[3][i], fx[i]);
+            let c01 = lerp(v[4][i], v[5][i], fx[i]);
+            let c11 = lerp(v[6][i], v[7][i], fx[i]);
+            r[i] = lerp(lerp(c00, c10, fy[i]), lerp(c01, c11, fy[i]), fz[i]);
+        }
+        for (&x, &r) in blk.x[..n].iter().zip(&r) {
+            out[x as usize] = r;
+        }
+        blk.n = 0;
+    }
+
+    /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through every plane.
+    fn band(&self, y0: usize, acc: &mut [Rgba]) -> Counters {
+        let w = self.width;
+        let rows = acc.len() / w;
+        if self.shade {
+            self.band_shaded(y0, rows, acc)
+        } else {
+            self.band_plain(y0, rows, acc)
+        }
+    }
+
+    /// Composite without gradients, and MIP/MinIP: each sample is classified as soon as it is
+    /// reconstructed.
+    fn band_plain(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
+        let w = self.width;
+        let mut c = Counters::default();
+        let mut line = vec![f32::NAN; w];
+        // Live window of each row (composite): pixels outside it are opaque.
+        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
+        let composite = self.mode == RenderMode::Composite;
+        let mip = self.mode == RenderMode::Mip;
+        for p in 0..self.n_planes {
+            let d = self.depth(p);
+            let depth01 = ((d - self.dmin) * self.depth_scale).clamp(0.0, 1.0) as f32;
+            let mut any_live = false;
+            for r in 0..rows {
+                let y = y0 + r;
+                let walk = self.walk(y, d);
+                let mut span = self.clip_span(y, d, walk.span);
+                let row_acc = &mut acc[r * w..(r + 1) * w];
+                if composite {
+                    let lw = &mut live[r];
+                    while lw.0 <= lw.1 && row_acc[lw.0 as usize][3] >= self.cutoff {
+                        lw.0 += 1;
+                    }
+                    while lw.1 >= lw.0 && row_acc[lw.1 as usize][3] >= self.cutoff {
+                        lw.1 -= 1;
+                    }
+                    if lw.0 > lw.1 {
+                        continue;
+                    }
+                    any_live = true;
+                    span = (span.0.max(lw.0), span.1.min(lw.1));
+                } else {
+                    any_live = true;
+                }
+                if span.0 > span.1 {
+                    continue;
+                }
+                if !composite {
+                    // MIP/MinIP: skip bricks that cannot change the pixel.
+                    c.samples += self.extreme_row(&walk, span, row_acc, mip);
+                    continue;
+                }
+                c.samples += self.sample_row(&walk, span, &mut line);
+                for x in span.0 as usize..=span.1 as usize {
+                    let rho = line[x];
+                    if rho.is_nan() {
+                        continue;
+                    }
+                    let px = &mut row_acc[x];
+                    if px[3] >= self.cutoff {
+                        c.terminated += 1;
+                        continue;
+                    }
+                    let rgba = match self.post {
+                        Some(t) => {
+                            let v = t.lookup(rho);
+                            (v[3] > 0.0).then_some(v)
+                        }
+                        None => {
+                            if self.classifier.density_opacity(rho) == Some(0.0) {
+                                continue;
+                            }
+                            self.classifier.classify(&SampleInput {
+                                density: rho,
+                                gradient: Vec3::ZERO,
+                                depth: depth01,
+                            })
+                        }
+                    };
+                    if let Some(rgba) = rgba {
+                        let rgba = self.path_correct(rgba, x, y);
+                        over_front_to_back(px, rgba);
+                        c.visible += 1;
+                    }
+                }
+            }
+            if !any_live {
+                break;
+            }
+        }
+        c
+    }
+
+    /// MIP/MinIP over the pixels `span` of one row of one plane; samples whose brick cannot
+    /// beat the pixel's current extreme are skipped (exact: a trilinear value lies in its
+    /// brick's range).
+    fn extreme_row(&self, walk: &Walk, span: (i64, i64), row: &mut [Rgba], mip: bool) -> u64 {
+        let mut n = 0;
+        for x in span.0.max(walk.span.0)..=span.1.min(walk.span.1) {
+            let px = &mut row[x as usize][0];
+            let (cell, frac) = self.cell(walk.at(x));
+            if !px.is_nan() {
+                let [lo, hi] = self.bricks.ranges[self.bricks.index(cell[0], cell[1], cell[2])];
+                if (mip && hi <= *px) || (!mip && lo >= *px) {
+                    continue;
+                }
+            }
+            n += 1;
+            let v = self.trilinear(cell, frac);
+            if v.is_nan() {
+                continue;
+            }
+            if px.is_nan() || (mip && v > *px) || (!mip && v < *px) {
+                *px = v;
+            }
+        }
+        n
+    }
+
+    /// The cell (lower corner) holding the fixed-point index position `q` (every component in
+    /// `[0, n − 1]`, as [`Ctx::walk`] guarantees) and the fractions in it. On the last voxel
+    /// plane the cell is the one below with fraction 1.
+    #[inline(always)]
+    fn cell(&self, q: [i64; 3]) -> ([usize; 3], [f32; 3]) {
+        let mut c = [0usize; 3];
+        let mut f = [0.0f32; 3];
+        for a in 0..3 {
+            let i = (q[a] >> FRAC).min(self.max_cell[a]);
+            c[a] = i as usize;
+            f[a] = ((q[a] - (i << FRAC)) >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
+        }
+        (c, f)
+    }
+
+    /// Trilinear interpolation in cell `c` at fractions `f` (the tent kernel's sum; module
+    /// docs).
+    #[inline(always)]
+    fn trilinear(&self, c: [usize; 3], f: [f32; 3]) -> f32 {
+        let [ux, uy, uz] = self.up;
+        let base = c[0] + c[1] * self.stride[1] + c[2] * self.stride[2];
+        let v = |o: usize| self.data[base + o].to_f32();
+        let c00 = lerp(v(0), v(ux), f[0]);
+        let c10 = lerp(v(uy), v(uy + ux), f[0]);
+        let c01 = lerp(v(uz), v(uz + ux), f[0]);
+        let c11 = lerp(v(uz + uy), v(uz + uy + ux), f[0]);
+        lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2])
+    }
+
+    /// Perspective: the slab's path along the ray through pixel `(x, y)` is `Δ·√(1 + u² + v²)`,
+    /// so the opacity (corrected for `Δ`) becomes `1 − (1 − α)^√(1 + u² + v²)` and the colour
+    /// scales with it.
+    #[inline]
+    fn path_correct(&self, rgba: Rgba, x: usize, y: usize) -> Rgba {
+        if !self.view.perspective {
+            return rgba;
+        }
+        let a = rgba[3];
+        if a <= 0.0 || a >= 1.0 {
+            return rgba;
+        }
+        let (u, v) = self.view.offsets(x as f64, y as f64);
+        let k = (1.0 + u * u + v * v).sqrt() as f32;
+        let a2 = 1.0 - (1.0 - a).powf(k);
+        let s = a2 / a;
+        [rgba[0] * s, rgba[1] * s, rgba[2] * s, a2]
+    }
+
+    /// Shaded composite: planes are reconstructed `m` planes ahead of the one classified, over
+    /// the band's rows and `k` rows above and below, so that central differences of about one
+    /// voxel in x, y and depth are available (Mueller, Möller & Crawfis 1999, §3).
+    fn band_shaded(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
+        let w = self.width;
+        let (k, m) = (self.k_px, self.m_planes);
+        let ya = y0.saturating_sub(k);
+        let yb = (y0 + rows + k).min(self.height);
+        let halo_rows = yb - ya;
+        let ring_len = 2 * m + 1;
+        let mut ring: Vec<Vec<f32>> = vec![vec![f32::NAN; halo_rows * w]; ring_len];
+        let mut c = Counters::default();
+        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
+        let total = self.n_planes + m;
+        for pc in 0..total {
+            // Reconstruct plane `pc` into its ring slot.
+            let slot = pc % ring_len;
+            if pc < self.n_planes {
+                let d = self.depth(pc);
+                let plane = &mut ring[slot];
+                for (r, y) in (ya..yb).enumerate() {
+                    let walk = self.walk(y, d);
+                    let out = &mut plane[r * w..(r + 1) * w];
+                    c.samples += self.sample_row(&walk, walk.span, out);
+                }
+            } else {
+                ring[slot].fill(f32::NAN);
+            }
+            // Classify plane p = pc − m.
+            if pc < m {
+                continue;
+            }
+            let p = pc - m;
+            let d = self.depth(p);
+            let depth01 = ((d - self.dmin) * self.depth_scale).clamp(0.0, 1.0) as f32;
+            let cur = &ring[p % ring_len];
+            let ahead = &ring[(p + m) % ring_len];
+            let behind = (p >= m).then(|| &ring[(p - m) % ring_len]);
+            let mut any_live = false;
+            for r in 0..rows {
+                let y = y0 + r;
+                let row_acc = &mut acc[r * w..(r + 1) * w];
+                let lw = &mut live[r];
+                while lw.0 <= lw.1 && row_acc[lw.0 as usize][3] >= self.cutoff {
+                    lw.0 += 1;
+                }
+                while lw.1 >= lw.0 && row_acc[lw.1 as usize][3] >= self.cutoff {
+                    lw.1 -= 1;
+                }
+                if lw.0 > lw.1 {
+                    continue;
+                }
+                any_live = true;
+                let walk = self.walk(y, d);
+                let span = self.clip_span(y, d, walk.span);
+                let span = (span.0.max(lw.0), span.1.min(lw.1));
+                if span.0 > span.1 {
+                    continue;
+                }
+                let hr = y - ya;
+                let row = &cur[hr * w..(hr + 1) * w];
+                let up_row = (y >= ya + k).then(|| &cur[(hr - k) * w..(hr - k + 1) * w]);
+                let down_row = (y + k < yb).then(|| &cur[(hr + k) * w..(hr + k + 1) * w]);
+                let (_, v) = self.view.offsets(0.0, y as f64);
+                for x in span.0 as usize..=span.1 as usize {
+                    let rho = row[x];
+                    if rho.is_nan() {
+                        continue;
+                    }
+                    let px = &mut row_acc[x];
+                    if px[3] >= self.cutoff {
+                        c.terminated += 1;
+                        continue;
+                    }
+                    if self.classifier.density_opacity(rho) == Some(0.0) {
+                        continue;
+                    }
+                    // Central differences (one-sided at the edge of what was reconstructed).
+                    let left = if x >= k { row[x - k] } else { f32::NAN };
+                    let right = if x + k < w { row[x + k] } else { f32::NAN };
+                    let dx = diff(left, rho, right, k as f32);
+                    let upv = up_row.map_or(f32::NAN, |r| r[x]);
+                    let downv = down_row.map_or(f32::NAN, |r| r[x]);
+                    // Rows grow downwards, the up vector upwards.
+                    let dy = -diff(upv, rho, downv, k as f32);
+                    let back = behind.map_or(f32::NAN, |b| b[hr * w + x]);
+                    let front = ahead[hr * w + x];
+                    let dz = diff(back, rho, front, m as f32);
+                    let gradient = self.world_gradient(dx, dy, dz, x, v, d);
+                    let input = SampleInput {
+                        density: rho,
+                        gradient,
+                        depth: depth01,
+                    };
+                    if let Some(rgba) = self.classifier.classify(&input) {
+                        let rgba = self.path_correct(rgba, x, y);
+                        over_front_to_back(px, rgba);
+                        c.visible += 1;
+                    }
+                }
+            }
+            if !any_live {
+                break;
+            }
+        }
+        c
+    }
+
+    /// World gradient from the derivatives of `ρ̂` per pixel along x and along the image's up
+    /// direction, and per plane along the ray: with `a_x, a_y, a_j` the world displacements
+    /// of one pixel and one plane, solve `g·a = dρ`. Orthographic: `a_x = r·s`, `a_y = u·s`,
+    /// `a_j = f·Δ` (s world units per pixel). Perspective at depth `d`: `a_x = r·d/F`,
+    /// `a_y = u·d/F`, `a_j = Δ·(f + u_x·r + v_y·u)` with `(u_x, v_y)` the pixel's offsets on
+    /// the plane at unit depth.
+    #[inline]
+    fn world_gradient(&self, dx: f32, dy: f32, dz: f32, x: usize, v: f64, d: f64) -> Vec3 {
+        let vw = &self.view;
+        let delta = self.delta as f32;
+        if !vw.perspective {
+            let s = vw.scale as f32;
+            vw.right * (dx / s) + vw.up * (dy / s) + vw.fwd * (dz / delta)
+        } else {
+            let px = (d * vw.scale) as f32;
+            let (gr, gu) = (dx / px, dy / px);
+            let u = ((x as f64 + 0.5 - vw.half_w) * vw.scale) as f32;
+            let gf = dz / delta - u * gr - v as f32 * gu;
+            vw.right * gr + vw.up * gu + vw.fwd * gf
+        }
+    }
+}
+
+/// Samples interpolated together ([`Ctx::sample_row`]).
+const BLOCK: usize = 16;
+
+/// A block of samples waiting for interpolation.
+struct Block {
+    n: usize,
+    x: [u32; BLOCK],
+    base: [usize; BLOCK],
+    f: [[f32; BLOCK]; 3],
+}
+
+impl Default for Block {
+    fn default() -> Self {
+        Block {
+            n: 0,
+            x: [0; BLOCK],
+            base: [0; BLOCK],
+            f: [[0.0; BLOCK]; 3],
+        }
+    }
+}
+
+/// Bits of fraction in the fixed-point index positions.
+const FRAC: u32 = 32;
+
+#[inline]
+fn to_fixed(v: f64) -> i64 {
+    (v * (1u64 << FRAC) as f64).round() as i64
+}
+
+/// One row of one plane in fixed-point index coordinates ([`Ctx::walk`]).
+struct Walk {
+    s: [i64; 3],
+    st: [i64; 3],
+    /// Pixels inside the box of voxel centres (empty when `span.0 > span.1`).
+    span: (i64, i64),
+}
+
+impl Walk {
+    /// How many pixels from the one at `q` (in cell `cell`) on keep their cells in the same
+    /// brick: at least 1.
+    #[inline]
+    fn run_in_brick(&self, q: [i64; 3], cell: [usize; 3]) -> i64 {
+        let mut run = i64::MAX;
+        for a in 0..3 {
+            let st = self.st[a];
+            let b0 = ((cell[a] / BRICK) * BRICK) as i64;
+            let k = if st > 0 {
+                // Steps k with q + k·st < (b0 + B) << FRAC.
+                let room = ((b0 + BRICK as i64) << FRAC) - q[a];
+                (room + st - 1) / st
+            } else if st < 0 {
+                // Steps k with q + k·st ≥ b0 << FRAC, counting the pixel itself.
+                let room = q[a] - (b0 << FRAC);
+                room / -st + 1
+            } else {
+                continue;
+            };
+            run = run.min(k);
+        }
+        run.max(1)
+    }
+
+    #[inline(always)]
+    fn at(&self, x: i64) -> [i64; 3] {
+        [
+            self.s[0] + x * self.st[0],
+            self.s[1] + x * self.st[1],
+            self.s[2] + x * self.st[2],
+        ]
+    }
+}
+
+/// Premultiplied RGBA per density for unshaded classification: [`FrameClassifier::classify`]
+/// evaluated at the entries of its own fused table (so the entries agree with it exactly),
+/// read with linear interpolation of the premultiplied values (interpolating colour and
+/// opacity separately, as `classify` does, differs between entries by the product of the
+/// two increments).
+struct PostTable {
+    lo: f32,
+    scale: f32,
+    last: f32,
+    values: Vec<Rgba>,
+}
+
+impl PostTable {
+    const LEN: usize = 4096;
+
+    fn new(tables: &CrioTables, classifier: &FrameClassifier) -> Option<Self> {
+        use volsplat_core::TableIndex::Density;
+        let idx = [
+            tables.opacity.index,
+            tables.emission.index,
+            tables.reflection.index,
+        ];
+        if idx.iter().any(|&i| i != Density)
+            || tables.modulation.values.len() != 1
+            || classifier.needs_gradient
+        {
+            return None;
+        }
+        let lo = tables
+            .opacity
+            .lo
+            .min(tables.emission.lo)
+            .min(tables.reflection.lo);
+        let hi = tables
+            .opacity
+            .hi
+            .max(tables.emission.hi)
+            .max(tables.reflection.hi);
+        let n = if hi > lo { Self::LEN } else { 1 };
+        let values = (0..n)
+            .map(|k| {
+                let x = if n == 1 {
+                    lo
+                } else {
+                    lo + (hi - lo) * k as f32 / (n - 1) as f32
+                };
+                classifier
+                    .classify(&SampleInput {
+                        density: x,
+                        gradient: Vec3::ZERO,
+                        depth: 0.0,
+                    })
+                    .unwrap_or([0.0; 4])
+            })
+            .collect();
+        Some(PostTable {
+            lo,
+            scale: if n > 1 {
+                (n - 1) as f32 / (hi - lo)
+            } else {
+                0.0
+            },
+            last: (n - 1) as f32,
+            values,
+        })
+    }
+
+    #[inline(always)]
+    fn lookup(&self, x: f32) -> Rgba {
+        let t = ((x - self.lo) * self.scale).max(0.0).min(self.last);
+        let i = t as usize;
+        let f = t - i as f32;
+        let a = self.values[i];
+        let b = self.values[(i + 1).min(self.values.len() - 1)];
+        [
+            a[0] + f * (b[0] - a[0]),
+            a[1] + f * (b[1] - a[1]),
+            a[2] + f * (b[2] - a[2]),
+            a[3] + f * (b[3] - a[3]),
+        ]
+    }
+}
+
+#[inline(always)]
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    a + t * (b - a)
+}
+
+/// Derivative per unit offset from samples `lo` and `hi` at ∓`h` around `mid`: central when
+/// both exist, one-sided when one does, zero otherwise.
+#[inline(always)]
+fn diff(lo: f32, mid: f32, hi: f32, h: f32) -> f32 {
+    match (lo.is_nan(), hi.is_nan()) {
+        (false, false) => (hi - lo) / (2.0 * h),
+        (true, false) => (hi - mid) / h,
+        (false, true) => (mid - lo) / h,
+        (true, true) => 0.0,
+    }
+}
