@@ -542,9 +542,17 @@ impl<T: Scalar> Ctx<'_, T> {
         let [ux, uy, uz] = self.up;
         let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
         let mut v = [[0.0f32; BLOCK]; 8];
+        let data = self.data;
+        // Every base is a cell with each index ≤ max(n, 2) − 2 (`Ctx::cell`, from positions that
+        // `Ctx::walk` keeps ≥ 0), and each offset steps at most one voxel per axis of more than
+        // one voxel, so `base + offs[7] ≤ len − 1`: checked once per block here instead of eight
+        // bounds checks per sample.
+        let last = blk.base[..n].iter().copied().max().unwrap_or(0) + offs[7];
+        assert!(last < data.len(), "cell outside the volume");
         for (i, &b) in blk.base[..n].iter().enumerate() {
             for (c, &o) in offs.iter().enumerate() {
-                v[c][i] = self.data[b + o].to_f32();
+                // SAFETY: b + o ≤ last < data.len() (asserted above).
+                v[c][i] = unsafe { data.get_unchecked(b + o) }.to_f32();
             }
         }
         let mut r = [0.0f32; BLOCK];
@@ -583,6 +591,11 @@ impl<T: Scalar> Ctx<'_, T> {
         // Live window of each row (composite): pixels outside it are opaque.
         let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
         let composite = self.mode == RenderMode::Composite;
+        let kf = if composite {
+            self.path_factors(y0, rows)
+        } else {
+            Vec::new()
+        };
         let mip = self.mode == RenderMode::Mip;
         for p in 0..self.n_planes {
             let d = self.depth(p);
@@ -645,7 +658,7 @@ impl<T: Scalar> Ctx<'_, T> {
                         }
                     };
                     if let Some(rgba) = rgba {
-                        let rgba = self.path_correct(rgba, x, y);
+                        let rgba = self.path_correct(rgba, kf[r * w + x]);
                         over_front_to_back(px, rgba);
                         c.visible += 1;
                     }
@@ -713,23 +726,35 @@ impl<T: Scalar> Ctx<'_, T> {
         lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2])
     }
 
-    /// Perspective: the slab's path along the ray through pixel `(x, y)` is `Δ·√(1 + u² + v²)`,
-    /// so the opacity (corrected for `Δ`) becomes `1 − (1 − α)^√(1 + u² + v²)` and the colour
-    /// scales with it.
+    /// Perspective: the slab's path along the ray through a pixel is `Δ·k`, `k = √(1 + u² + v²)`
+    /// ([`Ctx::path_factors`]), so the opacity (corrected for `Δ`) becomes `1 − (1 − α)^k` and
+    /// the colour scales with it. `k = 1` (orthographic) changes nothing.
     #[inline]
-    fn path_correct(&self, rgba: Rgba, x: usize, y: usize) -> Rgba {
-        if !self.view.perspective {
-            return rgba;
-        }
+    fn path_correct(&self, rgba: Rgba, k: f32) -> Rgba {
         let a = rgba[3];
-        if a <= 0.0 || a >= 1.0 {
+        if k == 1.0 || a <= 0.0 || a >= 1.0 {
             return rgba;
         }
-        let (u, v) = self.view.offsets(x as f64, y as f64);
-        let k = (1.0 + u * u + v * v).sqrt() as f32;
-        let a2 = 1.0 - (1.0 - a).powf(k);
+        let a2 = 1.0 - exp2_neg(k * log2_unit(1.0 - a));
         let s = a2 / a;
         [rgba[0] * s, rgba[1] * s, rgba[2] * s, a2]
+    }
+
+    /// The path factor `k = √(1 + u² + v²)` of every pixel of the rows `[y0, y0 + rows)`: 1 in
+    /// orthographic views.
+    fn path_factors(&self, y0: usize, rows: usize) -> Vec<f32> {
+        let w = self.width;
+        if !self.view.perspective {
+            return vec![1.0; rows * w];
+        }
+        let mut k = Vec::with_capacity(rows * w);
+        for y in y0..y0 + rows {
+            for x in 0..w {
+                let (u, v) = self.view.offsets(x as f64, y as f64);
+                k.push((1.0 + u * u + v * v).sqrt() as f32);
+            }
+        }
+        k
     }
 
     /// Shaded composite: planes are reconstructed `m` planes ahead of the one classified, over
@@ -745,6 +770,7 @@ impl<T: Scalar> Ctx<'_, T> {
         let mut ring: Vec<Vec<f32>> = vec![vec![f32::NAN; halo_rows * w]; ring_len];
         let mut c = Counters::default();
         let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
+        let kf = self.path_factors(y0, rows);
         let total = self.n_planes + m;
         for pc in 0..total {
             // Reconstruct plane `pc` into its ring slot.
@@ -827,7 +853,7 @@ impl<T: Scalar> Ctx<'_, T> {
                         depth: depth01,
                     };
                     if let Some(rgba) = self.classifier.classify(&input) {
-                        let rgba = self.path_correct(rgba, x, y);
+                        let rgba = self.path_correct(rgba, kf[r * w + x]);
                         over_front_to_back(px, rgba);
                         c.visible += 1;
                     }
@@ -1006,7 +1032,8 @@ impl PostTable {
     #[inline(always)]
     fn lookup(&self, x: f32) -> Rgba {
         let t = ((x - self.lo) * self.scale).max(0.0).min(self.last);
-        let i = t as usize;
+        // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
+        let i = t as i32 as usize;
         let f = t - i as f32;
         let a = self.values[i];
         let b = self.values[(i + 1).min(self.values.len() - 1)];
@@ -1017,6 +1044,40 @@ impl PostTable {
             a[3] + f * (b[3] - a[3]),
         ]
     }
+}
+
+/// `log2(y)` for `y` in `(0, 1]`: the exponent plus the series of `log2((1 + t)/(1 − t))`,
+/// `t = (m − 1)/(m + 1) ∈ [0, 1/3)`, to `t⁹` (error below 2·10⁻⁶). Plain arithmetic, so every
+/// platform gives the same bits (no libm).
+#[inline(always)]
+fn log2_unit(y: f32) -> f32 {
+    let bits = y.to_bits();
+    let e = ((bits >> 23) & 0xff) as i32 - 127;
+    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+    let t = (m - 1.0) / (m + 1.0);
+    let t2 = t * t;
+    let p = t
+        * (2.885_39
+            + t2 * (0.961_796_7 + t2 * (0.577_078 + t2 * (0.412_198_6 + t2 * 0.320_598_9))));
+    e as f32 + p
+}
+
+/// `2^z` for `z ≤ 0` (0 below −126): `2^(i + ½)·2^f`, `f ∈ [−½, ½]`, with the Taylor series of
+/// `2^f` to `f⁶` (relative error below 2·10⁻⁷). Plain arithmetic, as [`log2_unit`].
+#[inline(always)]
+fn exp2_neg(z: f32) -> f32 {
+    if z.is_nan() || z < -126.0 {
+        return 0.0;
+    }
+    // Truncation rounds towards zero, so for z ≤ 0, i ≥ z and z − i ∈ (−1, 0].
+    let i = z as i32;
+    let f = z - i as f32 + 0.5;
+    let p = 1.0
+        + f * (0.693_147_2
+            + f * (0.240_226_5
+                + f * (0.055_504_1 + f * (0.009_618_13 + f * (0.001_333_36 + f * 0.000_154_04)))));
+    // 2^(i − ½) = 2^i / √2; i ≥ −126, so 2^i is a normal number.
+    f32::from_bits(((i + 127) as u32) << 23) * p * std::f32::consts::FRAC_1_SQRT_2
 }
 
 #[inline(always)]
@@ -1033,5 +1094,30 @@ fn diff(lo: f32, mid: f32, hi: f32, h: f32) -> f32 {
         (true, false) => (hi - mid) / h,
         (false, true) => (mid - lo) / h,
         (true, true) => 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_log2_and_exp2_are_accurate() {
+        let mut worst_log = 0.0f64;
+        let mut worst_exp = 0.0f64;
+        for n in 1..=100_000 {
+            let y = n as f32 / 100_000.0;
+            let e = (log2_unit(y) as f64 - (y as f64).log2()).abs();
+            worst_log = worst_log.max(e);
+            let z = -(n as f32) / 2_000.0; // down to −50
+            let exact = (z as f64).exp2();
+            let r = (exp2_neg(z) as f64 - exact).abs() / exact;
+            worst_exp = worst_exp.max(r);
+        }
+        assert!(worst_log < 3e-6, "log2 error {worst_log}");
+        assert!(worst_exp < 5e-7, "exp2 relative error {worst_exp}");
+        assert!((exp2_neg(0.0) - 1.0).abs() < 1e-6);
+        assert_eq!(exp2_neg(-200.0), 0.0);
+        assert_eq!(exp2_neg(f32::NAN), 0.0);
     }
 }
