@@ -588,7 +588,12 @@ impl Renderer {
                     splats_terminated: s.splats_terminated,
                     pixel_updates: s.pixel_updates,
                     kernel: "tent".into(),
-                    antialias: "none",
+                    antialias: match s.supersampling {
+                        0 | 1 => "none",
+                        2 => "supersample-2x2",
+                        3 => "supersample-3x3",
+                        _ => "supersample-4x4",
+                    },
                     sheets: s.sheets,
                     sheet_axis: "view",
                     sheet_spacing: s.sheet_spacing,

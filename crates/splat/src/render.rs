@@ -162,6 +162,9 @@ pub struct RenderStats {
     pub footprint_half_extent: [f64; 2],
     /// Threads in the rayon pool that ran the render.
     pub threads: usize,
+    /// Image-aligned slabs: sub-pixel rays per axis averaged into each pixel (anti-aliasing of
+    /// minified views, [`crate::slab`]); 0 or 1 means one ray per pixel.
+    pub supersampling: usize,
 }
 
 impl RenderStats {
