@@ -280,7 +280,7 @@ fn supersampling(
     }
     let frame = proj.frame();
     let depth = (grid.center_world() - frame.eye).dot(frame.forward);
-    if !(depth > 0.0) && matches!(proj, Projection::Perspective(_)) {
+    if (depth.is_nan() || depth <= 0.0) && matches!(proj, Projection::Perspective(_)) {
         return 1;
     }
     let ratio = proj.pixel_size_at(depth) / min_spacing;
