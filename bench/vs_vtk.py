@@ -83,7 +83,8 @@ def peak_rss_cmd(cmd, env=None):
 # ---------------------------------------------------------------------------------------------
 # VTK side (runs in a subprocess: `vs_vtk.py --vtk-worker VOL CAM TF OUT.png SIZE THREADS FRAMES`)
 
-def vtk_worker(vol, cam_path, tf_path, out_png, size, threads, frames):
+def vtk_worker(vol, cam_path, tf_path, out_png, size, threads, frames, sample_factor=0.5):
+    """Renders one scene with VTK; `sample_factor` × the smallest spacing is the sample distance."""
     import numpy as np
     import vtk
     cam_j = json.load(open(cam_path))
@@ -100,7 +101,7 @@ def vtk_worker(vol, cam_path, tf_path, out_png, size, threads, frames):
     else:
         mapper.SetBlendModeToComposite()
     mapper.AutoAdjustSampleDistancesOff()
-    mapper.SetSampleDistance(0.5 * min(img.GetSpacing()))
+    mapper.SetSampleDistance(sample_factor * min(img.GetSpacing()))
     mapper.SetImageSampleDistance(1.0)
     mapper.SetNumberOfThreads(threads)
     color = vtk.vtkColorTransferFunction()
@@ -327,7 +328,8 @@ if __name__ == "__main__":
         print(json.dumps(compare(sys.argv[2], sys.argv[3])))
     elif len(sys.argv) > 1 and sys.argv[1] == "--vtk-worker":
         v, c, t, o, s, th, fr = sys.argv[2:9]
-        vtk_worker(v, c, t, o, int(s), int(th), int(fr))
+        factor = float(sys.argv[9]) if len(sys.argv) > 9 else 0.5
+        vtk_worker(v, c, t, o, int(s), int(th), int(fr), factor)
     else:
         ensure_venv()
         main()

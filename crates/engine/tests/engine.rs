@@ -379,3 +379,50 @@ fn a_nil_map_over_budget_is_built_coarser_and_says_so() {
         lit(&full)
     );
 }
+
+/// `quality.visibility = image` draws both projections with the image-aligned slab renderer,
+/// keeps the volume's bricks across frames (a new camera rebuilds nothing), renders X-ray with
+/// the exact sheet renderer, reports progress and cancels, and bad slab thicknesses name the
+/// field.
+#[test]
+fn image_visibility_uses_the_slab_renderer_and_keeps_its_bricks() {
+    use volsplat::VisibilityChoice;
+    for perspective in [false, true] {
+        let mut scene = blobs(32);
+        scene.camera = orbit(30.0, 15.0, perspective);
+        let mut req = RenderRequest::new(scene, 48, 40);
+        req.quality.visibility = VisibilityChoice::Image;
+        let mut r = Renderer::new();
+        let first = r.render(&req, &mut |_| true).unwrap();
+        assert_eq!(first.stats.renderer, Some(UsedRenderer::Slab));
+        assert!(first.stats.prepare_ms > 0.0);
+        assert!(first.image.pixels().iter().any(|p| p[3] > 0.1));
+        req.scene.camera = orbit(75.0, 5.0, perspective);
+        let second = r.render(&req, &mut |_| true).unwrap();
+        assert_eq!(second.stats.prepare_ms, 0.0, "perspective={perspective}");
+        let fresh = Renderer::new().render(&req, &mut |_| true).unwrap();
+        assert_eq!(bits(&second), bits(&fresh));
+        let mut calls = 0;
+        let e = Renderer::new()
+            .render(&req, &mut |p| {
+                if p.stage == "render" {
+                    calls += 1;
+                }
+                calls < 2
+            })
+            .unwrap_err();
+        assert!(matches!(e, EngineError::Cancelled), "{e}");
+    }
+    let mut req = RenderRequest::new(blobs(24), 32, 32);
+    req.quality.visibility = VisibilityChoice::Image;
+    req.mode = Mode::Xray;
+    let out = Renderer::new().render(&req, &mut |_| true).unwrap();
+    assert_eq!(out.stats.renderer, Some(UsedRenderer::Dense));
+    req.mode = Mode::Composite;
+    req.quality.slab = 0.0;
+    let e = Renderer::new().render(&req, &mut |_| true).unwrap_err();
+    assert!(
+        matches!(e, EngineError::Request { ref field, .. } if field == "quality.slab"),
+        "{e}"
+    );
+}
