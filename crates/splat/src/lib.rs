@@ -40,4 +40,4 @@ pub use render::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render, render_any,
     render_with_progress,
 };
-pub use slab::{render_slabs, render_slabs_any};
+pub use slab::{force_scalar_sampling, render_slabs, render_slabs_any};

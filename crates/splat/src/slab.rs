@@ -173,6 +173,7 @@ pub fn render_slabs<T: Scalar>(
         data: volume.data(),
         dims: grid.dims,
         max_cell: grid.dims.map(|n| n.max(2) as i64 - 2),
+        simd: simd_available() && volume.data().len() < i32::MAX as usize,
         stride: [1, grid.dims[0], grid.dims[0] * grid.dims[1]],
         up: [
             usize::from(grid.dims[0] > 1),
@@ -502,6 +503,8 @@ struct Ctx<'a, T> {
     stride: [usize; 3],
     /// Offset to the next voxel per axis (0 along an axis of one voxel).
     up: [usize; 3],
+    /// Sample eight pixels at a time with AVX2 (the CPU has it, and indices fit in i32).
+    simd: bool,
     bricks: &'a BrickGrid,
     active: &'a [bool],
     skip_empty: bool,
@@ -554,7 +557,13 @@ impl<T: Scalar> Ctx<'_, T> {
         while r.1 >= r.0 && !inside(r.1) {
             r.1 -= 1;
         }
-        Walk { s, st, span: r }
+        Walk {
+            s,
+            st,
+            s32: [0, 1, 2].map(|a| start[a] as f32),
+            st32: [0, 1, 2].map(|a| step[a] as f32),
+            span: r,
+        }
     }
 
     /// The pixels of row `y` at depth `d` kept by every clipping plane.
@@ -573,103 +582,82 @@ impl<T: Scalar> Ctx<'_, T> {
     /// Reconstructs the pixels `span` (within `walk.span`) of a row into `out` (NaN elsewhere
     /// and where the brick is skipped). Returns the number of samples reconstructed.
     ///
-    /// Samples are gathered in blocks of [`BLOCK`]: positions and cells first, then the eight
-    /// corners of each, then the seven interpolations over the whole block, which the compiler
-    /// vectorises (one sample at a time, the interpolation's dependency chain left the core
-    /// idle). Every sample goes through the same arithmetic in either case.
+    /// Runs of pixels in active bricks are sampled at `s + x·st` (f32, per pixel, so a pixel's
+    /// value does not depend on which pixels around it are skipped), eight at a time with AVX2
+    /// where the CPU has it ([`sample_run_avx2`]) and one at a time otherwise; both do the same
+    /// f32 operations in the same order, so they give the same bits.
     fn sample_row(&self, walk: &Walk, span: (i64, i64), out: &mut [f32]) -> u64 {
         out.fill(f32::NAN);
-        let mut blk = Block::default();
         let mut count = 0;
         let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+        if !self.skip_empty {
+            if lo <= hi {
+                self.sample_run(walk, lo as usize, hi as usize, out);
+                count += (hi - lo + 1) as u64;
+            }
+            return count;
+        }
+        // Runs of pixels whose cells stay in one brick (space leaping per row); consecutive
+        // active runs are sampled together.
+        let mut pending: Option<(i64, i64)> = None;
         let mut x = lo;
         while x <= hi {
-            // The run of pixels whose cells stay in this brick (space leaping per row).
-            let end = if self.skip_empty {
-                let q = walk.at(x);
-                let (cell, _) = self.cell(q);
-                let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
-                if !self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
-                    x = end + 1;
-                    continue;
-                }
-                end
-            } else {
-                hi
-            };
-            for x in x..=end {
-                let (cell, frac) = self.cell(walk.at(x));
-                self.push(&mut blk, x, cell, frac, out, &mut count);
+            let q = walk.at(x);
+            let (cell, _) = self.cell(q);
+            let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
+            if self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
+                pending = Some(match pending {
+                    Some((a, _)) => (a, end),
+                    None => (x, end),
+                });
+            } else if let Some((a, b)) = pending.take() {
+                self.sample_run(walk, a as usize, b as usize, out);
+                count += (b - a + 1) as u64;
             }
             x = end + 1;
         }
-        count += blk.n as u64;
-        self.flush(&mut blk, out);
+        if let Some((a, b)) = pending {
+            self.sample_run(walk, a as usize, b as usize, out);
+            count += (b - a + 1) as u64;
+        }
         count
     }
 
-    #[inline(always)]
-    fn push(
-        &self,
-        blk: &mut Block,
-        x: i64,
-        cell: [usize; 3],
-        frac: [f32; 3],
-        out: &mut [f32],
-        count: &mut u64,
-    ) {
-        {
-            let n = blk.n;
-            blk.x[n] = x as u32;
-            blk.base[n] = cell[0] + cell[1] * self.stride[1] + cell[2] * self.stride[2];
-            blk.f[0][n] = frac[0];
-            blk.f[1][n] = frac[1];
-            blk.f[2][n] = frac[2];
-            blk.n += 1;
-            if blk.n == BLOCK {
-                self.flush(blk, out);
-                *count += BLOCK as u64;
-            }
+    /// Samples the pixels `a..=b` of a row (all inside the volume) into `out`.
+    #[inline]
+    fn sample_run(&self, walk: &Walk, a: usize, b: usize, out: &mut [f32]) {
+        #[allow(unused_mut)]
+        let mut x = a;
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+            x = unsafe { sample_run_avx2(self, walk, a, b, out) };
+        }
+        for (x, o) in out.iter_mut().enumerate().take(b + 1).skip(x) {
+            *o = self.sample_scalar(walk, x);
         }
     }
 
-    /// Interpolates the block's samples into `out` and empties the block.
+    /// One sample at pixel `x`: the scalar twin of [`sample_run_avx2`].
     #[inline(always)]
-    fn flush(&self, blk: &mut Block, out: &mut [f32]) {
-        let n = blk.n;
-        if n == 0 {
-            return;
+    fn sample_scalar(&self, walk: &Walk, x: usize) -> f32 {
+        let xf = x as f32;
+        let mut c = [0usize; 3];
+        let mut f = [0.0f32; 3];
+        for a in 0..3 {
+            let q = walk.s32[a] + xf * walk.st32[a];
+            let i = (q as i32).clamp(0, self.max_cell[a] as i32);
+            c[a] = i as usize;
+            f[a] = (q - i as f32).clamp(0.0, 1.0);
         }
         let [ux, uy, uz] = self.up;
-        let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
-        let mut v = [[0.0f32; BLOCK]; 8];
-        let data = self.data;
-        // Every base is a cell with each index ≤ max(n, 2) − 2 (`Ctx::cell`, from positions that
-        // `Ctx::walk` keeps ≥ 0), and each offset steps at most one voxel per axis of more than
-        // one voxel, so `base + offs[7] ≤ len − 1`: checked once per block here instead of eight
-        // bounds checks per sample.
-        let last = blk.base[..n].iter().copied().max().unwrap_or(0) + offs[7];
-        assert!(last < data.len(), "cell outside the volume");
-        for (i, &b) in blk.base[..n].iter().enumerate() {
-            for (c, &o) in offs.iter().enumerate() {
-                // SAFETY: b + o ≤ last < data.len() (asserted above).
-                v[c][i] = unsafe { data.get_unchecked(b + o) }.to_f32();
-            }
-        }
-        let mut r = [0.0f32; BLOCK];
-        let [fx, fy, fz] = &blk.f;
-        #[allow(clippy::needless_range_loop)] // one index into nine arrays: vectorised as is
-        for i in 0..BLOCK {
-            let c00 = lerp(v[0][i], v[1][i], fx[i]);
-            let c10 = lerp(v[2][i], v[3][i], fx[i]);
-            let c01 = lerp(v[4][i], v[5][i], fx[i]);
-            let c11 = lerp(v[6][i], v[7][i], fx[i]);
-            r[i] = lerp(lerp(c00, c10, fy[i]), lerp(c01, c11, fy[i]), fz[i]);
-        }
-        for (&x, &r) in blk.x[..n].iter().zip(&r) {
-            out[x as usize] = r;
-        }
-        blk.n = 0;
+        let base = c[0] + c[1] * self.stride[1] + c[2] * self.stride[2];
+        let v = |o: usize| self.data[base + o].to_f32();
+        let c00 = lerp(v(0), v(ux), f[0]);
+        let c10 = lerp(v(uy), v(uy + ux), f[0]);
+        let c01 = lerp(v(uz), v(uz + ux), f[0]);
+        let c11 = lerp(v(uz + uy), v(uz + uy + ux), f[0]);
+        lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2])
     }
 
     /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through every plane.
@@ -990,28 +978,6 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 }
 
-/// Samples interpolated together ([`Ctx::sample_row`]).
-const BLOCK: usize = 16;
-
-/// A block of samples waiting for interpolation.
-struct Block {
-    n: usize,
-    x: [u32; BLOCK],
-    base: [usize; BLOCK],
-    f: [[f32; BLOCK]; 3],
-}
-
-impl Default for Block {
-    fn default() -> Self {
-        Block {
-            n: 0,
-            x: [0; BLOCK],
-            base: [0; BLOCK],
-            f: [[0.0; BLOCK]; 3],
-        }
-    }
-}
-
 /// Bits of fraction in the fixed-point index positions.
 const FRAC: u32 = 32;
 
@@ -1024,6 +990,9 @@ fn to_fixed(v: f64) -> i64 {
 struct Walk {
     s: [i64; 3],
     st: [i64; 3],
+    /// The row's start and step as f32, for the samples themselves.
+    s32: [f32; 3],
+    st32: [f32; 3],
     /// Pixels inside the box of voxel centres (empty when `span.0 > span.1`).
     span: (i64, i64),
 }
@@ -1076,7 +1045,7 @@ struct PostTable {
 }
 
 impl PostTable {
-    const LEN: usize = 4096;
+    const LEN: usize = 1024;
 
     fn new(tables: &CrioTables, classifier: &FrameClassifier) -> Option<Self> {
         use volsplat_core::TableIndex::Density;
@@ -1196,6 +1165,158 @@ fn diff(lo: f32, mid: f32, hi: f32, h: f32) -> f32 {
         (false, true) => (mid - lo) / h,
         (true, true) => 0.0,
     }
+}
+
+static FORCE_SCALAR: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Makes the slab renderer sample one pixel at a time even where the CPU has AVX2 (tests compare
+/// the two paths bit for bit). Process-wide; the images do not change, only the speed.
+#[doc(hidden)]
+pub fn force_scalar_sampling(on: bool) {
+    FORCE_SCALAR.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+fn simd_available() -> bool {
+    if FORCE_SCALAR.load(std::sync::atomic::Ordering::Relaxed) {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Samples pixels `a..=b` of a row eight at a time (the last group partly); returns the first
+/// pixel not done (`b + 1`, or earlier where a group's reads would pass the end of the data). Lane `l` does exactly [`Ctx::sample_scalar`]'s f32 operations for pixel `x + l`
+/// (no fused multiply–add: AVX2 without FMA), and reads the volume with `vpgatherdd`: 8-bit and
+/// 16-bit samples are gathered as 32-bit words and masked (sign-extended for signed types), so a
+/// group whose last corner lies within 3 bytes of the end of the data is left to the scalar path.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn sample_run_avx2<T: Scalar>(
+    ctx: &Ctx<'_, T>,
+    walk: &Walk,
+    a: usize,
+    b: usize,
+    out: &mut [f32],
+) -> usize {
+    use std::arch::x86_64::*;
+    use volsplat_core::ScalarType;
+    let data = ctx.data;
+    let bytes = std::mem::size_of::<T>();
+    // Largest index whose 4-byte read stays inside the data.
+    let safe_last = std::mem::size_of_val(data).saturating_sub(4) / bytes;
+    let [ux, uy, uz] = ctx.up;
+    let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux].map(|o| o as i32);
+    let ptr = data.as_ptr() as *const i32;
+    let lanes = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let izero = _mm256_setzero_si256();
+    let s = walk.s32.map(|v| _mm256_set1_ps(v));
+    let st = walk.st32.map(|v| _mm256_set1_ps(v));
+    let maxc = ctx.max_cell.map(|m| _mm256_set1_epi32(m as i32));
+    let sy = _mm256_set1_epi32(ctx.stride[1] as i32);
+    let sz = _mm256_set1_epi32(ctx.stride[2] as i32);
+    let last_ok = _mm256_set1_epi32(safe_last as i32);
+    let kind = T::TYPE;
+    let mut x = a;
+    while x <= b {
+        // x + lane as f32: exact (x < 2^24), equal to the scalar `x as f32`.
+        let xf = _mm256_add_ps(_mm256_set1_ps(x as f32), lanes);
+        let mut cell = [izero; 3];
+        let mut frac = [zero; 3];
+        for ax in 0..3 {
+            let q = _mm256_add_ps(s[ax], _mm256_mul_ps(xf, st[ax]));
+            let i = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(q), izero), maxc[ax]);
+            cell[ax] = i;
+            let f = _mm256_sub_ps(q, _mm256_cvtepi32_ps(i));
+            frac[ax] = _mm256_min_ps(_mm256_max_ps(f, zero), one);
+        }
+        let base = _mm256_add_epi32(
+            cell[0],
+            _mm256_add_epi32(
+                _mm256_mullo_epi32(cell[1], sy),
+                _mm256_mullo_epi32(cell[2], sz),
+            ),
+        );
+        let top = _mm256_add_epi32(base, _mm256_set1_epi32(offs[7]));
+        if bytes < 4 && _mm256_movemask_epi8(_mm256_cmpgt_epi32(top, last_ok)) != 0 {
+            break;
+        }
+        // Macros, not closures: a closure would not inherit `target_feature` and was not inlined.
+        macro_rules! gather {
+            ($o:expr) => {{
+                let idx = _mm256_add_epi32(base, _mm256_set1_epi32($o));
+                // SAFETY: every index is a voxel of the volume (cells are clamped to the grid), and
+                // for 8/16-bit samples the 4-byte read ends inside the data (checked above).
+                unsafe {
+                    match kind {
+                        ScalarType::U8 => _mm256_cvtepi32_ps(_mm256_and_si256(
+                            _mm256_i32gather_epi32::<1>(ptr, idx),
+                            _mm256_set1_epi32(0xff),
+                        )),
+                        ScalarType::I8 => _mm256_cvtepi32_ps(_mm256_srai_epi32::<24>(
+                            _mm256_slli_epi32::<24>(_mm256_i32gather_epi32::<1>(ptr, idx)),
+                        )),
+                        ScalarType::U16 => _mm256_cvtepi32_ps(_mm256_and_si256(
+                            _mm256_i32gather_epi32::<2>(ptr, idx),
+                            _mm256_set1_epi32(0xffff),
+                        )),
+                        ScalarType::I16 => _mm256_cvtepi32_ps(_mm256_srai_epi32::<16>(
+                            _mm256_slli_epi32::<16>(_mm256_i32gather_epi32::<2>(ptr, idx)),
+                        )),
+                        ScalarType::F32 => _mm256_i32gather_ps::<4>(ptr as *const f32, idx),
+                    }
+                }
+            }};
+        }
+        macro_rules! lerp8 {
+            ($a:expr, $b:expr, $t:expr) => {{
+                let (a, b) = ($a, $b);
+                _mm256_add_ps(a, _mm256_mul_ps($t, _mm256_sub_ps(b, a)))
+            }};
+        }
+        let v = [
+            gather!(offs[0]),
+            gather!(offs[1]),
+            gather!(offs[2]),
+            gather!(offs[3]),
+            gather!(offs[4]),
+            gather!(offs[5]),
+            gather!(offs[6]),
+            gather!(offs[7]),
+        ];
+        let c00 = lerp8!(v[0], v[1], frac[0]);
+        let c10 = lerp8!(v[2], v[3], frac[0]);
+        let c01 = lerp8!(v[4], v[5], frac[0]);
+        let c11 = lerp8!(v[6], v[7], frac[0]);
+        let r = lerp8!(
+            lerp8!(c00, c10, frac[1]),
+            lerp8!(c01, c11, frac[1]),
+            frac[2]
+        );
+        if x + 7 <= b {
+            // SAFETY: x + 7 ≤ b < out.len().
+            unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(x), r) };
+        } else {
+            // The last, partial group: lanes past `b` sampled clamped cells (valid reads) and
+            // are dropped here.
+            let mut tmp = [0.0f32; 8];
+            // SAFETY: tmp holds 8 floats.
+            unsafe { _mm256_storeu_ps(tmp.as_mut_ptr(), r) };
+            out[x..=b].copy_from_slice(&tmp[..=b - x]);
+        }
+        x += 8;
+    }
+    x
 }
 
 #[cfg(test)]
