@@ -716,7 +716,7 @@ impl<T: Scalar> Ctx<'_, T> {
                 }
                 if !composite {
                     // MIP/MinIP: skip bricks that cannot change the pixel.
-                    c.samples += self.extreme_row(&walk, span, row_acc, mip);
+                    c.samples += self.extreme_row(&walk, span, row_acc, &mut line, mip);
                     continue;
                 }
                 c.samples += self.sample_row(&walk, span, &mut line);
@@ -760,27 +760,45 @@ impl<T: Scalar> Ctx<'_, T> {
         c
     }
 
-    /// MIP/MinIP over the pixels `span` of one row of one plane; samples whose brick cannot
-    /// beat the pixel's current extreme are skipped (exact: a trilinear value lies in its
-    /// brick's range).
-    fn extreme_row(&self, walk: &Walk, span: (i64, i64), row: &mut [Rgba], mip: bool) -> u64 {
+    /// MIP/MinIP over the pixels `span` of one row of one plane, a brick run at a time: a run
+    /// whose brick cannot beat the current extreme of any of its pixels is skipped (exact: a
+    /// trilinear value lies in its brick's range); the others are sampled as composite rows are
+    /// ([`Ctx::sample_run`]) into `line`.
+    fn extreme_row(
+        &self,
+        walk: &Walk,
+        span: (i64, i64),
+        row: &mut [Rgba],
+        line: &mut [f32],
+        mip: bool,
+    ) -> u64 {
         let mut n = 0;
-        for x in span.0.max(walk.span.0)..=span.1.min(walk.span.1) {
-            let px = &mut row[x as usize][0];
-            let (cell, frac) = self.cell(walk.at(x));
-            if !px.is_nan() {
-                let [lo, hi] = self.bricks.ranges[self.bricks.index(cell[0], cell[1], cell[2])];
-                if (mip && hi <= *px) || (!mip && lo >= *px) {
-                    continue;
-                }
-            }
-            n += 1;
-            let v = self.trilinear(cell, frac);
-            if v.is_nan() {
+        let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+        let mut x = lo;
+        while x <= hi {
+            let q = walk.at(x);
+            let (cell, _) = self.cell(q);
+            let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
+            let [blo, bhi] = self.bricks.ranges[self.bricks.index(cell[0], cell[1], cell[2])];
+            let (a, b) = (x as usize, end as usize);
+            x = end + 1;
+            let beaten = row[a..=b].iter().all(|p| {
+                let cur = p[0];
+                !cur.is_nan() && ((mip && bhi <= cur) || (!mip && blo >= cur))
+            });
+            if beaten {
                 continue;
             }
-            if px.is_nan() || (mip && v > *px) || (!mip && v < *px) {
-                *px = v;
+            n += (b - a + 1) as u64;
+            self.sample_run(walk, a, b, line);
+            for (p, &v) in row[a..=b].iter_mut().zip(&line[a..=b]) {
+                let px = &mut p[0];
+                if v.is_nan() {
+                    continue;
+                }
+                if px.is_nan() || (mip && v > *px) || (!mip && v < *px) {
+                    *px = v;
+                }
             }
         }
         n
@@ -799,20 +817,6 @@ impl<T: Scalar> Ctx<'_, T> {
             f[a] = ((q[a] - (i << FRAC)) >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
         }
         (c, f)
-    }
-
-    /// Trilinear interpolation in cell `c` at fractions `f` (the tent kernel's sum; module
-    /// docs).
-    #[inline(always)]
-    fn trilinear(&self, c: [usize; 3], f: [f32; 3]) -> f32 {
-        let [ux, uy, uz] = self.up;
-        let base = c[0] + c[1] * self.stride[1] + c[2] * self.stride[2];
-        let v = |o: usize| self.data[base + o].to_f32();
-        let c00 = lerp(v(0), v(ux), f[0]);
-        let c10 = lerp(v(uy), v(uy + ux), f[0]);
-        let c01 = lerp(v(uz), v(uz + ux), f[0]);
-        let c11 = lerp(v(uz + uy), v(uz + uy + ux), f[0]);
-        lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2])
     }
 
     /// Perspective: the slab's path along the ray through a pixel is `Δ·k`, `k = √(1 + u² + v²)`
