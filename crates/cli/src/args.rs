@@ -268,12 +268,14 @@ pub struct RenderOptions {
     /// screen filter (`ewa`), or none. Changes nothing where voxels cover a pixel or more.
     #[arg(long, value_enum, default_value = "swan", help_heading = "Quality")]
     pub antialias: AntialiasChoice,
-    /// Visibility: Westover's sheet buffers, composite-every-sample, or image-aligned slabs
-    /// classified and shaded per pixel after reconstruction (`image`).
+    /// Visibility: image-aligned slabs classified and shaded per pixel after reconstruction
+    /// (`image`), Westover's sheet buffers (`sheet`), composite-every-sample (`every`), or `auto`:
+    /// slabs for unshaded composite, MIP and MinIP, sheets for shaded composite and X-ray
+    /// (docs/decisions/0016).
     #[arg(
         long,
         value_enum,
-        default_value = "sheet",
+        default_value = "auto",
         help_heading = "Quality",
         hide_short_help = true
     )]

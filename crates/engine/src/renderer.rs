@@ -374,8 +374,27 @@ impl Renderer {
         let mut warnings: Vec<String> = tf_warning.into_iter().collect();
         let t_prep = Instant::now();
         report(progress, 0.05, "classify")?;
-        let slab =
-            request.quality.visibility == VisibilityChoice::Image && request.mode != Mode::Xray;
+        // Decision 0016: `auto` draws unshaded composite, MIP and MinIP with image-aligned slabs
+        // and keeps Westover's sheets where the slabs do not (yet) match VTK as well.
+        let mut early_fresh = false;
+        let slab = request.mode != Mode::Xray
+            && match request.quality.visibility {
+                VisibilityChoice::Image => true,
+                VisibilityChoice::Auto => {
+                    let plain = request.renderer == RendererChoice::Auto
+                        && ladder.is_none()
+                        && request.k_contour.is_none();
+                    plain && {
+                        let (tables, fresh) =
+                            cached(&mut self.tables, tables_key(request, &tf), || {
+                                Ok(Arc::new(build_tables(request, &tf)?))
+                            })?;
+                        early_fresh = fresh;
+                        request.mode != Mode::Composite || !tables.needs_gradient()
+                    }
+                }
+                VisibilityChoice::Sheet | VisibilityChoice::Every => false,
+            };
         let renderer = match request.renderer {
             RendererChoice::Auto if slab => UsedRenderer::Slab,
             RendererChoice::Auto if camera.parallel_projection => UsedRenderer::Dense,
@@ -544,6 +563,7 @@ impl Renderer {
                     cached(&mut self.tables, tables_key(request, &tf), || {
                         Ok(Arc::new(build_tables(request, &tf)?))
                     })?;
+                let fresh_tables = fresh_tables || early_fresh;
                 let tables = Arc::clone(tables);
                 let (bricks, fresh_bricks) =
                     cached(&mut self.bricks, request.scene.volume.clone(), || {
@@ -607,6 +627,7 @@ impl Renderer {
                     cached(&mut self.tables, tables_key(request, &tf), || {
                         Ok(Arc::new(build_tables(request, &tf)?))
                     })?;
+                let fresh_tables = fresh_tables || early_fresh;
                 let tables = Arc::clone(tables);
                 let mut settings = request.splat_settings();
                 settings.clip = request.scene.clipping.world_planes(vol.grid())?;

@@ -128,8 +128,12 @@ pub enum AntialiasChoice {
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum VisibilityChoice {
-    /// Sheet buffers (Westover 1990/91).
+    /// Chosen by measurement (decision 0016): image-aligned slabs for unshaded composite, MIP
+    /// and MinIP; Westover's sheet buffers for shaded composite, X-ray (exact line integrals),
+    /// successive refinement, the k-contour and an explicit `splat`/`splat_list` renderer.
     #[default]
+    Auto,
+    /// Sheet buffers (Westover 1990/91).
     Sheet,
     /// Composite every sample (Westover 1989; bleeds).
     Every,
@@ -180,7 +184,7 @@ impl Default for Quality {
         Quality {
             kernel: KernelChoice::Gaussian,
             antialias: AntialiasChoice::Swan,
-            visibility: VisibilityChoice::Sheet,
+            visibility: VisibilityChoice::Auto,
             order: OrderChoice::Ftb,
             opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
             subsample: 1,
@@ -511,7 +515,7 @@ impl RenderRequest {
             height: self.height,
             mode: self.mode.splat_mode(),
             visibility: match q.visibility {
-                VisibilityChoice::Sheet => Visibility::SheetBuffer,
+                VisibilityChoice::Auto | VisibilityChoice::Sheet => Visibility::SheetBuffer,
                 VisibilityChoice::Every => Visibility::EverySample,
                 VisibilityChoice::Image => Visibility::ImageAligned,
             },

@@ -86,7 +86,7 @@ class Scene:
     - ``mode``: ``"composite"`` (default), ``"mip"``, ``"minip"``, ``"xray"`` (``--mode``).
     - ``renderer``: ``"auto"``, ``"splat"``, ``"splat_list"``, ``"sabella"``, ``"nil"``.
     - quality: ``kernel`` (``"gaussian"``, ``"nearest"``, ``"tent"``, ``"bspline"``, …),
-      ``antialias``, ``visibility`` (``"sheet"``/``"every"``), ``order`` (``"ftb"``/``"btf"``),
+      ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``order`` (``"ftb"``/``"btf"``),
       ``opacity_cutoff``, ``subsample``, ``list_threshold``; or ``quality={...}``.
     - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
       (``--light``); ``shading={"emission":…, "diffuse":…, "specular":…}``;
