@@ -376,3 +376,23 @@ def test_clipping_is_a_scene_option(vol):
     assert 0 < np.abs(cropped).sum() < 0.9 * np.abs(plain.values).sum()
     with pytest.raises(volsplat.VolsplatError, match="clipping"):
         volsplat.render(vol, size=32, clipping={"planes": [{"normal": (0, 0, 0), "offset": 0}]})
+
+
+def test_visibility_and_slab(vol):
+    """`visibility` picks the renderer (decision 0016) and `slab` sets the slab thickness."""
+    tf = volsplat.TransferFunction(
+        color=[[0, 0.2, 0.3, 0.9], [3000, 1, 1, 1]],
+        opacity=[[0, 0.0], [500, 0.0], [3000, 0.6]],
+        shade=False,
+    )
+    image = volsplat.render(vol, transfer_function=tf, size=48, visibility="image")
+    sheet = volsplat.render(vol, transfer_function=tf, size=48, visibility="sheet")
+    auto = volsplat.render(vol, transfer_function=tf, size=48)
+    assert image.stats["renderer"] == "slab" and sheet.stats["renderer"] == "dense"
+    np.testing.assert_array_equal(auto.rgba, image.rgba)  # unshaded: auto draws slabs
+    assert image.rgba[..., 3].max() > 0.05
+    thick = volsplat.render(vol, transfer_function=tf, size=48, visibility="image", slab=2.0)
+    assert thick.stats["sheet_spacing"] == pytest.approx(2.0 * 1.0)
+    assert not np.array_equal(thick.rgba, image.rgba)
+    with pytest.raises(volsplat.InvalidInputError, match="slab"):
+        volsplat.render(vol, transfer_function=tf, size=48, visibility="image", slab=0.0)

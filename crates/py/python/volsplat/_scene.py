@@ -24,6 +24,7 @@ _QUALITY = (
     "opacity_cutoff",
     "subsample",
     "list_threshold",
+    "slab",
 )
 _SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping")
 _ORBIT = ("azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
@@ -86,7 +87,8 @@ class Scene:
     - ``mode``: ``"composite"`` (default), ``"mip"``, ``"minip"``, ``"xray"`` (``--mode``).
     - ``renderer``: ``"auto"``, ``"splat"``, ``"splat_list"``, ``"sabella"``, ``"nil"``.
     - quality: ``kernel`` (``"gaussian"``, ``"nearest"``, ``"tent"``, ``"bspline"``, …),
-      ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``order`` (``"ftb"``/``"btf"``),
+      ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``slab`` (image-aligned slab
+      thickness in voxels), ``order`` (``"ftb"``/``"btf"``),
       ``opacity_cutoff``, ``subsample``, ``list_threshold``; or ``quality={...}``.
     - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
       (``--light``); ``shading={"emission":…, "diffuse":…, "specular":…}``;
