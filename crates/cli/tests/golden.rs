@@ -144,7 +144,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "45",
         ],
         "npy",
-        0x6c1333ec69b26be6,
+        0xf8c8459c9d6d3d8c,
     ),
     (
         "shaded, image-aligned slabs",

@@ -731,6 +731,18 @@ impl<T: Scalar> Ctx<'_, T> {
                         continue;
                     }
                     let rgba = match self.post {
+                        Some(t) if self.view.perspective => {
+                            // Colour and log-transmittance per table entry: the path
+                            // correction is one exp2 (no log2, no division).
+                            let [cr, cg, cb, l] = t.lookup_in(&t.persp, rho);
+                            if l >= 0.0 {
+                                continue;
+                            }
+                            let a = 1.0 - exp2_neg(kf[r * w + x] * l);
+                            over_front_to_back(px, [cr * a, cg * a, cb * a, a]);
+                            c.visible += 1;
+                            continue;
+                        }
                         Some(t) => {
                             let v = t.lookup(rho);
                             (v[3] > 0.0).then_some(v)
@@ -1042,6 +1054,8 @@ impl Walk {
 /// opacity separately, as `classify` does, differs between entries by the product of the
 /// two increments).
 struct PostTable {
+    /// Perspective: `[r, g, b, log2(1 − α)]` per entry (colour not premultiplied).
+    persp: Vec<Rgba>,
     lo: f32,
     scale: f32,
     last: f32,
@@ -1075,7 +1089,7 @@ impl PostTable {
             .max(tables.emission.hi)
             .max(tables.reflection.hi);
         let n = if hi > lo { Self::LEN } else { 1 };
-        let values = (0..n)
+        let values: Vec<Rgba> = (0..n)
             .map(|k| {
                 let x = if n == 1 {
                     lo
@@ -1091,7 +1105,26 @@ impl PostTable {
                     .unwrap_or([0.0; 4])
             })
             .collect();
+        // Perspective: un-premultiplied colour and log2(1 − α) (−126 for α = 1), so that
+        // `1 − (1 − α)^k` is one exp2.
+        let persp = values
+            .iter()
+            .map(|v: &Rgba| {
+                let a = v[3];
+                if a <= 0.0 {
+                    [0.0; 4]
+                } else {
+                    let l = if a >= 1.0 {
+                        -126.0
+                    } else {
+                        log2_unit(1.0 - a).max(-126.0)
+                    };
+                    [v[0] / a, v[1] / a, v[2] / a, l]
+                }
+            })
+            .collect();
         Some(PostTable {
+            persp,
             lo,
             scale: if n > 1 {
                 (n - 1) as f32 / (hi - lo)
@@ -1105,12 +1138,18 @@ impl PostTable {
 
     #[inline(always)]
     fn lookup(&self, x: f32) -> Rgba {
+        self.lookup_in(&self.values, x)
+    }
+
+    /// Linear interpolation in `values` (either table) at density `x`.
+    #[inline(always)]
+    fn lookup_in(&self, values: &[Rgba], x: f32) -> Rgba {
         let t = ((x - self.lo) * self.scale).max(0.0).min(self.last);
         // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
         let i = t as i32 as usize;
         let f = t - i as f32;
-        let a = self.values[i];
-        let b = self.values[(i + 1).min(self.values.len() - 1)];
+        let a = values[i];
+        let b = values[(i + 1).min(values.len() - 1)];
         [
             a[0] + f * (b[0] - a[0]),
             a[1] + f * (b[1] - a[1]),
