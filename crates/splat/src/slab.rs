@@ -696,16 +696,9 @@ impl<T: Scalar> Ctx<'_, T> {
                 let mut span = self.clip_span(y, d, walk.span);
                 let row_acc = &mut acc[r * w..(r + 1) * w];
                 if composite {
-                    let lw = &mut live[r];
-                    while lw.0 <= lw.1 && row_acc[lw.0 as usize][3] >= self.cutoff {
-                        lw.0 += 1;
-                    }
-                    while lw.1 >= lw.0 && row_acc[lw.1 as usize][3] >= self.cutoff {
-                        lw.1 -= 1;
-                    }
-                    if lw.0 > lw.1 {
+                    let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
                         continue;
-                    }
+                    };
                     any_live = true;
                     span = (span.0.max(lw.0), span.1.min(lw.1));
                 } else {
@@ -905,16 +898,9 @@ impl<T: Scalar> Ctx<'_, T> {
             for r in 0..rows {
                 let y = y0 + r;
                 let row_acc = &mut acc[r * w..(r + 1) * w];
-                let lw = &mut live[r];
-                while lw.0 <= lw.1 && row_acc[lw.0 as usize][3] >= self.cutoff {
-                    lw.0 += 1;
-                }
-                while lw.1 >= lw.0 && row_acc[lw.1 as usize][3] >= self.cutoff {
-                    lw.1 -= 1;
-                }
-                if lw.0 > lw.1 {
+                let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
                     continue;
-                }
+                };
                 any_live = true;
                 let walk = self.walk(y, d);
                 let span = self.clip_span(y, d, walk.span);
@@ -992,6 +978,18 @@ impl<T: Scalar> Ctx<'_, T> {
             vw.right * gr + vw.up * gu + vw.fwd * gf
         }
     }
+}
+
+/// Narrows a row's window of live pixels (those below the opacity `cutoff`) from both ends;
+/// `None` once every pixel of the row is opaque.
+fn shrink_live(lw: &mut (i64, i64), row: &[Rgba], cutoff: f32) -> Option<(i64, i64)> {
+    while lw.0 <= lw.1 && row[lw.0 as usize][3] >= cutoff {
+        lw.0 += 1;
+    }
+    while lw.1 >= lw.0 && row[lw.1 as usize][3] >= cutoff {
+        lw.1 -= 1;
+    }
+    (lw.0 <= lw.1).then_some(*lw)
 }
 
 /// Bits of fraction in the fixed-point index positions.
