@@ -222,6 +222,49 @@ def scene_list(scenes_dir, data_dir, only):
     return out
 
 
+def make_synthetic(n, vol):
+    """Writes the synthetic probe volume (see `synthetic_scene`) to `vol`, atomically."""
+    import numpy as np
+    rng = np.random.default_rng(12)
+    z, y, x = np.ogrid[0:n, 0:n, 0:n]
+    field = np.zeros((n, n, n), dtype=np.float32)
+    for _ in range(12):
+        c = rng.uniform(0.2 * n, 0.8 * n, 3)
+        r = rng.uniform(0.06 * n, 0.16 * n)
+        field += np.exp(-(((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2) / (2 * r * r)),
+                        dtype=np.float32)
+    field = field / field.max() * 230 + rng.uniform(0, 25, field.shape).astype(np.float32)
+    data = np.clip(field, 0, 255).astype(np.uint8)
+    with open(vol + ".tmp", "wb") as f:
+        f.write(f"NRRD0004\ntype: uint8\ndimension: 3\nsizes: {n} {n} {n}\n"
+                "spacings: 1 1 1\nencoding: raw\n\n".encode())
+        f.write(data.tobytes())
+    os.replace(vol + ".tmp", vol)
+
+
+def synthetic_scene(n, work):
+    """Issue 12's probe: an `n`³ u8 volume (smooth blobs plus a little noise, 0–255, spacing 1),
+    written as NRRD with an orthographic camera and a composite transfer function; returns a
+    scene tuple like `scene_list`'s. Made once per `n` in `work`."""
+    vol = os.path.join(work, f"synthetic{n}.nrrd")
+    cam = os.path.join(work, f"synthetic{n}__composite_ortho.camera.json")
+    tf = os.path.join(work, f"synthetic{n}__composite_ortho.tf.json")
+    if not os.path.exists(vol):
+        # In a child process: the parent's peak memory would otherwise count in every later
+        # child's peak RSS (a forked child shares its parent's pages until it execs).
+        subprocess.run([sys.executable, os.path.abspath(__file__), "--make-synthetic", str(n), vol],
+                       check=True)
+    c = (n - 1) / 2.0
+    json.dump({"position": [c + 1.2 * n, c - 0.9 * n, c + 1.5 * n], "focal_point": [c, c, c],
+               "view_up": [0, 0, 1], "parallel_projection": True, "parallel_scale": 0.9 * n,
+               "view_angle": 30.0}, open(cam, "w"))
+    json.dump({"color": [[0, 0, 0, 0], [80, 0.8, 0.4, 0.2], [160, 1, 0.9, 0.7], [255, 1, 1, 1]],
+               "scalar_opacity": [[0, 0], [60, 0], [120, 0.02], [255, 0.2]],
+               "scalar_opacity_unit_distance": 1.0, "shade": False}, open(tf, "w"))
+    label = f"synthetic{n}__composite_ortho"
+    return (label, f"synthetic{n}", "composite_ortho", vol, cam, tf)
+
+
 def volsplat_flags(name, cam):
     flags = []
     if name.startswith("mip"):
@@ -246,6 +289,8 @@ def main():
     ap.add_argument("--extra", default="", help="extra flags for volsplat (bench and render)")
     ap.add_argument("--markdown", default=None, help="also write the table to this file")
     ap.add_argument("--keep", default=None, help="keep the images in this folder")
+    ap.add_argument("--synthetic", type=int, default=0,
+                    help="add issue 12's probe: an N³ u8 volume rendered at 2N² (e.g. 512)")
     a = ap.parse_args()
     bins = []
     for i, b in enumerate(a.bin or [os.path.join(ROOT, "target", "release", "volsplat")]):
@@ -258,9 +303,15 @@ def main():
     extra = a.extra.split()
     rows = []
     window = "?"
-    for label, vol_name, name, vol, cam, tf in scene_list(scenes_dir, a.data, a.only):
+    scenes = scene_list(scenes_dir, a.data, a.only)
+    if a.synthetic:
+        synth = os.path.join(ROOT, "target", "vs_vtk-synthetic")
+        os.makedirs(synth, exist_ok=True)
+        scenes.append(synthetic_scene(a.synthetic, synth))
+    for label, vol_name, name, vol, cam, tf in scenes:
+        size = 2 * a.synthetic if vol_name.startswith("synthetic") else a.size
         flags = volsplat_flags(name, cam) + extra
-        common = [vol, "--camera", cam, "--tf", tf, "--size", str(a.size), "--threads", str(a.threads)]
+        common = [vol, "--camera", cam, "--tf", tf, "--size", str(size), "--threads", str(a.threads)]
         vtk_png = os.path.join(work, label + ".vtk.png")
         vtk_ms, vtk_rss = [], 0.0
         vs_ms = {b: [] for b, _ in bins}
@@ -268,7 +319,7 @@ def main():
         vs_last = {}
         for _ in range(a.rounds):
             out, rss = peak_rss_cmd(prefix + [sys.executable, os.path.abspath(__file__), "--vtk-worker",
-                                              vol, cam, tf, vtk_png, str(a.size), str(a.threads),
+                                              vol, cam, tf, vtk_png, str(size), str(a.threads),
                                               str(a.frames)], env=env)
             vtk = json.loads(out.strip().splitlines()[-1])
             window = vtk.get("window", window)
@@ -324,7 +375,9 @@ def main():
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "--compare":
+    if len(sys.argv) > 1 and sys.argv[1] == "--make-synthetic":
+        make_synthetic(int(sys.argv[2]), sys.argv[3])
+    elif len(sys.argv) > 1 and sys.argv[1] == "--compare":
         print(json.dumps(compare(sys.argv[2], sys.argv[3])))
     elif len(sys.argv) > 1 and sys.argv[1] == "--vtk-worker":
         v, c, t, o, s, th, fr = sys.argv[2:9]

@@ -161,7 +161,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "15",
         ],
         "npy",
-        0xedb99d91edbb89ed,
+        0xe9586f58af80fbbb,
     ),
     (
         "X-ray",

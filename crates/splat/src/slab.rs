@@ -11,9 +11,11 @@
 //! holds the reconstructed scalar `ρ̂ = Σ_v ρ_v·h(p − v)` summed over the voxels `v` whose
 //! kernel `h` reaches the pixel's point `p` on the plane (the kernel's section by the plane, as
 //! in Mueller & Crawfis' slicing of each kernel by the slabs it overlaps). Then, per pixel
-//! (Mueller, Möller & Crawfis §3): the transfer function classifies `ρ̂`, the gradient comes
-//! from central differences on the stack of planes, the lights shade it through the same
-//! tables as the other renderers ([`FrameClassifier`]), and the slab is composited front to
+//! (Mueller, Möller & Crawfis §3): the transfer function classifies `ρ̂`; where it has opacity
+//! and the lights need it, the gradient is the same kernel's reconstruction of the voxels'
+//! central differences (their "gradient splats", gathered at the sample; [`Ctx::gradient_at`]);
+//! the lights shade it through the same tables as the other renderers ([`FrameClassifier`]),
+//! and the slab is composited front to
 //! back with its opacity corrected for its thickness `Δ` (along the ray: `Δ/cos θ` in
 //! perspective).
 //!
@@ -155,15 +157,11 @@ pub fn render_slabs<T: Scalar>(
         });
     }
     let (w, h) = (settings.width, settings.height);
-    let pixel_size_mid = proj.pixel_size_at(0.5 * (dmin.max(delta) + dmax));
-    // Central-difference offsets of about one voxel: in pixels in the plane, in planes in depth.
-    let k_px = ((min_spacing / pixel_size_mid).round() as usize).clamp(1, 8);
-    let m_planes = (settings.slab.recip().round() as usize).clamp(1, 8);
     let view = View::new(&proj, grid, w, h);
     let active = bricks.active(
         &tables.opacity,
         (tables.opacity.hi - tables.opacity.lo) / 4095.0,
-        shade,
+        false,
     );
     let all_active = active.iter().all(|&a| a);
     let post = (composite && !shade)
@@ -174,6 +172,7 @@ pub fn render_slabs<T: Scalar>(
         dims: grid.dims,
         max_cell: grid.dims.map(|n| n.max(2) as i64 - 2),
         simd: simd_available() && volume.data().len() < i32::MAX as usize,
+        grad_to_world: [0, 1, 2].map(|a| (grid.direction.col(a) / grid.spacing[a]).as_vec3()),
         stride: [1, grid.dims[0], grid.dims[0] * grid.dims[1]],
         up: [
             usize::from(grid.dims[0] > 1),
@@ -198,10 +197,7 @@ pub fn render_slabs<T: Scalar>(
         } else {
             0.0
         },
-        k_px,
-        m_planes,
         width: w,
-        height: h,
         clip: settings
             .clip
             .iter()
@@ -393,10 +389,7 @@ struct View {
     right_q: DVec3,
     up_q: DVec3,
     fwd_q: DVec3,
-    /// World frame, for gradients.
-    right: Vec3,
-    up: Vec3,
-    fwd: Vec3,
+    /// World frame, for clipping planes.
     eye: DVec3,
     right_w: DVec3,
     up_w: DVec3,
@@ -422,9 +415,6 @@ impl View {
             right_q: lin(fr.right),
             up_q: lin(fr.up),
             fwd_q: lin(fr.forward),
-            right: fr.right.as_vec3(),
-            up: fr.up.as_vec3(),
-            fwd: fr.forward.as_vec3(),
             eye: fr.eye,
             right_w: fr.right,
             up_w: fr.up,
@@ -505,6 +495,9 @@ struct Ctx<'a, T> {
     up: [usize; 3],
     /// Sample eight pixels at a time with AVX2 (the CPU has it, and indices fit in i32).
     simd: bool,
+    /// Per index axis: the world direction of that axis divided by its spacing (a derivative
+    /// per index step becomes a world gradient).
+    grad_to_world: [Vec3; 3],
     bricks: &'a BrickGrid,
     active: &'a [bool],
     skip_empty: bool,
@@ -520,10 +513,7 @@ struct Ctx<'a, T> {
     delta: f64,
     dmin: f64,
     depth_scale: f64,
-    k_px: usize,
-    m_planes: usize,
     width: usize,
-    height: usize,
     clip: Vec<(DVec3, f64)>,
 }
 
@@ -664,11 +654,53 @@ impl<T: Scalar> Ctx<'_, T> {
     fn band(&self, y0: usize, acc: &mut [Rgba]) -> Counters {
         let w = self.width;
         let rows = acc.len() / w;
-        if self.shade {
-            self.band_shaded(y0, rows, acc)
-        } else {
-            self.band_plain(y0, rows, acc)
+        self.band_plain(y0, rows, acc)
+    }
+
+    /// The world gradient of the reconstruction at pixel `x` of a row (data units per world
+    /// unit): the tent kernel's interpolation of the voxels' central differences (one-sided on
+    /// the faces of the grid), i.e. gradient splats gathered at the sample, which is what VTK's
+    /// ray caster and the reference integrator shade with. Computed only for samples with
+    /// opacity.
+    fn gradient_at(&self, walk: &Walk, x: usize) -> Vec3 {
+        let xf = x as f32;
+        let mut c = [0usize; 3];
+        let mut f = [0.0f32; 3];
+        for a in 0..3 {
+            let q = walk.s32[a] + xf * walk.st32[a];
+            let i = (q as i32).clamp(0, self.max_cell[a] as i32);
+            c[a] = i as usize;
+            f[a] = (q - i as f32).clamp(0.0, 1.0);
         }
+        let mut g = [0.0f32; 3];
+        for corner in 0..8usize {
+            let mut w = 1.0f32;
+            let mut p = [0usize; 3];
+            for a in 0..3 {
+                let up = corner >> a & 1 == 1;
+                p[a] = c[a] + usize::from(up && self.dims[a] > 1);
+                w *= if up { f[a] } else { 1.0 - f[a] };
+            }
+            if w == 0.0 {
+                continue;
+            }
+            let here = p[0] + p[1] * self.stride[1] + p[2] * self.stride[2];
+            for a in 0..3 {
+                let n = self.dims[a];
+                if n < 2 {
+                    continue;
+                }
+                let (lo, hi, span) = if p[a] == 0 {
+                    (here, here + self.stride[a], 1.0)
+                } else if p[a] == n - 1 {
+                    (here - self.stride[a], here, 1.0)
+                } else {
+                    (here - self.stride[a], here + self.stride[a], 2.0)
+                };
+                g[a] += w * (self.data[hi].to_f32() - self.data[lo].to_f32()) / span;
+            }
+        }
+        self.grad_to_world[0] * g[0] + self.grad_to_world[1] * g[1] + self.grad_to_world[2] * g[2]
     }
 
     /// Composite without gradients, and MIP/MinIP: each sample is classified as soon as it is
@@ -744,9 +776,14 @@ impl<T: Scalar> Ctx<'_, T> {
                             if self.classifier.density_opacity(rho) == Some(0.0) {
                                 continue;
                             }
+                            let gradient = if self.shade {
+                                self.gradient_at(&walk, x)
+                            } else {
+                                Vec3::ZERO
+                            };
                             self.classifier.classify(&SampleInput {
                                 density: rho,
-                                gradient: Vec3::ZERO,
+                                gradient,
                                 depth: depth01,
                             })
                         }
@@ -853,130 +890,6 @@ impl<T: Scalar> Ctx<'_, T> {
             }
         }
         k
-    }
-
-    /// Shaded composite: planes are reconstructed `m` planes ahead of the one classified, over
-    /// the band's rows and `k` rows above and below, so that central differences of about one
-    /// voxel in x, y and depth are available (Mueller, Möller & Crawfis 1999, §3).
-    fn band_shaded(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
-        let w = self.width;
-        let (k, m) = (self.k_px, self.m_planes);
-        let ya = y0.saturating_sub(k);
-        let yb = (y0 + rows + k).min(self.height);
-        let halo_rows = yb - ya;
-        let ring_len = 2 * m + 1;
-        let mut ring: Vec<Vec<f32>> = vec![vec![f32::NAN; halo_rows * w]; ring_len];
-        let mut c = Counters::default();
-        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
-        let kf = self.path_factors(y0, rows);
-        let total = self.n_planes + m;
-        for pc in 0..total {
-            // Reconstruct plane `pc` into its ring slot.
-            let slot = pc % ring_len;
-            if pc < self.n_planes {
-                let d = self.depth(pc);
-                let plane = &mut ring[slot];
-                for (r, y) in (ya..yb).enumerate() {
-                    let walk = self.walk(y, d);
-                    let out = &mut plane[r * w..(r + 1) * w];
-                    c.samples += self.sample_row(&walk, walk.span, out);
-                }
-            } else {
-                ring[slot].fill(f32::NAN);
-            }
-            // Classify plane p = pc − m.
-            if pc < m {
-                continue;
-            }
-            let p = pc - m;
-            let d = self.depth(p);
-            let depth01 = ((d - self.dmin) * self.depth_scale).clamp(0.0, 1.0) as f32;
-            let cur = &ring[p % ring_len];
-            let ahead = &ring[(p + m) % ring_len];
-            let behind = (p >= m).then(|| &ring[(p - m) % ring_len]);
-            let mut any_live = false;
-            for r in 0..rows {
-                let y = y0 + r;
-                let row_acc = &mut acc[r * w..(r + 1) * w];
-                let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
-                    continue;
-                };
-                any_live = true;
-                let walk = self.walk(y, d);
-                let span = self.clip_span(y, d, walk.span);
-                let span = (span.0.max(lw.0), span.1.min(lw.1));
-                if span.0 > span.1 {
-                    continue;
-                }
-                let hr = y - ya;
-                let row = &cur[hr * w..(hr + 1) * w];
-                let up_row = (y >= ya + k).then(|| &cur[(hr - k) * w..(hr - k + 1) * w]);
-                let down_row = (y + k < yb).then(|| &cur[(hr + k) * w..(hr + k + 1) * w]);
-                let (_, v) = self.view.offsets(0.0, y as f64);
-                for x in span.0 as usize..=span.1 as usize {
-                    let rho = row[x];
-                    if rho.is_nan() {
-                        continue;
-                    }
-                    let px = &mut row_acc[x];
-                    if px[3] >= self.cutoff {
-                        c.terminated += 1;
-                        continue;
-                    }
-                    if self.classifier.density_opacity(rho) == Some(0.0) {
-                        continue;
-                    }
-                    // Central differences (one-sided at the edge of what was reconstructed).
-                    let left = if x >= k { row[x - k] } else { f32::NAN };
-                    let right = if x + k < w { row[x + k] } else { f32::NAN };
-                    let dx = diff(left, rho, right, k as f32);
-                    let upv = up_row.map_or(f32::NAN, |r| r[x]);
-                    let downv = down_row.map_or(f32::NAN, |r| r[x]);
-                    // Rows grow downwards, the up vector upwards.
-                    let dy = -diff(upv, rho, downv, k as f32);
-                    let back = behind.map_or(f32::NAN, |b| b[hr * w + x]);
-                    let front = ahead[hr * w + x];
-                    let dz = diff(back, rho, front, m as f32);
-                    let gradient = self.world_gradient(dx, dy, dz, x, v, d);
-                    let input = SampleInput {
-                        density: rho,
-                        gradient,
-                        depth: depth01,
-                    };
-                    if let Some(rgba) = self.classifier.classify(&input) {
-                        let rgba = self.path_correct(rgba, kf[r * w + x]);
-                        over_front_to_back(px, rgba);
-                        c.visible += 1;
-                    }
-                }
-            }
-            if !any_live {
-                break;
-            }
-        }
-        c
-    }
-
-    /// World gradient from the derivatives of `ρ̂` per pixel along x and along the image's up
-    /// direction, and per plane along the ray: with `a_x, a_y, a_j` the world displacements
-    /// of one pixel and one plane, solve `g·a = dρ`. Orthographic: `a_x = r·s`, `a_y = u·s`,
-    /// `a_j = f·Δ` (s world units per pixel). Perspective at depth `d`: `a_x = r·d/F`,
-    /// `a_y = u·d/F`, `a_j = Δ·(f + u_x·r + v_y·u)` with `(u_x, v_y)` the pixel's offsets on
-    /// the plane at unit depth.
-    #[inline]
-    fn world_gradient(&self, dx: f32, dy: f32, dz: f32, x: usize, v: f64, d: f64) -> Vec3 {
-        let vw = &self.view;
-        let delta = self.delta as f32;
-        if !vw.perspective {
-            let s = vw.scale as f32;
-            vw.right * (dx / s) + vw.up * (dy / s) + vw.fwd * (dz / delta)
-        } else {
-            let px = (d * vw.scale) as f32;
-            let (gr, gu) = (dx / px, dy / px);
-            let u = ((x as f64 + 0.5 - vw.half_w) * vw.scale) as f32;
-            let gf = dz / delta - u * gr - v as f32 * gu;
-            vw.right * gr + vw.up * gu + vw.fwd * gf
-        }
     }
 }
 
@@ -1194,18 +1107,6 @@ fn exp2_neg(z: f32) -> f32 {
 #[inline(always)]
 fn lerp(a: f32, b: f32, t: f32) -> f32 {
     a + t * (b - a)
-}
-
-/// Derivative per unit offset from samples `lo` and `hi` at ∓`h` around `mid`: central when
-/// both exist, one-sided when one does, zero otherwise.
-#[inline(always)]
-fn diff(lo: f32, mid: f32, hi: f32, h: f32) -> f32 {
-    match (lo.is_nan(), hi.is_nan()) {
-        (false, false) => (hi - lo) / (2.0 * h),
-        (true, false) => (hi - mid) / h,
-        (false, true) => (mid - lo) / h,
-        (true, true) => 0.0,
-    }
 }
 
 static FORCE_SCALAR: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);

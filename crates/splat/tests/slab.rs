@@ -76,7 +76,7 @@ fn rms_diff(a: &Image, b: &Image) -> f64 {
 }
 
 /// Composite and shaded, orthographic and perspective: the slab image agrees with the
-/// reference integrator far better than Westover's pre-classified sheets do (measured: 96 / 75
+/// reference integrator far better than Westover's pre-classified sheets do (measured: 96 / 83
 /// dB unshaded / shaded for the slabs, 56 / 55 dB for the sheets; the bars leave room for
 /// rounding, not for a different reconstruction).
 #[test]
@@ -86,7 +86,7 @@ fn composite_matches_the_reference_integrator() {
     for parallel in [true, false] {
         for (name, tables, bar) in [
             ("unshaded", unshaded_tables(), 80.0),
-            ("shaded", shaded_tables(), 65.0),
+            ("shaded", shaded_tables(), 78.0),
         ] {
             let cam = camera(vol.grid(), 30.0, 20.0, parallel);
             let proj = Projection::new(&cam, w, h).unwrap();
@@ -447,11 +447,11 @@ fn minified_views_are_box_filtered() {
     assert_eq!(a.image.pixels(), b.image.pixels());
 }
 
-/// Shading reads gradients from the plane stack: on linear ramps along each grid axis (and one
+/// Shading reads interpolated voxel gradients: on linear ramps along each grid axis (and one
 /// oblique, on an anisotropic grid) the lit image matches the reference integrator, whose
 /// gradients are interpolated central differences (exact on a ramp).
 #[test]
-fn plane_stack_gradients_light_ramps_like_the_reference() {
+fn gradients_light_ramps_like_the_reference() {
     use volsplat_core::glam::DMat3;
     for (name, dir, spacing) in [
         ("x", [1.0, 0.0, 0.0], [1.0, 1.0, 1.0]),
