@@ -2,7 +2,10 @@
 //! between frames.
 
 use crate::error::{EngineError, Result};
-use crate::request::{DensityChoice, Mode, RenderRequest, RendererChoice, VisibilityChoice};
+use crate::request::{
+    AntialiasChoice, DensityChoice, KernelChoice, Mode, OrderChoice, RenderRequest, RendererChoice,
+    VisibilityChoice,
+};
 use crate::scene::{TransferSpec, VolumeSource};
 use serde::Serialize;
 use std::sync::Arc;
@@ -381,9 +384,15 @@ impl Renderer {
             && match request.quality.visibility {
                 VisibilityChoice::Image => true,
                 VisibilityChoice::Auto => {
+                    // Options that only the sheet renderers have keep them.
+                    let q = &request.quality;
                     let plain = request.renderer == RendererChoice::Auto
                         && ladder.is_none()
-                        && request.k_contour.is_none();
+                        && request.k_contour.is_none()
+                        && q.subsample == 1
+                        && q.order == OrderChoice::Ftb
+                        && q.kernel == KernelChoice::Gaussian
+                        && matches!(q.antialias, AntialiasChoice::Swan | AntialiasChoice::None);
                     plain && {
                         let (tables, fresh) =
                             cached(&mut self.tables, tables_key(request, &tf), || {

@@ -130,7 +130,9 @@ pub enum AntialiasChoice {
 pub enum VisibilityChoice {
     /// Chosen by measurement (decision 0016): image-aligned slabs for unshaded composite, MIP
     /// and MinIP; Westover's sheet buffers for shaded composite, X-ray (exact line integrals),
-    /// successive refinement, the k-contour and an explicit `splat`/`splat_list` renderer.
+    /// successive refinement, the k-contour, an explicit `splat`/`splat_list` renderer, and
+    /// requests that set a sheet-only option (a kernel other than the Gaussian, subsampling,
+    /// back-to-front order, or the `swan-perpendicular`/`ewa` anti-aliasing rules).
     #[default]
     Auto,
     /// Sheet buffers (Westover 1990/91).

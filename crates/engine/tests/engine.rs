@@ -426,3 +426,35 @@ fn image_visibility_uses_the_slab_renderer_and_keeps_its_bricks() {
         "{e}"
     );
 }
+
+/// `auto` keeps the sheet renderers when a sheet-only option is set, and draws unshaded
+/// composite with slabs otherwise.
+#[test]
+fn auto_visibility_keeps_sheets_for_sheet_only_options() {
+    use volsplat::{AntialiasChoice, KernelChoice, OrderChoice};
+    let mut req = RenderRequest::new(blobs(24), 32, 32);
+    req.scene.transfer_function = TransferSpec::Preset("ramp".parse().unwrap());
+    let used = |req: &RenderRequest| {
+        Renderer::new()
+            .render(req, &mut |_| true)
+            .unwrap()
+            .stats
+            .renderer
+    };
+    assert_eq!(used(&req), Some(UsedRenderer::Slab));
+    let mut r = req.clone();
+    r.quality.kernel = KernelChoice::Nearest;
+    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    let mut r = req.clone();
+    r.quality.subsample = 2;
+    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    let mut r = req.clone();
+    r.quality.order = OrderChoice::Btf;
+    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    let mut r = req.clone();
+    r.quality.antialias = AntialiasChoice::Ewa;
+    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    let mut r = req.clone();
+    r.quality.antialias = AntialiasChoice::None;
+    assert_eq!(used(&r), Some(UsedRenderer::Slab));
+}

@@ -101,6 +101,20 @@ pub fn render_slabs<T: Scalar>(
                        are exact in the sheet renderers)",
         });
     }
+    if settings.subsample != 1 {
+        return Err(SplatError::Setting {
+            name: "subsample",
+            value: settings.subsample.to_string(),
+            expected: "1 with image-aligned slabs (subsampling is the sheet renderers' preview)",
+        });
+    }
+    if settings.order != crate::geometry::Order::FrontToBack {
+        return Err(SplatError::Setting {
+            name: "order",
+            value: "back to front".into(),
+            expected: "front to back: image-aligned slabs composite front to back only",
+        });
+    }
     if !(settings.slab.is_finite() && (0.01..=16.0).contains(&settings.slab)) {
         return Err(SplatError::Setting {
             name: "slab",

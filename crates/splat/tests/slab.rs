@@ -556,3 +556,22 @@ fn simd_and_scalar_sampling_agree_bit_for_bit() {
         }
     }
 }
+
+/// Sheet-only options are refused by name instead of being ignored.
+#[test]
+fn sheet_only_options_are_refused() {
+    let vol = volume(8);
+    let cam = camera(vol.grid(), 0.0, 0.0, true);
+    let s = RenderSettings {
+        subsample: 2,
+        ..settings(8, 8, RenderMode::Composite)
+    };
+    let e = render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| true).unwrap_err();
+    assert!(e.to_string().contains("subsample"), "{e}");
+    let s = RenderSettings {
+        order: volsplat_splat::Order::BackToFront,
+        ..settings(8, 8, RenderMode::Composite)
+    };
+    let e = render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| true).unwrap_err();
+    assert!(e.to_string().contains("order"), "{e}");
+}
