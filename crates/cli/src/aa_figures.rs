@@ -14,6 +14,10 @@ pub struct AaFiguresArgs {
     /// Frames of the dolly used to measure flicker.
     #[arg(long, default_value_t = 60)]
     pub frames: usize,
+    /// Folder holding `mri_brainsmall.nrrd`, `mri_colin27.nhdr` and `scenes/`, for the MRI
+    /// minification table (rows whose data is missing are left out).
+    #[arg(long, default_value = "../shared/data")]
+    pub data: PathBuf,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -24,6 +28,7 @@ pub fn aa_figures_cmd(a: AaFiguresArgs) -> Result<()> {
     let settings = volsplat_studies::AaFiguresSettings {
         out: a.out,
         frames: a.frames,
+        data: a.data,
     };
     let pool = crate::commands::thread_pool(a.threads)?;
     let bar = crate::progress::Bar::spinner("aa-figures", false);

@@ -263,9 +263,12 @@ pub struct RenderOptions {
     /// gaussian or crawfis-max).
     #[arg(long, value_enum, default_value = "gaussian", help_heading = "Quality")]
     pub kernel: KernelChoice,
-    /// Anti-aliasing of voxels smaller than a pixel: Swan et al. 1997 eq. 4 and 8 (`swan`),
-    /// its §4.6 perpendicular-distance estimate (`swan-perpendicular`), Zwicker et al.'s EWA
-    /// screen filter (`ewa`), or none. Changes nothing where voxels cover a pixel or more.
+    /// Anti-aliasing of voxels smaller than a pixel. Sheet renderers: Swan et al. 1997 eq. 4
+    /// and 8 (`swan`), its §4.6 perpendicular-distance estimate (`swan-perpendicular`),
+    /// Zwicker et al.'s EWA screen filter (`ewa`), a one-pixel box's variance added to each
+    /// footprint (`area`), or none; image-aligned slabs average ⌈pixel/voxel⌉² rays unless
+    /// `none`. Changes nothing where voxels cover a pixel or more (`area` and `ewa` widen a
+    /// little).
     #[arg(long, value_enum, default_value = "swan", help_heading = "Quality")]
     pub antialias: AntialiasChoice,
     /// Visibility: image-aligned slabs classified and shaded per pixel after reconstruction

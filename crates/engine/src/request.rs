@@ -119,6 +119,9 @@ pub enum AntialiasChoice {
     SwanPerpendicular,
     /// Zwicker et al.'s EWA screen filter.
     Ewa,
+    /// The pixel's area: the footprint's screen covariance plus a one-pixel box's, 1/12 px²
+    /// (EWA with a box-sized pre-filter; Mip-Splatting's 2D filter).
+    Area,
     /// None: the true projection whatever its size.
     None,
 }
@@ -533,6 +536,7 @@ impl RenderRequest {
                 AntialiasChoice::Swan => Antialias::Swan,
                 AntialiasChoice::SwanPerpendicular => Antialias::SwanPerpendicular,
                 AntialiasChoice::Ewa => Antialias::Ewa,
+                AntialiasChoice::Area => Antialias::Area,
                 AntialiasChoice::None => Antialias::None,
             },
             ..RenderSettings::default()

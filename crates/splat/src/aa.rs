@@ -30,6 +30,16 @@
 //!   unit-variance Gaussian pixel pre-filter: `Q′ = σ²(σ²Q⁻¹ + I)⁻¹`. It widens every splat,
 //!   also those larger than a pixel (by a little), and grows smoothly instead of switching on
 //!   at `k`.
+//! - [`Antialias::Area`]: the same resampling filter with the pixel pre-filter's variance
+//!   reduced from 1 to that of a one-pixel box, `s = 1/12` px² per axis: `Q′ = σ²(σ²Q⁻¹ +
+//!   I/12)⁻¹`, `E = √(det Q′/det Q)`. This is Zwicker et al. 2001's EWA low-pass (§5) scaled to
+//!   a box, and Mip-Splatting's "2D Mip filter" chosen to mimic a one-pixel box (Yu, Chen,
+//!   Huang, Sattler, Geiger, *Mip-Splatting: Alias-free 3D Gaussian Splatting*, CVPR 2024,
+//!   §5.2). It approximates the pixel-area average that box-filtered supersampled references
+//!   compute: Swan's rule widens a minified splat to a screen variance of `σ²` ≈ 0.36 px² per
+//!   axis, far more than a pixel's 1/12, and on real data shown small is then worse than no
+//!   anti-aliasing against such a reference (issue 12 item 4; `docs/design/pipeline.md` §4).
+//!   At magnification it widens every splat's screen variance by exactly 1/12 px².
 
 use volsplat_core::Kernel;
 use volsplat_core::glam::{DMat2, DVec2};
@@ -46,18 +56,24 @@ pub enum Antialias {
     SwanPerpendicular,
     /// Zwicker et al. 2001 EWA: footprint covariance plus a unit pixel covariance.
     Ewa,
+    /// The pixel's area: footprint covariance plus a one-pixel box's covariance, `I/12` (EWA's
+    /// resampling filter with `s = 1/12`, Zwicker et al. 2001; Mip-Splatting's 2D Mip filter,
+    /// Yu et al. CVPR 2024 §5.2).
+    Area,
 }
 
 impl Antialias {
     /// Names accepted by [`Antialias::from_name`].
-    pub const NAMES: &'static [&'static str] = &["swan", "swan-perpendicular", "ewa", "none"];
+    pub const NAMES: &'static [&'static str] =
+        &["swan", "swan-perpendicular", "ewa", "area", "none"];
 
-    /// Parses `swan`, `swan-perpendicular`, `ewa` or `none`.
+    /// Parses `swan`, `swan-perpendicular`, `ewa`, `area` or `none`.
     pub fn from_name(name: &str) -> Option<Self> {
         Some(match name {
             "swan" => Antialias::Swan,
             "swan-perpendicular" | "perpendicular" => Antialias::SwanPerpendicular,
             "ewa" => Antialias::Ewa,
+            "area" => Antialias::Area,
             "none" | "off" => Antialias::None,
             _ => return None,
         })
@@ -70,9 +86,14 @@ impl Antialias {
             Antialias::Swan => "swan",
             Antialias::SwanPerpendicular => "swan-perpendicular",
             Antialias::Ewa => "ewa",
+            Antialias::Area => "area",
         }
     }
 }
+
+/// The screen-space variance, px² per axis, that [`Antialias::Area`] adds to a footprint: that
+/// of a one-pixel box, `∫x²dx` over `[−½, ½]`.
+pub const AREA_VARIANCE: f64 = 1.0 / 12.0;
 
 /// Eigen-decomposition of a symmetric 2×2 matrix: `(μ₁, μ₂, e₁)` with `μ₁ ≥ μ₂` and `e₁` the unit
 /// eigenvector of `μ₁` (`e₂` is `e₁` turned by 90°). A non-finite input gives non-finite
@@ -115,7 +136,7 @@ fn from_eigen(l1: f64, l2: f64, e1: DVec2) -> DMat2 {
 
 /// Applies `rule` to the lattice metric `q`; returns the widened metric and the energy factor
 /// `E = √(det Q′/det Q)` ≤ 1. `variance` is the kernel's per-axis footprint variance in lattice
-/// units² (used by EWA only; see [`footprint_variance`]).
+/// units² (used by EWA and Area only; see [`footprint_variance`]).
 pub fn widen(rule: Antialias, q: DMat2, variance: f64) -> (DMat2, f64) {
     let (m1, m2, e1) = sym_eigen(q);
     if !(m2 > 0.0 && m1.is_finite()) {
@@ -138,14 +159,20 @@ pub fn widen(rule: Antialias, q: DMat2, variance: f64) -> (DMat2, f64) {
                 (from_eigen(n1, n2, e1), ((n1 * n2) / (m1 * m2)).sqrt())
             }
         }
-        Antialias::Ewa => {
-            // Σ = σ²Q⁻¹ (pixels²); Σ′ = Σ + I; Q′ = σ²Σ′⁻¹: eigenvalues σ²/(σ²/μ + 1).
-            let v = variance.max(1e-12);
-            let f = |m: f64| v / (v / m + 1.0);
-            let (n1, n2) = (f(m1), f(m2));
-            (from_eigen(n1, n2, e1), ((n1 * n2) / (m1 * m2)).sqrt())
-        }
+        Antialias::Ewa => prefilter(m1, m2, e1, variance, 1.0),
+        Antialias::Area => prefilter(m1, m2, e1, variance, AREA_VARIANCE),
     }
+}
+
+/// The EWA resampling filter (Zwicker et al. 2001, eq. 19–21) with a pixel pre-filter of variance
+/// `s` px² per axis, for the metric with eigen-decomposition `(μ₁, μ₂, e₁)` and kernel variance
+/// `variance`: `Σ = σ²Q⁻¹` (pixels²); `Σ′ = Σ + s·I`; `Q′ = σ²Σ′⁻¹`, eigenvalues
+/// `σ²/(σ²/μ + s)`; `E = √(det Q′/det Q)`.
+fn prefilter(m1: f64, m2: f64, e1: DVec2, variance: f64, s: f64) -> (DMat2, f64) {
+    let v = variance.max(1e-12);
+    let f = |m: f64| v / (v / m + s);
+    let (n1, n2) = (f(m1), f(m2));
+    (from_eigen(n1, n2, e1), ((n1 * n2) / (m1 * m2)).sqrt())
 }
 
 /// The per-axis variance of a kernel's footprint, lattice units²: `½∫ρ²F(ρ)d²ρ` for radial
@@ -263,6 +290,111 @@ mod tests {
         assert!((v / m1 - (v / 4.0 + 1.0)).abs() < 1e-12);
         assert!((v / m2 - (v + 1.0)).abs() < 1e-12);
         assert!((e - ((m1 * m2) / 4.0).sqrt()).abs() < 1e-12);
+    }
+
+    /// The screen covariance `σ²Q′⁻¹` of an `area`-widened footprint is the true one plus
+    /// `I/12` px², along the same principal axes, minified or magnified.
+    #[test]
+    fn area_adds_a_twelfth_pixel_variance() {
+        for v in [0.346136, 1.0 / 6.0, 1.0] {
+            for (l1, l2, angle) in [
+                (9.0, 9.0, 0.3),
+                (16.0, 0.25, 0.4),
+                (4.0, 1.0, 0.0),
+                (0.5, 0.2, 1.0),
+                (1e-3, 1e-4, 2.5),
+            ] {
+                let q = metric(l1, l2, angle);
+                let (q2, _) = widen(Antialias::Area, q, v);
+                let (m1, m2, e1) = sym_eigen(q2);
+                // μ′ is decreasing in the screen variance, so μ₁′ belongs to μ₁.
+                for (mu, n) in [(l1, m1), (l2, m2)] {
+                    let want = v / mu + 1.0 / 12.0;
+                    assert!(
+                        (v / n - want).abs() <= 1e-12 * want,
+                        "σ² {v}, μ {mu}: {} vs {want}",
+                        v / n
+                    );
+                }
+                if l1 > l2 {
+                    let axis = DVec2::new(angle.cos(), angle.sin());
+                    assert!((e1.dot(axis).abs() - 1.0).abs() < 1e-12);
+                }
+                // The whole matrix: σ²Q′⁻¹ = σ²Q⁻¹ + I/12.
+                let d = q2.inverse() * v - (q.inverse() * v + DMat2::IDENTITY / 12.0);
+                let scale = v / l2;
+                for c in [d.col(0), d.col(1)] {
+                    assert!(c.abs().max_element() <= 1e-9 * scale, "{d}");
+                }
+            }
+        }
+    }
+
+    /// Each splat keeps its energy: the weight factor is `E = √(det Q′/det Q)`, so the
+    /// footprint's screen integral `E·∫F/√det Q′` equals the unwidened `∫F/√det Q`.
+    #[test]
+    fn area_keeps_energy() {
+        for (l1, l2, angle) in [(9.0, 9.0, 0.3), (16.0, 0.25, 0.4), (0.5, 0.2, 1.0)] {
+            let q = metric(l1, l2, angle);
+            let (q2, e) = widen(Antialias::Area, q, 0.346136);
+            assert!(e > 0.0 && e < 1.0, "{e}");
+            let (dq, dq2) = (q.determinant(), q2.determinant());
+            assert!((e * e * dq - dq2).abs() <= 1e-12 * dq2, "{e} {dq} {dq2}");
+            assert!((e / dq2.sqrt() - 1.0 / dq.sqrt()).abs() <= 1e-12 / dq.sqrt());
+        }
+        // Minified 3× (μ = 9, σ² = 0.346): screen variance 0.0385 → 0.1218 px², E = 0.316,
+        // against Swan's 1/9 (variance 0.346 px², nine times the area).
+        let (_, e) = widen(Antialias::Area, metric(9.0, 9.0, 0.0), 0.346136);
+        let want = (0.346136 / 9.0) / (0.346136 / 9.0 + 1.0 / 12.0);
+        assert!((e - want).abs() < 1e-12, "{e} vs {want}");
+        assert!(e > 2.5 / 9.0);
+    }
+
+    /// Where a voxel spans a pixel or more (`μ ≤ 1`) Swan's rule changes nothing; `area` adds
+    /// the box's 1/12 px², at most `√(1 + 1/(12σ²))` in radius (1.113 for Westover's Gaussian),
+    /// far less than EWA's unit pre-filter.
+    #[test]
+    fn area_at_magnification_widens_by_at_most_the_box_variance() {
+        let v = footprint_variance(&Kernel::default());
+        let max_radius = (1.0 + 1.0 / (12.0 * v)).sqrt();
+        assert!((max_radius - 1.1133).abs() < 1e-3, "{max_radius}");
+        for (l1, l2, angle) in [
+            (1.0, 1.0, 0.0),
+            (0.999, 0.3, 0.7),
+            (0.5, 0.2, 1.0),
+            (1.0 / 1.5f64.powi(2), 1.0 / 1.5f64.powi(2), 0.2),
+            (0.01, 0.002, -0.4),
+        ] {
+            let q = metric(l1, l2, angle);
+            let (q2, e) = widen(Antialias::Area, q, v);
+            let (m1, m2, _) = sym_eigen(q2);
+            for (mu, n) in [(l1, m1), (l2, m2)] {
+                let (before, after) = (v / mu, v / n);
+                assert!(after > before, "μ {mu}: {before} → {after}");
+                assert!(after - before <= 1.0 / 12.0 + 1e-12, "μ {mu}");
+                assert!((after / before).sqrt() <= max_radius + 1e-12, "μ {mu}");
+            }
+            assert!(e >= 1.0 / max_radius.powi(2) - 1e-12 && e < 1.0, "{e}");
+            // EWA widens more, Swan not at all.
+            let (_, e_ewa) = widen(Antialias::Ewa, q, v);
+            assert!(e_ewa < e, "ewa {e_ewa} vs area {e}");
+            assert_eq!(widen(Antialias::Swan, q, v), (q, 1.0));
+        }
+        // 1.5 px per voxel: σ² 0.78 → 0.86 px².
+        let q = metric(1.0 / 2.25, 1.0 / 2.25, 0.0);
+        let (q2, _) = widen(Antialias::Area, q, v);
+        let (n, _, _) = sym_eigen(q2);
+        assert!((v / n - (v * 2.25 + 1.0 / 12.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for &name in Antialias::NAMES {
+            let aa = Antialias::from_name(name).unwrap();
+            assert_eq!(aa.name(), name);
+        }
+        assert_eq!(Antialias::from_name("area"), Some(Antialias::Area));
+        assert_eq!(Antialias::from_name("box"), None);
     }
 
     #[test]

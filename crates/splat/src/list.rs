@@ -1171,8 +1171,10 @@ mod tests {
         };
         let swan = energy(Antialias::Swan);
         let ewa = energy(Antialias::Ewa);
+        let area = energy(Antialias::Area);
         assert!((swan - 1.0).abs() < 0.01, "swan {swan}");
         assert!((ewa - 1.0).abs() < 0.01, "ewa {ewa}");
+        assert!((area - 1.0).abs() < 0.01, "area {area}");
         // The dense renderer applies the same rule through its footprint table.
         let s = RenderSettings {
             width: 12,
@@ -1192,6 +1194,14 @@ mod tests {
             * px
             * px;
         assert!((dense / mass - 1.0).abs() < 0.01, "dense {}", dense / mass);
+        let s = RenderSettings {
+            antialias: Antialias::Area,
+            ..s
+        };
+        let r = render(&vol, &cam, &t, &s).unwrap();
+        let sum: f64 = r.values.unwrap().values().iter().map(|&v| v as f64).sum();
+        let dense_area = sum * px * px / mass;
+        assert!((dense_area - 1.0).abs() < 0.01, "dense area {dense_area}");
     }
 
     #[test]

@@ -10,6 +10,9 @@
 //!   resolution and box-filtered down, split at the distance `k` (eq. 3).
 //! - [`temporal_highpass`]: flicker of an animation, the mean energy of the second temporal
 //!   difference `f(t+1) − 2f(t) + f(t−1)` over a region.
+//! - [`minified_box_errors`]: a volume shown small (orthographic, dense renderer) against the
+//!   same scene rendered `factor`× larger without anti-aliasing and box-filtered down, the
+//!   reference of issue 12 item 4 (the MRI minification table).
 //!
 //! Errors are RMS over the R, G, B channels of premultiplied colour (over black,
 //! [`metrics::rms_rgb`](crate::metrics::rms_rgb)).
@@ -21,7 +24,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use volsplat_core::glam::DVec3;
-use volsplat_core::{Camera, CrioTables, Image, Projection, ScalarImage, Volume, scenes};
+use volsplat_core::{Camera, CrioTables, Image, Projection, Scalar, ScalarImage, Volume, scenes};
 use volsplat_io::PngSettings;
 use volsplat_splat::list::{draw_depth_contour, k_distance, render_list_depth};
 use volsplat_splat::{Antialias, ExtractSettings, RenderSettings, SplatList, render_list};
@@ -167,12 +170,7 @@ pub fn perspective_errors(
     let black = Image::new(w, h);
     let plain_rms = rms_rgb(&plain, &black, Some(&before));
     let mut out = Vec::new();
-    for aa in [
-        Antialias::None,
-        Antialias::Swan,
-        Antialias::SwanPerpendicular,
-        Antialias::Ewa,
-    ] {
+    for aa in RULES {
         let img = render_list(
             list,
             camera,
@@ -193,6 +191,53 @@ pub fn perspective_errors(
         });
     }
     Ok((k, frac, out))
+}
+
+/// The anti-aliasing rules every table of the study compares, in column order.
+pub const RULES: [Antialias; 5] = [
+    Antialias::None,
+    Antialias::Swan,
+    Antialias::SwanPerpendicular,
+    Antialias::Ewa,
+    Antialias::Area,
+];
+
+/// A volume shown small: renders `volume` with the dense renderer (`base`: its settings, size
+/// `w × h`) under each rule of `rules`, and compares each image with the same scene rendered at
+/// `factor × w` by `factor × h` without anti-aliasing and box-filtered `factor × factor` down
+/// (there a voxel covers `factor²` as many pixels, so with `factor` ≥ the voxels per pixel no
+/// rule would widen anything: the reference averages each pixel's area). Returns the RMS error
+/// (premultiplied RGB) per rule, in the order of `rules`.
+pub fn minified_box_errors<T: Scalar>(
+    volume: &Volume<T>,
+    camera: &Camera,
+    tables: &CrioTables,
+    base: &RenderSettings,
+    factor: usize,
+    rules: &[Antialias],
+) -> Result<Vec<f64>> {
+    let (w, h) = (base.width, base.height);
+    let hi = RenderSettings {
+        width: w * factor,
+        height: h * factor,
+        antialias: Antialias::None,
+        ..base.clone()
+    };
+    let reference = box_downsample(
+        &volsplat_splat::render(volume, camera, tables, &hi)?.image,
+        factor,
+    )?;
+    rules
+        .iter()
+        .map(|&aa| {
+            let s = RenderSettings {
+                antialias: aa,
+                ..base.clone()
+            };
+            let img = volsplat_splat::render(volume, camera, tables, &s)?.image;
+            Ok(rms_rgb(&img, &reference, None))
+        })
+        .collect()
 }
 
 /// The flicker of a dolly: `frames` renders with the eye moving `step` world units per frame
@@ -363,6 +408,80 @@ fn figure(
     Ok((times[0], times[1]))
 }
 
+/// The MRI minification table of [`write_figures`]: the orthographic scenes of `data/scenes`
+/// (brainsmall composite and shaded composite, Colin27 composite) at 96², 112² and 128², each
+/// against its own 4× box reference ([`minified_box_errors`]). Volumes missing from `data` are
+/// left out.
+fn mri_minification(md: &mut String, data: &Path) -> Result<()> {
+    writeln!(
+        md,
+        "\n## Real MRIs shown small, against a 4× box-filtered reference\n"
+    )?;
+    writeln!(
+        md,
+        "The orthographic scenes of `{}/scenes`, rendered by the dense sheet-buffer renderer at \
+         n² and compared with the same scene at (4n)² without anti-aliasing, box-filtered 4×4 \
+         (the pixel-area average, issue 12 item 4). RMS error of premultiplied RGB (0–1). \
+         `area` adds a one-pixel box's variance, 1/12 px², to each footprint; Swan's rule widens \
+         a minified footprint to the kernel's variance, 0.35 px². The reference uses the same \
+         Gaussian kernel, so it measures the pre-filter alone.\n",
+        data.display()
+    )?;
+    writeln!(
+        md,
+        "| scene | size | voxels per pixel | none | swan | swan-perpendicular | ewa | area | \
+         area / none |"
+    )?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|")?;
+    let mut missing = Vec::new();
+    for (file, scene) in [
+        ("mri_brainsmall.nrrd", "mri_brainsmall__composite_ortho"),
+        (
+            "mri_brainsmall.nrrd",
+            "mri_brainsmall__composite_shaded_ortho",
+        ),
+        ("mri_colin27.nhdr", "mri_colin27__composite_ortho"),
+    ] {
+        let path = data.join(file);
+        let json = |kind: &str| data.join("scenes").join(format!("{scene}.{kind}.json"));
+        if !path.is_file() || !json("camera").is_file() || !json("tf").is_file() {
+            missing.push(scene);
+            continue;
+        }
+        let vol = volsplat_io::read_volume(&path)
+            .with_context(|| format!("reading {}", path.display()))?
+            .to_f32();
+        let (camera, _) = volsplat_io::load_camera(json("camera"))?;
+        let (tf, _) = volsplat_io::load_transfer_function(json("tf"))?;
+        let tables = CrioTables::from_transfer_function(&tf, 1024)?;
+        let spacing = vol
+            .grid()
+            .spacing
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        for n in [96usize, 112, 128] {
+            let base = RenderSettings {
+                width: n,
+                height: n,
+                ..RenderSettings::default()
+            };
+            let e = minified_box_errors(&vol, &camera, &tables, &base, 4, &RULES)?;
+            let vpp = 2.0 * camera.parallel_scale / n as f64 / spacing;
+            write!(md, "| `{scene}` | {n}² | {vpp:.2} |")?;
+            for v in &e {
+                write!(md, " {v:.5} |")?;
+            }
+            writeln!(md, " {:.2} |", e[4] / e[0])?;
+        }
+    }
+    if !missing.is_empty() {
+        writeln!(md, "\nLeft out (data missing): {}.", missing.join(", "))?;
+    }
+    writeln!(md)?;
+    Ok(())
+}
+
 /// Settings of [`write_figures`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct AaFiguresSettings {
@@ -370,14 +489,19 @@ pub struct AaFiguresSettings {
     pub out: PathBuf,
     /// Frames of the dolly used to measure flicker (at least 3 are rendered).
     pub frames: usize,
+    /// The folder holding `mri_brainsmall.nrrd`, `mri_colin27.nhdr` and `scenes/` (the shared
+    /// data set), for the MRI minification table; rows whose data is missing are left out.
+    pub data: PathBuf,
 }
 
 impl Default for AaFiguresSettings {
-    /// `docs/figures`, 60 frames (what `volsplat aa-figures` writes by default).
+    /// `docs/figures`, 60 frames, data in `../shared/data` (what `volsplat aa-figures` writes
+    /// by default).
     fn default() -> Self {
         AaFiguresSettings {
             out: PathBuf::from("docs/figures"),
             frames: 60,
+            data: PathBuf::from("../shared/data"),
         }
     }
 }
@@ -385,7 +509,9 @@ impl Default for AaFiguresSettings {
 /// The figures and measurements of Swan et al. 1997 §5: Fig. 7a–f (checkerboard sheet,
 /// terrain, dense fibres; left without, right with anti-aliasing, the line at `k` drawn on
 /// both) as `fig7-*.png`, and `README.md` with the render times, the aliasing under
-/// orthographic minification ([`minification_error`]), in the perspective checkerboard
+/// orthographic minification ([`minification_error`]), real MRIs shown small against their 4×
+/// box-filtered references ([`minified_box_errors`]; those `data` holds), in the perspective
+/// checkerboard
 /// ([`perspective_errors`]) and the flicker of a dolly ([`temporal_highpass`]). Runs on the
 /// current rayon pool; about 25 s on 2 cores at the default 60 frames.
 pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
@@ -494,9 +620,10 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
     )?;
     writeln!(
         md,
-        "| voxels per pixel | renderer | none | swan | swan-perpendicular | ewa | none / swan |"
+        "| voxels per pixel | renderer | none | swan | swan-perpendicular | ewa | area | none / \
+         swan |"
     )?;
-    writeln!(md, "|---|---|---|---|---|---|---|")?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|")?;
     for vpp in [2.0, 3.0, 5.0, 8.0] {
         for use_list in [false, true] {
             let e = |aa: Antialias| {
@@ -511,15 +638,16 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
                     use_list,
                 )
             };
-            let (n, s, p, w) = (
+            let (n, s, p, w, r) = (
                 e(Antialias::None)?,
                 e(Antialias::Swan)?,
                 e(Antialias::SwanPerpendicular)?,
                 e(Antialias::Ewa)?,
+                e(Antialias::Area)?,
             );
             writeln!(
                 md,
-                "| {vpp} | {} | {n:.4} | {s:.4} | {p:.4} | {w:.4} | {:.0}× |",
+                "| {vpp} | {} | {n:.4} | {s:.4} | {p:.4} | {w:.4} | {r:.4} | {:.0}× |",
                 if use_list {
                     "splat list"
                 } else {
@@ -529,6 +657,9 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
             )?;
         }
     }
+
+    // (i′) a real MRI shown small (issue 12 item 4).
+    mri_minification(&mut md, &a.data)?;
 
     // (ii) perspective checkerboard against a supersampled reference.
     writeln!(md, "\n## Aliasing in the perspective checkerboard\n")?;
@@ -592,12 +723,7 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
     writeln!(md, "| rule | temporal high-pass energy | ratio to none |")?;
     writeln!(md, "|---|---|---|")?;
     let mut none_e = 0.0;
-    for aa in [
-        Antialias::None,
-        Antialias::Swan,
-        Antialias::SwanPerpendicular,
-        Antialias::Ewa,
-    ] {
+    for aa in RULES {
         let s = RenderSettings {
             width: 270,
             height: 157,
@@ -616,8 +742,9 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
     writeln!(
         md,
         "Checked by `crates/splat/tests/antialias.rs` (far_away_xray_keeps_its_energy_when_splats_grow) \
-         and `list.rs` (orthographic_minification_conserves_x_ray_energy_with_swan): the image's \
-         integral stays within 1 % of the volume's mass when anti-aliasing enlarges the splats.\n"
+         and `list.rs` (orthographic_minification_conserves_x_ray_energy_with_swan), for swan, \
+         ewa and area: the image's integral stays within 1 % of the volume's mass when \
+         anti-aliasing enlarges the splats.\n"
     )?;
     writeln!(md, "Total time: {:.1} s.", t0.elapsed().as_secs_f64())?;
     let report = a.out.join("README.md");
