@@ -269,7 +269,7 @@ pub struct RenderOptions {
     /// footprint (`area`), or none; image-aligned slabs average ⌈pixel/voxel⌉² rays unless
     /// `none`. Changes nothing where voxels cover a pixel or more (`area` and `ewa` widen a
     /// little).
-    #[arg(long, value_enum, default_value = "swan", help_heading = "Quality")]
+    #[arg(long, value_enum, default_value = "area", help_heading = "Quality")]
     pub antialias: AntialiasChoice,
     /// Visibility: image-aligned slabs classified and shaded per pixel after reconstruction
     /// (`image`), Westover's sheet buffers (`sheet`), composite-every-sample (`every`), or `auto`:

@@ -23,6 +23,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "demo head, composite",
         &[
+            // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
+            "--antialias",
+            "swan",
             "--phantom-size",
             "40",
             "--size",
@@ -36,9 +39,28 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         0x3173c65bfc844768,
     ),
     (
+        // The default since decision 0006's 2026-11-24 amendment: the `area` rule.
+        "demo head, area anti-aliasing",
+        &[
+            "--phantom-size",
+            "40",
+            "--size",
+            "48x40",
+            "--azimuth",
+            "30",
+            "--elevation",
+            "15",
+        ],
+        "npy",
+        0x1d81b67e12c200e3,
+    ),
+    (
         // sRGB-encoded, the default before decision 0012 made PNGs linear.
         "demo head, PNG --srgb",
         &[
+            // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
+            "--antialias",
+            "swan",
             "--srgb",
             "--phantom-size",
             "40",
@@ -55,6 +77,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "perspective",
         &[
+            // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
+            "--antialias",
+            "swan",
             "--phantom-size",
             "40",
             "--size",
@@ -71,6 +96,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "splat list, orthographic",
         &[
+            // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
+            "--antialias",
+            "swan",
             // The function these hashes were recorded with (the default before the automatic
             // transfer function of issue 15).
             "--preset",
@@ -92,6 +120,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         // Westover's sheets, the default for MIP before decision 0016.
         "MIP",
         &[
+            // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
+            "--antialias",
+            "swan",
             "--visibility",
             "sheet",
             "--phantom",
@@ -166,6 +197,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "X-ray",
         &[
+            // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
+            "--antialias",
+            "swan",
             "--phantom",
             "shepp-logan",
             "--phantom-size",

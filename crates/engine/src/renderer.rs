@@ -392,7 +392,10 @@ impl Renderer {
                         && q.subsample == 1
                         && q.order == OrderChoice::Ftb
                         && q.kernel == KernelChoice::Gaussian
-                        && matches!(q.antialias, AntialiasChoice::Swan | AntialiasChoice::None);
+                        && !matches!(
+                            q.antialias,
+                            AntialiasChoice::SwanPerpendicular | AntialiasChoice::Ewa
+                        );
                     plain && {
                         let (tables, fresh) =
                             cached(&mut self.tables, tables_key(request, &tf), || {

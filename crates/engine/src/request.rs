@@ -113,14 +113,15 @@ impl KernelChoice {
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum AntialiasChoice {
     /// Swan et al. eq. 4 and 8.
-    #[default]
     Swan,
     /// Swan et al. §4.6, per principal axis.
     SwanPerpendicular,
     /// Zwicker et al.'s EWA screen filter.
     Ewa,
-    /// The pixel's area: the footprint's screen covariance plus a one-pixel box's, 1/12 px²
-    /// (EWA with a box-sized pre-filter; Mip-Splatting's 2D filter).
+    /// The pixel's area (the default, decision 0006 amended 2026-11-24): the footprint's
+    /// screen covariance plus a one-pixel box's, 1/12 px² (EWA with a box-sized pre-filter;
+    /// Mip-Splatting's 2D filter). Image-aligned slabs average sub-pixel rays instead.
+    #[default]
     Area,
     /// None: the true projection whatever its size.
     None,
@@ -188,7 +189,7 @@ impl Default for Quality {
     fn default() -> Self {
         Quality {
             kernel: KernelChoice::Gaussian,
-            antialias: AntialiasChoice::Swan,
+            antialias: AntialiasChoice::Area,
             visibility: VisibilityChoice::Auto,
             order: OrderChoice::Ftb,
             opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
