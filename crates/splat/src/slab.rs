@@ -642,9 +642,10 @@ impl<T: Scalar> Ctx<'_, T> {
         }
     }
 
-    /// One sample at pixel `x`: the scalar twin of [`sample_run_avx2`].
+    /// The cell of pixel `x` of a row and the fractions in it, from the row's f32 start and step
+    /// (the positions [`sample_run_avx2`] computes lane by lane).
     #[inline(always)]
-    fn sample_scalar(&self, walk: &Walk, x: usize) -> f32 {
+    fn cell_f32(&self, walk: &Walk, x: usize) -> ([usize; 3], [f32; 3]) {
         let xf = x as f32;
         let mut c = [0usize; 3];
         let mut f = [0.0f32; 3];
@@ -654,6 +655,13 @@ impl<T: Scalar> Ctx<'_, T> {
             c[a] = i as usize;
             f[a] = (q - i as f32).clamp(0.0, 1.0);
         }
+        (c, f)
+    }
+
+    /// One sample at pixel `x`: the scalar twin of [`sample_run_avx2`].
+    #[inline(always)]
+    fn sample_scalar(&self, walk: &Walk, x: usize) -> f32 {
+        let (c, f) = self.cell_f32(walk, x);
         let [ux, uy, uz] = self.up;
         let base = c[0] + c[1] * self.stride[1] + c[2] * self.stride[2];
         let v = |o: usize| self.data[base + o].to_f32();
@@ -677,15 +685,7 @@ impl<T: Scalar> Ctx<'_, T> {
     /// ray caster and the reference integrator shade with. Computed only for samples with
     /// opacity.
     fn gradient_at(&self, walk: &Walk, x: usize) -> Vec3 {
-        let xf = x as f32;
-        let mut c = [0usize; 3];
-        let mut f = [0.0f32; 3];
-        for a in 0..3 {
-            let q = walk.s32[a] + xf * walk.st32[a];
-            let i = (q as i32).clamp(0, self.max_cell[a] as i32);
-            c[a] = i as usize;
-            f[a] = (q - i as f32).clamp(0.0, 1.0);
-        }
+        let (c, f) = self.cell_f32(walk, x);
         let mut g = [0.0f32; 3];
         for corner in 0..8usize {
             let mut w = 1.0f32;
