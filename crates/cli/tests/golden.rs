@@ -175,7 +175,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "45",
         ],
         "npy",
-        0xf8c8459c9d6d3d8c,
+        0x6839a1c4ba690d6c,
     ),
     (
         "shaded, image-aligned slabs",

@@ -726,11 +726,12 @@ impl<T: Scalar> Ctx<'_, T> {
         // Live window of each row (composite): pixels outside it are opaque.
         let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
         let composite = self.mode == RenderMode::Composite;
-        let kf = if composite {
-            self.path_factors(y0, rows)
+        let (kf, ext) = if composite {
+            (self.path_factors(y0, rows), self.ray_extents(y0, rows))
         } else {
-            Vec::new()
+            (Vec::new(), Vec::new())
         };
+        let half = (0.5 * self.delta) as f32;
         let mip = self.mode == RenderMode::Mip;
         for p in 0..self.n_planes {
             let d = self.depth(p);
@@ -769,15 +770,35 @@ impl<T: Scalar> Ctx<'_, T> {
                         c.terminated += 1;
                         continue;
                     }
+                    // The first and last samples of a ray stand for the path from where the
+                    // ray enters (leaves) the volume or its clipping, not a whole slab: without
+                    // this the cut faces step from plane to plane (wood grain).
+                    let [din, dout] = ext[r * w + x];
+                    let df = d as f32;
+                    let k = if df - 2.0 * half < din || df + 2.0 * half > dout {
+                        let lo = if df - 2.0 * half < din {
+                            din
+                        } else {
+                            df - half
+                        };
+                        let hi = if df + 2.0 * half > dout {
+                            dout
+                        } else {
+                            df + half
+                        };
+                        kf[r * w + x] * ((hi - lo) / (2.0 * half)).max(0.0)
+                    } else {
+                        kf[r * w + x]
+                    };
                     let rgba = match self.post {
-                        Some(t) if self.view.perspective => {
+                        Some(t) if self.view.perspective || k != 1.0 => {
                             // Colour and log-transmittance per table entry: the path
                             // correction is one exp2 (no log2, no division).
                             let [cr, cg, cb, l] = t.lookup_in(&t.persp, rho);
                             if l >= 0.0 {
                                 continue;
                             }
-                            let a = 1.0 - exp2_neg(kf[r * w + x] * l);
+                            let a = 1.0 - exp2_neg(k * l);
                             over_front_to_back(px, [cr * a, cg * a, cb * a, a]);
                             c.visible += 1;
                             continue;
@@ -803,7 +824,7 @@ impl<T: Scalar> Ctx<'_, T> {
                         }
                     };
                     if let Some(rgba) = rgba {
-                        let rgba = self.path_correct(rgba, kf[r * w + x]);
+                        let rgba = self.path_correct(rgba, k);
                         over_front_to_back(px, rgba);
                         c.visible += 1;
                     }
@@ -887,6 +908,60 @@ impl<T: Scalar> Ctx<'_, T> {
         let a2 = 1.0 - exp2_neg(k * log2_unit(1.0 - a));
         let s = a2 / a;
         [rgba[0] * s, rgba[1] * s, rgba[2] * s, a2]
+    }
+
+    /// The eye depths `[d_in, d_out]` between which the ray of each pixel of the rows
+    /// `[y0, y0 + rows)` lies in the box of voxel centres and on the kept side of every clipping
+    /// plane (`[+∞, −∞]` where it misses).
+    fn ray_extents(&self, y0: usize, rows: usize) -> Vec<[f32; 2]> {
+        let v = &self.view;
+        let mut out = Vec::with_capacity(rows * self.width);
+        for y in y0..y0 + rows {
+            for x in 0..self.width {
+                let (u, w) = v.offsets(x as f64, y as f64);
+                // Index and world position at depth d: a + d·b.
+                let (aq, bq, aw, bw) = if v.perspective {
+                    (
+                        v.eye_q,
+                        v.fwd_q + v.right_q * u + v.up_q * w,
+                        v.eye,
+                        v.fwd_w + v.right_w * u + v.up_w * w,
+                    )
+                } else {
+                    (
+                        v.eye_q + v.right_q * u + v.up_q * w,
+                        v.fwd_q,
+                        v.eye + v.right_w * u + v.up_w * w,
+                        v.fwd_w,
+                    )
+                };
+                let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+                let mut cut = |a: f64, b: f64, min: f64, max: f64| {
+                    // min ≤ a + d·b ≤ max
+                    if b.abs() < 1e-300 {
+                        if a < min || a > max {
+                            lo = f64::INFINITY;
+                        }
+                    } else {
+                        let (t0, t1) = ((min - a) / b, (max - a) / b);
+                        lo = lo.max(t0.min(t1));
+                        hi = hi.min(t0.max(t1));
+                    }
+                };
+                for ax in 0..3 {
+                    cut(aq[ax], bq[ax], 0.0, (self.dims[ax] - 1) as f64);
+                }
+                for &(n, off) in &self.clip {
+                    cut(n.dot(aw) + off, n.dot(bw), 0.0, f64::INFINITY);
+                }
+                out.push(if lo <= hi {
+                    [lo as f32, hi as f32]
+                } else {
+                    [f32::INFINITY, f32::NEG_INFINITY]
+                });
+            }
+        }
+        out
     }
 
     /// The path factor `k = √(1 + u² + v²)` of every pixel of the rows `[y0, y0 + rows)`: 1 in

@@ -484,7 +484,9 @@ fn gradients_light_ramps_like_the_reference() {
             let img = slabs(&vol, &cam, &tables, &settings(w, h, RenderMode::Composite)).image;
             let p = image_psnr(&img, &reference);
             eprintln!("ramp {name} parallel={parallel}: {p:.1} dB");
-            assert!(p > 50.0, "ramp {name} parallel={parallel}: {p:.2} dB");
+            // The ramps fill the whole box, so the first and last slab of every ray count: with
+            // them weighted by the path inside the volume, 69.6–73.4 dB (66 dB without).
+            assert!(p > 65.0, "ramp {name} parallel={parallel}: {p:.2} dB");
         }
     }
 }
