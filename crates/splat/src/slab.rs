@@ -594,36 +594,10 @@ impl<T: Scalar> Ctx<'_, T> {
         out.fill(f32::NAN);
         let mut count = 0;
         let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
-        if !self.skip_empty {
-            if lo <= hi {
-                self.sample_run(walk, lo as usize, hi as usize, out);
-                count += (hi - lo + 1) as u64;
-            }
-            return count;
-        }
-        // Runs of pixels whose cells stay in one brick (space leaping per row); consecutive
-        // active runs are sampled together.
-        let mut pending: Option<(i64, i64)> = None;
-        let mut x = lo;
-        while x <= hi {
-            let q = walk.at(x);
-            let (cell, _) = self.cell(q);
-            let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
-            if self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
-                pending = Some(match pending {
-                    Some((a, _)) => (a, end),
-                    None => (x, end),
-                });
-            } else if let Some((a, b)) = pending.take() {
-                self.sample_run(walk, a as usize, b as usize, out);
-                count += (b - a + 1) as u64;
-            }
-            x = end + 1;
-        }
-        if let Some((a, b)) = pending {
-            self.sample_run(walk, a as usize, b as usize, out);
+        self.for_each_run(walk, lo, hi, |a, b| {
+            self.sample_run(walk, a, b, out);
             count += (b - a + 1) as u64;
-        }
+        });
         count
     }
 
@@ -676,7 +650,155 @@ impl<T: Scalar> Ctx<'_, T> {
     fn band(&self, y0: usize, acc: &mut [Rgba]) -> Counters {
         let w = self.width;
         let rows = acc.len() / w;
-        self.band_plain(y0, rows, acc)
+        match self.post {
+            Some(t) if self.mode == RenderMode::Composite => self.band_post(y0, rows, acc, t),
+            _ => self.band_plain(y0, rows, acc),
+        }
+    }
+
+    /// Unshaded composite through the post-classification table: each run of pixels in active
+    /// bricks is sampled, classified and composited in one pass ([`composite_run_avx2`] eight
+    /// pixels at a time where the CPU has AVX2, [`Ctx::composite_one`] otherwise and for the
+    /// ends of runs; the same f32 operations in the same order, so the same bits). The band's
+    /// accumulation is kept as four planes of channels while it is composited.
+    fn band_post(&self, y0: usize, rows: usize, acc: &mut [Rgba], t: &PostTable) -> Counters {
+        let w = self.width;
+        let mut c = Counters::default();
+        let mut band = BandAcc {
+            r: vec![0.0; rows * w],
+            g: vec![0.0; rows * w],
+            b: vec![0.0; rows * w],
+            a: vec![0.0; rows * w],
+        };
+        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
+        let kf = self.path_factors(y0, rows);
+        let (din, dout) = self.ray_extents(y0, rows);
+        let half = (0.5 * self.delta) as f32;
+        for p in 0..self.n_planes {
+            let d = self.depth(p);
+            let mut any_live = false;
+            for (r, live_r) in live.iter_mut().enumerate() {
+                let y = y0 + r;
+                let o = r * w;
+                let Some(lw) = shrink_live_alpha(live_r, &band.a[o..o + w], self.cutoff) else {
+                    continue;
+                };
+                any_live = true;
+                let walk = self.walk(y, d);
+                let span = self.clip_span(y, d, walk.span);
+                let (lo, hi) = (
+                    span.0.max(lw.0).max(walk.span.0),
+                    span.1.min(lw.1).min(walk.span.1),
+                );
+                if lo > hi {
+                    continue;
+                }
+                let mut row = RowCtx {
+                    r: &mut band.r[o..o + w],
+                    g: &mut band.g[o..o + w],
+                    b: &mut band.b[o..o + w],
+                    a: &mut band.a[o..o + w],
+                    kf: &kf[o..o + w],
+                    din: &din[o..o + w],
+                    dout: &dout[o..o + w],
+                    d: d as f32,
+                    half,
+                };
+                self.for_each_run(&walk, lo, hi, |a, b| {
+                    c.samples += (b - a + 1) as u64;
+                    #[allow(unused_mut)]
+                    let mut x = a;
+                    #[cfg(target_arch = "x86_64")]
+                    if self.simd {
+                        // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+                        x = unsafe { composite_run_avx2(self, &walk, a, b, &mut row, t, &mut c) };
+                    }
+                    for x in x..=b {
+                        self.composite_one(&walk, x, &mut row, t, &mut c);
+                    }
+                });
+            }
+            if !any_live {
+                break;
+            }
+        }
+        for (i, px) in acc.iter_mut().enumerate() {
+            *px = [band.r[i], band.g[i], band.b[i], band.a[i]];
+        }
+        c
+    }
+
+    /// Samples, classifies and composites pixel `x` of a row ([`Ctx::band_post`]): the scalar
+    /// twin of [`composite_run_avx2`].
+    #[inline(always)]
+    fn composite_one(
+        &self,
+        walk: &Walk,
+        x: usize,
+        row: &mut RowCtx<'_>,
+        t: &PostTable,
+        c: &mut Counters,
+    ) {
+        if row.a[x] >= self.cutoff {
+            c.terminated += 1;
+            return;
+        }
+        let rho = self.sample_scalar(walk, x);
+        let k = boundary_factor(row.kf[x], row.din[x], row.dout[x], row.d, row.half);
+        let src = if self.view.perspective || k != 1.0 {
+            // Colour and log-transmittance per table entry: the path correction is one exp2
+            // (no log2, no division).
+            let [cr, cg, cb, l] = t.lookup_in(&t.persp, rho);
+            if l >= 0.0 {
+                return;
+            }
+            let a = 1.0 - exp2_neg(k * l);
+            [cr * a, cg * a, cb * a, a]
+        } else {
+            let v = t.lookup(rho);
+            if v[3] <= 0.0 || v[3].is_nan() {
+                return;
+            }
+            v
+        };
+        let tr = 1.0 - row.a[x];
+        row.r[x] += tr * src[0];
+        row.g[x] += tr * src[1];
+        row.b[x] += tr * src[2];
+        row.a[x] += tr * src[3];
+        c.visible += 1;
+    }
+
+    /// Calls `f(a, b)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells lie in
+    /// active bricks, consecutive active runs merged (space leaping per row); the whole range
+    /// when nothing is skipped.
+    #[inline]
+    fn for_each_run(&self, walk: &Walk, lo: i64, hi: i64, mut f: impl FnMut(usize, usize)) {
+        if !self.skip_empty {
+            if lo <= hi {
+                f(lo as usize, hi as usize);
+            }
+            return;
+        }
+        let mut pending: Option<(i64, i64)> = None;
+        let mut x = lo;
+        while x <= hi {
+            let q = walk.at(x);
+            let (cell, _) = self.cell(q);
+            let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
+            if self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
+                pending = Some(match pending {
+                    Some((a, _)) => (a, end),
+                    None => (x, end),
+                });
+            } else if let Some((a, b)) = pending.take() {
+                f(a as usize, b as usize);
+            }
+            x = end + 1;
+        }
+        if let Some((a, b)) = pending {
+            f(a as usize, b as usize);
+        }
     }
 
     /// The world gradient of the reconstruction at pixel `x` of a row (data units per world
@@ -726,10 +848,10 @@ impl<T: Scalar> Ctx<'_, T> {
         // Live window of each row (composite): pixels outside it are opaque.
         let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
         let composite = self.mode == RenderMode::Composite;
-        let (kf, ext) = if composite {
+        let (kf, (din, dout)) = if composite {
             (self.path_factors(y0, rows), self.ray_extents(y0, rows))
         } else {
-            (Vec::new(), Vec::new())
+            (Vec::new(), (Vec::new(), Vec::new()))
         };
         let half = (0.5 * self.delta) as f32;
         let mip = self.mode == RenderMode::Mip;
@@ -773,56 +895,21 @@ impl<T: Scalar> Ctx<'_, T> {
                     // The first and last samples of a ray stand for the path from where the
                     // ray enters (leaves) the volume or its clipping, not a whole slab: without
                     // this the cut faces step from plane to plane (wood grain).
-                    let [din, dout] = ext[r * w + x];
-                    let df = d as f32;
-                    let k = if df - 2.0 * half < din || df + 2.0 * half > dout {
-                        let lo = if df - 2.0 * half < din {
-                            din
-                        } else {
-                            df - half
-                        };
-                        let hi = if df + 2.0 * half > dout {
-                            dout
-                        } else {
-                            df + half
-                        };
-                        kf[r * w + x] * ((hi - lo) / (2.0 * half)).max(0.0)
+                    let i = r * w + x;
+                    let k = boundary_factor(kf[i], din[i], dout[i], d as f32, half);
+                    if self.classifier.density_opacity(rho) == Some(0.0) {
+                        continue;
+                    }
+                    let gradient = if self.shade {
+                        self.gradient_at(&walk, x)
                     } else {
-                        kf[r * w + x]
+                        Vec3::ZERO
                     };
-                    let rgba = match self.post {
-                        Some(t) if self.view.perspective || k != 1.0 => {
-                            // Colour and log-transmittance per table entry: the path
-                            // correction is one exp2 (no log2, no division).
-                            let [cr, cg, cb, l] = t.lookup_in(&t.persp, rho);
-                            if l >= 0.0 {
-                                continue;
-                            }
-                            let a = 1.0 - exp2_neg(k * l);
-                            over_front_to_back(px, [cr * a, cg * a, cb * a, a]);
-                            c.visible += 1;
-                            continue;
-                        }
-                        Some(t) => {
-                            let v = t.lookup(rho);
-                            (v[3] > 0.0).then_some(v)
-                        }
-                        None => {
-                            if self.classifier.density_opacity(rho) == Some(0.0) {
-                                continue;
-                            }
-                            let gradient = if self.shade {
-                                self.gradient_at(&walk, x)
-                            } else {
-                                Vec3::ZERO
-                            };
-                            self.classifier.classify(&SampleInput {
-                                density: rho,
-                                gradient,
-                                depth: depth01,
-                            })
-                        }
-                    };
+                    let rgba = self.classifier.classify(&SampleInput {
+                        density: rho,
+                        gradient,
+                        depth: depth01,
+                    });
                     if let Some(rgba) = rgba {
                         let rgba = self.path_correct(rgba, k);
                         over_front_to_back(px, rgba);
@@ -910,12 +997,13 @@ impl<T: Scalar> Ctx<'_, T> {
         [rgba[0] * s, rgba[1] * s, rgba[2] * s, a2]
     }
 
-    /// The eye depths `[d_in, d_out]` between which the ray of each pixel of the rows
+    /// The eye depths `d_in` and `d_out` between which the ray of each pixel of the rows
     /// `[y0, y0 + rows)` lies in the box of voxel centres and on the kept side of every clipping
     /// plane (`[+∞, −∞]` where it misses).
-    fn ray_extents(&self, y0: usize, rows: usize) -> Vec<[f32; 2]> {
+    fn ray_extents(&self, y0: usize, rows: usize) -> (Vec<f32>, Vec<f32>) {
         let v = &self.view;
-        let mut out = Vec::with_capacity(rows * self.width);
+        let mut din = Vec::with_capacity(rows * self.width);
+        let mut dout = Vec::with_capacity(rows * self.width);
         for y in y0..y0 + rows {
             for x in 0..self.width {
                 let (u, w) = v.offsets(x as f64, y as f64);
@@ -954,14 +1042,16 @@ impl<T: Scalar> Ctx<'_, T> {
                 for &(n, off) in &self.clip {
                     cut(n.dot(aw) + off, n.dot(bw), 0.0, f64::INFINITY);
                 }
-                out.push(if lo <= hi {
-                    [lo as f32, hi as f32]
+                let (a, b) = if lo <= hi {
+                    (lo as f32, hi as f32)
                 } else {
-                    [f32::INFINITY, f32::NEG_INFINITY]
-                });
+                    (f32::INFINITY, f32::NEG_INFINITY)
+                };
+                din.push(a);
+                dout.push(b);
             }
         }
-        out
+        (din, dout)
     }
 
     /// The path factor `k = √(1 + u² + v²)` of every pixel of the rows `[y0, y0 + rows)`: 1 in
@@ -1221,52 +1311,131 @@ fn simd_available() -> bool {
     }
 }
 
-/// Samples pixels `a..=b` of a row eight at a time (the last group partly); returns the first
-/// pixel not done (`b + 1`, or earlier where a group's reads would pass the end of the data). Lane `l` does exactly [`Ctx::sample_scalar`]'s f32 operations for pixel `x + l`
-/// (no fused multiply–add: AVX2 without FMA), and reads the volume with `vpgatherdd`: 8-bit and
-/// 16-bit samples are gathered as 32-bit words and masked (sign-extended for signed types), so a
-/// group whose last corner lies within 3 bytes of the end of the data is left to the scalar path.
-///
-/// # Safety
-/// The CPU must support AVX2.
+/// The accumulation of a band of rows as four planes of channels ([`Ctx::band_post`]).
+struct BandAcc {
+    r: Vec<f32>,
+    g: Vec<f32>,
+    b: Vec<f32>,
+    a: Vec<f32>,
+}
+
+/// One row of a band being composited through one plane: its channels, and per pixel the path
+/// factor and the depths where the ray enters and leaves the volume ([`Ctx::band_post`]).
+struct RowCtx<'a> {
+    r: &'a mut [f32],
+    g: &'a mut [f32],
+    b: &'a mut [f32],
+    a: &'a mut [f32],
+    kf: &'a [f32],
+    din: &'a [f32],
+    dout: &'a [f32],
+    /// The plane's eye depth and half the slab thickness (world units).
+    d: f32,
+    half: f32,
+}
+
+/// The opacity exponent of the slab at depth `d` for a ray with path factor `kf` that lies in
+/// the volume (and its clipping) between the eye depths `din` and `dout`: `kf`, except for the
+/// first and last slab of the ray, which stand for the path from where the ray enters (leaves)
+/// the volume, not a whole slab (without this the cut faces step from plane to plane: wood
+/// grain).
+#[inline(always)]
+fn boundary_factor(kf: f32, din: f32, dout: f32, d: f32, half: f32) -> f32 {
+    let lo_cut = d - 2.0 * half < din;
+    let hi_cut = d + 2.0 * half > dout;
+    if lo_cut || hi_cut {
+        let lo = if lo_cut { din } else { d - half };
+        let hi = if hi_cut { dout } else { d + half };
+        kf * ((hi - lo) / (2.0 * half)).max(0.0)
+    } else {
+        kf
+    }
+}
+
+/// [`shrink_live`] on a row's opacity channel.
+fn shrink_live_alpha(lw: &mut (i64, i64), alpha: &[f32], cutoff: f32) -> Option<(i64, i64)> {
+    while lw.0 <= lw.1 && alpha[lw.0 as usize] >= cutoff {
+        lw.0 += 1;
+    }
+    while lw.1 >= lw.0 && alpha[lw.1 as usize] >= cutoff {
+        lw.1 -= 1;
+    }
+    (lw.0 <= lw.1).then_some(*lw)
+}
+
+/// Trilinear samples of one row of one plane, eight pixels at a time with AVX2: lane `l` does
+/// exactly [`Ctx::sample_scalar`]'s f32 operations for pixel `x + l` (no fused multiply–add:
+/// AVX2 without FMA), and reads the volume with `vpgatherdd`: 8-bit and 16-bit samples are
+/// gathered as 32-bit words and masked (sign-extended for signed types), so a group whose last
+/// corner lies within 3 bytes of the end of the data is left to the scalar path.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn sample_run_avx2<T: Scalar>(
-    ctx: &Ctx<'_, T>,
-    walk: &Walk,
-    a: usize,
-    b: usize,
-    out: &mut [f32],
-) -> usize {
-    use std::arch::x86_64::*;
-    use volsplat_core::ScalarType;
-    let data = ctx.data;
-    let bytes = std::mem::size_of::<T>();
-    // Largest index whose 4-byte read stays inside the data.
-    let safe_last = std::mem::size_of_val(data).saturating_sub(4) / bytes;
-    let [ux, uy, uz] = ctx.up;
-    let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux].map(|o| o as i32);
-    let ptr = data.as_ptr() as *const i32;
-    let lanes = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
-    let zero = _mm256_setzero_ps();
-    let one = _mm256_set1_ps(1.0);
-    let izero = _mm256_setzero_si256();
-    let s = walk.s32.map(|v| _mm256_set1_ps(v));
-    let st = walk.st32.map(|v| _mm256_set1_ps(v));
-    let maxc = ctx.max_cell.map(|m| _mm256_set1_epi32(m as i32));
-    let sy = _mm256_set1_epi32(ctx.stride[1] as i32);
-    let sz = _mm256_set1_epi32(ctx.stride[2] as i32);
-    let last_ok = _mm256_set1_epi32(safe_last as i32);
-    let kind = T::TYPE;
-    let mut x = a;
-    while x <= b {
+struct Sampler8<T> {
+    ptr: *const i32,
+    kind: volsplat_core::ScalarType,
+    small: bool,
+    offs: [i32; 8],
+    s: [std::arch::x86_64::__m256; 3],
+    st: [std::arch::x86_64::__m256; 3],
+    maxc: [std::arch::x86_64::__m256i; 3],
+    sy: std::arch::x86_64::__m256i,
+    sz: std::arch::x86_64::__m256i,
+    last_ok: std::arch::x86_64::__m256i,
+    _t: std::marker::PhantomData<T>,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<T: Scalar> Sampler8<T> {
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    unsafe fn new(ctx: &Ctx<'_, T>, walk: &Walk) -> Self {
+        use std::arch::x86_64::*;
+        let data = ctx.data;
+        let bytes = std::mem::size_of::<T>();
+        // Largest index whose 4-byte read stays inside the data.
+        let safe_last = std::mem::size_of_val(data).saturating_sub(4) / bytes;
+        let [ux, uy, uz] = ctx.up;
+        Sampler8 {
+            ptr: data.as_ptr() as *const i32,
+            kind: T::TYPE,
+            small: bytes < 4,
+            offs: [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux].map(|o| o as i32),
+            s: walk.s32.map(|v| _mm256_set1_ps(v)),
+            st: walk.st32.map(|v| _mm256_set1_ps(v)),
+            maxc: ctx.max_cell.map(|m| _mm256_set1_epi32(m as i32)),
+            sy: _mm256_set1_epi32(ctx.stride[1] as i32),
+            sz: _mm256_set1_epi32(ctx.stride[2] as i32),
+            last_ok: _mm256_set1_epi32(safe_last as i32),
+            _t: std::marker::PhantomData,
+        }
+    }
+
+    /// The samples of pixels `x..x + 8` (all of whose cells are clamped to the grid), or `None`
+    /// where an 8/16-bit read would pass the end of the data.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, and the sampler must have been made for this volume.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn at(&self, x: usize) -> Option<std::arch::x86_64::__m256> {
+        use std::arch::x86_64::*;
+        use volsplat_core::ScalarType;
+        let zero = _mm256_setzero_ps();
+        let one = _mm256_set1_ps(1.0);
+        let izero = _mm256_setzero_si256();
         // x + lane as f32: exact (x < 2^24), equal to the scalar `x as f32`.
-        let xf = _mm256_add_ps(_mm256_set1_ps(x as f32), lanes);
+        let xf = _mm256_add_ps(
+            _mm256_set1_ps(x as f32),
+            _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
+        );
         let mut cell = [izero; 3];
         let mut frac = [zero; 3];
         for ax in 0..3 {
-            let q = _mm256_add_ps(s[ax], _mm256_mul_ps(xf, st[ax]));
-            let i = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(q), izero), maxc[ax]);
+            let q = _mm256_add_ps(self.s[ax], _mm256_mul_ps(xf, self.st[ax]));
+            let i = _mm256_min_epi32(
+                _mm256_max_epi32(_mm256_cvttps_epi32(q), izero),
+                self.maxc[ax],
+            );
             cell[ax] = i;
             let f = _mm256_sub_ps(q, _mm256_cvtepi32_ps(i));
             frac[ax] = _mm256_min_ps(_mm256_max_ps(f, zero), one);
@@ -1274,14 +1443,16 @@ unsafe fn sample_run_avx2<T: Scalar>(
         let base = _mm256_add_epi32(
             cell[0],
             _mm256_add_epi32(
-                _mm256_mullo_epi32(cell[1], sy),
-                _mm256_mullo_epi32(cell[2], sz),
+                _mm256_mullo_epi32(cell[1], self.sy),
+                _mm256_mullo_epi32(cell[2], self.sz),
             ),
         );
-        let top = _mm256_add_epi32(base, _mm256_set1_epi32(offs[7]));
-        if bytes < 4 && _mm256_movemask_epi8(_mm256_cmpgt_epi32(top, last_ok)) != 0 {
-            break;
+        let top = _mm256_add_epi32(base, _mm256_set1_epi32(self.offs[7]));
+        if self.small && _mm256_movemask_epi8(_mm256_cmpgt_epi32(top, self.last_ok)) != 0 {
+            return None;
         }
+        let ptr = self.ptr;
+        let kind = self.kind;
         // Macros, not closures: a closure would not inherit `target_feature` and was not inlined.
         macro_rules! gather {
             ($o:expr) => {{
@@ -1315,25 +1486,52 @@ unsafe fn sample_run_avx2<T: Scalar>(
                 _mm256_add_ps(a, _mm256_mul_ps($t, _mm256_sub_ps(b, a)))
             }};
         }
+        let o = self.offs;
         let v = [
-            gather!(offs[0]),
-            gather!(offs[1]),
-            gather!(offs[2]),
-            gather!(offs[3]),
-            gather!(offs[4]),
-            gather!(offs[5]),
-            gather!(offs[6]),
-            gather!(offs[7]),
+            gather!(o[0]),
+            gather!(o[1]),
+            gather!(o[2]),
+            gather!(o[3]),
+            gather!(o[4]),
+            gather!(o[5]),
+            gather!(o[6]),
+            gather!(o[7]),
         ];
         let c00 = lerp8!(v[0], v[1], frac[0]);
         let c10 = lerp8!(v[2], v[3], frac[0]);
         let c01 = lerp8!(v[4], v[5], frac[0]);
         let c11 = lerp8!(v[6], v[7], frac[0]);
-        let r = lerp8!(
+        Some(lerp8!(
             lerp8!(c00, c10, frac[1]),
             lerp8!(c01, c11, frac[1]),
             frac[2]
-        );
+        ))
+    }
+}
+
+/// Samples pixels `a..=b` of a row eight at a time ([`Sampler8`]; the last group partly);
+/// returns the first pixel not done (`b + 1`, or earlier where a group's reads would pass the
+/// end of the data).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn sample_run_avx2<T: Scalar>(
+    ctx: &Ctx<'_, T>,
+    walk: &Walk,
+    a: usize,
+    b: usize,
+    out: &mut [f32],
+) -> usize {
+    use std::arch::x86_64::*;
+    // SAFETY (all calls below): the caller guarantees AVX2.
+    let sampler = unsafe { Sampler8::new(ctx, walk) };
+    let mut x = a;
+    while x <= b {
+        let Some(r) = (unsafe { sampler.at(x) }) else {
+            break;
+        };
         if x + 7 <= b {
             // SAFETY: x + 7 ≤ b < out.len().
             unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(x), r) };
@@ -1348,6 +1546,175 @@ unsafe fn sample_run_avx2<T: Scalar>(
         x += 8;
     }
     x
+}
+
+/// Samples, classifies and composites pixels `a..=b` of a row eight at a time: lane `l` does
+/// exactly [`Ctx::composite_one`]'s f32 operations for pixel `x + l` (table lookups with
+/// `vgatherdps`, the path correction with the same polynomial `exp2`); returns the first pixel
+/// not done (whole groups only; the rest is left to the scalar twin).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn composite_run_avx2<T: Scalar>(
+    ctx: &Ctx<'_, T>,
+    walk: &Walk,
+    a: usize,
+    b: usize,
+    row: &mut RowCtx<'_>,
+    t: &PostTable,
+    c: &mut Counters,
+) -> usize {
+    use std::arch::x86_64::*;
+    // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
+    // are of pixels x..x + 8 ≤ b + 1 ≤ the row's length.
+    let sampler = unsafe { Sampler8::new(ctx, walk) };
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let cutoff = _mm256_set1_ps(ctx.cutoff);
+    let lo = _mm256_set1_ps(t.lo);
+    let scale = _mm256_set1_ps(t.scale);
+    let last = _mm256_set1_ps(t.last);
+    let last_i = _mm256_set1_epi32((t.values.len() - 1) as i32);
+    let d = row.d;
+    let two_half = 2.0 * row.half;
+    let front = _mm256_set1_ps(d - two_half);
+    let back = _mm256_set1_ps(d + two_half);
+    let d_minus = _mm256_set1_ps(d - row.half);
+    let d_plus = _mm256_set1_ps(d + row.half);
+    let two_half_v = _mm256_set1_ps(two_half);
+    let persp = ctx.view.perspective;
+    let values = t.values.as_ptr() as *const f32;
+    let logs = t.persp.as_ptr() as *const f32;
+    // Linear interpolation in a table of [f32; 4] entries at the positions `pos` (already
+    // clamped to [0, last]), one channel at a time: `PostTable::lookup_in`, lane by lane.
+    macro_rules! lookup {
+        ($table:expr, $pos:expr) => {{
+            let pos = $pos;
+            let i = _mm256_cvttps_epi32(pos);
+            let f = _mm256_sub_ps(pos, _mm256_cvtepi32_ps(i));
+            let i4 = _mm256_slli_epi32::<2>(i);
+            let j4 = _mm256_slli_epi32::<2>(_mm256_min_epi32(
+                _mm256_add_epi32(i, _mm256_set1_epi32(1)),
+                last_i,
+            ));
+            let mut out = [zero; 4];
+            for (ch, o) in out.iter_mut().enumerate() {
+                let chv = _mm256_set1_epi32(ch as i32);
+                let p = unsafe { _mm256_i32gather_ps::<4>($table, _mm256_add_epi32(i4, chv)) };
+                let q = unsafe { _mm256_i32gather_ps::<4>($table, _mm256_add_epi32(j4, chv)) };
+                *o = _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
+            }
+            out
+        }};
+    }
+    let mut x = a;
+    while x + 7 <= b {
+        let ar = unsafe { _mm256_loadu_ps(row.a.as_ptr().add(x)) };
+        let live = _mm256_cmp_ps::<_CMP_LT_OQ>(ar, cutoff);
+        let live_bits = _mm256_movemask_ps(live);
+        if live_bits == 0 {
+            c.terminated += 8;
+            x += 8;
+            continue;
+        }
+        let Some(rho) = (unsafe { sampler.at(x) }) else {
+            break;
+        };
+        c.terminated += u64::from((!live_bits & 0xff).count_ones());
+        // The slab's exponent (`boundary_factor`, lane by lane).
+        let kf = unsafe { _mm256_loadu_ps(row.kf.as_ptr().add(x)) };
+        let din = unsafe { _mm256_loadu_ps(row.din.as_ptr().add(x)) };
+        let dout = unsafe { _mm256_loadu_ps(row.dout.as_ptr().add(x)) };
+        let lo_cut = _mm256_cmp_ps::<_CMP_LT_OQ>(front, din);
+        let hi_cut = _mm256_cmp_ps::<_CMP_GT_OQ>(back, dout);
+        let cut = _mm256_or_ps(lo_cut, hi_cut);
+        let k = if _mm256_movemask_ps(cut) == 0 {
+            kf
+        } else {
+            let l = _mm256_blendv_ps(d_minus, din, lo_cut);
+            let h = _mm256_blendv_ps(d_plus, dout, hi_cut);
+            let q = _mm256_max_ps(_mm256_div_ps(_mm256_sub_ps(h, l), two_half_v), zero);
+            _mm256_blendv_ps(kf, _mm256_mul_ps(kf, q), cut)
+        };
+        let pos = _mm256_min_ps(
+            _mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(rho, lo), scale), zero),
+            last,
+        );
+        // Lanes that take the path-corrected form.
+        let corrected = if persp {
+            _mm256_castsi256_ps(_mm256_set1_epi32(-1))
+        } else {
+            _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, one)
+        };
+        let corrected_bits = _mm256_movemask_ps(corrected);
+        let mut src = [zero; 4];
+        let mut contributes = _mm256_setzero_ps();
+        if corrected_bits != 0xff {
+            let v = lookup!(values, pos);
+            src = v;
+            contributes = _mm256_cmp_ps::<_CMP_GT_OQ>(v[3], zero);
+        }
+        if corrected_bits != 0 {
+            let [cr, cg, cb, l] = lookup!(logs, pos);
+            let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(l, zero);
+            let a = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, l)));
+            let pc = [
+                _mm256_mul_ps(cr, a),
+                _mm256_mul_ps(cg, a),
+                _mm256_mul_ps(cb, a),
+                a,
+            ];
+            for ch in 0..4 {
+                src[ch] = _mm256_blendv_ps(src[ch], pc[ch], corrected);
+            }
+            contributes = _mm256_blendv_ps(contributes, ok, corrected);
+        }
+        let mask = _mm256_and_ps(contributes, live);
+        let bits = _mm256_movemask_ps(mask);
+        if bits != 0 {
+            c.visible += u64::from(bits.count_ones());
+            let tr = _mm256_sub_ps(one, ar);
+            let chans: [&mut [f32]; 4] = [&mut *row.r, &mut *row.g, &mut *row.b, &mut *row.a];
+            for (ch, plane) in chans.into_iter().enumerate() {
+                let p = unsafe { plane.as_mut_ptr().add(x) };
+                let old = unsafe { _mm256_loadu_ps(p) };
+                let new = _mm256_add_ps(old, _mm256_mul_ps(tr, src[ch]));
+                unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(old, new, mask)) };
+            }
+        }
+        x += 8;
+    }
+    x
+}
+
+/// [`exp2_neg`] on eight lanes, with the same operations in the same order.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn exp2_neg8(z: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let bad = _mm256_or_ps(
+        _mm256_cmp_ps::<_CMP_UNORD_Q>(z, z),
+        _mm256_cmp_ps::<_CMP_LT_OQ>(z, _mm256_set1_ps(-126.0)),
+    );
+    let i = _mm256_cvttps_epi32(z);
+    let f = _mm256_add_ps(_mm256_sub_ps(z, _mm256_cvtepi32_ps(i)), _mm256_set1_ps(0.5));
+    let c = |v: f32| _mm256_set1_ps(v);
+    let mut p = _mm256_mul_ps(f, c(0.000_154_04));
+    p = _mm256_mul_ps(f, _mm256_add_ps(c(0.001_333_36), p));
+    p = _mm256_mul_ps(f, _mm256_add_ps(c(0.009_618_13), p));
+    p = _mm256_mul_ps(f, _mm256_add_ps(c(0.055_504_1), p));
+    p = _mm256_mul_ps(f, _mm256_add_ps(c(0.240_226_5), p));
+    p = _mm256_mul_ps(f, _mm256_add_ps(c(std::f32::consts::LN_2), p));
+    p = _mm256_add_ps(c(1.0), p);
+    let pow = _mm256_castsi256_ps(_mm256_slli_epi32::<23>(_mm256_add_epi32(
+        i,
+        _mm256_set1_epi32(127),
+    )));
+    let r = _mm256_mul_ps(_mm256_mul_ps(pow, p), c(std::f32::consts::FRAC_1_SQRT_2));
+    _mm256_andnot_ps(bad, r)
 }
 
 #[cfg(test)]
