@@ -311,14 +311,10 @@ pub struct RenderOptions {
     )]
     pub opacity_cutoff: f32,
     /// `--visibility image`: slab thickness (plane spacing along the view) in units of the
-    /// smallest voxel spacing, in [0.01, 16].
-    #[arg(
-        long,
-        default_value_t = 0.5,
-        help_heading = "Quality",
-        hide_short_help = true
-    )]
-    pub slab: f64,
+    /// smallest voxel spacing, in [0.01, 16]. Default: 1 for unshaded composite, 0.5 for MIP,
+    /// MinIP and shaded composite (docs/decisions/0017-slab-thickness-by-mode.md).
+    #[arg(long, help_heading = "Quality", hide_short_help = true)]
+    pub slab: Option<f64>,
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,

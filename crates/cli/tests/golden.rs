@@ -175,6 +175,30 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "45",
         ],
         "npy",
+        // Re-recorded for decision 0017 (unshaded composite slabs default to one voxel); the
+        // half-voxel slabs keep their bits in the next case.
+        0xd304c6d6f5894f84,
+    ),
+    (
+        "composite, image-aligned half-voxel slabs, perspective",
+        &[
+            "--visibility",
+            "image",
+            "--slab",
+            "0.5",
+            "--preset",
+            "ramp",
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "32",
+            "--size",
+            "36x44",
+            "--perspective",
+            "--azimuth",
+            "45",
+        ],
+        "npy",
         0x6839a1c4ba690d6c,
     ),
     (

@@ -586,6 +586,9 @@ impl Renderer {
                 let bricks = Arc::clone(bricks);
                 let mut settings = request.splat_settings();
                 settings.clip = request.scene.clipping.world_planes(vol.grid())?;
+                settings.slab = request.quality.slab.unwrap_or_else(|| {
+                    volsplat_splat::slab::default_slab(settings.mode, tables.needs_gradient())
+                });
                 let prepare_ms = if fresh_tables || fresh_bricks {
                     ms(t_prep)
                 } else {

@@ -181,8 +181,10 @@ pub struct Quality {
     /// Splat list: keep voxels whose opacity exceeds this, in [0, 1).
     pub list_threshold: f32,
     /// Image-aligned visibility: slab thickness (plane spacing along the view) in units of the
-    /// smallest voxel spacing, in [0.01, 16].
-    pub slab: f64,
+    /// smallest voxel spacing, in [0.01, 16]; `None` (the default) picks by mode
+    /// ([`volsplat_splat::slab::default_slab`]: 1 for unshaded composite, ½ for MIP, MinIP and
+    /// shaded composite; decision 0017).
+    pub slab: Option<f64>,
 }
 
 impl Default for Quality {
@@ -195,7 +197,7 @@ impl Default for Quality {
             opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
             subsample: 1,
             list_threshold: 0.0,
-            slab: volsplat_splat::slab::DEFAULT_SLAB,
+            slab: None,
         }
     }
 }
@@ -452,12 +454,13 @@ impl RenderRequest {
                 format!("must be in 1..=64, got {}", q.subsample),
             );
         }
-        if !(q.slab.is_finite() && (0.01..=16.0).contains(&q.slab)) {
+        if let Some(slab) = q.slab
+            && !(slab.is_finite() && (0.01..=16.0).contains(&slab))
+        {
             return Err(EngineError::request(
                 "quality.slab",
                 format!(
-                    "must be a slab thickness in [0.01, 16] × the smallest voxel spacing, got {}",
-                    q.slab
+                    "must be a slab thickness in [0.01, 16] × the smallest voxel spacing, got {slab}"
                 ),
             ));
         }
@@ -531,7 +534,7 @@ impl RenderRequest {
             },
             kernel: q.kernel.kernel(),
             subsample: q.subsample,
-            slab: q.slab,
+            slab: q.slab.unwrap_or(volsplat_splat::slab::DEFAULT_SLAB),
             opacity_cutoff: q.opacity_cutoff,
             antialias: match q.antialias {
                 AntialiasChoice::Swan => Antialias::Swan,

@@ -419,7 +419,7 @@ fn image_visibility_uses_the_slab_renderer_and_keeps_its_bricks() {
     let out = Renderer::new().render(&req, &mut |_| true).unwrap();
     assert_eq!(out.stats.renderer, Some(UsedRenderer::Dense));
     req.mode = Mode::Composite;
-    req.quality.slab = 0.0;
+    req.quality.slab = Some(0.0);
     let e = Renderer::new().render(&req, &mut |_| true).unwrap_err();
     assert!(
         matches!(e, EngineError::Request { ref field, .. } if field == "quality.slab"),

@@ -88,7 +88,7 @@ class Scene:
     - ``renderer``: ``"auto"``, ``"splat"``, ``"splat_list"``, ``"sabella"``, ``"nil"``.
     - quality: ``kernel`` (``"gaussian"``, ``"nearest"``, ``"tent"``, ``"bspline"``, …),
       ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``slab`` (image-aligned slab
-      thickness in voxels), ``order`` (``"ftb"``/``"btf"``),
+      thickness in voxels; default ``None``: 1 for unshaded composite, 0.5 otherwise), ``order`` (``"ftb"``/``"btf"``),
       ``opacity_cutoff``, ``subsample``, ``list_threshold``; or ``quality={...}``.
     - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
       (``--light``); ``shading={"emission":…, "diffuse":…, "specular":…}``;
