@@ -1176,6 +1176,10 @@ impl Walk {
 struct PostTable {
     /// Perspective: `[r, g, b, log2(1 − α)]` per entry (colour not premultiplied).
     persp: Vec<Rgba>,
+    /// Entry `i` of `values` (of `persp`) followed by entry `min(i + 1, last)`: one 32-byte row
+    /// per lookup for [`composite_run_avx2`].
+    pairs: Vec<[f32; 8]>,
+    persp_pairs: Vec<[f32; 8]>,
     lo: f32,
     scale: f32,
     last: f32,
@@ -1227,7 +1231,7 @@ impl PostTable {
             .collect();
         // Perspective: un-premultiplied colour and log2(1 − α) (−126 for α = 1), so that
         // `1 − (1 − α)^k` is one exp2.
-        let persp = values
+        let persp: Vec<Rgba> = values
             .iter()
             .map(|v: &Rgba| {
                 let a = v[3];
@@ -1243,7 +1247,17 @@ impl PostTable {
                 }
             })
             .collect();
+        let paired = |t: &[Rgba]| -> Vec<[f32; 8]> {
+            (0..t.len())
+                .map(|i| {
+                    let (a, b) = (t[i], t[(i + 1).min(t.len() - 1)]);
+                    [a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]
+                })
+                .collect()
+        };
         Some(PostTable {
+            pairs: paired(&values),
+            persp_pairs: paired(&persp),
             persp,
             lo,
             scale: if n > 1 {
@@ -1653,7 +1667,6 @@ unsafe fn composite_run_avx2<T: Scalar>(
     let lo = _mm256_set1_ps(t.lo);
     let scale = _mm256_set1_ps(t.scale);
     let last = _mm256_set1_ps(t.last);
-    let last_i = _mm256_set1_epi32((t.values.len() - 1) as i32);
     let d = row.d;
     let two_half = 2.0 * row.half;
     let front = _mm256_set1_ps(d - two_half);
@@ -1662,28 +1675,59 @@ unsafe fn composite_run_avx2<T: Scalar>(
     let d_plus = _mm256_set1_ps(d + row.half);
     let two_half_v = _mm256_set1_ps(two_half);
     let persp = ctx.view.perspective;
-    let values = t.values.as_ptr() as *const f32;
-    let logs = t.persp.as_ptr() as *const f32;
+    let values = &t.pairs;
+    let logs = &t.persp_pairs;
     // Linear interpolation in a table of [f32; 4] entries at the positions `pos` (already
     // clamped to [0, last]), one channel at a time: `PostTable::lookup_in`, lane by lane.
+    // Linear interpolation in a table at the positions `pos` (already clamped to [0, last]):
+    // `PostTable::lookup_in`, lane by lane. Each lane loads its entry and the next one as one
+    // 32-byte row of the paired table, and an 8×8 transpose turns the eight rows into the
+    // channels of both entries (cheaper than eight gathers).
     macro_rules! lookup {
-        ($table:expr, $pos:expr) => {{
+        ($pairs:expr, $pos:expr) => {{
             let pos = $pos;
             let i = _mm256_cvttps_epi32(pos);
             let f = _mm256_sub_ps(pos, _mm256_cvtepi32_ps(i));
-            let i4 = _mm256_slli_epi32::<2>(i);
-            let j4 = _mm256_slli_epi32::<2>(_mm256_min_epi32(
-                _mm256_add_epi32(i, _mm256_set1_epi32(1)),
-                last_i,
-            ));
-            let mut out = [zero; 4];
-            for (ch, o) in out.iter_mut().enumerate() {
-                let chv = _mm256_set1_epi32(ch as i32);
-                let p = unsafe { _mm256_i32gather_ps::<4>($table, _mm256_add_epi32(i4, chv)) };
-                let q = unsafe { _mm256_i32gather_ps::<4>($table, _mm256_add_epi32(j4, chv)) };
-                *o = _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
-            }
-            out
+            let mut idx = [0i32; 8];
+            unsafe { _mm256_storeu_si256(idx.as_mut_ptr() as *mut __m256i, i) };
+            let base: *const [f32; 8] = $pairs.as_ptr();
+            // SAFETY: every index is in [0, last] (pos is clamped), a row of the table.
+            let r = idx.map(|k| unsafe { _mm256_loadu_ps(base.add(k as usize) as *const f32) });
+            let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+            let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+            let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+            let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+            let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+            let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+            let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+            let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+            let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+            let u1 = _mm256_shuffle_ps::<0xee>(t0, t2);
+            let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+            let u3 = _mm256_shuffle_ps::<0xee>(t1, t3);
+            let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+            let u5 = _mm256_shuffle_ps::<0xee>(t4, t6);
+            let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+            let u7 = _mm256_shuffle_ps::<0xee>(t5, t7);
+            let lerp = |p: __m256, q: __m256| _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
+            [
+                lerp(
+                    _mm256_permute2f128_ps::<0x20>(u0, u4),
+                    _mm256_permute2f128_ps::<0x31>(u0, u4),
+                ),
+                lerp(
+                    _mm256_permute2f128_ps::<0x20>(u1, u5),
+                    _mm256_permute2f128_ps::<0x31>(u1, u5),
+                ),
+                lerp(
+                    _mm256_permute2f128_ps::<0x20>(u2, u6),
+                    _mm256_permute2f128_ps::<0x31>(u2, u6),
+                ),
+                lerp(
+                    _mm256_permute2f128_ps::<0x20>(u3, u7),
+                    _mm256_permute2f128_ps::<0x31>(u3, u7),
+                ),
+            ]
         }};
     }
     let mut x = a;
