@@ -268,6 +268,8 @@ pub struct Renderer {
     pool: Option<Cached<Option<usize>, Arc<rayon::ThreadPool>>>,
     /// The automatic transfer function and its description, per volume (keyed by address).
     auto_tf: Option<Cached<VolumeSource, (TransferFunction, String)>>,
+    /// The volume's value range (a pass over every voxel), per volume.
+    range: Option<Cached<VolumeSource, (f64, f64)>>,
     limits: volsplat_io::Limits,
 }
 
@@ -311,7 +313,11 @@ impl Renderer {
     /// The transfer function `request` resolves to for its volume and mode.
     pub fn transfer_function(&mut self, request: &RenderRequest) -> Result<TransferFunction> {
         let vol = self.volume(&request.scene.volume)?;
-        Ok(resolve_tf(request, &vol, &mut self.auto_tf)?.0)
+        let range = *cached(&mut self.range, request.scene.volume.clone(), || {
+            Ok(vol.value_range())
+        })?
+        .0;
+        Ok(resolve_tf(request, &vol, range, &mut self.auto_tf)?.0)
     }
 
     /// Renders `request`. `progress` is called between stages and during the render (after
@@ -358,7 +364,11 @@ impl Renderer {
             _ => Vec::new(),
         };
         let camera = request.scene.camera.resolve(vol.grid().bounds_world())?;
-        let (tf, tf_warning, tf_note) = resolve_tf(request, &vol, &mut self.auto_tf)?;
+        let range = *cached(&mut self.range, request.scene.volume.clone(), || {
+            Ok(vol.value_range())
+        })?
+        .0;
+        let (tf, tf_warning, tf_note) = resolve_tf(request, &vol, range, &mut self.auto_tf)?;
         notes.extend(tf_note);
         let threads = request.threads;
         let pool = Arc::clone(
@@ -862,16 +872,16 @@ fn ms(t: Instant) -> f64 {
 }
 
 /// The transfer function for `request` on `vol` (see [`TransferSpec::Auto`]).
-/// The transfer function of `request` for `vol`: the scene's, a preset, or the automatic
-/// choice (see [`TransferSpec::Auto`]). `auto` caches the histogram rule per volume; the
+/// The transfer function of `request` for `vol` (whose value range is `range`): the scene's, a
+/// preset, or the automatic choice (see [`TransferSpec::Auto`]). `auto` caches the histogram rule per volume; the
 /// returned strings are a warning (a preset that misses the data) and a note (what the
 /// automatic rule found), each given when the function is first made.
 fn resolve_tf(
     request: &RenderRequest,
     vol: &Arc<AnyVolume>,
+    range: (f64, f64),
     auto: &mut Option<Cached<VolumeSource, (TransferFunction, String)>>,
 ) -> Result<(TransferFunction, Option<String>, Option<String>)> {
-    let range = vol.value_range();
     let scene = match &request.scene.volume {
         VolumeSource::Phantom { phantom, .. } => phantom.scene_transfer_function(),
         _ => None,

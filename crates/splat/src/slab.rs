@@ -587,6 +587,7 @@ impl<T: Scalar> Ctx<'_, T> {
             st,
             s32: [0, 1, 2].map(|a| start[a] as f32),
             st32: [0, 1, 2].map(|a| step[a] as f32),
+            inv_st: st.map(|v| if v == 0 { 0.0 } else { 1.0 / v.unsigned_abs() as f64 }),
             span: r,
         }
     }
@@ -1117,6 +1118,20 @@ fn shrink_live(lw: &mut (i64, i64), row: &[Rgba], cutoff: f32) -> Option<(i64, i
 /// Bits of fraction in the fixed-point index positions.
 const FRAC: u32 = 32;
 
+/// `⌊n / d⌋` for `n ≥ 0`, `d > 0`, given `inv = 1 / d`: estimated in f64 and corrected to the
+/// exact integer (a 64-bit division costs several times as much, once per brick run).
+#[inline(always)]
+fn div_floor(n: i64, d: i64, inv: f64) -> i64 {
+    let mut k = (n as f64 * inv) as i64;
+    while k > 0 && k * d > n {
+        k -= 1;
+    }
+    while (k + 1) * d <= n {
+        k += 1;
+    }
+    k
+}
+
 #[inline]
 fn to_fixed(v: f64) -> i64 {
     (v * (1u64 << FRAC) as f64).round() as i64
@@ -1129,6 +1144,8 @@ struct Walk {
     /// The row's start and step as f32, for the samples themselves.
     s32: [f32; 3],
     st32: [f32; 3],
+    /// `1 / |st|` per axis (0 where `st` is), for [`div_floor`].
+    inv_st: [f64; 3],
     /// Pixels inside the box of voxel centres (empty when `span.0 > span.1`).
     span: (i64, i64),
 }
@@ -1145,11 +1162,11 @@ impl Walk {
             let k = if st > 0 {
                 // Steps k with q + k·st < (b0 + B) << FRAC.
                 let room = ((b0 + BRICK as i64) << FRAC) - q[a];
-                (room + st - 1) / st
+                div_floor(room + st - 1, st, self.inv_st[a])
             } else if st < 0 {
                 // Steps k with q + k·st ≥ b0 << FRAC, counting the pixel itself.
                 let room = q[a] - (b0 << FRAC);
-                room / -st + 1
+                div_floor(room, -st, self.inv_st[a]) + 1
             } else {
                 continue;
             };
@@ -1841,6 +1858,25 @@ fn exp2_neg8(z: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn div_floor_is_exact() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for _ in 0..200_000 {
+            let n = (next() >> (20 + next() % 40)) as i64;
+            let d = ((next() >> (24 + next() % 38)) as i64).max(1);
+            assert_eq!(div_floor(n, d, 1.0 / d as f64), n / d, "{n} / {d}");
+        }
+        for (n, d) in [(0, 1), (7, 7), (1 << 45, 3), ((1 << 45) - 1, 1 << 20)] {
+            assert_eq!(div_floor(n, d, 1.0 / d as f64), n / d);
+        }
+    }
 
     #[test]
     fn coarse_to_fine_visits_every_plane_once() {
