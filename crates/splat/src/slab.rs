@@ -587,7 +587,13 @@ impl<T: Scalar> Ctx<'_, T> {
             st,
             s32: [0, 1, 2].map(|a| start[a] as f32),
             st32: [0, 1, 2].map(|a| step[a] as f32),
-            inv_st: st.map(|v| if v == 0 { 0.0 } else { 1.0 / v.unsigned_abs() as f64 }),
+            inv_st: st.map(|v| {
+                if v == 0 {
+                    0.0
+                } else {
+                    1.0 / v.unsigned_abs() as f64
+                }
+            }),
             span: r,
         }
     }
@@ -673,8 +679,9 @@ impl<T: Scalar> Ctx<'_, T> {
         let w = self.width;
         let rows = acc.len() / w;
         match self.post {
-            Some(t) if self.mode == RenderMode::Composite => self.band_post(y0, rows, acc, t),
-            _ => self.band_plain(y0, rows, acc),
+            _ if self.mode != RenderMode::Composite => self.band_extreme(y0, rows, acc),
+            Some(t) => self.band_post(y0, rows, acc, t),
+            None => self.band_plain(y0, rows, acc),
         }
     }
 
@@ -802,24 +809,106 @@ impl<T: Scalar> Ctx<'_, T> {
             }
             return;
         }
-        let mut pending: Option<(i64, i64)> = None;
-        let mut x = lo;
-        while x <= hi {
-            let q = walk.at(x);
-            let (cell, _) = self.cell(q);
-            let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
-            if self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
+        let mut pending: Option<(usize, usize)> = None;
+        self.brick_runs(walk, lo, hi, |x, end, brick| {
+            if self.active[brick] {
                 pending = Some(match pending {
                     Some((a, _)) => (a, end),
                     None => (x, end),
                 });
             } else if let Some((a, b)) = pending.take() {
-                f(a as usize, b as usize);
+                f(a, b);
             }
+        });
+        if let Some((a, b)) = pending {
+            f(a, b);
+        }
+    }
+
+    /// Calls `f(a, b, brick)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells
+    /// lie in one brick, in order.
+    #[inline]
+    fn brick_runs(&self, walk: &Walk, lo: i64, hi: i64, mut f: impl FnMut(usize, usize, usize)) {
+        // Per axis, the first pixel whose cell leaves the current brick along that axis: only
+        // the axis (axes) just crossed is recomputed at the start of a run.
+        let mut next = [i64::MIN; 3];
+        let mut x = lo;
+        while x <= hi {
+            let q = walk.at(x);
+            let (cell, _) = self.cell(q);
+            let mut end = hi;
+            for (a, next_a) in next.iter_mut().enumerate() {
+                if *next_a <= x {
+                    *next_a = x.saturating_add(walk.run_along(a, q[a], cell[a]));
+                }
+                end = end.min(*next_a - 1);
+            }
+            let end = end.max(x);
+            f(
+                x as usize,
+                end as usize,
+                self.bricks.index(cell[0], cell[1], cell[2]),
+            );
             x = end + 1;
         }
-        if let Some((a, b)) = pending {
-            f(a as usize, b as usize);
+    }
+
+    /// MIP (MinIP): the largest (smallest) reconstructed value over the planes, kept as one
+    /// plane of values for the band. The planes go coarse to fine ([`coarse_to_fine`]; the
+    /// extreme does not depend on their order): the early, sparse planes give each pixel a
+    /// near-final extreme, and afterwards every group of pixels that its brick cannot beat is
+    /// skipped (exact: a trilinear value lies in its brick's range). The others are sampled and
+    /// compared eight at a time ([`extreme_run_avx2`]) or one at a time
+    /// ([`Ctx::extreme_one`]); the samples are the same bits either way, so is their extreme.
+    fn band_extreme(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
+        let w = self.width;
+        let mip = self.mode == RenderMode::Mip;
+        let mut c = Counters::default();
+        let mut vals = vec![f32::NAN; rows * w];
+        for p in coarse_to_fine(self.n_planes) {
+            let d = self.depth(p);
+            for r in 0..rows {
+                let y = y0 + r;
+                let walk = self.walk(y, d);
+                let span = self.clip_span(y, d, walk.span);
+                let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+                let row = &mut vals[r * w..(r + 1) * w];
+                self.brick_runs(&walk, lo, hi, |a, b, brick| {
+                    let [blo, bhi] = self.bricks.ranges[brick];
+                    // The value the run's pixels must pass to change: the brick's maximum (MIP)
+                    // or minimum (MinIP).
+                    let bound = if mip { bhi } else { blo };
+                    let beaten =
+                        |cur: f32| !cur.is_nan() && if mip { bound <= cur } else { bound >= cur };
+                    #[allow(unused_mut)]
+                    let mut x = a;
+                    #[cfg(target_arch = "x86_64")]
+                    if self.simd {
+                        // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+                        x = unsafe { extreme_run_avx2(self, &walk, a, b, row, bound, mip, &mut c) };
+                    }
+                    for x in x..=b {
+                        if !beaten(row[x]) {
+                            c.samples += 1;
+                            self.extreme_one(&walk, x, row, mip);
+                        }
+                    }
+                });
+            }
+        }
+        for (px, &v) in acc.iter_mut().zip(&vals) {
+            px[0] = v;
+        }
+        c
+    }
+
+    /// Samples pixel `x` of a row into its extreme ([`Ctx::band_extreme`]).
+    #[inline(always)]
+    fn extreme_one(&self, walk: &Walk, x: usize, row: &mut [f32], mip: bool) {
+        let v = self.sample_scalar(walk, x);
+        let cur = row[x];
+        if cur.is_nan() || (mip && v > cur) || (!mip && v < cur) {
+            row[x] = v;
         }
     }
 
@@ -861,32 +950,19 @@ impl<T: Scalar> Ctx<'_, T> {
         self.grad_to_world[0] * g[0] + self.grad_to_world[1] * g[1] + self.grad_to_world[2] * g[2]
     }
 
-    /// Composite without gradients, and MIP/MinIP: each sample is classified as soon as it is
-    /// reconstructed.
+    /// Composite through the classifier (shaded, or tables that a density-indexed table cannot
+    /// hold): each sample is classified, with its gradient where the lights need one, as soon as
+    /// it is reconstructed.
     fn band_plain(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
         let w = self.width;
         let mut c = Counters::default();
         let mut line = vec![f32::NAN; w];
         // Live window of each row (composite): pixels outside it are opaque.
         let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
-        let composite = self.mode == RenderMode::Composite;
-        let (kf, (din, dout)) = if composite {
-            (self.path_factors(y0, rows), self.ray_extents(y0, rows))
-        } else {
-            (Vec::new(), (Vec::new(), Vec::new()))
-        };
+        let kf = self.path_factors(y0, rows);
+        let (din, dout) = self.ray_extents(y0, rows);
         let half = (0.5 * self.delta) as f32;
-        let mip = self.mode == RenderMode::Mip;
-        // Composite goes front to back. MIP/MinIP take the extreme over the planes, which does
-        // not depend on their order, so the planes go coarse to fine (every 16th, then the
-        // planes between those, …): the early, sparse planes give each pixel a near-final
-        // extreme, and the later ones skip every brick that cannot beat it.
-        let order: Vec<usize> = if composite {
-            (0..self.n_planes).collect()
-        } else {
-            coarse_to_fine(self.n_planes)
-        };
-        for p in order {
+        for p in 0..self.n_planes {
             let d = self.depth(p);
             let depth01 = ((d - self.dmin) * self.depth_scale).clamp(0.0, 1.0) as f32;
             let mut any_live = false;
@@ -895,21 +971,12 @@ impl<T: Scalar> Ctx<'_, T> {
                 let walk = self.walk(y, d);
                 let mut span = self.clip_span(y, d, walk.span);
                 let row_acc = &mut acc[r * w..(r + 1) * w];
-                if composite {
-                    let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
-                        continue;
-                    };
-                    any_live = true;
-                    span = (span.0.max(lw.0), span.1.min(lw.1));
-                } else {
-                    any_live = true;
-                }
-                if span.0 > span.1 {
+                let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
                     continue;
-                }
-                if !composite {
-                    // MIP/MinIP: skip bricks that cannot change the pixel.
-                    c.samples += self.extreme_row(&walk, span, row_acc, &mut line, mip);
+                };
+                any_live = true;
+                span = (span.0.max(lw.0), span.1.min(lw.1));
+                if span.0 > span.1 {
                     continue;
                 }
                 c.samples += self.sample_row(&walk, span, &mut line);
@@ -953,50 +1020,6 @@ impl<T: Scalar> Ctx<'_, T> {
             }
         }
         c
-    }
-
-    /// MIP/MinIP over the pixels `span` of one row of one plane, a brick run at a time: a run
-    /// whose brick cannot beat the current extreme of any of its pixels is skipped (exact: a
-    /// trilinear value lies in its brick's range); the others are sampled as composite rows are
-    /// ([`Ctx::sample_run`]) into `line`.
-    fn extreme_row(
-        &self,
-        walk: &Walk,
-        span: (i64, i64),
-        row: &mut [Rgba],
-        line: &mut [f32],
-        mip: bool,
-    ) -> u64 {
-        let mut n = 0;
-        let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
-        let mut x = lo;
-        while x <= hi {
-            let q = walk.at(x);
-            let (cell, _) = self.cell(q);
-            let end = hi.min(x + walk.run_in_brick(q, cell) - 1);
-            let [blo, bhi] = self.bricks.ranges[self.bricks.index(cell[0], cell[1], cell[2])];
-            let (a, b) = (x as usize, end as usize);
-            x = end + 1;
-            let beaten = row[a..=b].iter().all(|p| {
-                let cur = p[0];
-                !cur.is_nan() && ((mip && bhi <= cur) || (!mip && blo >= cur))
-            });
-            if beaten {
-                continue;
-            }
-            n += (b - a + 1) as u64;
-            self.sample_run(walk, a, b, line);
-            for (p, &v) in row[a..=b].iter_mut().zip(&line[a..=b]) {
-                let px = &mut p[0];
-                if v.is_nan() {
-                    continue;
-                }
-                if px.is_nan() || (mip && v > *px) || (!mip && v < *px) {
-                    *px = v;
-                }
-            }
-        }
-        n
     }
 
     /// The cell (lower corner) holding the fixed-point index position `q` (every component in
@@ -1151,28 +1174,23 @@ struct Walk {
 }
 
 impl Walk {
-    /// How many pixels from the one at `q` (in cell `cell`) on keep their cells in the same
-    /// brick: at least 1.
-    #[inline]
-    fn run_in_brick(&self, q: [i64; 3], cell: [usize; 3]) -> i64 {
-        let mut run = i64::MAX;
-        for a in 0..3 {
-            let st = self.st[a];
-            let b0 = ((cell[a] / BRICK) * BRICK) as i64;
-            let k = if st > 0 {
-                // Steps k with q + k·st < (b0 + B) << FRAC.
-                let room = ((b0 + BRICK as i64) << FRAC) - q[a];
-                div_floor(room + st - 1, st, self.inv_st[a])
-            } else if st < 0 {
-                // Steps k with q + k·st ≥ b0 << FRAC, counting the pixel itself.
-                let room = q[a] - (b0 << FRAC);
-                div_floor(room, -st, self.inv_st[a]) + 1
-            } else {
-                continue;
-            };
-            run = run.min(k);
+    /// How many pixels from the one at `q` (index `cell` along axis `a`) on keep their cells in
+    /// the same brick along axis `a` (`i64::MAX` if the row does not move along it).
+    #[inline(always)]
+    fn run_along(&self, a: usize, q: i64, cell: usize) -> i64 {
+        let st = self.st[a];
+        let b0 = ((cell / BRICK) * BRICK) as i64;
+        if st > 0 {
+            // Steps k with q + k·st < (b0 + B) << FRAC.
+            let room = ((b0 + BRICK as i64) << FRAC) - q;
+            div_floor(room + st - 1, st, self.inv_st[a])
+        } else if st < 0 {
+            // Steps k with q + k·st ≥ b0 << FRAC, counting the pixel itself.
+            let room = q - (b0 << FRAC);
+            div_floor(room, -st, self.inv_st[a]) + 1
+        } else {
+            i64::MAX
         }
-        run.max(1)
     }
 
     #[inline(always)]
@@ -1658,8 +1676,9 @@ unsafe fn sample_run_avx2<T: Scalar>(
 
 /// Samples, classifies and composites pixels `a..=b` of a row eight at a time: lane `l` does
 /// exactly [`Ctx::composite_one`]'s f32 operations for pixel `x + l` (table lookups with
-/// `vgatherdps`, the path correction with the same polynomial `exp2`); returns the first pixel
-/// not done (whole groups only; the rest is left to the scalar twin).
+/// paired rows, the path correction with the same polynomial `exp2`); returns the first pixel
+/// not done (the run's end, or the last pixels of the row where a group would pass it: those
+/// are left to the scalar twin).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -1726,7 +1745,8 @@ unsafe fn composite_run_avx2<T: Scalar>(
             let u5 = _mm256_shuffle_ps::<0xee>(t4, t6);
             let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
             let u7 = _mm256_shuffle_ps::<0xee>(t5, t7);
-            let lerp = |p: __m256, q: __m256| _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
+            let lerp =
+                |p: __m256, q: __m256| _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
             [
                 lerp(
                     _mm256_permute2f128_ps::<0x20>(u0, u4),
@@ -1747,20 +1767,25 @@ unsafe fn composite_run_avx2<T: Scalar>(
             ]
         }};
     }
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let mut x = a;
-    while x + 7 <= b {
+    // The last group of the run may be partial: its lanes past `b` are masked (they read
+    // clamped cells, valid reads, and store what they loaded).
+    while x <= b && x + 8 <= row.a.len() {
+        let n = (b - x + 1).min(8);
+        let in_run = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(n as i32), lane));
         let ar = unsafe { _mm256_loadu_ps(row.a.as_ptr().add(x)) };
-        let live = _mm256_cmp_ps::<_CMP_LT_OQ>(ar, cutoff);
+        let live = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ar, cutoff), in_run);
         let live_bits = _mm256_movemask_ps(live);
         if live_bits == 0 {
-            c.terminated += 8;
+            c.terminated += n as u64;
             x += 8;
             continue;
         }
         let Some(rho) = (unsafe { sampler.at(x) }) else {
             break;
         };
-        c.terminated += u64::from((!live_bits & 0xff).count_ones());
+        c.terminated += u64::from(n as u32 - live_bits.count_ones());
         // The slab's exponent (`boundary_factor`, lane by lane).
         let kf = unsafe { _mm256_loadu_ps(row.kf.as_ptr().add(x)) };
         let din = unsafe { _mm256_loadu_ps(row.din.as_ptr().add(x)) };
@@ -1822,6 +1847,75 @@ unsafe fn composite_run_avx2<T: Scalar>(
                 unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(old, new, mask)) };
             }
         }
+        x += 8;
+    }
+    x
+}
+
+/// MIP (`mip`) or MinIP over pixels `a..=b` of a row whose brick bounds its values by `bound`,
+/// eight at a time: a group whose every pixel already reaches `bound` is skipped; the others
+/// are sampled ([`Sampler8`]) and each lane keeps the larger (smaller) value, as
+/// [`Ctx::extreme_one`] does (a NaN pixel, not yet reached, takes the sample). Returns the first
+/// pixel not done (the run's end, or the last pixels of the row where a group would pass it).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn extreme_run_avx2<T: Scalar>(
+    ctx: &Ctx<'_, T>,
+    walk: &Walk,
+    a: usize,
+    b: usize,
+    row: &mut [f32],
+    bound: f32,
+    mip: bool,
+    c: &mut Counters,
+) -> usize {
+    use std::arch::x86_64::*;
+    // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
+    // are of pixels x..x + 8 ≤ b + 1 ≤ the row's length.
+    let sampler = unsafe { Sampler8::new(ctx, walk) };
+    let bound = _mm256_set1_ps(bound);
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let mut x = a;
+    // The last group of the run may be partial: its lanes past `b` are masked (they read
+    // clamped cells, valid reads, and store what they loaded).
+    while x <= b && x + 8 <= row.len() {
+        let in_run = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+            _mm256_set1_epi32((b - x + 1).min(8) as i32),
+            lane,
+        ));
+        let p = unsafe { row.as_mut_ptr().add(x) };
+        let cur = unsafe { _mm256_loadu_ps(p) };
+        let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_run);
+        let open = _mm256_and_ps(
+            if mip {
+                _mm256_cmp_ps::<_CMP_LT_OQ>(cur, bound)
+            } else {
+                _mm256_cmp_ps::<_CMP_GT_OQ>(cur, bound)
+            },
+            in_run,
+        );
+        let todo = _mm256_movemask_ps(_mm256_or_ps(unset, open));
+        if todo == 0 {
+            x += 8;
+            continue;
+        }
+        let Some(v) = (unsafe { sampler.at(x) }) else {
+            break;
+        };
+        c.samples += u64::from(todo.count_ones());
+        let better = if mip {
+            _mm256_cmp_ps::<_CMP_GT_OQ>(v, cur)
+        } else {
+            _mm256_cmp_ps::<_CMP_LT_OQ>(v, cur)
+        };
+        // Lanes already beyond the bound keep their value even where rounding put a sample an
+        // ulp above the brick's range: the scalar path does not sample them.
+        let take = _mm256_or_ps(unset, _mm256_and_ps(better, open));
+        unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(cur, v, take)) };
         x += 8;
     }
     x

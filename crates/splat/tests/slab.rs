@@ -537,6 +537,7 @@ fn simd_and_scalar_sampling_agree_bit_for_bit() {
             (RenderMode::Composite, true),
             (RenderMode::Composite, false),
             (RenderMode::Mip, true),
+            (RenderMode::Minip, false),
         ] {
             let cam = camera(vol.grid(), 23.0, 31.0, parallel);
             let s = settings(83, 61, mode);
