@@ -11,7 +11,9 @@ For the composite, shaded and perspective scenes of `../shared/data/scenes`:
    smallest spacing, rendered 4× larger and box-filtered 4×4 down (cached in
    `target/convergence-cache/`, keyed by scene, size and file times);
 2. **VTK's usual render**: sample distance 1/2 of the smallest spacing, at the size itself;
-3. **volsplat** in each mode (default: `sheet` = `--visibility sheet`, Westover's sheet buffers;
+3. **volsplat** in each mode (default: `auto` = no flags, what a user gets (decisions 0016 and
+   0017: one-voxel slabs for unshaded composite, sheets for shaded); `sheet` = `--visibility
+   sheet`, Westover's sheet buffers;
    `image` = `--visibility image --slab 0.5`; `image-1` = `--visibility image --slab 1`), same camera
    and transfer-function files, linear PNG as VTK writes it;
 4. **PSNR** (RGB, 8-bit linear values over black, peak 1) of each against the reference;
@@ -48,6 +50,7 @@ import vs_vtk  # noqa: E402  (same folder)
 ROOT = vs_vtk.ROOT
 SCENES = ["composite_ortho", "composite_shaded_ortho", "composite_persp"]
 DEFAULT_MODES = [
+    ("auto", ""),
     ("sheet", "--visibility sheet"),
     ("image", "--visibility image --slab 0.5"),
     ("image-1", "--visibility image --slab 1"),
