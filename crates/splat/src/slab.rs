@@ -664,6 +664,12 @@ impl<T: Scalar> Ctx<'_, T> {
     #[inline(always)]
     fn sample_scalar(&self, walk: &Walk, x: usize) -> f32 {
         let (c, f) = self.cell_f32(walk, x);
+        self.sample_cell(c, f)
+    }
+
+    /// The trilinear sample in cell `c` at fractions `f`.
+    #[inline(always)]
+    fn sample_cell(&self, c: [usize; 3], f: [f32; 3]) -> f32 {
         let [ux, uy, uz] = self.up;
         let base = c[0] + c[1] * self.stride[1] + c[2] * self.stride[2];
         let v = |o: usize| self.data[base + o].to_f32();
@@ -872,28 +878,21 @@ impl<T: Scalar> Ctx<'_, T> {
                 let walk = self.walk(y, d);
                 let span = self.clip_span(y, d, walk.span);
                 let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+                if lo > hi {
+                    continue;
+                }
                 let row = &mut vals[r * w..(r + 1) * w];
-                self.brick_runs(&walk, lo, hi, |a, b, brick| {
-                    let [blo, bhi] = self.bricks.ranges[brick];
-                    // The value the run's pixels must pass to change: the brick's maximum (MIP)
-                    // or minimum (MinIP).
-                    let bound = if mip { bhi } else { blo };
-                    let beaten =
-                        |cur: f32| !cur.is_nan() && if mip { bound <= cur } else { bound >= cur };
-                    #[allow(unused_mut)]
-                    let mut x = a;
-                    #[cfg(target_arch = "x86_64")]
-                    if self.simd {
-                        // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
-                        x = unsafe { extreme_run_avx2(self, &walk, a, b, row, bound, mip, &mut c) };
-                    }
-                    for x in x..=b {
-                        if !beaten(row[x]) {
-                            c.samples += 1;
-                            self.extreme_one(&walk, x, row, mip);
-                        }
-                    }
-                });
+                let (lo, hi) = (lo as usize, hi as usize);
+                #[allow(unused_mut)]
+                let mut x = lo;
+                #[cfg(target_arch = "x86_64")]
+                if self.simd {
+                    // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+                    x = unsafe { extreme_row_avx2(self, &walk, lo, hi, row, mip, &mut c) };
+                }
+                for x in x..=hi {
+                    self.extreme_one(&walk, x, row, mip, &mut c);
+                }
             }
         }
         for (px, &v) in acc.iter_mut().zip(&vals) {
@@ -902,11 +901,19 @@ impl<T: Scalar> Ctx<'_, T> {
         c
     }
 
-    /// Samples pixel `x` of a row into its extreme ([`Ctx::band_extreme`]).
+    /// Pixel `x` of a row ([`Ctx::band_extreme`]): skipped where its cell's brick cannot beat
+    /// the pixel's extreme (exact: a trilinear value lies in its cell's brick's range), sampled
+    /// and compared otherwise. The scalar twin of [`extreme_row_avx2`].
     #[inline(always)]
-    fn extreme_one(&self, walk: &Walk, x: usize, row: &mut [f32], mip: bool) {
-        let v = self.sample_scalar(walk, x);
+    fn extreme_one(&self, walk: &Walk, x: usize, row: &mut [f32], mip: bool, c: &mut Counters) {
+        let (cell, f) = self.cell_f32(walk, x);
+        let [blo, bhi] = self.bricks.ranges[self.bricks.index(cell[0], cell[1], cell[2])];
         let cur = row[x];
+        if !cur.is_nan() && if mip { bhi <= cur } else { blo >= cur } {
+            return;
+        }
+        c.samples += 1;
+        let v = self.sample_cell(cell, f);
         if cur.is_nan() || (mip && v > cur) || (!mip && v < cur) {
             row[x] = v;
         }
@@ -1476,6 +1483,13 @@ struct Sampler8<T> {
     _t: std::marker::PhantomData<T>,
 }
 
+/// Eight lanes' cells and the fractions in them ([`Sampler8::locate`]).
+#[cfg(target_arch = "x86_64")]
+struct Cells8 {
+    cell: [std::arch::x86_64::__m256i; 3],
+    frac: [std::arch::x86_64::__m256; 3],
+}
+
 #[cfg(target_arch = "x86_64")]
 impl<T: Scalar> Sampler8<T> {
     /// # Safety
@@ -1512,8 +1526,19 @@ impl<T: Scalar> Sampler8<T> {
     #[inline]
     #[target_feature(enable = "avx2")]
     unsafe fn at(&self, x: usize) -> Option<std::arch::x86_64::__m256> {
+        // SAFETY: the caller's guarantees are these calls' own.
+        unsafe { self.sample(&self.locate(x)) }
+    }
+
+    /// The cells of pixels `x..x + 8` (clamped to the grid) and the fractions in them:
+    /// [`Ctx::cell_f32`] lane by lane.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn locate(&self, x: usize) -> Cells8 {
         use std::arch::x86_64::*;
-        use volsplat_core::ScalarType;
         let zero = _mm256_setzero_ps();
         let one = _mm256_set1_ps(1.0);
         let izero = _mm256_setzero_si256();
@@ -1534,6 +1559,44 @@ impl<T: Scalar> Sampler8<T> {
             let f = _mm256_sub_ps(q, _mm256_cvtepi32_ps(i));
             frac[ax] = _mm256_min_ps(_mm256_max_ps(f, zero), one);
         }
+        Cells8 { cell, frac }
+    }
+
+    /// The brick (`BrickGrid::index`) of each lane's cell; `bdims` are the grid's bricks per
+    /// axis.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn bricks_of(
+        &self,
+        c: &Cells8,
+        bdims: [std::arch::x86_64::__m256i; 2],
+    ) -> std::arch::x86_64::__m256i {
+        use std::arch::x86_64::*;
+        const S: i32 = BRICK.trailing_zeros() as i32;
+        let [i, j, k] = c.cell.map(|v| _mm256_srli_epi32::<S>(v));
+        _mm256_add_epi32(
+            _mm256_mullo_epi32(
+                _mm256_add_epi32(_mm256_mullo_epi32(k, bdims[1]), j),
+                bdims[0],
+            ),
+            i,
+        )
+    }
+
+    /// The trilinear samples at located cells ([`Sampler8::locate`]), or `None` where an
+    /// 8/16-bit read would pass the end of the data.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, and the sampler must have been made for this volume.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sample(&self, c: &Cells8) -> Option<std::arch::x86_64::__m256> {
+        use std::arch::x86_64::*;
+        use volsplat_core::ScalarType;
+        let (cell, frac) = (&c.cell, &c.frac);
         let base = _mm256_add_epi32(
             cell[0],
             _mm256_add_epi32(
@@ -1852,58 +1915,69 @@ unsafe fn composite_run_avx2<T: Scalar>(
     x
 }
 
-/// MIP (`mip`) or MinIP over pixels `a..=b` of a row whose brick bounds its values by `bound`,
-/// eight at a time: a group whose every pixel already reaches `bound` is skipped; the others
-/// are sampled ([`Sampler8`]) and each lane keeps the larger (smaller) value, as
+/// MIP (`mip`) or MinIP over pixels `lo..=hi` of a row, eight at a time: each lane's cell is
+/// located first, and a group none of whose pixels its cells' bricks can beat (a brick's maximum
+/// (minimum) no larger (smaller) than the pixel's extreme) is not sampled; the others are
+/// sampled ([`Sampler8`]) and each open lane keeps the larger (smaller) value, as
 /// [`Ctx::extreme_one`] does (a NaN pixel, not yet reached, takes the sample). Returns the first
-/// pixel not done (the run's end, or the last pixels of the row where a group would pass it).
+/// pixel not done (`hi + 1`, or the last pixels of the row where a group would pass it).
 ///
 /// # Safety
 /// The CPU must support AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn extreme_run_avx2<T: Scalar>(
+unsafe fn extreme_row_avx2<T: Scalar>(
     ctx: &Ctx<'_, T>,
     walk: &Walk,
-    a: usize,
-    b: usize,
+    lo: usize,
+    hi: usize,
     row: &mut [f32],
-    bound: f32,
     mip: bool,
     c: &mut Counters,
 ) -> usize {
     use std::arch::x86_64::*;
     // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
-    // are of pixels x..x + 8 ≤ b + 1 ≤ the row's length.
+    // are of pixels x..x + 8 ≤ the row's length; brick indices come from cells clamped to the
+    // grid, so they index `ranges`.
     let sampler = unsafe { Sampler8::new(ctx, walk) };
-    let bound = _mm256_set1_ps(bound);
+    let bdims = [
+        _mm256_set1_epi32(ctx.bricks.dims[0] as i32),
+        _mm256_set1_epi32(ctx.bricks.dims[1] as i32),
+    ];
+    let ranges = ctx.bricks.ranges.as_ptr() as *const f32;
+    let which = _mm256_set1_epi32(i32::from(mip));
     let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    let mut x = a;
-    // The last group of the run may be partial: its lanes past `b` are masked (they read
-    // clamped cells, valid reads, and store what they loaded).
-    while x <= b && x + 8 <= row.len() {
-        let in_run = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
-            _mm256_set1_epi32((b - x + 1).min(8) as i32),
+    let mut x = lo;
+    while x <= hi && x + 8 <= row.len() {
+        let in_row = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+            _mm256_set1_epi32((hi - x + 1).min(8) as i32),
             lane,
         ));
         let p = unsafe { row.as_mut_ptr().add(x) };
         let cur = unsafe { _mm256_loadu_ps(p) };
-        let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_run);
+        let cells = unsafe { sampler.locate(x) };
+        let brick = unsafe { sampler.bricks_of(&cells, bdims) };
+        let bound = unsafe {
+            _mm256_i32gather_ps::<4>(
+                ranges,
+                _mm256_add_epi32(_mm256_slli_epi32::<1>(brick), which),
+            )
+        };
+        let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_row);
         let open = _mm256_and_ps(
             if mip {
                 _mm256_cmp_ps::<_CMP_LT_OQ>(cur, bound)
             } else {
                 _mm256_cmp_ps::<_CMP_GT_OQ>(cur, bound)
             },
-            in_run,
+            in_row,
         );
         let todo = _mm256_movemask_ps(_mm256_or_ps(unset, open));
         if todo == 0 {
             x += 8;
             continue;
         }
-        let Some(v) = (unsafe { sampler.at(x) }) else {
+        let Some(v) = (unsafe { sampler.sample(&cells) }) else {
             break;
         };
         c.samples += u64::from(todo.count_ones());
@@ -1912,8 +1986,8 @@ unsafe fn extreme_run_avx2<T: Scalar>(
         } else {
             _mm256_cmp_ps::<_CMP_LT_OQ>(v, cur)
         };
-        // Lanes already beyond the bound keep their value even where rounding put a sample an
-        // ulp above the brick's range: the scalar path does not sample them.
+        // Lanes whose brick cannot beat them keep their value even where rounding put a
+        // sample an ulp beyond the brick's range: the scalar twin does not sample them.
         let take = _mm256_or_ps(unset, _mm256_and_ps(better, open));
         unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(cur, v, take)) };
         x += 8;
