@@ -216,6 +216,7 @@ pub fn render_slabs<T: Scalar>(
         ],
         bricks,
         active: &active,
+        active_bytes: active.iter().map(|&a| u8::from(a)).chain([0; 3]).collect(),
         skip_empty: composite && !all_active,
         view,
         classifier: &classifier,
@@ -535,6 +536,8 @@ struct Ctx<'a, T> {
     grad_to_world: [Vec3; 3],
     bricks: &'a BrickGrid,
     active: &'a [bool],
+    /// `active` as bytes, padded with three zero bytes (AVX2 gathers read 4 bytes).
+    active_bytes: Vec<u8>,
     skip_empty: bool,
     view: View,
     classifier: &'a FrameClassifier,
@@ -739,19 +742,17 @@ impl<T: Scalar> Ctx<'_, T> {
                     d: d as f32,
                     half,
                 };
-                self.for_each_run(&walk, lo, hi, |a, b| {
-                    c.samples += (b - a + 1) as u64;
-                    #[allow(unused_mut)]
-                    let mut x = a;
-                    #[cfg(target_arch = "x86_64")]
-                    if self.simd {
-                        // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
-                        x = unsafe { composite_run_avx2(self, &walk, a, b, &mut row, t, &mut c) };
-                    }
-                    for x in x..=b {
-                        self.composite_one(&walk, x, &mut row, t, &mut c);
-                    }
-                });
+                let (a, b) = (lo as usize, hi as usize);
+                #[allow(unused_mut)]
+                let mut x = a;
+                #[cfg(target_arch = "x86_64")]
+                if self.simd {
+                    // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+                    x = unsafe { composite_run_avx2(self, &walk, a, b, &mut row, t, &mut c) };
+                }
+                for x in x..=b {
+                    self.composite_one(&walk, x, &mut row, t, &mut c);
+                }
             }
             if !any_live {
                 break;
@@ -778,7 +779,12 @@ impl<T: Scalar> Ctx<'_, T> {
             c.terminated += 1;
             return;
         }
-        let rho = self.sample_scalar(walk, x);
+        let (cell, f) = self.cell_f32(walk, x);
+        if !self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
+            return;
+        }
+        c.samples += 1;
+        let rho = self.sample_cell(cell, f);
         let k = boundary_factor(row.kf[x], row.din[x], row.dout[x], row.d, row.half);
         let src = if self.view.perspective || k != 1.0 {
             // Colour and log-transmittance per table entry: the path correction is one exp2
@@ -1760,6 +1766,12 @@ unsafe fn composite_run_avx2<T: Scalar>(
     // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
     // are of pixels x..x + 8 ≤ b + 1 ≤ the row's length.
     let sampler = unsafe { Sampler8::new(ctx, walk) };
+    let bdims = [
+        _mm256_set1_epi32(ctx.bricks.dims[0] as i32),
+        _mm256_set1_epi32(ctx.bricks.dims[1] as i32),
+    ];
+    // One byte per brick, padded so that a 4-byte read at the last brick stays inside.
+    let active_bytes = ctx.active_bytes.as_ptr() as *const i32;
     let zero = _mm256_setzero_ps();
     let one = _mm256_set1_ps(1.0);
     let cutoff = _mm256_set1_ps(ctx.cutoff);
@@ -1845,10 +1857,30 @@ unsafe fn composite_run_avx2<T: Scalar>(
             x += 8;
             continue;
         }
-        let Some(rho) = (unsafe { sampler.at(x) }) else {
-            break;
+        let cells = unsafe { sampler.locate(x) };
+        // Lanes whose cell's brick has no opacity under the transfer function contribute
+        // nothing: not sampled where a whole group is in such bricks.
+        let active = if ctx.skip_empty {
+            let brick = unsafe { sampler.bricks_of(&cells, bdims) };
+            let flags = unsafe { _mm256_i32gather_epi32::<1>(active_bytes, brick) };
+            _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+                _mm256_and_si256(flags, _mm256_set1_epi32(0xff)),
+                _mm256_setzero_si256(),
+            ))
+        } else {
+            _mm256_castsi256_ps(_mm256_set1_epi32(-1))
         };
         c.terminated += u64::from(n as u32 - live_bits.count_ones());
+        let live = _mm256_and_ps(live, active);
+        let live_bits = _mm256_movemask_ps(live);
+        if live_bits == 0 {
+            x += 8;
+            continue;
+        }
+        c.samples += u64::from(live_bits.count_ones());
+        let Some(rho) = (unsafe { sampler.sample(&cells) }) else {
+            break;
+        };
         // The slab's exponent (`boundary_factor`, lane by lane).
         let kf = unsafe { _mm256_loadu_ps(row.kf.as_ptr().add(x)) };
         let din = unsafe { _mm256_loadu_ps(row.din.as_ptr().add(x)) };
