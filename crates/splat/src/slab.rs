@@ -1870,14 +1870,14 @@ unsafe fn composite_run_avx2<T: Scalar>(
         } else {
             _mm256_castsi256_ps(_mm256_set1_epi32(-1))
         };
-        c.terminated += u64::from(n as u32 - live_bits.count_ones());
+        c.terminated += u64::from(n as u32 - lanes(live_bits));
         let live = _mm256_and_ps(live, active);
         let live_bits = _mm256_movemask_ps(live);
         if live_bits == 0 {
             x += 8;
             continue;
         }
-        c.samples += u64::from(live_bits.count_ones());
+        c.samples += u64::from(lanes(live_bits));
         let Some(rho) = (unsafe { sampler.sample(&cells) }) else {
             break;
         };
@@ -1932,14 +1932,17 @@ unsafe fn composite_run_avx2<T: Scalar>(
         let mask = _mm256_and_ps(contributes, live);
         let bits = _mm256_movemask_ps(mask);
         if bits != 0 {
-            c.visible += u64::from(bits.count_ones());
+            c.visible += u64::from(lanes(bits));
             let tr = _mm256_sub_ps(one, ar);
             let chans: [&mut [f32]; 4] = [&mut *row.r, &mut *row.g, &mut *row.b, &mut *row.a];
             for (ch, plane) in chans.into_iter().enumerate() {
                 let p = unsafe { plane.as_mut_ptr().add(x) };
                 let old = unsafe { _mm256_loadu_ps(p) };
-                let new = _mm256_add_ps(old, _mm256_mul_ps(tr, src[ch]));
-                unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(old, new, mask)) };
+                // Masked lanes add a zero (of either sign), which leaves every value an
+                // accumulation can hold (never −0) bit for bit, so the store needs no blend
+                // (a blended store compiles to `vmaskmovps`, slow on AMD).
+                let add = _mm256_mul_ps(tr, _mm256_and_ps(src[ch], mask));
+                unsafe { _mm256_storeu_ps(p, _mm256_add_ps(old, add)) };
             }
         }
         x += 8;
@@ -2012,7 +2015,7 @@ unsafe fn extreme_row_avx2<T: Scalar>(
         let Some(v) = (unsafe { sampler.sample(&cells) }) else {
             break;
         };
-        c.samples += u64::from(todo.count_ones());
+        c.samples += u64::from(lanes(todo));
         let better = if mip {
             _mm256_cmp_ps::<_CMP_GT_OQ>(v, cur)
         } else {
@@ -2025,6 +2028,22 @@ unsafe fn extreme_row_avx2<T: Scalar>(
         x += 8;
     }
     x
+}
+
+/// The number of lanes set in an 8-lane `movemask`: a table, as `popcnt` is not part of AVX2
+/// (and not detected here).
+#[inline(always)]
+fn lanes(bits: i32) -> u32 {
+    const POP: [u8; 256] = {
+        let mut t = [0u8; 256];
+        let mut i = 0;
+        while i < 256 {
+            t[i] = (i as u32).count_ones() as u8;
+            i += 1;
+        }
+        t
+    };
+    u32::from(POP[(bits & 0xff) as usize])
 }
 
 /// [`exp2_neg`] on eight lanes, with the same operations in the same order.
