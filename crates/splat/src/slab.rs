@@ -217,6 +217,11 @@ pub fn render_slabs<T: Scalar>(
         bricks,
         active: &active,
         active_bytes: active.iter().map(|&a| u8::from(a)).chain([0; 3]).collect(),
+        extreme_bounds: match settings.mode {
+            RenderMode::Mip => bricks.ranges.iter().map(|r| r[1]).collect(),
+            RenderMode::Minip => bricks.ranges.iter().map(|r| r[0]).collect(),
+            _ => Vec::new(),
+        },
         skip_empty: composite && !all_active,
         view,
         classifier: &classifier,
@@ -538,6 +543,9 @@ struct Ctx<'a, T> {
     active: &'a [bool],
     /// `active` as bytes, padded with three zero bytes (AVX2 gathers read 4 bytes).
     active_bytes: Vec<u8>,
+    /// MIP: each brick's maximum; MinIP: its minimum (empty otherwise): the one bound of
+    /// `bricks.ranges` that the mode tests, in half the memory.
+    extreme_bounds: Vec<f32>,
     skip_empty: bool,
     view: View,
     classifier: &'a FrameClassifier,
@@ -590,13 +598,6 @@ impl<T: Scalar> Ctx<'_, T> {
             st,
             s32: [0, 1, 2].map(|a| start[a] as f32),
             st32: [0, 1, 2].map(|a| step[a] as f32),
-            inv_st: st.map(|v| {
-                if v == 0 {
-                    0.0
-                } else {
-                    1.0 / v.unsigned_abs() as f64
-                }
-            }),
             span: r,
         }
     }
@@ -844,6 +845,13 @@ impl<T: Scalar> Ctx<'_, T> {
         // Per axis, the first pixel whose cell leaves the current brick along that axis: only
         // the axis (axes) just crossed is recomputed at the start of a run.
         let mut next = [i64::MIN; 3];
+        let inv = walk.st.map(|v| {
+            if v == 0 {
+                0.0
+            } else {
+                1.0 / v.unsigned_abs() as f64
+            }
+        });
         let mut x = lo;
         while x <= hi {
             let q = walk.at(x);
@@ -851,7 +859,7 @@ impl<T: Scalar> Ctx<'_, T> {
             let mut end = hi;
             for (a, next_a) in next.iter_mut().enumerate() {
                 if *next_a <= x {
-                    *next_a = x.saturating_add(walk.run_along(a, q[a], cell[a]));
+                    *next_a = x.saturating_add(walk.run_along(a, q[a], cell[a], inv[a]));
                 }
                 end = end.min(*next_a - 1);
             }
@@ -913,9 +921,9 @@ impl<T: Scalar> Ctx<'_, T> {
     #[inline(always)]
     fn extreme_one(&self, walk: &Walk, x: usize, row: &mut [f32], mip: bool, c: &mut Counters) {
         let (cell, f) = self.cell_f32(walk, x);
-        let [blo, bhi] = self.bricks.ranges[self.bricks.index(cell[0], cell[1], cell[2])];
+        let bound = self.extreme_bounds[self.bricks.index(cell[0], cell[1], cell[2])];
         let cur = row[x];
-        if !cur.is_nan() && if mip { bhi <= cur } else { blo >= cur } {
+        if !cur.is_nan() && if mip { bound <= cur } else { bound >= cur } {
             return;
         }
         c.samples += 1;
@@ -1180,27 +1188,26 @@ struct Walk {
     /// The row's start and step as f32, for the samples themselves.
     s32: [f32; 3],
     st32: [f32; 3],
-    /// `1 / |st|` per axis (0 where `st` is), for [`div_floor`].
-    inv_st: [f64; 3],
     /// Pixels inside the box of voxel centres (empty when `span.0 > span.1`).
     span: (i64, i64),
 }
 
 impl Walk {
     /// How many pixels from the one at `q` (index `cell` along axis `a`) on keep their cells in
-    /// the same brick along axis `a` (`i64::MAX` if the row does not move along it).
+    /// the same brick along axis `a` (`i64::MAX` if the row does not move along it); `inv` is
+    /// `1 / |st[a]|` ([`div_floor`]).
     #[inline(always)]
-    fn run_along(&self, a: usize, q: i64, cell: usize) -> i64 {
+    fn run_along(&self, a: usize, q: i64, cell: usize, inv: f64) -> i64 {
         let st = self.st[a];
         let b0 = ((cell / BRICK) * BRICK) as i64;
         if st > 0 {
             // Steps k with q + k·st < (b0 + B) << FRAC.
             let room = ((b0 + BRICK as i64) << FRAC) - q;
-            div_floor(room + st - 1, st, self.inv_st[a])
+            div_floor(room + st - 1, st, inv)
         } else if st < 0 {
             // Steps k with q + k·st ≥ b0 << FRAC, counting the pixel itself.
             let room = q - (b0 << FRAC);
-            div_floor(room, -st, self.inv_st[a]) + 1
+            div_floor(room, -st, inv) + 1
         } else {
             i64::MAX
         }
@@ -1973,14 +1980,13 @@ unsafe fn extreme_row_avx2<T: Scalar>(
     use std::arch::x86_64::*;
     // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
     // are of pixels x..x + 8 ≤ the row's length; brick indices come from cells clamped to the
-    // grid, so they index `ranges`.
+    // grid, so they index `extreme_bounds`.
     let sampler = unsafe { Sampler8::new(ctx, walk) };
     let bdims = [
         _mm256_set1_epi32(ctx.bricks.dims[0] as i32),
         _mm256_set1_epi32(ctx.bricks.dims[1] as i32),
     ];
-    let ranges = ctx.bricks.ranges.as_ptr() as *const f32;
-    let which = _mm256_set1_epi32(i32::from(mip));
+    let bounds = ctx.extreme_bounds.as_ptr();
     let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let mut x = lo;
     while x <= hi && x + 8 <= row.len() {
@@ -1992,12 +1998,7 @@ unsafe fn extreme_row_avx2<T: Scalar>(
         let cur = unsafe { _mm256_loadu_ps(p) };
         let cells = unsafe { sampler.locate(x) };
         let brick = unsafe { sampler.bricks_of(&cells, bdims) };
-        let bound = unsafe {
-            _mm256_i32gather_ps::<4>(
-                ranges,
-                _mm256_add_epi32(_mm256_slli_epi32::<1>(brick), which),
-            )
-        };
+        let bound = unsafe { _mm256_i32gather_ps::<4>(bounds, brick) };
         let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_row);
         let open = _mm256_and_ps(
             if mip {
