@@ -1633,46 +1633,37 @@ impl<T: Scalar> Sampler8<T> {
                 let idx = _mm256_add_epi32(base, _mm256_set1_epi32($o));
                 // SAFETY: every index is a voxel of the volume (cells are clamped to the grid), and
                 // for 8/16-bit samples the 4-byte read ends inside the data (checked above).
+                // The word's low sample and the one `shift` bits up, zero-extended under `mask`
+                // or sign-extended from the top `bits` of the word.
+                macro_rules! unsigned {
+                    ($w:expr, $mask:expr) => {{
+                        let (w, m) = ($w, _mm256_set1_epi32($mask));
+                        (
+                            _mm256_cvtepi32_ps(_mm256_and_si256(w, m)),
+                            _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srl_epi32(w, shift), m)),
+                        )
+                    }};
+                }
+                macro_rules! signed {
+                    ($w:expr, $bits:literal) => {{
+                        let w = $w;
+                        let hi = _mm256_srl_epi32(w, shift);
+                        (
+                            _mm256_cvtepi32_ps(_mm256_srai_epi32::<$bits>(_mm256_slli_epi32::<
+                                $bits,
+                            >(w))),
+                            _mm256_cvtepi32_ps(_mm256_srai_epi32::<$bits>(_mm256_slli_epi32::<
+                                $bits,
+                            >(hi))),
+                        )
+                    }};
+                }
                 unsafe {
                     match kind {
-                        ScalarType::U8 => {
-                            let w = _mm256_i32gather_epi32::<1>(ptr, idx);
-                            let m = _mm256_set1_epi32(0xff);
-                            (
-                                _mm256_cvtepi32_ps(_mm256_and_si256(w, m)),
-                                _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srl_epi32(w, shift), m)),
-                            )
-                        }
-                        ScalarType::I8 => {
-                            let w = _mm256_i32gather_epi32::<1>(ptr, idx);
-                            (
-                                _mm256_cvtepi32_ps(_mm256_srai_epi32::<24>(
-                                    _mm256_slli_epi32::<24>(w),
-                                )),
-                                _mm256_cvtepi32_ps(_mm256_srai_epi32::<24>(
-                                    _mm256_slli_epi32::<24>(_mm256_srl_epi32(w, shift)),
-                                )),
-                            )
-                        }
-                        ScalarType::U16 => {
-                            let w = _mm256_i32gather_epi32::<2>(ptr, idx);
-                            let m = _mm256_set1_epi32(0xffff);
-                            (
-                                _mm256_cvtepi32_ps(_mm256_and_si256(w, m)),
-                                _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srl_epi32(w, shift), m)),
-                            )
-                        }
-                        ScalarType::I16 => {
-                            let w = _mm256_i32gather_epi32::<2>(ptr, idx);
-                            (
-                                _mm256_cvtepi32_ps(_mm256_srai_epi32::<16>(
-                                    _mm256_slli_epi32::<16>(w),
-                                )),
-                                _mm256_cvtepi32_ps(_mm256_srai_epi32::<16>(
-                                    _mm256_slli_epi32::<16>(_mm256_srl_epi32(w, shift)),
-                                )),
-                            )
-                        }
+                        ScalarType::U8 => unsigned!(_mm256_i32gather_epi32::<1>(ptr, idx), 0xff),
+                        ScalarType::I8 => signed!(_mm256_i32gather_epi32::<1>(ptr, idx), 24),
+                        ScalarType::U16 => unsigned!(_mm256_i32gather_epi32::<2>(ptr, idx), 0xffff),
+                        ScalarType::I16 => signed!(_mm256_i32gather_epi32::<2>(ptr, idx), 16),
                         ScalarType::F32 => {
                             let p = ptr as *const f32;
                             (
