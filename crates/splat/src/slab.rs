@@ -45,6 +45,18 @@
 //! the transfer function (or, for shading, no such neighbour) is not reconstructed, and in MIP
 //! a sample whose brick cannot exceed the pixel's current maximum is skipped. Both skips are
 //! exact.
+//!
+//! # Speed (issue 12; `docs/BENCHMARKS.md` §13)
+//!
+//! Rows of a plane are processed eight pixels at a time where the CPU has AVX2 (runtime
+//! detection; every kernel has a scalar twin doing the same f32 operations in the same order, so
+//! the bits do not depend on the CPU or the thread count): [`Sampler8`] locates the eight cells
+//! and gathers their corners; unshaded composite classifies through a 1024-entry table and
+//! composites into channel planes in the same pass ([`composite_run_avx2`]); MIP/MinIP compare
+//! against one plane of values ([`extreme_row_avx2`]). Each group of eight is first tested
+//! against its own cells' bricks, and skipped where none can contribute. Shaded composite and
+//! tables that a density-indexed table cannot hold take the per-sample classifier
+//! ([`Ctx::band_plain`]).
 
 use crate::bricks::{BRICK, BrickGrid};
 use crate::error::{Result, SplatError};
