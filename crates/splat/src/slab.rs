@@ -1508,11 +1508,32 @@ struct Sampler8<T> {
     _t: std::marker::PhantomData<T>,
 }
 
-/// Eight lanes' cells and the fractions in them ([`Sampler8::locate`]).
+/// Eight lanes' index positions and cells ([`Sampler8::locate`]); the fractions in the cells
+/// are computed only for groups that are sampled ([`Cells8::fractions`]).
 #[cfg(target_arch = "x86_64")]
 struct Cells8 {
     cell: [std::arch::x86_64::__m256i; 3],
-    frac: [std::arch::x86_64::__m256; 3],
+    pos: [std::arch::x86_64::__m256; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Cells8 {
+    /// The fractions in the cells, clamped to [0, 1]: [`Ctx::cell_f32`] lane by lane.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn fractions(&self) -> [std::arch::x86_64::__m256; 3] {
+        use std::arch::x86_64::*;
+        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+        let mut frac = [zero; 3];
+        for (ax, f) in frac.iter_mut().enumerate() {
+            let d = _mm256_sub_ps(self.pos[ax], _mm256_cvtepi32_ps(self.cell[ax]));
+            *f = _mm256_min_ps(_mm256_max_ps(d, zero), one);
+        }
+        frac
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1565,7 +1586,6 @@ impl<T: Scalar> Sampler8<T> {
     unsafe fn locate(&self, x: usize) -> Cells8 {
         use std::arch::x86_64::*;
         let zero = _mm256_setzero_ps();
-        let one = _mm256_set1_ps(1.0);
         let izero = _mm256_setzero_si256();
         // x + lane as f32: exact (x < 2^24), equal to the scalar `x as f32`.
         let xf = _mm256_add_ps(
@@ -1573,18 +1593,16 @@ impl<T: Scalar> Sampler8<T> {
             _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
         );
         let mut cell = [izero; 3];
-        let mut frac = [zero; 3];
+        let mut pos = [zero; 3];
         for ax in 0..3 {
             let q = _mm256_add_ps(self.s[ax], _mm256_mul_ps(xf, self.st[ax]));
-            let i = _mm256_min_epi32(
+            pos[ax] = q;
+            cell[ax] = _mm256_min_epi32(
                 _mm256_max_epi32(_mm256_cvttps_epi32(q), izero),
                 self.maxc[ax],
             );
-            cell[ax] = i;
-            let f = _mm256_sub_ps(q, _mm256_cvtepi32_ps(i));
-            frac[ax] = _mm256_min_ps(_mm256_max_ps(f, zero), one);
         }
-        Cells8 { cell, frac }
+        Cells8 { cell, pos }
     }
 
     /// The brick (`BrickGrid::index`) of each lane's cell; `bdims` are the grid's bricks per
@@ -1621,7 +1639,9 @@ impl<T: Scalar> Sampler8<T> {
     unsafe fn sample(&self, c: &Cells8) -> Option<std::arch::x86_64::__m256> {
         use std::arch::x86_64::*;
         use volsplat_core::ScalarType;
-        let (cell, frac) = (&c.cell, &c.frac);
+        let cell = &c.cell;
+        // SAFETY: the caller guarantees AVX2.
+        let frac = unsafe { c.fractions() };
         let base = _mm256_add_epi32(
             cell[0],
             _mm256_add_epi32(
