@@ -458,3 +458,43 @@ fn auto_visibility_keeps_sheets_for_sheet_only_options() {
     r.quality.antialias = AntialiasChoice::None;
     assert_eq!(used(&r), Some(UsedRenderer::Slab));
 }
+
+/// Without `quality.slab` the slab thickness follows the mode (decision 0017): one voxel for
+/// unshaded composite, half a voxel for MIP, MinIP and shaded composite; an explicit thickness
+/// wins. Read back from the renderer's reported plane spacing, in units of the smallest spacing.
+#[test]
+fn slab_thickness_defaults_by_mode() {
+    use volsplat::VisibilityChoice;
+    let thickness = |mode: Mode, shade: Option<bool>, slab: Option<f64>| {
+        let mut req = RenderRequest::new(blobs(24), 32, 32);
+        req.quality.visibility = VisibilityChoice::Image;
+        req.quality.slab = slab;
+        req.mode = mode;
+        let mut r = Renderer::new();
+        if let Some(shade) = shade {
+            let mut tf = r.transfer_function(&req).unwrap();
+            tf.shade = shade;
+            req.scene.transfer_function = TransferSpec::Function(tf);
+        }
+        let out = r.render(&req, &mut |_| true).unwrap();
+        assert_eq!(out.stats.renderer, Some(UsedRenderer::Slab));
+        let min = r
+            .volume(&req.scene.volume)
+            .unwrap()
+            .grid()
+            .spacing
+            .iter()
+            .fold(f64::INFINITY, |m, &s| m.min(s));
+        out.stats.sheet_spacing / min
+    };
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+    assert!(close(thickness(Mode::Composite, Some(false), None), 1.0));
+    assert!(close(thickness(Mode::Composite, Some(true), None), 0.5));
+    assert!(close(thickness(Mode::Mip, None, None), 0.5));
+    assert!(close(thickness(Mode::Minip, None, None), 0.5));
+    assert!(close(
+        thickness(Mode::Composite, Some(false), Some(0.25)),
+        0.25
+    ));
+    assert!(close(thickness(Mode::Mip, None, Some(2.0)), 2.0));
+}
