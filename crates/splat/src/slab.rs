@@ -1505,6 +1505,8 @@ struct Sampler8<T> {
     /// Bits from a corner's sample to the next one's along x within a 32-bit word (8- and
     /// 16-bit samples): `8·ux` or `16·ux`.
     x_shift: std::arch::x86_64::__m128i,
+    /// Bricks along x and y ([`Sampler8::bricks_of`]).
+    bdims: [std::arch::x86_64::__m256i; 2],
     _t: std::marker::PhantomData<T>,
 }
 
@@ -1560,6 +1562,10 @@ impl<T: Scalar> Sampler8<T> {
             sz: _mm256_set1_epi32(ctx.stride[2] as i32),
             last_ok: _mm256_set1_epi32(safe_last as i32),
             x_shift: _mm_cvtsi32_si128((8 * bytes * ux).min(32) as i32),
+            bdims: [
+                _mm256_set1_epi32(ctx.bricks.dims[0] as i32),
+                _mm256_set1_epi32(ctx.bricks.dims[1] as i32),
+            ],
             _t: std::marker::PhantomData,
         }
     }
@@ -1605,19 +1611,15 @@ impl<T: Scalar> Sampler8<T> {
         Cells8 { cell, pos }
     }
 
-    /// The brick (`BrickGrid::index`) of each lane's cell; `bdims` are the grid's bricks per
-    /// axis.
+    /// The brick (`BrickGrid::index`) of each lane's cell.
     ///
     /// # Safety
     /// The CPU must support AVX2.
     #[inline]
     #[target_feature(enable = "avx2")]
-    unsafe fn bricks_of(
-        &self,
-        c: &Cells8,
-        bdims: [std::arch::x86_64::__m256i; 2],
-    ) -> std::arch::x86_64::__m256i {
+    unsafe fn bricks_of(&self, c: &Cells8) -> std::arch::x86_64::__m256i {
         use std::arch::x86_64::*;
+        let bdims = self.bdims;
         const S: i32 = BRICK.trailing_zeros() as i32;
         let [i, j, k] = c.cell.map(|v| _mm256_srli_epi32::<S>(v));
         _mm256_add_epi32(
@@ -1796,10 +1798,6 @@ unsafe fn composite_run_avx2<T: Scalar>(
     // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
     // are of pixels x..x + 8 ≤ b + 1 ≤ the row's length.
     let sampler = unsafe { Sampler8::new(ctx, walk) };
-    let bdims = [
-        _mm256_set1_epi32(ctx.bricks.dims[0] as i32),
-        _mm256_set1_epi32(ctx.bricks.dims[1] as i32),
-    ];
     // One byte per brick, padded so that a 4-byte read at the last brick stays inside.
     let active_bytes = ctx.active_bytes.as_ptr() as *const i32;
     let zero = _mm256_setzero_ps();
@@ -1872,13 +1870,12 @@ unsafe fn composite_run_avx2<T: Scalar>(
             ]
         }};
     }
-    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let mut x = a;
     // The last group of the run may be partial: its lanes past `b` are masked (they read
     // clamped cells, valid reads, and store what they loaded).
     while x <= b && x + 8 <= row.a.len() {
         let n = (b - x + 1).min(8);
-        let in_run = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(n as i32), lane));
+        let in_run = first_lanes(n);
         let ar = unsafe { _mm256_loadu_ps(row.a.as_ptr().add(x)) };
         let live = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ar, cutoff), in_run);
         let live_bits = _mm256_movemask_ps(live);
@@ -1891,7 +1888,7 @@ unsafe fn composite_run_avx2<T: Scalar>(
         // Lanes whose cell's brick has no opacity under the transfer function contribute
         // nothing: not sampled where a whole group is in such bricks.
         let active = if ctx.skip_empty {
-            let brick = unsafe { sampler.bricks_of(&cells, bdims) };
+            let brick = unsafe { sampler.bricks_of(&cells) };
             let flags = unsafe { _mm256_i32gather_epi32::<1>(active_bytes, brick) };
             _mm256_castsi256_ps(_mm256_cmpgt_epi32(
                 _mm256_and_si256(flags, _mm256_set1_epi32(0xff)),
@@ -2005,22 +2002,14 @@ unsafe fn extreme_row_avx2<T: Scalar>(
     // are of pixels x..x + 8 ≤ the row's length; brick indices come from cells clamped to the
     // grid, so they index `extreme_bounds`.
     let sampler = unsafe { Sampler8::new(ctx, walk) };
-    let bdims = [
-        _mm256_set1_epi32(ctx.bricks.dims[0] as i32),
-        _mm256_set1_epi32(ctx.bricks.dims[1] as i32),
-    ];
     let bounds = ctx.extreme_bounds.as_ptr();
-    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let mut x = lo;
     while x <= hi && x + 8 <= row.len() {
-        let in_row = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
-            _mm256_set1_epi32((hi - x + 1).min(8) as i32),
-            lane,
-        ));
+        let in_row = first_lanes((hi - x + 1).min(8));
         let p = unsafe { row.as_mut_ptr().add(x) };
         let cur = unsafe { _mm256_loadu_ps(p) };
         let cells = unsafe { sampler.locate(x) };
-        let brick = unsafe { sampler.bricks_of(&cells, bdims) };
+        let brick = unsafe { sampler.bricks_of(&cells) };
         let bound = unsafe { _mm256_i32gather_ps::<4>(bounds, brick) };
         let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_row);
         let open = _mm256_and_ps(
@@ -2052,6 +2041,19 @@ unsafe fn extreme_row_avx2<T: Scalar>(
         x += 8;
     }
     x
+}
+
+/// A mask of the first `n` (≤ 8) of eight lanes: the pixels of a partial last group that belong
+/// to the run.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn first_lanes(n: usize) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+        _mm256_set1_epi32(n as i32),
+        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+    ))
 }
 
 /// The number of lanes set in an 8-lane `movemask`: a table, as `popcnt` is not part of AVX2
