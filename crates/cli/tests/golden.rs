@@ -216,7 +216,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "15",
         ],
         "npy",
-        0xe9586f58af80fbbb,
+        // Re-recorded 2026-11-25 for the shaded slab kernel (tables and central differences
+        // interpolated in the cell instead of the per-sample classifier): 99.6 dB from the old
+        // picture, largest difference 5.8e-4.
+        0x504aa980d99cd12e,
     ),
     (
         "X-ray",

@@ -425,10 +425,31 @@ impl FusedDensityTable {
     }
 }
 
-struct FrameLight {
-    l: Vec3,
-    h: Vec3,
-    color: Vec3,
+/// One light prepared for a frame ([`FrameClassifier::lights`]): unit vectors in the world
+/// frame and the light's RGB colour (each channel ≥ 0).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameLight {
+    /// Unit direction towards the light (world frame).
+    pub l: Vec3,
+    /// Unit half-vector between `l` and the direction towards the viewer (Blinn), or `l` where
+    /// the two are opposite.
+    pub h: Vec3,
+    /// RGB colour of the light.
+    pub color: Vec3,
+}
+
+/// What [`FrameClassifier::classify`] combines for one density before it shades: the opacity
+/// (step-corrected, modulated, in `[0, 1]`), the emission it adds (zero where the emission term
+/// is off) and the reflection colour (RGB in `[0, 1]`) that the diffuse term (and a
+/// reflection-coloured specular term) scales.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfaceTerms {
+    /// Opacity for the frame's step, in `[0, 1]`; `0` where the sample is culled.
+    pub alpha: f32,
+    /// Emitted RGB added before the lights (zero when [`Shading::emission`] is off).
+    pub emission: [f32; 3],
+    /// Reflection RGB.
+    pub reflection: [f32; 3],
 }
 
 /// The CRIO tables prepared for one frame: opacity corrected for the step, lights in world
@@ -511,6 +532,41 @@ impl FrameClassifier {
         a * self
             .modulation
             .lookup(index_value(self.modulation.index, s))[0]
+    }
+
+    /// The lights of this frame, in the world frame.
+    pub fn lights(&self) -> &[FrameLight] {
+        &self.lights
+    }
+
+    /// The shading switches and parameters the classifier was made with.
+    pub fn shading(&self) -> &Shading {
+        &self.shading
+    }
+
+    /// The terms [`FrameClassifier::classify`] combines for `density` before it shades, where
+    /// every table is indexed by density and the modulation is a constant (so that they depend
+    /// on the density alone); `None` otherwise. Renderers that shade many samples build their
+    /// own tables from these (the slab renderer's shaded kernel).
+    pub fn surface_terms(&self, density: f32) -> Option<SurfaceTerms> {
+        let (f, m) = (self.fused.as_ref()?, self.constant_modulation?);
+        let v = f.lookup(density);
+        let a = v[0] * m;
+        let alpha = if a.is_nan() || a <= 0.0 {
+            0.0
+        } else {
+            a.min(1.0)
+        };
+        let emission = if self.shading.emission {
+            [v[1], v[2], v[3]]
+        } else {
+            [0.0; 3]
+        };
+        Some(SurfaceTerms {
+            alpha,
+            emission,
+            reflection: [v[4], v[5], v[6]],
+        })
     }
 
     /// Opacity-table value only when the opacity table is indexed by density (a cheap cull test

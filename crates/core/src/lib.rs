@@ -38,7 +38,10 @@ pub use camera::{
     AnatomicalView, Camera, Orbit, OrthoProjection, PerspectiveProjection, Projection,
     ProjectionKind, ViewFrame,
 };
-pub use crio::{CrioTables, FrameClassifier, Light, LookupTable, SampleInput, Shading, TableIndex};
+pub use crio::{
+    CrioTables, FrameClassifier, FrameLight, Light, LookupTable, SampleInput, Shading,
+    SpecularColor, SurfaceTerms, TableIndex,
+};
 pub use error::{CoreError, Result};
 pub use image::{Image, Rgba, ScalarImage};
 pub use kernel::Kernel;

@@ -214,12 +214,18 @@ pub fn render_slabs<T: Scalar>(
     let post = (composite && !shade)
         .then(|| PostTable::new(tables, &classifier))
         .flatten();
+    let grad_to_world = [0, 1, 2].map(|a| (grid.direction.col(a) / grid.spacing[a]).as_vec3());
+    // Shaded composite through tables where the classification depends on the density alone;
+    // the per-sample classifier otherwise.
+    let shade_table = shade
+        .then(|| ShadeTable::new(tables, &classifier, grad_to_world))
+        .flatten();
     let ctx = Ctx {
         data: volume.data(),
         dims: grid.dims,
         max_cell: grid.dims.map(|n| n.max(2) as i64 - 2),
         simd: simd_available() && volume.data().len() < i32::MAX as usize,
-        grad_to_world: [0, 1, 2].map(|a| (grid.direction.col(a) / grid.spacing[a]).as_vec3()),
+        grad_to_world,
         stride: [1, grid.dims[0], grid.dims[0] * grid.dims[1]],
         up: [
             usize::from(grid.dims[0] > 1),
@@ -238,6 +244,7 @@ pub fn render_slabs<T: Scalar>(
         view,
         classifier: &classifier,
         post: post.as_ref(),
+        shaded: shade_table.as_ref(),
         mode: settings.mode,
         shade,
         cutoff: settings.opacity_cutoff,
@@ -563,6 +570,8 @@ struct Ctx<'a, T> {
     classifier: &'a FrameClassifier,
     /// Unshaded, density-indexed classification as one premultiplied table.
     post: Option<&'a PostTable>,
+    /// Shaded, density-indexed classification.
+    shaded: Option<&'a ShadeTable>,
     mode: RenderMode,
     shade: bool,
     cutoff: f32,
@@ -686,24 +695,24 @@ impl<T: Scalar> Ctx<'_, T> {
     /// The trilinear sample in cell `c` at fractions `f`.
     #[inline(always)]
     fn sample_cell(&self, c: [usize; 3], f: [f32; 3]) -> f32 {
-        let [ux, uy, uz] = self.up;
-        let base = c[0] + c[1] * self.stride[1] + c[2] * self.stride[2];
-        let v = |o: usize| self.data[base + o].to_f32();
-        let c00 = lerp(v(0), v(ux), f[0]);
-        let c10 = lerp(v(uy), v(uy + ux), f[0]);
-        let c01 = lerp(v(uz), v(uz + ux), f[0]);
-        let c11 = lerp(v(uz + uy), v(uz + uy + ux), f[0]);
-        lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2])
+        trilinear(self.data, self.base(c), self.up, f)
+    }
+
+    /// Linear index of voxel `c`.
+    #[inline(always)]
+    fn base(&self, c: [usize; 3]) -> usize {
+        c[0] + c[1] * self.stride[1] + c[2] * self.stride[2]
     }
 
     /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through every plane.
     fn band(&self, y0: usize, acc: &mut [Rgba]) -> Counters {
         let w = self.width;
         let rows = acc.len() / w;
-        match self.post {
+        match (self.post, self.shaded) {
             _ if self.mode != RenderMode::Composite => self.band_extreme(y0, rows, acc),
-            Some(t) => self.band_post(y0, rows, acc, t),
-            None => self.band_plain(y0, rows, acc),
+            (Some(t), _) => self.band_post(y0, rows, acc, Post::Table(t)),
+            (None, Some(t)) => self.band_post(y0, rows, acc, Post::Shaded(t)),
+            (None, None) => self.band_plain(y0, rows, acc),
         }
     }
 
@@ -712,7 +721,7 @@ impl<T: Scalar> Ctx<'_, T> {
     /// pixels at a time where the CPU has AVX2, [`Ctx::composite_one`] otherwise and for the
     /// ends of runs; the same f32 operations in the same order, so the same bits). The band's
     /// accumulation is kept as four planes of channels while it is composited.
-    fn band_post(&self, y0: usize, rows: usize, acc: &mut [Rgba], t: &PostTable) -> Counters {
+    fn band_post(&self, y0: usize, rows: usize, acc: &mut [Rgba], post: Post<'_>) -> Counters {
         let w = self.width;
         let mut c = Counters::default();
         let mut band = BandAcc {
@@ -761,10 +770,10 @@ impl<T: Scalar> Ctx<'_, T> {
                 #[cfg(target_arch = "x86_64")]
                 if self.simd {
                     // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
-                    x = unsafe { composite_run_avx2(self, &walk, a, b, &mut row, t, &mut c) };
+                    x = unsafe { composite_run_avx2(self, &walk, a, b, &mut row, post, &mut c) };
                 }
                 for x in x..=b {
-                    self.composite_one(&walk, x, &mut row, t, &mut c);
+                    self.composite_one(&walk, x, &mut row, post, &mut c);
                 }
             }
             if !any_live {
@@ -778,14 +787,14 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 
     /// Samples, classifies and composites pixel `x` of a row ([`Ctx::band_post`]): the scalar
-    /// twin of [`composite_run_avx2`].
+    /// twin of [`composite_run_avx2`] and, with `post` shaded, of [`shaded_run_avx2`].
     #[inline(always)]
     fn composite_one(
         &self,
         walk: &Walk,
         x: usize,
         row: &mut RowCtx<'_>,
-        t: &PostTable,
+        post: Post<'_>,
         c: &mut Counters,
     ) {
         if row.a[x] >= self.cutoff {
@@ -799,21 +808,13 @@ impl<T: Scalar> Ctx<'_, T> {
         c.samples += 1;
         let rho = self.sample_cell(cell, f);
         let k = boundary_factor(row.kf[x], row.din[x], row.dout[x], row.d, row.half);
-        let src = if self.view.perspective || k != 1.0 {
-            // Colour and log-transmittance per table entry: the path correction is one exp2
-            // (no log2, no division).
-            let [cr, cg, cb, l] = t.lookup_in(&t.persp, rho);
-            if l >= 0.0 {
-                return;
-            }
-            let a = 1.0 - exp2_neg(k * l);
-            [cr * a, cg * a, cb * a, a]
-        } else {
-            let v = t.lookup(rho);
-            if v[3] <= 0.0 || v[3].is_nan() {
-                return;
-            }
-            v
+        let corrected = self.view.perspective || k != 1.0;
+        let src = match post {
+            Post::Table(t) => Self::post_src(t, rho, k, corrected),
+            Post::Shaded(t) => Self::shaded_src(t, rho, self.gradient_lerp(cell, f), k, corrected),
+        };
+        let Some(src) = src else {
+            return;
         };
         let tr = 1.0 - row.a[x];
         row.r[x] += tr * src[0];
@@ -821,6 +822,89 @@ impl<T: Scalar> Ctx<'_, T> {
         row.b[x] += tr * src[2];
         row.a[x] += tr * src[3];
         c.visible += 1;
+    }
+
+    /// The premultiplied colour of an unshaded sample of density `rho` with slab exponent `k`
+    /// (`corrected`: `k ≠ 1` or perspective), or `None` where it has no opacity.
+    #[inline(always)]
+    fn post_src(t: &PostTable, rho: f32, k: f32, corrected: bool) -> Option<Rgba> {
+        if corrected {
+            // Colour and log-transmittance per table entry: the path correction is one exp2
+            // (no log2, no division).
+            let [cr, cg, cb, l] = t.lookup_in(&t.persp, rho);
+            if l >= 0.0 {
+                return None;
+            }
+            let a = 1.0 - exp2_neg(k * l);
+            Some([cr * a, cg * a, cb * a, a])
+        } else {
+            let v = t.lookup(rho);
+            if v[3] <= 0.0 || v[3].is_nan() {
+                return None;
+            }
+            Some(v)
+        }
+    }
+
+    /// The premultiplied, shaded colour of a sample of density `rho` whose interpolated voxel
+    /// gradient is `g` ([`Ctx::gradient_lerp`], index units), with slab exponent `k`, or `None`
+    /// where it has no opacity: [`FrameClassifier::classify`]'s formula (emission, then per
+    /// light the diffuse term `d·c_L·(N·L)` and the specular term `s·c_L·(N·H)^n` where `N·L > 0`
+    /// (`|N·L|` two-sided), clamped to [0, 1], times the opacity), with the terms read from
+    /// [`ShadeTable`]. The scalar twin of [`shade8`]: every operation in the same order, the
+    /// `if`s written as the kernel's masks (a term that does not apply adds `+0`) and the clamps
+    /// as `maxps`/`minps`, so the bits agree.
+    #[inline(always)]
+    fn shaded_src(t: &ShadeTable, rho: f32, g: [f32; 3], k: f32, corrected: bool) -> Option<Rgba> {
+        let v = t.entry(rho);
+        // NaN entries contribute nothing, as in the kernel's ordered comparisons.
+        let a = if corrected {
+            if v[7] < 0.0 {
+                1.0 - exp2_neg(k * v[7])
+            } else {
+                return None;
+            }
+        } else if v[0] > 0.0 {
+            v[0]
+        } else {
+            return None;
+        };
+        let m = &t.to_world;
+        let gw: [f32; 3] =
+            std::array::from_fn(|i| m[0][i] * g[0] + m[1][i] * g[1] + m[2][i] * g[2]);
+        let g2 = gw[0] * gw[0] + gw[1] * gw[1] + gw[2] * gw[2];
+        let mut col = [v[1], v[2], v[3]];
+        if (t.diffuse || t.specular) && g2 > 0.0 {
+            let inv = 1.0 / g2.sqrt();
+            let n = gw.map(|c| c * inv);
+            for light in &t.lights {
+                let (l, h, lc) = (light.l, light.h, light.color.to_array());
+                let mut ndl = n[0] * l.x + n[1] * l.y + n[2] * l.z;
+                let mut ndh = n[0] * h.x + n[1] * h.y + n[2] * h.z;
+                if t.two_sided && ndl < 0.0 {
+                    ndl = -ndl;
+                    ndh = -ndh;
+                }
+                let lit = ndl > 0.0;
+                if !lit {
+                    continue;
+                }
+                if t.diffuse {
+                    for ch in 0..3 {
+                        col[ch] += v[4 + ch] * lc[ch] * ndl;
+                    }
+                }
+                if t.specular && ndh > 0.0 {
+                    let p = t.spec(ndh);
+                    for ch in 0..3 {
+                        let s = t.spec_color.map_or(v[4 + ch], |c| c[ch]);
+                        col[ch] += s * lc[ch] * p;
+                    }
+                }
+            }
+        }
+        let col = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
+        Some([col[0], col[1], col[2], a])
     }
 
     /// Calls `f(a, b)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells lie in
@@ -981,6 +1065,45 @@ impl<T: Scalar> Ctx<'_, T> {
             }
         }
         self.grad_to_world[0] * g[0] + self.grad_to_world[1] * g[1] + self.grad_to_world[2] * g[2]
+    }
+
+    /// The voxels' central differences (one-sided on the faces of the grid, zero along an axis
+    /// of one voxel), in data units per index step, interpolated trilinearly in cell `c` at
+    /// fractions `f`: per axis, the same interpolation as [`Ctx::sample_cell`] of the
+    /// differences at the cell's eight corners, each `(ρ(p + e) − ρ(p − e)) · ½` (one-sided:
+    /// `(ρ(p + e) − ρ(p)) · 1`). The scalar twin of [`ShadeSource`]'s gradients (interior cells).
+    #[inline(always)]
+    fn gradient_lerp(&self, c: [usize; 3], f: [f32; 3]) -> [f32; 3] {
+        let base = self.base(c);
+        let [ux, uy, uz] = self.up;
+        // Corner k of the cell is (k & 1, k >> 1 & 1, k >> 2) voxels from its lower corner.
+        let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
+        let mut g = [0.0f32; 3];
+        for (a, out) in g.iter_mut().enumerate() {
+            let (n, s) = (self.dims[a], self.stride[a]);
+            if n < 2 {
+                continue;
+            }
+            let mut d = [0.0f32; 8];
+            for (k, (dk, &o)) in d.iter_mut().zip(&offs).enumerate() {
+                let p = c[a] + (k >> a & 1);
+                let at = base + o;
+                let v = |q: usize| self.data[q].to_f32();
+                *dk = if p == 0 {
+                    (v(at + s) - v(at)) * 1.0
+                } else if p == n - 1 {
+                    (v(at) - v(at - s)) * 1.0
+                } else {
+                    (v(at + s) - v(at - s)) * 0.5
+                };
+            }
+            let c00 = lerp(d[0], d[1], f[0]);
+            let c10 = lerp(d[2], d[3], f[0]);
+            let c01 = lerp(d[4], d[5], f[0]);
+            let c11 = lerp(d[6], d[7], f[0]);
+            *out = lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
+        }
+        g
     }
 
     /// Composite through the classifier (shaded, or tables that a density-indexed table cannot
@@ -1269,16 +1392,7 @@ impl PostTable {
         {
             return None;
         }
-        let lo = tables
-            .opacity
-            .lo
-            .min(tables.emission.lo)
-            .min(tables.reflection.lo);
-        let hi = tables
-            .opacity
-            .hi
-            .max(tables.emission.hi)
-            .max(tables.reflection.hi);
+        let (lo, hi) = table_range(tables);
         let n = if hi > lo { Self::LEN } else { 1 };
         let values: Vec<Rgba> = (0..n)
             .map(|k| {
@@ -1360,6 +1474,139 @@ impl PostTable {
     }
 }
 
+/// What the shaded kernel reads per sample ([`Ctx::shaded_src`]): the classifier's terms before
+/// shading ([`FrameClassifier::surface_terms`]) at 1024 densities, read with linear
+/// interpolation like [`PostTable`], the lights of the frame, a table of the specular power, and
+/// the matrix from the stored gradient field to world gradients.
+struct ShadeTable {
+    lo: f32,
+    scale: f32,
+    last: f32,
+    /// `[α, e_r, e_g, e_b, d_r, d_g, d_b, log2(1 − α)]` per density (α step-corrected, `e` the
+    /// emission `classify` adds, `d` the reflection colour; `log2(1 − α)` is −126 for `α = 1`),
+    /// with the last entry repeated so that entry `i + 1` exists for every `i ≤ last`.
+    rows: Vec<[f32; 8]>,
+    /// `x^n` at `x = i / SPEC` for `i` in `0..=SPEC`, the last repeated (as `classify`'s own
+    /// table of 4097 entries).
+    spec_pow: Vec<f32>,
+    lights: Vec<volsplat_core::FrameLight>,
+    diffuse: bool,
+    specular: bool,
+    two_sided: bool,
+    /// Constant specular colour, or `None` for the reflection colour.
+    spec_color: Option<[f32; 3]>,
+    /// Column `a`: the world gradient per unit of the index-space derivative along axis `a`
+    /// (`Ctx::grad_to_world`).
+    to_world: [[f32; 3]; 3],
+}
+
+impl ShadeTable {
+    const LEN: usize = 1024;
+    const SPEC: usize = 4096;
+
+    /// `None` where the classifier's terms depend on more than the density (tables indexed by
+    /// gradient magnitude or depth, a modulation that is not constant).
+    fn new(
+        tables: &CrioTables,
+        classifier: &FrameClassifier,
+        grad_to_world: [Vec3; 3],
+    ) -> Option<Self> {
+        let (lo, hi) = table_range(tables);
+        classifier.surface_terms(lo)?;
+        let n = if hi > lo { Self::LEN } else { 1 };
+        let mut rows: Vec<[f32; 8]> = (0..n)
+            .map(|k| {
+                let x = if n == 1 {
+                    lo
+                } else {
+                    lo + (hi - lo) * k as f32 / (n - 1) as f32
+                };
+                let t = classifier
+                    .surface_terms(x)
+                    .unwrap_or(volsplat_core::SurfaceTerms {
+                        alpha: 0.0,
+                        emission: [0.0; 3],
+                        reflection: [0.0; 3],
+                    });
+                let a = t.alpha;
+                let l = if a <= 0.0 {
+                    0.0
+                } else if a >= 1.0 {
+                    -126.0
+                } else {
+                    log2_unit(1.0 - a).max(-126.0)
+                };
+                let [er, eg, eb] = t.emission;
+                let [dr, dg, db] = t.reflection;
+                [a, er, eg, eb, dr, dg, db, l]
+            })
+            .collect();
+        rows.push(rows[n - 1]);
+        let sh = classifier.shading();
+        let p = sh.specular_power as f64;
+        let mut spec_pow: Vec<f32> = (0..=Self::SPEC)
+            .map(|i| (i as f64 / Self::SPEC as f64).powf(p) as f32)
+            .collect();
+        spec_pow.push(spec_pow[Self::SPEC]);
+        Some(ShadeTable {
+            lo,
+            scale: if n > 1 {
+                (n - 1) as f32 / (hi - lo)
+            } else {
+                0.0
+            },
+            last: (n - 1) as f32,
+            rows,
+            spec_pow,
+            lights: classifier.lights().to_vec(),
+            diffuse: sh.diffuse,
+            specular: sh.specular,
+            two_sided: sh.two_sided,
+            spec_color: match sh.specular_color {
+                volsplat_core::SpecularColor::Constant(c) => Some(c),
+                volsplat_core::SpecularColor::Reflection => None,
+            },
+            to_world: grad_to_world.map(|g| g.to_array()),
+        })
+    }
+
+    /// The entry at density `x`, linearly interpolated.
+    #[inline(always)]
+    fn entry(&self, x: f32) -> [f32; 8] {
+        let t = ((x - self.lo) * self.scale).max(0.0).min(self.last);
+        // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
+        let i = t as i32 as usize;
+        let f = t - i as f32;
+        let (a, b) = (self.rows[i], self.rows[i + 1]);
+        std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
+    }
+
+    /// `x^n` for `x` in `(0, 1]`, linearly interpolated in the table.
+    #[inline(always)]
+    fn spec(&self, x: f32) -> f32 {
+        let t = min_ps(max_ps(x * Self::SPEC as f32, 0.0), Self::SPEC as f32);
+        let i = t as i32 as usize;
+        let f = t - i as f32;
+        let (a, b) = (self.spec_pow[i], self.spec_pow[i + 1]);
+        a + f * (b - a)
+    }
+}
+
+/// The density range `[lo, hi]` that the density-indexed tables cover together.
+fn table_range(tables: &CrioTables) -> (f32, f32) {
+    let lo = tables
+        .opacity
+        .lo
+        .min(tables.emission.lo)
+        .min(tables.reflection.lo);
+    let hi = tables
+        .opacity
+        .hi
+        .max(tables.emission.hi)
+        .max(tables.reflection.hi);
+    (lo, hi)
+}
+
 /// `log2(y)` for `y` in `(0, 1]`: the exponent plus the series of `log2((1 + t)/(1 − t))`,
 /// `t = (m − 1)/(m + 1) ∈ [0, 1/3)`, to `t⁹` (error below 2·10⁻⁶). Plain arithmetic, so every
 /// platform gives the same bits (no libm).
@@ -1394,6 +1641,33 @@ fn exp2_neg(z: f32) -> f32 {
     f32::from_bits(((i + 127) as u32) << 23) * p * std::f32::consts::FRAC_1_SQRT_2
 }
 
+/// The trilinear interpolation of `data` (a grid with the volume's strides) in the cell whose
+/// lower corner has linear index `base`, at fractions `f`; `up` is the offset to the next voxel
+/// per axis. [`Sampler8::sample`] does the same operations in the same order.
+#[inline(always)]
+fn trilinear<U: Scalar>(data: &[U], base: usize, up: [usize; 3], f: [f32; 3]) -> f32 {
+    let [ux, uy, uz] = up;
+    let v = |o: usize| data[base + o].to_f32();
+    let c00 = lerp(v(0), v(ux), f[0]);
+    let c10 = lerp(v(uy), v(uy + ux), f[0]);
+    let c01 = lerp(v(uz), v(uz + ux), f[0]);
+    let c11 = lerp(v(uz + uy), v(uz + uy + ux), f[0]);
+    lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2])
+}
+
+/// `max(x, lo)` as `maxps` computes it (`x > lo ? x : lo`, so NaN and −0 give `lo`), for the
+/// scalar twins of the AVX2 kernels.
+#[inline(always)]
+fn max_ps(x: f32, lo: f32) -> f32 {
+    if x > lo { x } else { lo }
+}
+
+/// `min(x, hi)` as `minps` computes it (`x < hi ? x : hi`).
+#[inline(always)]
+fn min_ps(x: f32, hi: f32) -> f32 {
+    if x < hi { x } else { hi }
+}
+
 #[inline(always)]
 fn lerp(a: f32, b: f32, t: f32) -> f32 {
     a + t * (b - a)
@@ -1423,6 +1697,13 @@ fn simd_available() -> bool {
 }
 
 /// The accumulation of a band of rows as four planes of channels ([`Ctx::band_post`]).
+/// How [`Ctx::band_post`] classifies: through the unshaded table, or shaded.
+#[derive(Clone, Copy)]
+enum Post<'a> {
+    Table(&'a PostTable),
+    Shaded(&'a ShadeTable),
+}
+
 struct BandAcc {
     r: Vec<f32>,
     g: Vec<f32>,
@@ -1639,18 +1920,130 @@ impl<T: Scalar> Sampler8<T> {
     #[inline]
     #[target_feature(enable = "avx2")]
     unsafe fn sample(&self, c: &Cells8) -> Option<std::arch::x86_64::__m256> {
+        // SAFETY: the caller's guarantees are these calls' own.
+        unsafe { self.sample_at(self.base_of(c), c.fractions()) }
+    }
+
+    /// The linear index of each lane's cell (its lower corner).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn base_of(&self, c: &Cells8) -> std::arch::x86_64::__m256i {
         use std::arch::x86_64::*;
-        use volsplat_core::ScalarType;
         let cell = &c.cell;
-        // SAFETY: the caller guarantees AVX2.
-        let frac = unsafe { c.fractions() };
-        let base = _mm256_add_epi32(
+        _mm256_add_epi32(
             cell[0],
             _mm256_add_epi32(
                 _mm256_mullo_epi32(cell[1], self.sy),
                 _mm256_mullo_epi32(cell[2], self.sz),
             ),
-        );
+        )
+    }
+
+    /// Voxels `idx, idx + 1, …, idx + N − 1` of each lane as f32 (`N` = 2 or 4): one 32-bit
+    /// gather for four 8-bit voxels, one per two 16-bit voxels, one per 32-bit voxel.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2; for every lane the voxels read must lie in the data, and for
+    /// 8/16-bit samples the 4-byte word read at each gathered voxel too.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn gather_run<const N: usize>(
+        &self,
+        idx: std::arch::x86_64::__m256i,
+    ) -> [std::arch::x86_64::__m256; N] {
+        use std::arch::x86_64::*;
+        use volsplat_core::ScalarType;
+        let mut out = [_mm256_setzero_ps(); N];
+        let ptr = self.ptr;
+        // SAFETY (gathers): the caller guarantees the reads.
+        match self.kind {
+            ScalarType::U8 | ScalarType::I8 => {
+                let w = unsafe { _mm256_i32gather_epi32::<1>(ptr, idx) };
+                for (j, o) in out.iter_mut().enumerate() {
+                    let v = if self.kind == ScalarType::U8 {
+                        _mm256_and_si256(
+                            _mm256_srlv_epi32(w, _mm256_set1_epi32(8 * j as i32)),
+                            _mm256_set1_epi32(0xff),
+                        )
+                    } else {
+                        _mm256_srai_epi32::<24>(_mm256_sllv_epi32(
+                            w,
+                            _mm256_set1_epi32(24 - 8 * j as i32),
+                        ))
+                    };
+                    *o = _mm256_cvtepi32_ps(v);
+                }
+            }
+            ScalarType::U16 | ScalarType::I16 => {
+                for p in 0..N / 2 {
+                    let at = _mm256_add_epi32(idx, _mm256_set1_epi32(2 * p as i32));
+                    let w = unsafe { _mm256_i32gather_epi32::<2>(ptr, at) };
+                    let (lo, hi) = if self.kind == ScalarType::U16 {
+                        (
+                            _mm256_and_si256(w, _mm256_set1_epi32(0xffff)),
+                            _mm256_srli_epi32::<16>(w),
+                        )
+                    } else {
+                        (
+                            _mm256_srai_epi32::<16>(_mm256_slli_epi32::<16>(w)),
+                            _mm256_srai_epi32::<16>(w),
+                        )
+                    };
+                    out[2 * p] = _mm256_cvtepi32_ps(lo);
+                    out[2 * p + 1] = _mm256_cvtepi32_ps(hi);
+                }
+            }
+            ScalarType::F32 => {
+                for (j, o) in out.iter_mut().enumerate() {
+                    let at = _mm256_add_epi32(idx, _mm256_set1_epi32(j as i32));
+                    *o = unsafe { _mm256_i32gather_ps::<4>(ptr as *const f32, at) };
+                }
+            }
+        }
+        out
+    }
+
+    /// Voxels `idx … idx + 3` ([`Sampler8::gather_run`]).
+    ///
+    /// # Safety
+    /// As [`Sampler8::gather_run`].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn gather4(&self, idx: std::arch::x86_64::__m256i) -> [std::arch::x86_64::__m256; 4] {
+        // SAFETY: the caller's guarantees.
+        unsafe { self.gather_run::<4>(idx) }
+    }
+
+    /// Voxels `idx` and `idx + 1` ([`Sampler8::gather_run`]).
+    ///
+    /// # Safety
+    /// As [`Sampler8::gather_run`].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn gather2(&self, idx: std::arch::x86_64::__m256i) -> [std::arch::x86_64::__m256; 2] {
+        // SAFETY: the caller's guarantees.
+        unsafe { self.gather_run::<2>(idx) }
+    }
+
+    /// The trilinear samples in the cells with linear indices `base` ([`Sampler8::base_of`]) at
+    /// fractions `frac` ([`Cells8::fractions`]), or `None` where an 8/16-bit read would pass the
+    /// end of the data.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, and `base` must come from cells located by this sampler (or
+    /// one with the same grid).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sample_at(
+        &self,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<std::arch::x86_64::__m256> {
+        use std::arch::x86_64::*;
+        use volsplat_core::ScalarType;
         let top = _mm256_add_epi32(base, _mm256_set1_epi32(self.offs[7]));
         if self.small && _mm256_movemask_epi8(_mm256_cmpgt_epi32(top, self.last_ok)) != 0 {
             return None;
@@ -1775,37 +2168,129 @@ unsafe fn sample_run_avx2<T: Scalar>(
     x
 }
 
-/// Samples, classifies and composites pixels `a..=b` of a row eight at a time: lane `l` does
-/// exactly [`Ctx::composite_one`]'s f32 operations for pixel `x + l` (table lookups with
-/// paired rows, the path correction with the same polynomial `exp2`); returns the first pixel
-/// not done (the run's end, or the last pixels of the row where a group would pass it: those
-/// are left to the scalar twin).
+/// An 8×8 transpose: lane `l` of output `c` is element `c` of input row `l`.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn transpose8(r: [std::arch::x86_64::__m256; 8]) -> [std::arch::x86_64::__m256; 8] {
+    use std::arch::x86_64::*;
+    let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+    let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+    let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+    let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+    let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+    let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+    let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+    let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+    let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+    let u1 = _mm256_shuffle_ps::<0xee>(t0, t2);
+    let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+    let u3 = _mm256_shuffle_ps::<0xee>(t1, t3);
+    let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+    let u5 = _mm256_shuffle_ps::<0xee>(t4, t6);
+    let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+    let u7 = _mm256_shuffle_ps::<0xee>(t5, t7);
+    [
+        _mm256_permute2f128_ps::<0x20>(u0, u4),
+        _mm256_permute2f128_ps::<0x20>(u1, u5),
+        _mm256_permute2f128_ps::<0x20>(u2, u6),
+        _mm256_permute2f128_ps::<0x20>(u3, u7),
+        _mm256_permute2f128_ps::<0x31>(u0, u4),
+        _mm256_permute2f128_ps::<0x31>(u1, u5),
+        _mm256_permute2f128_ps::<0x31>(u2, u6),
+        _mm256_permute2f128_ps::<0x31>(u3, u7),
+    ]
+}
+
+/// Rows `idx + off` of a table of 32-byte rows, transposed ([`transpose8`]): lane `l` of output
+/// `c` is element `c` of row `idx[l] + off`.
+///
+/// # Safety
+/// The CPU must support AVX2, and every `idx[l] + off` must be a row of `rows`.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn rows8(rows: &[[f32; 8]], idx: &[i32; 8], off: usize) -> [std::arch::x86_64::__m256; 8] {
+    use std::arch::x86_64::*;
+    let base = rows.as_ptr();
+    let mut r = [_mm256_setzero_ps(); 8];
+    for l in 0..8 {
+        // SAFETY: the caller guarantees the rows exist.
+        r[l] = unsafe { _mm256_loadu_ps(base.add(idx[l] as usize + off) as *const f32) };
+    }
+    transpose8(r)
+}
+
+/// Linear interpolation at positions `pos` (clamped to `[0, last]`) in a table of entries of
+/// eight channels, lane by lane: `(i, f)` from `pos`, then `row_i + f·(row_{i+1} − row_i)` per
+/// channel. With `paired`, row `i` holds entry `i` in its first four floats and entry `i + 1` in
+/// its last four (four channels, one load per lane); otherwise entry `i + 1` is the next row.
+///
+/// # Safety
+/// The CPU must support AVX2; the rows read must exist (`i ≤ last`, and `i + 1` too unless
+/// `paired`).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn interp8(
+    rows: &[[f32; 8]],
+    pos: std::arch::x86_64::__m256,
+    paired: bool,
+) -> [std::arch::x86_64::__m256; 8] {
+    use std::arch::x86_64::*;
+    let i = _mm256_cvttps_epi32(pos);
+    let f = _mm256_sub_ps(pos, _mm256_cvtepi32_ps(i));
+    let mut idx = [0i32; 8];
+    // SAFETY: idx holds 8 i32; the rows' existence is the caller's guarantee.
+    unsafe { _mm256_storeu_si256(idx.as_mut_ptr() as *mut __m256i, i) };
+    let mut out = unsafe { rows8(rows, &idx, 0) };
+    if paired {
+        for ch in 0..4 {
+            let (p, q) = (out[ch], out[ch + 4]);
+            out[ch] = _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
+        }
+    } else {
+        let next = unsafe { rows8(rows, &idx, 1) };
+        for ch in 0..8 {
+            let (p, q) = (out[ch], next[ch]);
+            out[ch] = _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
+        }
+    }
+    out
+}
+
+/// The skeleton of the composite kernels: pixels `a..=b` of a row, eight at a time, skipping
+/// groups that are opaque or whose cells' bricks have no opacity, sampling the volume
+/// ([`Sampler8`]), computing each lane's slab exponent (`boundary_factor`) and compositing what
+/// `src` returns front to back into the row's channel planes: lane `l` does exactly
+/// [`Ctx::composite_one`]'s f32 operations for pixel `x + l`; the classification `src`
+/// ([`Source8::src`]) gives the premultiplied colours and the lanes that contribute. Returns the first pixel not done (`b + 1`, or earlier
+/// where a group's reads would pass the end of the data, or the last pixels of the row where a
+/// group would pass it: those are left to the scalar twin).
 ///
 /// # Safety
 /// The CPU must support AVX2.
 #[cfg(target_arch = "x86_64")]
+#[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn composite_run_avx2<T: Scalar>(
+#[allow(clippy::too_many_arguments)]
+unsafe fn composite_groups_avx2<T: Scalar>(
     ctx: &Ctx<'_, T>,
     walk: &Walk,
-    a: usize,
-    b: usize,
+    sampler: &Sampler8<T>,
+    (a, b): (usize, usize),
     row: &mut RowCtx<'_>,
-    t: &PostTable,
+    (post, src): (Post<'_>, &impl Source8<T>),
     c: &mut Counters,
 ) -> usize {
     use std::arch::x86_64::*;
     // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
-    // are of pixels x..x + 8 ≤ b + 1 ≤ the row's length.
-    let sampler = unsafe { Sampler8::new(ctx, walk) };
+    // are of pixels x..x + 8 ≤ the row's length.
     // One byte per brick, padded so that a 4-byte read at the last brick stays inside.
     let active_bytes = ctx.active_bytes.as_ptr() as *const i32;
     let zero = _mm256_setzero_ps();
     let one = _mm256_set1_ps(1.0);
     let cutoff = _mm256_set1_ps(ctx.cutoff);
-    let lo = _mm256_set1_ps(t.lo);
-    let scale = _mm256_set1_ps(t.scale);
-    let last = _mm256_set1_ps(t.last);
     let d = row.d;
     let two_half = 2.0 * row.half;
     let front = _mm256_set1_ps(d - two_half);
@@ -1814,62 +2299,6 @@ unsafe fn composite_run_avx2<T: Scalar>(
     let d_plus = _mm256_set1_ps(d + row.half);
     let two_half_v = _mm256_set1_ps(two_half);
     let persp = ctx.view.perspective;
-    let values = &t.pairs;
-    let logs = &t.persp_pairs;
-    // Linear interpolation in a table of [f32; 4] entries at the positions `pos` (already
-    // clamped to [0, last]), one channel at a time: `PostTable::lookup_in`, lane by lane.
-    // Linear interpolation in a table at the positions `pos` (already clamped to [0, last]):
-    // `PostTable::lookup_in`, lane by lane. Each lane loads its entry and the next one as one
-    // 32-byte row of the paired table, and an 8×8 transpose turns the eight rows into the
-    // channels of both entries (cheaper than eight gathers).
-    macro_rules! lookup {
-        ($pairs:expr, $pos:expr) => {{
-            let pos = $pos;
-            let i = _mm256_cvttps_epi32(pos);
-            let f = _mm256_sub_ps(pos, _mm256_cvtepi32_ps(i));
-            let mut idx = [0i32; 8];
-            unsafe { _mm256_storeu_si256(idx.as_mut_ptr() as *mut __m256i, i) };
-            let base: *const [f32; 8] = $pairs.as_ptr();
-            // SAFETY: every index is in [0, last] (pos is clamped), a row of the table.
-            let r = idx.map(|k| unsafe { _mm256_loadu_ps(base.add(k as usize) as *const f32) });
-            let t0 = _mm256_unpacklo_ps(r[0], r[1]);
-            let t1 = _mm256_unpackhi_ps(r[0], r[1]);
-            let t2 = _mm256_unpacklo_ps(r[2], r[3]);
-            let t3 = _mm256_unpackhi_ps(r[2], r[3]);
-            let t4 = _mm256_unpacklo_ps(r[4], r[5]);
-            let t5 = _mm256_unpackhi_ps(r[4], r[5]);
-            let t6 = _mm256_unpacklo_ps(r[6], r[7]);
-            let t7 = _mm256_unpackhi_ps(r[6], r[7]);
-            let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
-            let u1 = _mm256_shuffle_ps::<0xee>(t0, t2);
-            let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
-            let u3 = _mm256_shuffle_ps::<0xee>(t1, t3);
-            let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
-            let u5 = _mm256_shuffle_ps::<0xee>(t4, t6);
-            let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
-            let u7 = _mm256_shuffle_ps::<0xee>(t5, t7);
-            let lerp =
-                |p: __m256, q: __m256| _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)));
-            [
-                lerp(
-                    _mm256_permute2f128_ps::<0x20>(u0, u4),
-                    _mm256_permute2f128_ps::<0x31>(u0, u4),
-                ),
-                lerp(
-                    _mm256_permute2f128_ps::<0x20>(u1, u5),
-                    _mm256_permute2f128_ps::<0x31>(u1, u5),
-                ),
-                lerp(
-                    _mm256_permute2f128_ps::<0x20>(u2, u6),
-                    _mm256_permute2f128_ps::<0x31>(u2, u6),
-                ),
-                lerp(
-                    _mm256_permute2f128_ps::<0x20>(u3, u7),
-                    _mm256_permute2f128_ps::<0x31>(u3, u7),
-                ),
-            ]
-        }};
-    }
     let mut x = a;
     // The last group of the run may be partial: its lanes past `b` are masked (they read
     // clamped cells, valid reads, and store what they loaded).
@@ -1904,8 +2333,21 @@ unsafe fn composite_run_avx2<T: Scalar>(
             x += 8;
             continue;
         }
+        if unsafe { src.scalar_lanes(&cells, live) } {
+            // The scalar twin takes the group's live lanes (the others are counted above or
+            // contribute nothing).
+            for l in 0..n {
+                if live_bits >> l & 1 == 1 {
+                    ctx.composite_one(walk, x + l, row, post, c);
+                }
+            }
+            x += 8;
+            continue;
+        }
         c.samples += u64::from(lanes(live_bits));
-        let Some(rho) = (unsafe { sampler.sample(&cells) }) else {
+        let base = unsafe { sampler.base_of(&cells) };
+        let frac = unsafe { cells.fractions() };
+        let Some((rho, pre)) = (unsafe { src.sample(&cells, base, frac) }) else {
             break;
         };
         // The slab's exponent (`boundary_factor`, lane by lane).
@@ -1923,39 +2365,15 @@ unsafe fn composite_run_avx2<T: Scalar>(
             let q = _mm256_max_ps(_mm256_div_ps(_mm256_sub_ps(h, l), two_half_v), zero);
             _mm256_blendv_ps(kf, _mm256_mul_ps(kf, q), cut)
         };
-        let pos = _mm256_min_ps(
-            _mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(rho, lo), scale), zero),
-            last,
-        );
         // Lanes that take the path-corrected form.
         let corrected = if persp {
             _mm256_castsi256_ps(_mm256_set1_epi32(-1))
         } else {
             _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, one)
         };
-        let corrected_bits = _mm256_movemask_ps(corrected);
-        let mut src = [zero; 4];
-        let mut contributes = _mm256_setzero_ps();
-        if corrected_bits != 0xff {
-            let v = lookup!(values, pos);
-            src = v;
-            contributes = _mm256_cmp_ps::<_CMP_GT_OQ>(v[3], zero);
-        }
-        if corrected_bits != 0 {
-            let [cr, cg, cb, l] = lookup!(logs, pos);
-            let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(l, zero);
-            let a = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, l)));
-            let pc = [
-                _mm256_mul_ps(cr, a),
-                _mm256_mul_ps(cg, a),
-                _mm256_mul_ps(cb, a),
-                a,
-            ];
-            for ch in 0..4 {
-                src[ch] = _mm256_blendv_ps(src[ch], pc[ch], corrected);
-            }
-            contributes = _mm256_blendv_ps(contributes, ok, corrected);
-        }
+        let Some((src, contributes)) = (unsafe { src.src(&pre, frac, rho, k, corrected) }) else {
+            break;
+        };
         let mask = _mm256_and_ps(contributes, live);
         let bits = _mm256_movemask_ps(mask);
         if bits != 0 {
@@ -1975,6 +2393,510 @@ unsafe fn composite_run_avx2<T: Scalar>(
         x += 8;
     }
     x
+}
+
+/// Composite of pixels `a..=b` of a row, eight at a time ([`composite_groups_avx2`]), classified
+/// unshaded through the post table ([`PostSource`]) or shaded ([`ShadeSource`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn composite_run_avx2<T: Scalar>(
+    ctx: &Ctx<'_, T>,
+    walk: &Walk,
+    a: usize,
+    b: usize,
+    row: &mut RowCtx<'_>,
+    post: Post<'_>,
+    c: &mut Counters,
+) -> usize {
+    use std::arch::x86_64::*;
+    // SAFETY (all calls): the caller guarantees AVX2.
+    let sampler = unsafe { Sampler8::new(ctx, walk) };
+    match post {
+        Post::Table(t) => unsafe {
+            let src = PostSource {
+                t,
+                sampler: &sampler,
+            };
+            composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c)
+        },
+        // Central differences need a voxel each side of a cell: grids under 4 voxels on an axis
+        // have no interior cell, and take the scalar twin.
+        Post::Shaded(_) if ctx.dims.iter().any(|&n| n < 4) => a,
+        Post::Shaded(t) => {
+            let src = ShadeSource {
+                t,
+                sampler: &sampler,
+                inner_max: ctx.dims.map(|n| _mm256_set1_epi32(n as i32 - 3)),
+                safe_base: _mm256_set1_epi32((1 + ctx.stride[1] + ctx.stride[2]) as i32),
+            };
+            unsafe { composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c) }
+        }
+    }
+}
+
+/// The sampling and classification of a group of eight samples for [`composite_groups_avx2`].
+#[cfg(target_arch = "x86_64")]
+trait Source8<T> {
+    /// What [`Source8::sample`] read that [`Source8::src`] uses again.
+    type Pre;
+
+    /// Whether a lane of `live` must take the scalar twin (the kernel cannot read what it
+    /// needs there).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    unsafe fn scalar_lanes(&self, cells: &Cells8, live: std::arch::x86_64::__m256) -> bool;
+
+    /// The trilinear samples in `cells` (linear indices `base`, fractions `frac`), as
+    /// [`Sampler8::sample_at`] computes them, or `None` where a read would pass the end of the
+    /// data.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2; the cells must be the volume's, and no live lane may need
+    /// the scalar twin ([`Source8::scalar_lanes`]).
+    unsafe fn sample(
+        &self,
+        cells: &Cells8,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<(std::arch::x86_64::__m256, Self::Pre)>;
+
+    /// The premultiplied colours of the samples `rho` at fractions `frac` with slab exponents
+    /// `k`, and the mask of lanes that contribute; `corrected` is the mask of lanes whose
+    /// opacity takes the path correction (perspective, or `k ≠ 1`).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2; `pre` must come from [`Source8::sample`].
+    unsafe fn src(
+        &self,
+        pre: &Self::Pre,
+        frac: [std::arch::x86_64::__m256; 3],
+        rho: std::arch::x86_64::__m256,
+        k: std::arch::x86_64::__m256,
+        corrected: std::arch::x86_64::__m256,
+    ) -> Option<([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256)>;
+}
+
+/// Unshaded classification through the post table: lane `l` does exactly [`Ctx::post_src`]'s
+/// f32 operations (table lookups with paired rows, the path correction with the same polynomial
+/// `exp2`).
+#[cfg(target_arch = "x86_64")]
+struct PostSource<'a, T> {
+    t: &'a PostTable,
+    sampler: &'a Sampler8<T>,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<T: Scalar> Source8<T> for PostSource<'_, T> {
+    type Pre = ();
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn scalar_lanes(&self, _: &Cells8, _: std::arch::x86_64::__m256) -> bool {
+        false
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sample(
+        &self,
+        _: &Cells8,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<(std::arch::x86_64::__m256, ())> {
+        // SAFETY: the caller's guarantees.
+        Some((unsafe { self.sampler.sample_at(base, frac) }?, ()))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn src(
+        &self,
+        _: &(),
+        _: [std::arch::x86_64::__m256; 3],
+        rho: std::arch::x86_64::__m256,
+        k: std::arch::x86_64::__m256,
+        corrected: std::arch::x86_64::__m256,
+    ) -> Option<([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256)> {
+        use std::arch::x86_64::*;
+        let t = self.t;
+        let zero = _mm256_setzero_ps();
+        let one = _mm256_set1_ps(1.0);
+        let pos = _mm256_min_ps(
+            _mm256_max_ps(
+                _mm256_mul_ps(
+                    _mm256_sub_ps(rho, _mm256_set1_ps(t.lo)),
+                    _mm256_set1_ps(t.scale),
+                ),
+                zero,
+            ),
+            _mm256_set1_ps(t.last),
+        );
+        let corrected_bits = _mm256_movemask_ps(corrected);
+        let mut src = [zero; 4];
+        let mut contributes = _mm256_setzero_ps();
+        // SAFETY (interp8): positions are clamped to [0, last], rows of the paired tables.
+        if corrected_bits != 0xff {
+            let v = unsafe { interp8(&t.pairs, pos, true) };
+            src = [v[0], v[1], v[2], v[3]];
+            contributes = _mm256_cmp_ps::<_CMP_GT_OQ>(v[3], zero);
+        }
+        if corrected_bits != 0 {
+            let v = unsafe { interp8(&t.persp_pairs, pos, true) };
+            let l = v[3];
+            let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(l, zero);
+            let a = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, l)));
+            src[0] = _mm256_blendv_ps(src[0], _mm256_mul_ps(v[0], a), corrected);
+            src[1] = _mm256_blendv_ps(src[1], _mm256_mul_ps(v[1], a), corrected);
+            src[2] = _mm256_blendv_ps(src[2], _mm256_mul_ps(v[2], a), corrected);
+            src[3] = _mm256_blendv_ps(src[3], a, corrected);
+            contributes = _mm256_blendv_ps(contributes, ok, corrected);
+        }
+        Some((src, contributes))
+    }
+}
+
+/// Shaded classification ([`shade8`]) with the voxels' central differences gathered from the
+/// volume itself and interpolated in the sample's cell: lane `l` does exactly
+/// [`Ctx::gradient_lerp`]'s and [`Ctx::shaded_src`]'s f32 operations. A cell's differences read
+/// the 4×4×4 block around it without its edges: four rows of four voxels along x through the
+/// cell's own four (y, z) corners, and eight rows of two beside them (the rows one before and two
+/// after along y and z). So only interior cells (one voxel from every face) are read here;
+/// lanes on the faces take the scalar twin, whose differences are one-sided there.
+#[cfg(target_arch = "x86_64")]
+struct ShadeSource<'a, T> {
+    t: &'a ShadeTable,
+    sampler: &'a Sampler8<T>,
+    /// `n − 3` per axis: the largest interior cell.
+    inner_max: [std::arch::x86_64::__m256i; 3],
+    /// The linear index of cell (1, 1, 1), read in place of lanes that are not interior (their
+    /// results are dropped).
+    safe_base: std::arch::x86_64::__m256i,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<T: Scalar> ShadeSource<'_, T> {
+    /// The mask of lanes whose cell is interior (between 1 and `n − 3` on every axis).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn interior(&self, cells: &Cells8) -> std::arch::x86_64::__m256 {
+        use std::arch::x86_64::*;
+        let zero = _mm256_setzero_si256();
+        let mut m = _mm256_set1_epi32(-1);
+        for ax in 0..3 {
+            let c = cells.cell[ax];
+            let inside = _mm256_andnot_si256(
+                _mm256_cmpgt_epi32(c, self.inner_max[ax]),
+                _mm256_cmpgt_epi32(c, zero),
+            );
+            m = _mm256_and_si256(m, inside);
+        }
+        _mm256_castsi256_ps(m)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
+    /// The rows' first voxels (`base` with lanes that are not interior moved to cell
+    /// (1, 1, 1)) and `c[j][k]`: voxels x − 1 … x + 2 of row (y + j, z + k).
+    type Pre = (
+        std::arch::x86_64::__m256i,
+        [[[std::arch::x86_64::__m256; 4]; 2]; 2],
+    );
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn scalar_lanes(&self, cells: &Cells8, live: std::arch::x86_64::__m256) -> bool {
+        use std::arch::x86_64::*;
+        _mm256_movemask_ps(_mm256_andnot_ps(self.interior(cells), live)) != 0
+    }
+
+    /// The sample from the four central rows (the cell's corners are their voxels x and
+    /// x + 1), which the differences read again.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sample(
+        &self,
+        cells: &Cells8,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<(std::arch::x86_64::__m256, Self::Pre)> {
+        use std::arch::x86_64::*;
+        let base = _mm256_blendv_epi8(
+            self.safe_base,
+            base,
+            _mm256_castps_si256(self.interior(cells)),
+        );
+        let s = self.sampler;
+        let first = _mm256_sub_epi32(base, _mm256_set1_epi32(1));
+        let (y1, z1) = (_mm256_add_epi32(first, s.sy), _mm256_add_epi32(first, s.sz));
+        // SAFETY: interior cells (or cell (1, 1, 1)): voxels x − 1 … x + 2 of rows y, y + 1 and
+        // z, z + 1 lie in the volume.
+        let c = unsafe {
+            [
+                [s.gather4(first), s.gather4(z1)],
+                [s.gather4(y1), s.gather4(_mm256_add_epi32(y1, s.sz))],
+            ]
+        };
+        // Sampler8::sample_at's interpolation of the corners (voxels x and x + 1 of each row).
+        let c00 = lerp8(c[0][0][1], c[0][0][2], frac[0]);
+        let c10 = lerp8(c[1][0][1], c[1][0][2], frac[0]);
+        let c01 = lerp8(c[0][1][1], c[0][1][2], frac[0]);
+        let c11 = lerp8(c[1][1][1], c[1][1][2], frac[0]);
+        let rho = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
+        Some((rho, (base, c)))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn src(
+        &self,
+        pre: &Self::Pre,
+        frac: [std::arch::x86_64::__m256; 3],
+        rho: std::arch::x86_64::__m256,
+        k: std::arch::x86_64::__m256,
+        corrected: std::arch::x86_64::__m256,
+    ) -> Option<([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256)> {
+        use std::arch::x86_64::*;
+        let (v, a, contributes) = shade_terms8(self.t, rho, k, corrected);
+        if _mm256_movemask_ps(contributes) == 0 {
+            return Some(([_mm256_setzero_ps(); 4], contributes));
+        }
+        let (base, c) = pre;
+        let s = self.sampler;
+        let (sy, sz) = (s.sy, s.sz);
+        let (ny, nz) = (_mm256_sub_epi32(*base, sy), _mm256_sub_epi32(*base, sz));
+        let (y2, z2) = (
+            _mm256_add_epi32(*base, _mm256_add_epi32(sy, sy)),
+            _mm256_add_epi32(*base, _mm256_add_epi32(sz, sz)),
+        );
+        // SAFETY: as in `sample`; a 4-byte read starting in these rows ends in the data (the
+        // last row read is (y + 2, z + 1) or (y + 1, z + 2), never the grid's last row).
+        let (yo, zo) = unsafe {
+            (
+                // yo[0][k]: row (y − 1, z + k); yo[1][k]: row (y + 2, z + k); voxels x, x + 1.
+                [
+                    [s.gather2(ny), s.gather2(_mm256_add_epi32(ny, sz))],
+                    [s.gather2(y2), s.gather2(_mm256_add_epi32(y2, sz))],
+                ],
+                // zo[j][0]: row (y + j, z − 1); zo[j][1]: row (y + j, z + 2).
+                [
+                    [s.gather2(nz), s.gather2(z2)],
+                    [
+                        s.gather2(_mm256_add_epi32(nz, sy)),
+                        s.gather2(_mm256_add_epi32(z2, sy)),
+                    ],
+                ],
+            )
+        };
+        let half = _mm256_set1_ps(0.5);
+        // The differences along each axis at corner (dx, dy, dz), as `Ctx::gradient_lerp`.
+        let mut d = [[[[_mm256_setzero_ps(); 2]; 2]; 2]; 3];
+        for dy in 0..2 {
+            for dz in 0..2 {
+                for dx in 0..2 {
+                    let r = &c[dy][dz];
+                    let (hi_y, lo_y) = if dy == 0 {
+                        (c[1][dz][dx + 1], yo[0][dz][dx])
+                    } else {
+                        (yo[1][dz][dx], c[0][dz][dx + 1])
+                    };
+                    let (hi_z, lo_z) = if dz == 0 {
+                        (c[dy][1][dx + 1], zo[dy][0][dx])
+                    } else {
+                        (zo[dy][1][dx], c[dy][0][dx + 1])
+                    };
+                    d[0][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(r[dx + 2], r[dx]), half);
+                    d[1][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(hi_y, lo_y), half);
+                    d[2][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(hi_z, lo_z), half);
+                }
+            }
+        }
+        let mut g = [_mm256_setzero_ps(); 3];
+        for (ax, out) in g.iter_mut().enumerate() {
+            let e = &d[ax];
+            let c00 = lerp8(e[0][0][0], e[0][0][1], frac[0]);
+            let c10 = lerp8(e[0][1][0], e[0][1][1], frac[0]);
+            let c01 = lerp8(e[1][0][0], e[1][0][1], frac[0]);
+            let c11 = lerp8(e[1][1][0], e[1][1][1], frac[0]);
+            *out = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
+        }
+        Some((shade_light8(self.t, &v, a, contributes, g), contributes))
+    }
+}
+
+/// `(p₀q₀ + p₁q₁) + p₂q₂` on eight lanes (the order of the scalar twins' dot products).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn dot8(
+    p: [std::arch::x86_64::__m256; 3],
+    q: [std::arch::x86_64::__m256; 3],
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    _mm256_add_ps(
+        _mm256_add_ps(_mm256_mul_ps(p[0], q[0]), _mm256_mul_ps(p[1], q[1])),
+        _mm256_mul_ps(p[2], q[2]),
+    )
+}
+
+/// `v` broadcast to eight lanes per component.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn splat3(v: [f32; 3]) -> [std::arch::x86_64::__m256; 3] {
+    use std::arch::x86_64::*;
+    [
+        _mm256_set1_ps(v[0]),
+        _mm256_set1_ps(v[1]),
+        _mm256_set1_ps(v[2]),
+    ]
+}
+
+/// `p + f·(q − p)` on eight lanes ([`lerp`]).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn lerp8(
+    p: std::arch::x86_64::__m256,
+    q: std::arch::x86_64::__m256,
+    f: std::arch::x86_64::__m256,
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)))
+}
+
+/// The first half of [`Ctx::shaded_src`] on eight lanes: the table's entries at `rho`, the
+/// opacity (path-corrected in the `corrected` lanes) and the mask of lanes that contribute.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn shade_terms8(
+    t: &ShadeTable,
+    rho: std::arch::x86_64::__m256,
+    k: std::arch::x86_64::__m256,
+    corrected: std::arch::x86_64::__m256,
+) -> (
+    [std::arch::x86_64::__m256; 8],
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+) {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let pos = _mm256_min_ps(
+        _mm256_max_ps(
+            _mm256_mul_ps(
+                _mm256_sub_ps(rho, _mm256_set1_ps(t.lo)),
+                _mm256_set1_ps(t.scale),
+            ),
+            zero,
+        ),
+        _mm256_set1_ps(t.last),
+    );
+    // SAFETY: positions are clamped to [0, last], and row last + 1 exists (the repeated entry).
+    let v = unsafe { interp8(&t.rows, pos, false) };
+    let corrected_bits = _mm256_movemask_ps(corrected);
+    let mut a = v[0];
+    let mut contributes = _mm256_cmp_ps::<_CMP_GT_OQ>(v[0], zero);
+    if corrected_bits != 0 {
+        let ac = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, v[7])));
+        a = _mm256_blendv_ps(a, ac, corrected);
+        let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(v[7], zero);
+        contributes = _mm256_blendv_ps(contributes, ok, corrected);
+    }
+    (v, a, contributes)
+}
+
+/// The second half of [`Ctx::shaded_src`] on eight lanes (the conditions as masks): the
+/// premultiplied colours from the entries `v` and opacity `a` of [`shade_terms8`] and the
+/// interpolated index-space gradients `g`.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn shade_light8(
+    t: &ShadeTable,
+    v: &[std::arch::x86_64::__m256; 8],
+    a: std::arch::x86_64::__m256,
+    contributes: std::arch::x86_64::__m256,
+    g: [std::arch::x86_64::__m256; 3],
+) -> [std::arch::x86_64::__m256; 4] {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let [m0, m1, m2] = t.to_world;
+    let (m0, m1, m2) = (splat3(m0), splat3(m1), splat3(m2));
+    // World gradient, component i: (m0ᵢ·g₀ + m1ᵢ·g₁) + m2ᵢ·g₂.
+    let gw = [
+        dot8([m0[0], m1[0], m2[0]], g),
+        dot8([m0[1], m1[1], m2[1]], g),
+        dot8([m0[2], m1[2], m2[2]], g),
+    ];
+    let g2 = dot8(gw, gw);
+    let mut col = [v[1], v[2], v[3]];
+    let lit = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(g2, zero), contributes);
+    if (t.diffuse || t.specular) && _mm256_movemask_ps(lit) != 0 {
+        let inv = _mm256_div_ps(one, _mm256_sqrt_ps(g2));
+        let n = [
+            _mm256_mul_ps(gw[0], inv),
+            _mm256_mul_ps(gw[1], inv),
+            _mm256_mul_ps(gw[2], inv),
+        ];
+        let sign = _mm256_set1_ps(-0.0);
+        let spec_max = _mm256_set1_ps(ShadeTable::SPEC as f32);
+        for light in &t.lights {
+            let lc = splat3(light.color.to_array());
+            let mut ndl = dot8(n, splat3(light.l.to_array()));
+            let mut ndh = dot8(n, splat3(light.h.to_array()));
+            if t.two_sided {
+                let flip = _mm256_cmp_ps::<_CMP_LT_OQ>(ndl, zero);
+                ndl = _mm256_blendv_ps(ndl, _mm256_xor_ps(ndl, sign), flip);
+                ndh = _mm256_blendv_ps(ndh, _mm256_xor_ps(ndh, sign), flip);
+            }
+            let dm = _mm256_and_ps(lit, _mm256_cmp_ps::<_CMP_GT_OQ>(ndl, zero));
+            if _mm256_movemask_ps(dm) == 0 {
+                continue;
+            }
+            if t.diffuse {
+                for ch in 0..3 {
+                    let term = _mm256_mul_ps(_mm256_mul_ps(v[4 + ch], lc[ch]), ndl);
+                    col[ch] = _mm256_add_ps(col[ch], _mm256_and_ps(term, dm));
+                }
+            }
+            let sm = _mm256_and_ps(dm, _mm256_cmp_ps::<_CMP_GT_OQ>(ndh, zero));
+            if t.specular && _mm256_movemask_ps(sm) != 0 {
+                // ShadeTable::spec, lane by lane (masked lanes clamp to a valid entry and are
+                // dropped by the mask).
+                let s = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(ndh, spec_max), zero), spec_max);
+                let i = _mm256_cvttps_epi32(s);
+                let f = _mm256_sub_ps(s, _mm256_cvtepi32_ps(i));
+                let tab = t.spec_pow.as_ptr();
+                // SAFETY: i ∈ [0, SPEC], and spec_pow has SPEC + 2 entries.
+                let (p0, p1) = unsafe {
+                    (
+                        _mm256_i32gather_ps::<4>(tab, i),
+                        _mm256_i32gather_ps::<4>(tab.add(1), i),
+                    )
+                };
+                let p = _mm256_add_ps(p0, _mm256_mul_ps(f, _mm256_sub_ps(p1, p0)));
+                for ch in 0..3 {
+                    let sc = match t.spec_color {
+                        Some(c) => _mm256_set1_ps(c[ch]),
+                        None => v[4 + ch],
+                    };
+                    let term = _mm256_mul_ps(_mm256_mul_ps(sc, lc[ch]), p);
+                    col[ch] = _mm256_add_ps(col[ch], _mm256_and_ps(term, sm));
+                }
+            }
+        }
+    }
+    for c in &mut col {
+        *c = _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(*c, zero), one), a);
+    }
+    [col[0], col[1], col[2], a]
 }
 
 /// MIP (`mip`) or MinIP over pixels `lo..=hi` of a row, eight at a time: each lane's cell is
