@@ -301,11 +301,12 @@ pub struct RenderOptions {
     )]
     pub subsample: usize,
     /// Front-to-back early termination: a pixel whose opacity reaches this value takes no more
-    /// splats. The default changes no pixel by more than 1e-6; 0.99 is close to what ray casters
-    /// use. Values ≥ 1 disable it.
+    /// samples or splats. The default 0.99 is VTK's level (a pixel changes by at most 1 % of the
+    /// light behind where it stops; docs/decisions/0018); 0.999999 changes no pixel by more than
+    /// 1e-6; values ≥ 1 disable it.
     #[arg(
         long,
-        default_value_t = 1.0 - 1.0 / 1048576.0,
+        default_value_t = volsplat::DEFAULT_OPACITY_CUTOFF,
         help_heading = "Quality",
         hide_short_help = true
     )]

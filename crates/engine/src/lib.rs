@@ -39,8 +39,9 @@ pub use renderer::{
     renderer_name,
 };
 pub use request::{
-    AntialiasChoice, ControlChoice, DensityChoice, DisplayChoice, DisplayOptions, KernelChoice,
-    Mode, OrderChoice, Quality, RenderRequest, RendererChoice, VisibilityChoice,
+    AntialiasChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice, DisplayChoice,
+    DisplayOptions, KernelChoice, Mode, OrderChoice, Quality, RenderRequest, RendererChoice,
+    VisibilityChoice,
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,

@@ -173,8 +173,11 @@ pub struct Quality {
     pub visibility: VisibilityChoice,
     /// Traversal order (dense renderer).
     pub order: OrderChoice,
-    /// Front-to-back early termination: pixels at this opacity take no more splats (> 0; ≥ 1
-    /// disables it). The default `1 − 2⁻²⁰` changes no pixel by more than 1e-6.
+    /// Front-to-back early termination: pixels at this opacity take no more samples or splats
+    /// (> 0; ≥ 1 disables it). The default, [`DEFAULT_OPACITY_CUTOFF`] (0.99), is VTK's level
+    /// (docs/decisions/0018-early-termination-at-vtks-level.md): it changes a pixel by at most
+    /// 1 % of the light behind the point where it stops; `1 − 2⁻²⁰` changes none by more than
+    /// 1e-6.
     pub opacity_cutoff: f32,
     /// Splat every N-th voxel per axis (1..=64).
     pub subsample: usize,
@@ -187,6 +190,12 @@ pub struct Quality {
     pub slab: Option<f64>,
 }
 
+/// The front ends' early-termination opacity ([`Quality::opacity_cutoff`]): VTK's ray casters
+/// stop a ray at about this opacity (`vtkFixedPointVolumeRayCastMapper` when less than 255/32768
+/// of the light remains), and issue 12 asks for termination at that level. A pixel changes by at
+/// most 1 % of what lies behind the point where it stops (decision 0018).
+pub const DEFAULT_OPACITY_CUTOFF: f32 = 0.99;
+
 impl Default for Quality {
     fn default() -> Self {
         Quality {
@@ -194,7 +203,7 @@ impl Default for Quality {
             antialias: AntialiasChoice::Area,
             visibility: VisibilityChoice::Auto,
             order: OrderChoice::Ftb,
-            opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
+            opacity_cutoff: DEFAULT_OPACITY_CUTOFF,
             subsample: 1,
             list_threshold: 0.0,
             slab: None,

@@ -14,7 +14,7 @@
 //! (Mueller, Möller & Crawfis §3): the transfer function classifies `ρ̂`; where it has opacity
 //! and the lights need it, the gradient is the same kernel's reconstruction of the voxels'
 //! central differences (their "gradient splats", gathered at the sample; [`Ctx::gradient_at`]);
-//! the lights shade it through the same tables as the other renderers ([`FrameClassifier`]),
+//! the lights shade it with the same formula as the other renderers ([`FrameClassifier`]),
 //! and the slab is composited front to
 //! back with its opacity corrected for its thickness `Δ` (along the ray: `Δ/cos θ` in
 //! perspective).
@@ -52,11 +52,16 @@
 //! detection; every kernel has a scalar twin doing the same f32 operations in the same order, so
 //! the bits do not depend on the CPU or the thread count): [`Sampler8`] locates the eight cells
 //! and gathers their corners; unshaded composite classifies through a 1024-entry table and
-//! composites into channel planes in the same pass ([`composite_run_avx2`]); MIP/MinIP compare
-//! against one plane of values ([`extreme_row_avx2`]). Each group of eight is first tested
-//! against its own cells' bricks, and skipped where none can contribute. Shaded composite and
-//! tables that a density-indexed table cannot hold take the per-sample classifier
-//! ([`Ctx::band_plain`]).
+//! composites into channel planes in the same pass ([`composite_run_avx2`] with
+//! [`PostSource`]); shaded composite does the same with a table of the classifier's terms before
+//! shading ([`ShadeTable`]), the cell's central differences gathered from the volume (the 4×4×4
+//! block around the cell without its edges: twelve row reads, four of which also give the
+//! sample) and the lights evaluated as masks ([`ShadeSource`], [`shade_light8`]; cells on the
+//! faces of the grid, whose differences are one-sided, take the scalar twin inside the same
+//! rows); MIP/MinIP compare against one plane of values ([`extreme_row_avx2`]). Each group of
+//! eight is first tested against its own cells' bricks, and skipped where none can contribute.
+//! Tables that depend on more than the density (gradient-magnitude or depth indexing, a
+//! modulation that is not a constant) take the per-sample classifier ([`Ctx::band_plain`]).
 
 use crate::bricks::{BRICK, BrickGrid};
 use crate::error::{Result, SplatError};
@@ -1106,9 +1111,9 @@ impl<T: Scalar> Ctx<'_, T> {
         g
     }
 
-    /// Composite through the classifier (shaded, or tables that a density-indexed table cannot
-    /// hold): each sample is classified, with its gradient where the lights need one, as soon as
-    /// it is reconstructed.
+    /// Composite through the classifier (tables that depend on more than the density, shaded or
+    /// not): each sample is classified, with its gradient where the lights or the tables need
+    /// one, as soon as it is reconstructed.
     fn band_plain(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
         let w = self.width;
         let mut c = Counters::default();
