@@ -26,7 +26,7 @@ use volsplat_core::glam::{Mat3, Vec3};
 use volsplat_core::image::{Rgba, over_back_to_front, over_front_to_back};
 use volsplat_core::{
     AnyVolume, Camera, CrioTables, Image, Kernel, OrthoProjection, SampleInput, Scalar,
-    ScalarImage, Volume, with_volume,
+    ScalarImage, ScalarType, Volume, with_volume,
 };
 
 /// What is computed along each view ray.
@@ -468,6 +468,11 @@ struct ClassifyContext<'a, T> {
     classifier: &'a FrameClassifier,
     mode: RenderMode,
     cull: bool,
+    /// Composite culling of 8/16-bit volumes: whether each possible sample value (offset by
+    /// `lut_offset`) has zero opacity, the same test as [`FrameClassifier::density_opacity`]
+    /// made once per value instead of once per voxel (empty otherwise).
+    zero_lut: Vec<bool>,
+    lut_offset: i32,
     needs_gradient: bool,
     half_x: f32,
     half_y: f32,
@@ -491,7 +496,30 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
     ) -> Self {
         let grid = volume.grid();
         let (dlo, dhi) = geom.depth_range;
+        let (lut_len, lut_offset) = match T::TYPE {
+            ScalarType::U8 => (256, 0),
+            ScalarType::I8 => (256, -128),
+            ScalarType::U16 => (65536, 0),
+            ScalarType::I16 => (65536, -32768),
+            ScalarType::F32 => (0, 0),
+        };
+        let zero_lut = if settings.cull_transparent
+            && settings.mode == RenderMode::Composite
+            && classifier.density_opacity(0.0).is_some()
+        {
+            (0..lut_len)
+                .map(|k| {
+                    classifier
+                        .density_opacity((k + lut_offset) as f32)
+                        .is_some_and(|a| a.is_nan() || a <= 0.0)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         ClassifyContext {
+            zero_lut,
+            lut_offset,
             data: volume.data(),
             dims_full: grid.dims,
             direction: grid.direction.as_mat3(),
@@ -572,6 +600,11 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                 // Shade first (§5.2): cull zero opacity before anything else is computed.
                 if self.cull {
                     let zero = match self.mode {
+                        // 8/16-bit samples are integers in the table's range: the same test,
+                        // looked up.
+                        RenderMode::Composite if !self.zero_lut.is_empty() => {
+                            self.zero_lut[(density as i32 - self.lut_offset) as usize]
+                        }
                         RenderMode::Composite => self
                             .classifier
                             .density_opacity(density)
@@ -1496,6 +1529,55 @@ mod tests {
         let nonzero = vol.data().iter().filter(|&&v| v > 0.0).count() as u64;
         assert_eq!(a.stats.splats, nonzero);
         assert_eq!(b.stats.splats, vol.data().len() as u64);
+    }
+
+    /// 8- and 16-bit volumes cull through a table of the possible values; it makes the same
+    /// decisions as the per-voxel test of float volumes: the same samples as f32 give the same
+    /// picture and the same splat count, for each integer type, with opacity starting inside
+    /// the types' ranges.
+    #[test]
+    fn integer_culling_table_decides_as_the_float_test() {
+        use volsplat_core::AnyVolume;
+        let f = smooth_volume(18);
+        let grid = f.grid().clone();
+        // Few levels, so that every value near the threshold occurs many times.
+        let q = |off: f32| f.data().iter().map(move |&v| (v * 20.0 + off).round());
+        let volumes = [
+            AnyVolume::U8(Volume::new(grid.clone(), q(0.0).map(|v| v as u8).collect()).unwrap()),
+            AnyVolume::I8(Volume::new(grid.clone(), q(-10.0).map(|v| v as i8).collect()).unwrap()),
+            AnyVolume::U16(
+                Volume::new(grid.clone(), q(300.0).map(|v| v as u16).collect()).unwrap(),
+            ),
+            AnyVolume::I16(
+                Volume::new(grid.clone(), q(-300.0).map(|v| v as i16).collect()).unwrap(),
+            ),
+        ];
+        let cam = camera_for(&grid, 20.0, 35.0, 0.0);
+        let s = RenderSettings {
+            width: 36,
+            height: 36,
+            visibility: Visibility::SheetBuffer,
+            ..RenderSettings::default()
+        };
+        for vol in &volumes {
+            let (lo, hi) = vol.value_range();
+            // Zero opacity up to an integer in the middle of the range, positive from there on.
+            let t0 = (0.5 * (lo + hi)).floor();
+            let tf = volsplat_core::TransferFunction {
+                scalar_opacity: vec![[lo, 0.0], [t0, 0.0], [hi, 0.8]],
+                ..volsplat_core::TransferFunction::ramp(lo, hi, 0.8)
+            };
+            let t = CrioTables::from_transfer_function(&tf, 4096).unwrap();
+            let a = render_any(vol, &cam, &t, &s).unwrap();
+            let b = render(&vol.to_f32(), &cam, &t, &s).unwrap();
+            assert_eq!(a.image, b.image, "{:?}", vol.scalar_type());
+            assert_eq!(a.stats.splats, b.stats.splats, "{:?}", vol.scalar_type());
+            assert!(
+                0 < a.stats.splats && a.stats.splats < a.stats.voxels,
+                "{:?}",
+                vol.scalar_type()
+            );
+        }
     }
 
     /// F-W32: progress after every batch; FTB opacity never decreases; the last equals the image.
