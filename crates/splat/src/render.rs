@@ -326,7 +326,14 @@ pub fn render_with_progress<T: Scalar>(
         ..RenderStats::default()
     };
     stats.setup_ms = ms(t_start);
-    let ctx = ClassifyContext::new(volume, &geom, &classifier, settings, &table, n_bands);
+    let ctx = ClassifyContext::new(
+        volume,
+        &geom,
+        (tables, &classifier),
+        settings,
+        &table,
+        n_bands,
+    );
     let batch = settings.sheets_per_batch;
     let terminate = settings.mode == RenderMode::Composite
         && settings.order == Order::FrontToBack
@@ -474,6 +481,10 @@ struct ClassifyContext<'a, T> {
     zero_lut: Vec<bool>,
     lut_offset: i32,
     needs_gradient: bool,
+    /// Shaded composite whose tables depend on the density alone: the slab renderer's table of
+    /// the classifier's terms and its lighting ([`crate::slab::shaded_src`]), on the voxel's
+    /// central differences in index units; `None` otherwise (the classifier).
+    shade: Option<crate::slab::ShadeTable>,
     half_x: f32,
     half_y: f32,
     band_h: usize,
@@ -489,7 +500,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
     fn new(
         volume: &'a Volume<T>,
         geom: &'a SplatGeometry,
-        classifier: &'a FrameClassifier,
+        (tables, classifier): (&CrioTables, &'a FrameClassifier),
         settings: &RenderSettings,
         table: &FootprintTable,
         n_bands: usize,
@@ -517,9 +528,17 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         } else {
             Vec::new()
         };
+        let shade = (settings.mode == RenderMode::Composite && classifier.needs_gradient)
+            .then(|| {
+                let grad_to_world =
+                    [0, 1, 2].map(|a| (grid.direction.col(a) / grid.spacing[a]).as_vec3());
+                crate::slab::ShadeTable::new(tables, classifier, grad_to_world)
+            })
+            .flatten();
         ClassifyContext {
             zero_lut,
             lut_offset,
+            shade,
             data: volume.data(),
             dims_full: grid.dims,
             direction: grid.direction.as_mat3(),
@@ -660,6 +679,19 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     k
                 };
                 let mut value: Rgba = match self.mode {
+                    RenderMode::Composite if self.shade.is_some() => {
+                        let mut l = [0usize; 3];
+                        l[sa] = sheet * stride;
+                        l[ua] = u * stride;
+                        l[va] = v * stride;
+                        let g = index_gradient(self.data, self.dims_full, l);
+                        let t = self.shade.as_ref().expect("checked above");
+                        match crate::slab::shaded_src(t, density, g, 1.0, false) {
+                            Some(c) => c,
+                            None if self.cull => continue,
+                            None => [0.0; 4],
+                        }
+                    }
                     RenderMode::Composite => {
                         let gradient = if self.needs_gradient {
                             let mut l = [0usize; 3];
@@ -753,6 +785,37 @@ pub(crate) fn gradient_at<T: Scalar>(
         g[c] = (data[hi].to_f32() - data[lo].to_f32()) * half * inv_spacing_full[c];
     }
     direction * g
+}
+
+/// Central differences at full-resolution voxel `p` in index units (data units per voxel
+/// step): `(ρ(p + e) − ρ(p − e)) · ½`, one-sided `(ρ(p + e) − ρ(p)) · 1` on the faces, 0 along an
+/// axis of one voxel. [`gradient_at`] before its spacing and direction.
+#[inline]
+pub(crate) fn index_gradient<T: Scalar>(
+    data: &[T],
+    dims_full: [usize; 3],
+    p: [usize; 3],
+) -> [f32; 3] {
+    let [nx, ny, _] = dims_full;
+    let lin = p[0] + nx * (p[1] + ny * p[2]);
+    let strides = [1, nx, nx * ny];
+    let mut g = [0.0f32; 3];
+    for c in 0..3 {
+        let n = dims_full[c];
+        if n < 2 {
+            continue;
+        }
+        let s = strides[c];
+        let v = |q: usize| data[q].to_f32();
+        g[c] = if p[c] == 0 {
+            (v(lin + s) - v(lin)) * 1.0
+        } else if p[c] == n - 1 {
+            (v(lin) - v(lin - s)) * 1.0
+        } else {
+            (v(lin + s) - v(lin - s)) * 0.5
+        };
+    }
+    g
 }
 
 /// Composites the touched columns `tx0..tx1` of one band's sheet buffer into the band's slice

@@ -816,7 +816,7 @@ impl<T: Scalar> Ctx<'_, T> {
         let corrected = self.view.perspective || k != 1.0;
         let src = match post {
             Post::Table(t) => Self::post_src(t, rho, k, corrected),
-            Post::Shaded(t) => Self::shaded_src(t, rho, self.gradient_lerp(cell, f), k, corrected),
+            Post::Shaded(t) => shaded_src(t, rho, self.gradient_lerp(cell, f), k, corrected),
         };
         let Some(src) = src else {
             return;
@@ -849,67 +849,6 @@ impl<T: Scalar> Ctx<'_, T> {
             }
             Some(v)
         }
-    }
-
-    /// The premultiplied, shaded colour of a sample of density `rho` whose interpolated voxel
-    /// gradient is `g` ([`Ctx::gradient_lerp`], index units), with slab exponent `k`, or `None`
-    /// where it has no opacity: [`FrameClassifier::classify`]'s formula (emission, then per
-    /// light the diffuse term `d·c_L·(N·L)` and the specular term `s·c_L·(N·H)^n` where `N·L > 0`
-    /// (`|N·L|` two-sided), clamped to [0, 1], times the opacity), with the terms read from
-    /// [`ShadeTable`]. The scalar twin of [`shade8`]: every operation in the same order, the
-    /// `if`s written as the kernel's masks (a term that does not apply adds `+0`) and the clamps
-    /// as `maxps`/`minps`, so the bits agree.
-    #[inline(always)]
-    fn shaded_src(t: &ShadeTable, rho: f32, g: [f32; 3], k: f32, corrected: bool) -> Option<Rgba> {
-        let v = t.entry(rho);
-        // NaN entries contribute nothing, as in the kernel's ordered comparisons.
-        let a = if corrected {
-            if v[7] < 0.0 {
-                1.0 - exp2_neg(k * v[7])
-            } else {
-                return None;
-            }
-        } else if v[0] > 0.0 {
-            v[0]
-        } else {
-            return None;
-        };
-        let m = &t.to_world;
-        let gw: [f32; 3] =
-            std::array::from_fn(|i| m[0][i] * g[0] + m[1][i] * g[1] + m[2][i] * g[2]);
-        let g2 = gw[0] * gw[0] + gw[1] * gw[1] + gw[2] * gw[2];
-        let mut col = [v[1], v[2], v[3]];
-        if (t.diffuse || t.specular) && g2 > 0.0 {
-            let inv = 1.0 / g2.sqrt();
-            let n = gw.map(|c| c * inv);
-            for light in &t.lights {
-                let (l, h, lc) = (light.l, light.h, light.color.to_array());
-                let mut ndl = n[0] * l.x + n[1] * l.y + n[2] * l.z;
-                let mut ndh = n[0] * h.x + n[1] * h.y + n[2] * h.z;
-                if t.two_sided && ndl < 0.0 {
-                    ndl = -ndl;
-                    ndh = -ndh;
-                }
-                let lit = ndl > 0.0;
-                if !lit {
-                    continue;
-                }
-                if t.diffuse {
-                    for ch in 0..3 {
-                        col[ch] += v[4 + ch] * lc[ch] * ndl;
-                    }
-                }
-                if t.specular && ndh > 0.0 {
-                    let p = t.spec(ndh);
-                    for ch in 0..3 {
-                        let s = t.spec_color.map_or(v[4 + ch], |c| c[ch]);
-                        col[ch] += s * lc[ch] * p;
-                    }
-                }
-            }
-        }
-        let col = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
-        Some([col[0], col[1], col[2], a])
     }
 
     /// Calls `f(a, b)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells lie in
@@ -1441,17 +1380,14 @@ impl PostTable {
                 })
                 .collect()
         };
+        let (scale, last) = table_steps(lo, hi, n);
         Some(PostTable {
             pairs: paired(&values),
             persp_pairs: paired(&persp),
             persp,
             lo,
-            scale: if n > 1 {
-                (n - 1) as f32 / (hi - lo)
-            } else {
-                0.0
-            },
-            last: (n - 1) as f32,
+            scale,
+            last,
             values,
         })
     }
@@ -1479,11 +1415,11 @@ impl PostTable {
     }
 }
 
-/// What the shaded kernel reads per sample ([`Ctx::shaded_src`]): the classifier's terms before
+/// What the shaded kernel reads per sample ([`shaded_src`]): the classifier's terms before
 /// shading ([`FrameClassifier::surface_terms`]) at 1024 densities, read with linear
 /// interpolation like [`PostTable`], the lights of the frame, a table of the specular power, and
 /// the matrix from the stored gradient field to world gradients.
-struct ShadeTable {
+pub(crate) struct ShadeTable {
     lo: f32,
     scale: f32,
     last: f32,
@@ -1511,7 +1447,7 @@ impl ShadeTable {
 
     /// `None` where the classifier's terms depend on more than the density (tables indexed by
     /// gradient magnitude or depth, a modulation that is not constant).
-    fn new(
+    pub(crate) fn new(
         tables: &CrioTables,
         classifier: &FrameClassifier,
         grad_to_world: [Vec3; 3],
@@ -1553,14 +1489,11 @@ impl ShadeTable {
             .map(|i| (i as f64 / Self::SPEC as f64).powf(p) as f32)
             .collect();
         spec_pow.push(spec_pow[Self::SPEC]);
+        let (scale, last) = table_steps(lo, hi, n);
         Some(ShadeTable {
             lo,
-            scale: if n > 1 {
-                (n - 1) as f32 / (hi - lo)
-            } else {
-                0.0
-            },
-            last: (n - 1) as f32,
+            scale,
+            last,
             rows,
             spec_pow,
             lights: classifier.lights().to_vec(),
@@ -1595,6 +1528,83 @@ impl ShadeTable {
         let (a, b) = (self.spec_pow[i], self.spec_pow[i + 1]);
         a + f * (b - a)
     }
+}
+
+/// The premultiplied, shaded colour of a sample of density `rho` whose interpolated voxel
+/// gradient is `g` ([`Ctx::gradient_lerp`], index units), with slab exponent `k`, or `None`
+/// where it has no opacity: [`FrameClassifier::classify`]'s formula (emission, then per
+/// light the diffuse term `d·c_L·(N·L)` and the specular term `s·c_L·(N·H)^n` where `N·L > 0`
+/// (`|N·L|` two-sided), clamped to [0, 1], times the opacity), with the terms read from
+/// [`ShadeTable`]. The scalar twin of [`shade_terms8`] and [`shade_light8`]: every operation in the same order, the
+/// `if`s written as the kernel's masks (a term that does not apply adds `+0`) and the clamps
+/// as `maxps`/`minps`, so the bits agree.
+#[inline(always)]
+pub(crate) fn shaded_src(
+    t: &ShadeTable,
+    rho: f32,
+    g: [f32; 3],
+    k: f32,
+    corrected: bool,
+) -> Option<Rgba> {
+    let v = t.entry(rho);
+    // NaN entries contribute nothing, as in the kernel's ordered comparisons.
+    let a = if corrected {
+        if v[7] < 0.0 {
+            1.0 - exp2_neg(k * v[7])
+        } else {
+            return None;
+        }
+    } else if v[0] > 0.0 {
+        v[0]
+    } else {
+        return None;
+    };
+    let m = &t.to_world;
+    let gw: [f32; 3] = std::array::from_fn(|i| m[0][i] * g[0] + m[1][i] * g[1] + m[2][i] * g[2]);
+    let g2 = gw[0] * gw[0] + gw[1] * gw[1] + gw[2] * gw[2];
+    let mut col = [v[1], v[2], v[3]];
+    if (t.diffuse || t.specular) && g2 > 0.0 {
+        let inv = 1.0 / g2.sqrt();
+        let n = gw.map(|c| c * inv);
+        for light in &t.lights {
+            let (l, h, lc) = (light.l, light.h, light.color.to_array());
+            let mut ndl = n[0] * l.x + n[1] * l.y + n[2] * l.z;
+            let mut ndh = n[0] * h.x + n[1] * h.y + n[2] * h.z;
+            if t.two_sided && ndl < 0.0 {
+                ndl = -ndl;
+                ndh = -ndh;
+            }
+            let lit = ndl > 0.0;
+            if !lit {
+                continue;
+            }
+            if t.diffuse {
+                for ch in 0..3 {
+                    col[ch] += v[4 + ch] * lc[ch] * ndl;
+                }
+            }
+            if t.specular && ndh > 0.0 {
+                let p = t.spec(ndh);
+                for ch in 0..3 {
+                    let s = t.spec_color.map_or(v[4 + ch], |c| c[ch]);
+                    col[ch] += s * lc[ch] * p;
+                }
+            }
+        }
+    }
+    let col = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
+    Some([col[0], col[1], col[2], a])
+}
+
+/// Entries per data unit and the last entry's index of a table of `n` entries spanning
+/// `[lo, hi]` (a table of one entry: `(0, 0)`).
+fn table_steps(lo: f32, hi: f32, n: usize) -> (f32, f32) {
+    let scale = if n > 1 {
+        (n - 1) as f32 / (hi - lo)
+    } else {
+        0.0
+    };
+    (scale, (n - 1) as f32)
 }
 
 /// The density range `[lo, hi]` that the density-indexed tables cover together.
@@ -2530,16 +2540,7 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
         let t = self.t;
         let zero = _mm256_setzero_ps();
         let one = _mm256_set1_ps(1.0);
-        let pos = _mm256_min_ps(
-            _mm256_max_ps(
-                _mm256_mul_ps(
-                    _mm256_sub_ps(rho, _mm256_set1_ps(t.lo)),
-                    _mm256_set1_ps(t.scale),
-                ),
-                zero,
-            ),
-            _mm256_set1_ps(t.last),
-        );
+        let pos = table_pos8(rho, t.lo, t.scale, t.last);
         let corrected_bits = _mm256_movemask_ps(corrected);
         let mut src = [zero; 4];
         let mut contributes = _mm256_setzero_ps();
@@ -2566,7 +2567,7 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
 
 /// Shaded classification ([`shade8`]) with the voxels' central differences gathered from the
 /// volume itself and interpolated in the sample's cell: lane `l` does exactly
-/// [`Ctx::gradient_lerp`]'s and [`Ctx::shaded_src`]'s f32 operations. A cell's differences read
+/// [`Ctx::gradient_lerp`]'s and [`shaded_src`]'s f32 operations. A cell's differences read
 /// the 4×4×4 block around it without its edges: four rows of four voxels along x through the
 /// cell's own four (y, z) corners, and eight rows of two beside them (the rows one before and two
 /// after along y and z). So only interior cells (one voxel from every face) are read here;
@@ -2761,6 +2762,25 @@ fn splat3(v: [f32; 3]) -> [std::arch::x86_64::__m256; 3] {
     ]
 }
 
+/// A table position on eight lanes, `min(max((ρ − lo)·scale, 0), last)` (NaN → 0), as the
+/// scalar lookups compute it ([`PostTable::lookup_in`], [`ShadeTable::entry`]).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn table_pos8(
+    rho: std::arch::x86_64::__m256,
+    lo: f32,
+    scale: f32,
+    last: f32,
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let t = _mm256_mul_ps(
+        _mm256_sub_ps(rho, _mm256_set1_ps(lo)),
+        _mm256_set1_ps(scale),
+    );
+    _mm256_min_ps(_mm256_max_ps(t, _mm256_setzero_ps()), _mm256_set1_ps(last))
+}
+
 /// `p + f·(q − p)` on eight lanes ([`lerp`]).
 #[cfg(target_arch = "x86_64")]
 #[inline]
@@ -2774,7 +2794,7 @@ fn lerp8(
     _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)))
 }
 
-/// The first half of [`Ctx::shaded_src`] on eight lanes: the table's entries at `rho`, the
+/// The first half of [`shaded_src`] on eight lanes: the table's entries at `rho`, the
 /// opacity (path-corrected in the `corrected` lanes) and the mask of lanes that contribute.
 #[cfg(target_arch = "x86_64")]
 #[inline]
@@ -2792,16 +2812,7 @@ fn shade_terms8(
     use std::arch::x86_64::*;
     let zero = _mm256_setzero_ps();
     let one = _mm256_set1_ps(1.0);
-    let pos = _mm256_min_ps(
-        _mm256_max_ps(
-            _mm256_mul_ps(
-                _mm256_sub_ps(rho, _mm256_set1_ps(t.lo)),
-                _mm256_set1_ps(t.scale),
-            ),
-            zero,
-        ),
-        _mm256_set1_ps(t.last),
-    );
+    let pos = table_pos8(rho, t.lo, t.scale, t.last);
     // SAFETY: positions are clamped to [0, last], and row last + 1 exists (the repeated entry).
     let v = unsafe { interp8(&t.rows, pos, false) };
     let corrected_bits = _mm256_movemask_ps(corrected);
@@ -2816,7 +2827,7 @@ fn shade_terms8(
     (v, a, contributes)
 }
 
-/// The second half of [`Ctx::shaded_src`] on eight lanes (the conditions as masks): the
+/// The second half of [`shaded_src`] on eight lanes (the conditions as masks): the
 /// premultiplied colours from the entries `v` and opacity `a` of [`shade_terms8`] and the
 /// interpolated index-space gradients `g`.
 #[cfg(target_arch = "x86_64")]
