@@ -678,21 +678,20 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     }
                     k
                 };
-                let mut value: Rgba = match self.mode {
-                    RenderMode::Composite if self.shade.is_some() => {
+                let mut value: Rgba = match (self.mode, &self.shade) {
+                    (RenderMode::Composite, Some(t)) => {
                         let mut l = [0usize; 3];
                         l[sa] = sheet * stride;
                         l[ua] = u * stride;
                         l[va] = v * stride;
                         let g = index_gradient(self.data, self.dims_full, l);
-                        let t = self.shade.as_ref().expect("checked above");
                         match crate::slab::shaded_src(t, density, g, 1.0, false) {
                             Some(c) => c,
                             None if self.cull => continue,
                             None => [0.0; 4],
                         }
                     }
-                    RenderMode::Composite => {
+                    (RenderMode::Composite, None) => {
                         let gradient = if self.needs_gradient {
                             let mut l = [0usize; 3];
                             l[sa] = sheet * stride;
@@ -713,8 +712,8 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                             None => [0.0; 4],
                         }
                     }
-                    RenderMode::Xray => [density * ds, 0.0, 0.0, 0.0],
-                    RenderMode::Mip | RenderMode::Minip => [density, 1.0, 0.0, 0.0],
+                    (RenderMode::Xray, _) => [density * ds, 0.0, 0.0, 0.0],
+                    (RenderMode::Mip | RenderMode::Minip, _) => [density, 1.0, 0.0, 0.0],
                 };
                 if keep < 1.0 {
                     value = scale_kept(value, keep, self.mode);
