@@ -3,7 +3,7 @@
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 pub use volsplat::{
-    AntialiasChoice, KernelChoice, Mode, OrderChoice, PhantomKind, VisibilityChoice,
+    AntialiasChoice, KernelChoice, Mode, OrderChoice, PhantomKind, ShadeAtChoice, VisibilityChoice,
 };
 
 /// Volume rendering by splatting (Westover 1991).
@@ -273,8 +273,8 @@ pub struct RenderOptions {
     pub antialias: AntialiasChoice,
     /// Visibility: image-aligned slabs classified and shaded per pixel after reconstruction
     /// (`image`), Westover's sheet buffers (`sheet`), composite-every-sample (`every`), or `auto`:
-    /// slabs for unshaded composite, MIP and MinIP, sheets for shaded composite and X-ray
-    /// (docs/decisions/0016).
+    /// slabs for composite (shaded at the voxels), MIP and MinIP, sheets for composite shaded at
+    /// the samples and X-ray (docs/decisions/0016, 0019).
     #[arg(
         long,
         value_enum,
@@ -312,10 +312,22 @@ pub struct RenderOptions {
     )]
     pub opacity_cutoff: f32,
     /// `--visibility image`: slab thickness (plane spacing along the view) in units of the
-    /// smallest voxel spacing, in [0.01, 16]. Default: 1 for unshaded composite, 0.5 for MIP,
-    /// MinIP and shaded composite (docs/decisions/0017-slab-thickness-by-mode.md).
+    /// smallest voxel spacing, in [0.01, 16]. Default: 1 for composite (unshaded or shaded at
+    /// the voxels), 0.5 for MIP, MinIP and composite shaded at the samples
+    /// (docs/decisions/0017-slab-thickness-by-mode.md, 0019).
     #[arg(long, help_heading = "Quality", hide_short_help = true)]
     pub slab: Option<f64>,
+    /// Image-aligned slabs, shaded composite: evaluate the lights at the voxels and interpolate
+    /// the light (`voxels`, as VTK's CPU ray caster does), or at every sample with the
+    /// interpolated gradient (`samples`, the exact integral's order; docs/decisions/0019).
+    #[arg(
+        long,
+        value_enum,
+        default_value = "voxels",
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub shade_at: ShadeAtChoice,
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
@@ -497,6 +509,7 @@ pub const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
     ("no_specular", "--no-specular"),
     ("opacity_cutoff", "--opacity-cutoff"),
     ("slab", "--slab"),
+    ("shade_at", "--shade-at"),
     ("antialias", "--antialias"),
     ("splat_list", "--splat-list"),
     ("list_threshold", "--list-threshold"),

@@ -376,7 +376,8 @@ pub fn build_request(
         opacity_cutoff,
         subsample,
         list_threshold,
-        slab
+        slab,
+        shade_at
     );
     if set("threads") {
         req.threads = o.threads;

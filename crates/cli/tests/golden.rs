@@ -23,6 +23,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "demo head, composite",
         &[
+            // Westover's sheets, which `auto` drew for shaded composite before decision 0019.
+            "--visibility",
+            "sheet",
             // The early-termination cutoff these hashes were recorded with (the default before
             // decision 0018 made it VTK's 0.99): 1 − 2⁻²⁰.
             "--opacity-cutoff",
@@ -49,6 +52,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         // The default since decision 0006's 2026-11-24 amendment: the `area` rule.
         "demo head, area anti-aliasing",
         &[
+            // Westover's sheets (the `area` rule is theirs), which `auto` drew for shaded
+            // composite before decision 0019.
+            "--visibility",
+            "sheet",
             "--phantom-size",
             "40",
             "--size",
@@ -69,6 +76,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         // sRGB-encoded, the default before decision 0012 made PNGs linear.
         "demo head, PNG --srgb",
         &[
+            // Westover's sheets, which `auto` drew for shaded composite before decision 0019.
+            "--visibility",
+            "sheet",
             // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
             "--antialias",
             "swan",
@@ -90,6 +100,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     (
         "perspective",
         &[
+            // The splat list, which `auto` drew for shaded perspective before decision 0019.
+            "--visibility",
+            "sheet",
             // The early-termination cutoff these hashes were recorded with (the default before
             // decision 0018 made it VTK's 0.99): 1 − 2⁻²⁰.
             "--opacity-cutoff",
@@ -227,6 +240,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "0.99999905",
             "--visibility",
             "image",
+            // Shading at the samples at half a voxel, the slabs' shaded default before
+            // decision 0019.
+            "--shade-at",
+            "samples",
             "--phantom-size",
             "40",
             "--size",
@@ -241,6 +258,25 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         // interpolated in the cell instead of the per-sample classifier): 99.6 dB from the old
         // picture, largest difference 5.8e-4.
         0x504aa980d99cd12e,
+    ),
+    (
+        // Every default (decision 0019: `auto` draws shaded composite with one-voxel slabs
+        // shaded at the voxels, VTK's order; decision 0018's cutoff; area anti-aliasing).
+        "demo head, defaults (slabs shaded at the voxels)",
+        &[
+            "--phantom-size",
+            "40",
+            "--size",
+            "48x40",
+            "--azimuth",
+            "30",
+            "--elevation",
+            "15",
+        ],
+        "npy",
+        // Recorded 2026-11-25: 44.6 dB from the same slabs shaded at the samples, 29.8 dB from
+        // the sheets (blurrier on this 40³ phantom).
+        0x8a72fd6e5b1e42ef,
     ),
     (
         "X-ray",

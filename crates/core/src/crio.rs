@@ -329,6 +329,21 @@ impl CrioTables {
         Ok(self)
     }
 
+    /// Whether the opacity, emission and reflection tables are indexed by density and the
+    /// modulation is one constant entry: then classification before shading depends on the
+    /// density alone, and renderers may tabulate it per density
+    /// ([`FrameClassifier::surface_terms`] is `Some` exactly then).
+    pub fn density_only(&self) -> bool {
+        [
+            self.opacity.index,
+            self.emission.index,
+            self.reflection.index,
+        ]
+        .iter()
+        .all(|&i| i == TableIndex::Density)
+            && self.modulation.values.len() == 1
+    }
+
     /// Whether any table or the shading needs the gradient.
     pub fn needs_gradient(&self) -> bool {
         self.shading.diffuse

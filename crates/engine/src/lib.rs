@@ -41,7 +41,7 @@ pub use renderer::{
 pub use request::{
     AntialiasChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice, DisplayChoice,
     DisplayOptions, KernelChoice, Mode, OrderChoice, Quality, RenderRequest, RendererChoice,
-    VisibilityChoice,
+    ShadeAtChoice, VisibilityChoice,
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,

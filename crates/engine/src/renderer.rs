@@ -412,7 +412,11 @@ impl Renderer {
                                 Ok(Arc::new(build_tables(request, &tf)?))
                             })?;
                         early_fresh = fresh;
-                        request.mode != Mode::Composite || !tables.needs_gradient()
+                        // Shaded composite where the voxels can be shaded (decision 0019).
+                        request.mode != Mode::Composite
+                            || !tables.needs_gradient()
+                            || slab_shading(&request.quality, tables)
+                                == Some(volsplat_splat::ShadeAt::Voxels)
                     }
                 }
                 VisibilityChoice::Sheet | VisibilityChoice::Every => false,
@@ -597,7 +601,10 @@ impl Renderer {
                 let mut settings = request.splat_settings();
                 settings.clip = request.scene.clipping.world_planes(vol.grid())?;
                 settings.slab = request.quality.slab.unwrap_or_else(|| {
-                    volsplat_splat::slab::default_slab(settings.mode, tables.needs_gradient())
+                    volsplat_splat::slab::default_slab(
+                        settings.mode,
+                        slab_shading(&request.quality, &tables),
+                    )
                 });
                 let prepare_ms = if fresh_tables || fresh_bricks {
                     ms(t_prep)
@@ -853,6 +860,21 @@ fn report(
         Ok(())
     } else {
         Err(EngineError::Cancelled)
+    }
+}
+
+/// Where the slab renderer will evaluate the lights for these tables: `None` unshaded (no
+/// gradient needed), [`ShadeAt::Voxels`](volsplat_splat::ShadeAt::Voxels) where asked and the
+/// classification depends on the density alone, at the samples otherwise (the slab renderer's
+/// per-sample classifier).
+fn slab_shading(q: &crate::Quality, tables: &CrioTables) -> Option<volsplat_splat::ShadeAt> {
+    use volsplat_splat::ShadeAt;
+    if !tables.needs_gradient() {
+        None
+    } else if q.shade_at == crate::ShadeAtChoice::Voxels && tables.density_only() {
+        Some(ShadeAt::Voxels)
+    } else {
+        Some(ShadeAt::Samples)
     }
 }
 

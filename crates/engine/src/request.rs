@@ -132,8 +132,10 @@ pub enum AntialiasChoice {
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum VisibilityChoice {
-    /// Chosen by measurement (decision 0016): image-aligned slabs for unshaded composite, MIP
-    /// and MinIP; Westover's sheet buffers for shaded composite, X-ray (exact line integrals),
+    /// Chosen by measurement (decisions 0016 and 0019): image-aligned slabs for composite
+    /// (shaded at the voxels, as VTK shades, where the transfer function depends on the density
+    /// alone), MIP and MinIP; Westover's sheet buffers for composite shaded at the samples
+    /// (`shade_at = samples`) or through gradient-indexed tables, X-ray (exact line integrals),
     /// successive refinement, the k-contour, an explicit `splat`/`splat_list` renderer, and
     /// requests that set a sheet-only option (a kernel other than the Gaussian, subsampling,
     /// back-to-front order, or the `swan-perpendicular`/`ewa` anti-aliasing rules).
@@ -147,6 +149,23 @@ pub enum VisibilityChoice {
     /// Crawfis 1998; Mueller, Möller & Crawfis 1999): no sheet-axis popping, no pre-classified
     /// blur. Orthographic and perspective; X-ray keeps the exact sheet renderers.
     Image,
+}
+
+/// Where image-aligned slabs evaluate the lights in shaded composite
+/// ([`volsplat_splat::ShadeAt`]; decision 0019).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum ShadeAtChoice {
+    /// At the voxels, interpolated: each voxel's gradient direction is shaded once per frame
+    /// and a sample blends its cell's eight corners' light, as VTK's CPU ray caster
+    /// (`vtkFixedPointVolumeRayCastMapper`) does. The default.
+    #[default]
+    Voxels,
+    /// At every sample, with the gradient interpolated there (Mueller, Möller & Crawfis 1999;
+    /// the exact integral's order): closer to the exact integral, further from VTK's picture on
+    /// noisy data, and slower.
+    Samples,
 }
 
 /// Traversal order.
@@ -185,9 +204,12 @@ pub struct Quality {
     pub list_threshold: f32,
     /// Image-aligned visibility: slab thickness (plane spacing along the view) in units of the
     /// smallest voxel spacing, in [0.01, 16]; `None` (the default) picks by mode
-    /// ([`volsplat_splat::slab::default_slab`]: 1 for unshaded composite, ½ for MIP, MinIP and
-    /// shaded composite; decision 0017).
+    /// ([`volsplat_splat::slab::default_slab`]: 1 for composite, unshaded or shaded at the
+    /// voxels, ½ for MIP, MinIP and composite shaded at the samples; decisions 0017 and 0019).
     pub slab: Option<f64>,
+    /// Image-aligned visibility, shaded composite: where the lights are evaluated (default: at
+    /// the voxels, interpolated, as VTK does; decision 0019).
+    pub shade_at: ShadeAtChoice,
 }
 
 /// The front ends' early-termination opacity ([`Quality::opacity_cutoff`]): VTK's ray casters
@@ -207,6 +229,7 @@ impl Default for Quality {
             subsample: 1,
             list_threshold: 0.0,
             slab: None,
+            shade_at: ShadeAtChoice::Voxels,
         }
     }
 }
@@ -544,6 +567,10 @@ impl RenderRequest {
             kernel: q.kernel.kernel(),
             subsample: q.subsample,
             slab: q.slab.unwrap_or(volsplat_splat::slab::DEFAULT_SLAB),
+            shade_at: match q.shade_at {
+                ShadeAtChoice::Voxels => volsplat_splat::ShadeAt::Voxels,
+                ShadeAtChoice::Samples => volsplat_splat::ShadeAt::Samples,
+            },
             opacity_cutoff: q.opacity_cutoff,
             antialias: match q.antialias {
                 AntialiasChoice::Swan => Antialias::Swan,

@@ -110,6 +110,10 @@ fn perspective_uses_the_splat_list_and_the_dense_renderer_refuses_it() {
     let mut scene = blobs(24);
     scene.camera = orbit(10.0, 10.0, true);
     let mut req = RenderRequest::new(scene, 32, 32);
+    // `auto` draws the (shaded) blobs with slabs; with the sheets asked for, the splat list.
+    let out = Renderer::new().render(&req, &mut |_| true).unwrap();
+    assert_eq!(out.stats.renderer, Some(UsedRenderer::Slab));
+    req.quality.visibility = volsplat::VisibilityChoice::Sheet;
     let out = Renderer::new().render(&req, &mut |_| true).unwrap();
     assert_eq!(out.stats.renderer, Some(UsedRenderer::SplatList));
     assert_eq!(out.stats.projection, "perspective");
@@ -121,20 +125,28 @@ fn perspective_uses_the_splat_list_and_the_dense_renderer_refuses_it() {
     );
 }
 
-/// Every renderer reports progress during the render (not only between stages), and a
-/// callback that says stop half way cancels it.
+/// Every sheet renderer and display reports progress during the render (not only between
+/// stages), and a callback that says stop half way cancels it (the slab renderer's bands:
+/// `image_visibility_uses_the_slab_renderer_and_keeps_its_bricks`).
 #[test]
 fn progress_reports_and_cancels_for_every_renderer() {
+    use volsplat::VisibilityChoice::{Auto, Sheet};
     let cases = [
-        ("dense", RendererChoice::Auto, false),
-        ("splat list, perspective", RendererChoice::Auto, true),
-        ("splat list, orthographic", RendererChoice::SplatList, false),
-        ("sabella", RendererChoice::Sabella, false),
-        ("nil", RendererChoice::Nil, false),
+        ("dense", RendererChoice::Auto, false, Sheet),
+        ("splat list, perspective", RendererChoice::Auto, true, Sheet),
+        (
+            "splat list, orthographic",
+            RendererChoice::SplatList,
+            false,
+            Auto,
+        ),
+        ("sabella", RendererChoice::Sabella, false, Auto),
+        ("nil", RendererChoice::Nil, false, Auto),
     ];
-    for (name, renderer, perspective) in cases {
+    for (name, renderer, perspective, visibility) in cases {
         let mut req = RenderRequest::new(blobs(24), 32, 32);
         req.renderer = renderer;
+        req.quality.visibility = visibility;
         req.scene.camera = orbit(20.0, 10.0, perspective);
         req.display.samples_per_ray = 32;
         req.display.supersample = 1;
@@ -459,15 +471,17 @@ fn auto_visibility_keeps_sheets_for_sheet_only_options() {
     assert_eq!(used(&r), Some(UsedRenderer::Slab));
 }
 
-/// Without `quality.slab` the slab thickness follows the mode (decision 0017): one voxel for
-/// unshaded composite, half a voxel for MIP, MinIP and shaded composite; an explicit thickness
-/// wins. Read back from the renderer's reported plane spacing, in units of the smallest spacing.
+/// Without `quality.slab` the slab thickness follows the mode (decisions 0017 and 0019): one
+/// voxel for composite, unshaded or shaded at the voxels, half a voxel for MIP, MinIP and
+/// composite shaded at the samples; an explicit thickness wins. Read back from the renderer's
+/// reported plane spacing, in units of the smallest spacing.
 #[test]
 fn slab_thickness_defaults_by_mode() {
-    use volsplat::VisibilityChoice;
-    let thickness = |mode: Mode, shade: Option<bool>, slab: Option<f64>| {
+    use volsplat::{ShadeAtChoice, VisibilityChoice};
+    let thickness_at = |mode: Mode, shade: Option<bool>, slab: Option<f64>, at| {
         let mut req = RenderRequest::new(blobs(24), 32, 32);
         req.quality.visibility = VisibilityChoice::Image;
+        req.quality.shade_at = at;
         req.quality.slab = slab;
         req.mode = mode;
         let mut r = Renderer::new();
@@ -487,9 +501,16 @@ fn slab_thickness_defaults_by_mode() {
             .fold(f64::INFINITY, |m, &s| m.min(s));
         out.stats.sheet_spacing / min
     };
+    let thickness = |mode: Mode, shade: Option<bool>, slab: Option<f64>| {
+        thickness_at(mode, shade, slab, ShadeAtChoice::Voxels)
+    };
     let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
     assert!(close(thickness(Mode::Composite, Some(false), None), 1.0));
-    assert!(close(thickness(Mode::Composite, Some(true), None), 0.5));
+    assert!(close(thickness(Mode::Composite, Some(true), None), 1.0));
+    assert!(close(
+        thickness_at(Mode::Composite, Some(true), None, ShadeAtChoice::Samples),
+        0.5
+    ));
     assert!(close(thickness(Mode::Mip, None, None), 0.5));
     assert!(close(thickness(Mode::Minip, None, None), 0.5));
     assert!(close(

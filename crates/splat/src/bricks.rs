@@ -28,6 +28,10 @@ pub struct BrickGrid {
     pub ranges: Vec<[f32; 2]>,
     /// The volume dimensions this grid was built for.
     pub volume_dims: [usize; 3],
+    /// The voxels' direction codes for shading at the voxels ([`crate::normals`]), built on
+    /// first use ([`BrickGrid::normals`]) and kept with the grid, so a caller that keeps the
+    /// grid across frames (the engine's `Renderer`) builds them once per volume.
+    normals: std::sync::OnceLock<crate::normals::NormalField>,
 }
 
 impl BrickGrid {
@@ -78,7 +82,22 @@ impl BrickGrid {
             dims,
             ranges,
             volume_dims: n,
+            normals: std::sync::OnceLock::new(),
         }
+    }
+
+    /// The direction codes of `volume`'s voxels ([`crate::normals::NormalField`]), built on the
+    /// first call and kept; `None` if the grid was not built for a volume of this shape (or the
+    /// kept field was built for other axes or spacings), in which case the caller builds its own.
+    pub fn normals<T: Scalar>(&self, volume: &Volume<T>) -> Option<&crate::normals::NormalField> {
+        let grid = volume.grid();
+        if grid.dims != self.volume_dims {
+            return None;
+        }
+        let f = self
+            .normals
+            .get_or_init(|| crate::normals::NormalField::build(volume));
+        f.fits(grid).then_some(f)
     }
 
     /// Index of the brick holding the cell whose lower corner is voxel `(i, j, k)`.

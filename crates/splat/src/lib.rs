@@ -24,6 +24,7 @@ pub mod footprint;
 pub mod geometry;
 pub mod list;
 mod mipcull;
+pub mod normals;
 pub mod refine;
 pub mod render;
 mod row;
@@ -36,6 +37,7 @@ pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};
 pub use list::{ExtractSettings, SplatList, SplatRecord, render_list, render_list_with_progress};
+pub use normals::ShadeAt;
 pub use render::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render, render_any,
     render_with_progress,

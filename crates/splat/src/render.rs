@@ -97,6 +97,9 @@ pub struct RenderSettings {
     /// Image-aligned visibility only: slab thickness (plane spacing along the view), in units of
     /// the grid's smallest spacing, in [0.01, 16]; default [`crate::slab::DEFAULT_SLAB`].
     pub slab: f64,
+    /// Image-aligned visibility, shaded composite: where the lights are evaluated
+    /// ([`crate::normals::ShadeAt`]; default at every sample, the exact integral's order).
+    pub shade_at: crate::normals::ShadeAt,
 }
 
 impl Default for RenderSettings {
@@ -117,6 +120,7 @@ impl Default for RenderSettings {
             antialias: Antialias::default(),
             clip: Vec::new(),
             slab: crate::slab::DEFAULT_SLAB,
+            shade_at: crate::normals::ShadeAt::Samples,
         }
     }
 }

@@ -41,6 +41,11 @@ pub struct ReferenceSettings {
     pub step: f64,
     /// Sub-pixel rays per axis (`n × n` rays per pixel, averaged); 0 is treated as 1.
     pub supersample: usize,
+    /// Composite: shade at the voxels (VTK's order) instead of at the samples: each sample is
+    /// classified with each of its cell's eight voxel gradients and the eight colours are
+    /// blended with the trilinear weights (equal to blending the voxels' light where no
+    /// channel clamps at 1). Default `false`: the gradient is interpolated, then classified.
+    pub shade_at_voxels: bool,
 }
 
 impl Default for ReferenceSettings {
@@ -49,6 +54,7 @@ impl Default for ReferenceSettings {
         ReferenceSettings {
             step: 0.0,
             supersample: 1,
+            shade_at_voxels: false,
         }
     }
 }
@@ -377,6 +383,37 @@ pub fn reference_minip(
 }
 
 /// Accumulated opacity at which a ray stops (the remaining contribution is below 1e-6).
+/// The trilinear blend over the cell at `p_index` of `f` evaluated with each corner's voxel
+/// gradient (f64 weights), `None` where every corner gives `None`.
+fn corner_blend(
+    grads: &[[f32; 3]],
+    grid: &Grid,
+    p_index: DVec3,
+    f: impl Fn(Vec3) -> Option<Rgba>,
+) -> Option<Rgba> {
+    let [nx, ny, _] = grid.dims;
+    let (base, frac) = cell(grid, p_index);
+    let stride = [1, nx, nx * ny];
+    let mut sum = [0.0f64; 4];
+    let mut any = false;
+    for corner in 0..8usize {
+        let mut w = 1.0f64;
+        let mut idx = 0;
+        for a in 0..3 {
+            let up = corner >> a & 1 == 1;
+            idx += (base[a] + usize::from(up && grid.dims[a] > 1)) * stride[a];
+            w *= if up { frac[a] } else { 1.0 - frac[a] };
+        }
+        if let Some(c) = f(Vec3::from(grads[idx])) {
+            any = true;
+            for ch in 0..4 {
+                sum[ch] += w * c[ch] as f64;
+            }
+        }
+    }
+    any.then(|| sum.map(|v| v as f32))
+}
+
 const OPAQUE: f32 = 1.0 - 1e-6;
 
 /// Direct volume rendering by ray casting: premultiplied RGBA, no background.
@@ -449,16 +486,27 @@ pub fn reference_composite(
                         }
                         let p_world = ray.origin + ray.dir * (t0 + mid);
                         let depth = ((p_world - frame.eye).dot(forward) - dmin) * depth_scale;
-                        let gradient = match &grads {
-                            Some(g) => trilinear_gradient(g, grid, q),
-                            None => Vec3::ZERO,
+                        let depth = depth.clamp(0.0, 1.0) as f32;
+                        let classified = match &grads {
+                            Some(g) if settings.shade_at_voxels => {
+                                corner_blend(g, grid, q, |gradient| {
+                                    classifier.classify(&SampleInput {
+                                        density,
+                                        gradient,
+                                        depth,
+                                    })
+                                })
+                            }
+                            _ => classifier.classify(&SampleInput {
+                                density,
+                                gradient: match &grads {
+                                    Some(g) => trilinear_gradient(g, grid, q),
+                                    None => Vec3::ZERO,
+                                },
+                                depth,
+                            }),
                         };
-                        let input = SampleInput {
-                            density,
-                            gradient,
-                            depth: depth.clamp(0.0, 1.0) as f32,
-                        };
-                        let Some(mut rgba) = classifier.classify(&input) else {
+                        let Some(mut rgba) = classified else {
                             continue;
                         };
                         if seg < step {
@@ -647,6 +695,7 @@ mod tests {
                 ReferenceSettings {
                     step: 0.37,
                     supersample: 2,
+                    ..ReferenceSettings::default()
                 },
             ] {
                 let img = reference_composite(&vol, &proj, &tables, &settings);
@@ -730,6 +779,7 @@ mod tests {
         let settings = ReferenceSettings {
             step: 0.05,
             supersample: 2,
+            ..ReferenceSettings::default()
         };
         cam.parallel_projection = false;
         cam.dolly(1.5);
@@ -808,6 +858,7 @@ mod tests {
             let settings = ReferenceSettings {
                 step: 0.0,
                 supersample: n,
+                ..ReferenceSettings::default()
             };
             let img = reference_xray(&vol, &proj, &settings);
             let exact = analytic_xray(&blobs, &proj, n).unwrap();
@@ -849,6 +900,7 @@ mod tests {
         let settings = ReferenceSettings {
             step: 0.0,
             supersample: 2,
+            ..ReferenceSettings::default()
         };
         let img = reference_xray(&vol, &proj, &settings);
         let mut worst = 0.0f64;
@@ -895,6 +947,7 @@ mod tests {
             ReferenceSettings {
                 step: 0.37,
                 supersample: 1,
+                ..ReferenceSettings::default()
             },
         ] {
             let img = reference_composite(&vol, &proj, &tables, &settings);

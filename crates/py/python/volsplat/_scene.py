@@ -25,6 +25,7 @@ _QUALITY = (
     "subsample",
     "list_threshold",
     "slab",
+    "shade_at",
 )
 _SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping")
 _ORBIT = ("azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
@@ -88,7 +89,9 @@ class Scene:
     - ``renderer``: ``"auto"``, ``"splat"``, ``"splat_list"``, ``"sabella"``, ``"nil"``.
     - quality: ``kernel`` (``"gaussian"``, ``"nearest"``, ``"tent"``, ``"bspline"``, …),
       ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``slab`` (image-aligned slab
-      thickness in voxels; default ``None``: 1 for unshaded composite, 0.5 otherwise), ``order`` (``"ftb"``/``"btf"``),
+      thickness in voxels; default ``None``: 1 for composite, 0.5 for MIP, MinIP and shading at
+      the samples), ``shade_at`` (``"voxels"``, the default, as VTK shades, or ``"samples"``),
+      ``order`` (``"ftb"``/``"btf"``),
       ``opacity_cutoff``, ``subsample``, ``list_threshold``; or ``quality={...}``.
     - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
       (``--light``); ``shading={"emission":…, "diffuse":…, "specular":…}``;
