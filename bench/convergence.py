@@ -11,11 +11,12 @@ For the composite, shaded and perspective scenes of `../shared/data/scenes`:
    smallest spacing, rendered 4× larger and box-filtered 4×4 down (cached in
    `target/convergence-cache/`, keyed by scene, size and file times);
 2. **VTK's usual render**: sample distance 1/2 of the smallest spacing, at the size itself;
-3. **volsplat** in each mode (default: `auto` = no flags, what a user gets (decisions 0016 and
-   0017: one-voxel slabs for unshaded composite, sheets for shaded); `sheet` = `--visibility
-   sheet`, Westover's sheet buffers;
-   `image` = `--visibility image --slab 0.5`; `image-1` = `--visibility image --slab 1`), same camera
-   and transfer-function files, linear PNG as VTK writes it;
+3. **volsplat** in each mode (default: `auto` = no flags, what a user gets (decisions 0016, 0017
+   and 0019: one-voxel slabs for composite, shaded at the voxels as VTK shades); `sheet` =
+   `--visibility sheet`, Westover's sheet buffers; `image` = `--visibility image --slab 0.5`;
+   `image-1` = `--visibility image --slab 1`; `image-samples` = half-voxel slabs shading every
+   sample, `--shade-at samples`), same camera and transfer-function files, linear PNG as VTK
+   writes it;
 4. **PSNR** (RGB, 8-bit linear values over black, peak 1) of each against the reference;
 5. **Float reference** (a second, independent one): `testkit`'s brute-force integrator
    (`cargo run --release -p volsplat-testkit --example reference_render`): float arithmetic,
@@ -54,6 +55,7 @@ DEFAULT_MODES = [
     ("sheet", "--visibility sheet"),
     ("image", "--visibility image --slab 0.5"),
     ("image-1", "--visibility image --slab 1"),
+    ("image-samples", "--visibility image --slab 0.5 --shade-at samples"),
 ]
 
 

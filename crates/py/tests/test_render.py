@@ -30,7 +30,8 @@ def test_composite_image(vol):
     assert 0 < rgba[..., 3].max() <= 1
     assert np.asarray(img).shape == (30, 40, 4)
     stats = img.stats
-    assert stats["width"] == 40 and stats["renderer"] == "dense" and stats["total_ms"] > 0
+    # Shaded composite: `auto` draws one-voxel slabs shaded at the voxels (decision 0019).
+    assert stats["width"] == 40 and stats["renderer"] == "slab" and stats["total_ms"] > 0
     assert "volsplat.Image 40×30" in repr(img)
 
 
@@ -112,7 +113,7 @@ def test_camera_objects(vol, tmp_path):
     assert not np.array_equal(side.rgba, img.rgba)
     assert cam.replace(azimuth=45).azimuth == 45
     p = volsplat.render(vol, perspective=True, size=32)
-    assert p.camera.parallel_projection is False and p.stats["renderer"] == "splat-list"
+    assert p.camera.parallel_projection is False and p.stats["renderer"] == "slab"
     with pytest.raises(volsplat.InvalidInputError, match="focal_point"):
         volsplat.Camera(position=(0, 0, 1))
     with pytest.raises(volsplat.InvalidInputError, match="zoom"):
