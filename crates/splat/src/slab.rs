@@ -1597,18 +1597,7 @@ pub(crate) fn shaded_src(
     corrected: bool,
 ) -> Option<Rgba> {
     let v = t.entry(rho);
-    // NaN entries contribute nothing, as in the kernel's ordered comparisons.
-    let a = if corrected {
-        if v[7] < 0.0 {
-            1.0 - exp2_neg(k * v[7])
-        } else {
-            return None;
-        }
-    } else if v[0] > 0.0 {
-        v[0]
-    } else {
-        return None;
-    };
+    let a = shade_opacity(&v, k, corrected)?;
     let m = &t.to_world;
     let gw: [f32; 3] = std::array::from_fn(|i| m[0][i] * g[0] + m[1][i] * g[1] + m[2][i] * g[2]);
     let g2 = gw[0] * gw[0] + gw[1] * gw[1] + gw[2] * gw[2];
@@ -1665,17 +1654,7 @@ fn voxel_shaded_src(
     corrected: bool,
 ) -> Option<Rgba> {
     let v = t.entry(rho);
-    let a = if corrected {
-        if v[7] < 0.0 {
-            1.0 - exp2_neg(k * v[7])
-        } else {
-            return None;
-        }
-    } else if v[0] > 0.0 {
-        v[0]
-    } else {
-        return None;
-    };
+    let a = shade_opacity(&v, k, corrected)?;
     let mut col = [v[1], v[2], v[3]];
     let (diffuse, specular, _) = t.switches();
     if diffuse || specular {
@@ -1713,6 +1692,19 @@ fn voxel_shaded_src(
     }
     let col = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
     Some([col[0], col[1], col[2], a])
+}
+
+/// The opacity of a shaded sample from its [`ShadeTable`] entry `v`: path-corrected
+/// (`1 − 2^(k·log2(1 − α))`) where `corrected`, else `α`; `None` where it has none (NaN entries
+/// contribute nothing, as in the kernels' ordered comparisons): the scalar twin of
+/// [`shade_terms8`]'s opacity.
+#[inline(always)]
+fn shade_opacity(v: &[f32; 8], k: f32, corrected: bool) -> Option<f32> {
+    if corrected {
+        (v[7] < 0.0).then(|| 1.0 - exp2_neg(k * v[7]))
+    } else {
+        (v[0] > 0.0).then_some(v[0])
+    }
 }
 
 /// Entries per data unit and the last entry's index of a table of `n` entries spanning

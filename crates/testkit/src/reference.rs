@@ -184,12 +184,13 @@ pub fn voxel_gradients(vol: &Volume<f32>) -> Vec<[f32; 3]> {
     out
 }
 
-fn trilinear_gradient(grads: &[[f32; 3]], grid: &Grid, p_index: DVec3) -> Vec3 {
+/// The eight corners of the cell at `p_index`: each one's linear voxel index and trilinear
+/// weight (f64).
+fn cell_corners(grid: &Grid, p_index: DVec3) -> [(usize, f64); 8] {
     let [nx, ny, _] = grid.dims;
     let (base, frac) = cell(grid, p_index);
     let stride = [1, nx, nx * ny];
-    let mut g = Vec3::ZERO;
-    for corner in 0..8usize {
+    std::array::from_fn(|corner| {
         let mut w = 1.0f64;
         let mut idx = 0;
         for a in 0..3 {
@@ -197,6 +198,13 @@ fn trilinear_gradient(grads: &[[f32; 3]], grid: &Grid, p_index: DVec3) -> Vec3 {
             idx += (base[a] + usize::from(up && grid.dims[a] > 1)) * stride[a];
             w *= if up { frac[a] } else { 1.0 - frac[a] };
         }
+        (idx, w)
+    })
+}
+
+fn trilinear_gradient(grads: &[[f32; 3]], grid: &Grid, p_index: DVec3) -> Vec3 {
+    let mut g = Vec3::ZERO;
+    for (idx, w) in cell_corners(grid, p_index) {
         if w != 0.0 {
             g += Vec3::from(grads[idx]) * w as f32;
         }
@@ -391,19 +399,9 @@ fn corner_blend(
     p_index: DVec3,
     f: impl Fn(Vec3) -> Option<Rgba>,
 ) -> Option<Rgba> {
-    let [nx, ny, _] = grid.dims;
-    let (base, frac) = cell(grid, p_index);
-    let stride = [1, nx, nx * ny];
     let mut sum = [0.0f64; 4];
     let mut any = false;
-    for corner in 0..8usize {
-        let mut w = 1.0f64;
-        let mut idx = 0;
-        for a in 0..3 {
-            let up = corner >> a & 1 == 1;
-            idx += (base[a] + usize::from(up && grid.dims[a] > 1)) * stride[a];
-            w *= if up { frac[a] } else { 1.0 - frac[a] };
-        }
+    for (idx, w) in cell_corners(grid, p_index) {
         if let Some(c) = f(Vec3::from(grads[idx])) {
             any = true;
             for ch in 0..4 {
