@@ -2392,7 +2392,9 @@ unsafe fn interp8(
 /// ([`Sampler8`]), computing each lane's slab exponent (`boundary_factor`) and compositing what
 /// `src` returns front to back into the row's channel planes: lane `l` does exactly
 /// [`Ctx::composite_one`]'s f32 operations for pixel `x + l`; the classification `src`
-/// ([`Source8::src`]) gives the premultiplied colours and the lanes that contribute. Returns the first pixel not done (`b + 1`, or earlier
+/// ([`Source8::src`]) gives the premultiplied colours and the lanes that contribute. Groups go
+/// in chunks of four, sampled first and classified after, so that the gathers' cache misses
+/// overlap (`docs/BENCHMARKS.md` §15.3: 9–15 % of the frame). Returns the first pixel not done (`b + 1`, or earlier
 /// where a group's reads would pass the end of the data, or the last pixels of the row where a
 /// group would pass it: those are left to the scalar twin).
 ///
@@ -2428,99 +2430,144 @@ unsafe fn composite_groups_avx2<T: Scalar>(
     let two_half_v = _mm256_set1_ps(two_half);
     let persp = ctx.view.perspective;
     let mut x = a;
+    // Groups are taken in chunks: first each group of the chunk is tested and sampled, then each
+    // is classified and composited. The gathers of a chunk's groups then do not wait on one
+    // another's classification, so their cache misses overlap; every pixel still gets exactly
+    // the operations of the one-group-at-a-time loop (the groups hold different pixels).
+    const CHUNK: usize = 4;
+    struct Sampled<P> {
+        x: usize,
+        ar: __m256,
+        live: __m256,
+        frac: [__m256; 3],
+        rho: __m256,
+        pre: P,
+    }
+    let mut chunk: [Option<Sampled<_>>; CHUNK] = std::array::from_fn(|_| None);
     // The last group of the run may be partial: its lanes past `b` are masked (they read
     // clamped cells, valid reads, and store what they loaded).
-    while x <= b && x + 8 <= row.a.len() {
-        let n = (b - x + 1).min(8);
-        let in_run = first_lanes(n);
-        let ar = unsafe { _mm256_loadu_ps(row.a.as_ptr().add(x)) };
-        let live = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ar, cutoff), in_run);
-        let live_bits = _mm256_movemask_ps(live);
-        if live_bits == 0 {
-            c.terminated += n as u64;
+    loop {
+        let mut filled = 0;
+        // Set where a group's reads would pass the end of the data: the run stops there.
+        let mut stop = None;
+        while filled < CHUNK && x <= b && x + 8 <= row.a.len() {
+            let n = (b - x + 1).min(8);
+            let in_run = first_lanes(n);
+            let ar = unsafe { _mm256_loadu_ps(row.a.as_ptr().add(x)) };
+            let live = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ar, cutoff), in_run);
+            let live_bits = _mm256_movemask_ps(live);
+            if live_bits == 0 {
+                c.terminated += n as u64;
+                x += 8;
+                continue;
+            }
+            let cells = unsafe { sampler.locate(x) };
+            // Lanes whose cell's brick has no opacity under the transfer function contribute
+            // nothing: not sampled where a whole group is in such bricks.
+            let active = if ctx.skip_empty {
+                let brick = unsafe { sampler.bricks_of(&cells) };
+                let flags = unsafe { _mm256_i32gather_epi32::<1>(active_bytes, brick) };
+                _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+                    _mm256_and_si256(flags, _mm256_set1_epi32(0xff)),
+                    _mm256_setzero_si256(),
+                ))
+            } else {
+                _mm256_castsi256_ps(_mm256_set1_epi32(-1))
+            };
+            c.terminated += u64::from(n as u32 - lanes(live_bits));
+            let live = _mm256_and_ps(live, active);
+            let live_bits = _mm256_movemask_ps(live);
+            if live_bits == 0 {
+                x += 8;
+                continue;
+            }
+            if unsafe { src.scalar_lanes(&cells, live) } {
+                // The scalar twin takes the group's live lanes (the others are counted above or
+                // contribute nothing); its pixels are none of the chunk's.
+                for l in 0..n {
+                    if live_bits >> l & 1 == 1 {
+                        ctx.composite_one(walk, x + l, row, post, c);
+                    }
+                }
+                x += 8;
+                continue;
+            }
+            let base = unsafe { sampler.base_of(&cells) };
+            let frac = unsafe { cells.fractions() };
+            let Some((rho, pre)) = (unsafe { src.sample(&cells, base, frac) }) else {
+                stop = Some(x);
+                break;
+            };
+            c.samples += u64::from(lanes(live_bits));
+            chunk[filled] = Some(Sampled {
+                x,
+                ar,
+                live,
+                frac,
+                rho,
+                pre,
+            });
+            filled += 1;
             x += 8;
-            continue;
         }
-        let cells = unsafe { sampler.locate(x) };
-        // Lanes whose cell's brick has no opacity under the transfer function contribute
-        // nothing: not sampled where a whole group is in such bricks.
-        let active = if ctx.skip_empty {
-            let brick = unsafe { sampler.bricks_of(&cells) };
-            let flags = unsafe { _mm256_i32gather_epi32::<1>(active_bytes, brick) };
-            _mm256_castsi256_ps(_mm256_cmpgt_epi32(
-                _mm256_and_si256(flags, _mm256_set1_epi32(0xff)),
-                _mm256_setzero_si256(),
-            ))
-        } else {
-            _mm256_castsi256_ps(_mm256_set1_epi32(-1))
-        };
-        c.terminated += u64::from(n as u32 - lanes(live_bits));
-        let live = _mm256_and_ps(live, active);
-        let live_bits = _mm256_movemask_ps(live);
-        if live_bits == 0 {
-            x += 8;
-            continue;
-        }
-        if unsafe { src.scalar_lanes(&cells, live) } {
-            // The scalar twin takes the group's live lanes (the others are counted above or
-            // contribute nothing).
-            for l in 0..n {
-                if live_bits >> l & 1 == 1 {
-                    ctx.composite_one(walk, x + l, row, post, c);
+        for g in chunk.iter_mut().take(filled) {
+            let Some(Sampled {
+                x,
+                ar,
+                live,
+                frac,
+                rho,
+                pre,
+            }) = g.take()
+            else {
+                continue;
+            };
+            // The slab's exponent (`boundary_factor`, lane by lane).
+            let kf = unsafe { _mm256_loadu_ps(row.kf.as_ptr().add(x)) };
+            let din = unsafe { _mm256_loadu_ps(row.din.as_ptr().add(x)) };
+            let dout = unsafe { _mm256_loadu_ps(row.dout.as_ptr().add(x)) };
+            let lo_cut = _mm256_cmp_ps::<_CMP_LT_OQ>(front, din);
+            let hi_cut = _mm256_cmp_ps::<_CMP_GT_OQ>(back, dout);
+            let cut = _mm256_or_ps(lo_cut, hi_cut);
+            let k = if _mm256_movemask_ps(cut) == 0 {
+                kf
+            } else {
+                let l = _mm256_blendv_ps(d_minus, din, lo_cut);
+                let h = _mm256_blendv_ps(d_plus, dout, hi_cut);
+                let q = _mm256_max_ps(_mm256_div_ps(_mm256_sub_ps(h, l), two_half_v), zero);
+                _mm256_blendv_ps(kf, _mm256_mul_ps(kf, q), cut)
+            };
+            // Lanes that take the path-corrected form.
+            let corrected = if persp {
+                _mm256_castsi256_ps(_mm256_set1_epi32(-1))
+            } else {
+                _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, one)
+            };
+            let (src, contributes) = unsafe { src.src(&pre, frac, rho, k, corrected) };
+            let mask = _mm256_and_ps(contributes, live);
+            let bits = _mm256_movemask_ps(mask);
+            if bits != 0 {
+                c.visible += u64::from(lanes(bits));
+                let tr = _mm256_sub_ps(one, ar);
+                let chans: [&mut [f32]; 4] = [&mut *row.r, &mut *row.g, &mut *row.b, &mut *row.a];
+                for (ch, plane) in chans.into_iter().enumerate() {
+                    let p = unsafe { plane.as_mut_ptr().add(x) };
+                    let old = unsafe { _mm256_loadu_ps(p) };
+                    // Masked lanes add a zero (of either sign), which leaves every value an
+                    // accumulation can hold (never −0) bit for bit, so the store needs no blend
+                    // (a blended store compiles to `vmaskmovps`, slow on AMD).
+                    let add = _mm256_mul_ps(tr, _mm256_and_ps(src[ch], mask));
+                    unsafe { _mm256_storeu_ps(p, _mm256_add_ps(old, add)) };
                 }
             }
-            x += 8;
-            continue;
         }
-        c.samples += u64::from(lanes(live_bits));
-        let base = unsafe { sampler.base_of(&cells) };
-        let frac = unsafe { cells.fractions() };
-        let Some((rho, pre)) = (unsafe { src.sample(&cells, base, frac) }) else {
-            break;
-        };
-        // The slab's exponent (`boundary_factor`, lane by lane).
-        let kf = unsafe { _mm256_loadu_ps(row.kf.as_ptr().add(x)) };
-        let din = unsafe { _mm256_loadu_ps(row.din.as_ptr().add(x)) };
-        let dout = unsafe { _mm256_loadu_ps(row.dout.as_ptr().add(x)) };
-        let lo_cut = _mm256_cmp_ps::<_CMP_LT_OQ>(front, din);
-        let hi_cut = _mm256_cmp_ps::<_CMP_GT_OQ>(back, dout);
-        let cut = _mm256_or_ps(lo_cut, hi_cut);
-        let k = if _mm256_movemask_ps(cut) == 0 {
-            kf
-        } else {
-            let l = _mm256_blendv_ps(d_minus, din, lo_cut);
-            let h = _mm256_blendv_ps(d_plus, dout, hi_cut);
-            let q = _mm256_max_ps(_mm256_div_ps(_mm256_sub_ps(h, l), two_half_v), zero);
-            _mm256_blendv_ps(kf, _mm256_mul_ps(kf, q), cut)
-        };
-        // Lanes that take the path-corrected form.
-        let corrected = if persp {
-            _mm256_castsi256_ps(_mm256_set1_epi32(-1))
-        } else {
-            _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, one)
-        };
-        let Some((src, contributes)) = (unsafe { src.src(&pre, frac, rho, k, corrected) }) else {
-            break;
-        };
-        let mask = _mm256_and_ps(contributes, live);
-        let bits = _mm256_movemask_ps(mask);
-        if bits != 0 {
-            c.visible += u64::from(lanes(bits));
-            let tr = _mm256_sub_ps(one, ar);
-            let chans: [&mut [f32]; 4] = [&mut *row.r, &mut *row.g, &mut *row.b, &mut *row.a];
-            for (ch, plane) in chans.into_iter().enumerate() {
-                let p = unsafe { plane.as_mut_ptr().add(x) };
-                let old = unsafe { _mm256_loadu_ps(p) };
-                // Masked lanes add a zero (of either sign), which leaves every value an
-                // accumulation can hold (never −0) bit for bit, so the store needs no blend
-                // (a blended store compiles to `vmaskmovps`, slow on AMD).
-                let add = _mm256_mul_ps(tr, _mm256_and_ps(src[ch], mask));
-                unsafe { _mm256_storeu_ps(p, _mm256_add_ps(old, add)) };
-            }
+        if let Some(at) = stop {
+            return at;
         }
-        x += 8;
+        if filled == 0 {
+            return x;
+        }
     }
-    x
 }
 
 /// Composite of pixels `a..=b` of a row, eight at a time ([`composite_groups_avx2`]), classified
@@ -2615,7 +2662,7 @@ trait Source8<T> {
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
-    ) -> Option<([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256)>;
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256);
 }
 
 /// Unshaded classification through the post table: lane `l` does exactly [`Ctx::post_src`]'s
@@ -2658,7 +2705,7 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
-    ) -> Option<([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256)> {
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
         let t = self.t;
         let zero = _mm256_setzero_ps();
@@ -2684,7 +2731,7 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
             src[3] = _mm256_blendv_ps(src[3], a, corrected);
             contributes = _mm256_blendv_ps(contributes, ok, corrected);
         }
-        Some((src, contributes))
+        (src, contributes)
     }
 }
 
@@ -2788,11 +2835,11 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
-    ) -> Option<([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256)> {
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
         let (v, a, contributes) = shade_terms8(self.t, rho, k, corrected);
         if _mm256_movemask_ps(contributes) == 0 {
-            return Some(([_mm256_setzero_ps(); 4], contributes));
+            return ([_mm256_setzero_ps(); 4], contributes);
         }
         let (base, c) = pre;
         let s = self.sampler;
@@ -2853,7 +2900,7 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
             let c11 = lerp8(e[1][1][0], e[1][1][1], frac[0]);
             *out = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
         }
-        Some((shade_light8(self.t, &v, a, contributes, g), contributes))
+        (shade_light8(self.t, &v, a, contributes, g), contributes)
     }
 }
 
@@ -2945,11 +2992,11 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
-    ) -> Option<([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256)> {
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
         let (v, a, contributes) = shade_terms8(self.t, rho, k, corrected);
         if _mm256_movemask_ps(contributes) == 0 {
-            return Some(([_mm256_setzero_ps(); 4], contributes));
+            return ([_mm256_setzero_ps(); 4], contributes);
         }
         let zero = _mm256_setzero_ps();
         let one = _mm256_set1_ps(1.0);
@@ -2991,7 +3038,7 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
         for c in &mut col {
             *c = _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(*c, zero), one), a);
         }
-        Some(([col[0], col[1], col[2], a], contributes))
+        ([col[0], col[1], col[2], a], contributes)
     }
 }
 
