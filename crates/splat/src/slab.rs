@@ -3250,43 +3250,67 @@ unsafe fn extreme_row_avx2<T: Scalar>(
     let sampler = unsafe { Sampler8::new(ctx, walk) };
     let bounds = ctx.extreme_bounds.as_ptr();
     let mut x = lo;
-    while x <= hi && x + 8 <= row.len() {
-        let in_row = first_lanes((hi - x + 1).min(8));
-        let p = unsafe { row.as_mut_ptr().add(x) };
-        let cur = unsafe { _mm256_loadu_ps(p) };
-        let cells = unsafe { sampler.locate(x) };
-        let brick = unsafe { sampler.bricks_of(&cells) };
-        let bound = unsafe { _mm256_i32gather_ps::<4>(bounds, brick) };
-        let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_row);
-        let open = _mm256_and_ps(
-            if mip {
-                _mm256_cmp_ps::<_CMP_LT_OQ>(cur, bound)
-            } else {
-                _mm256_cmp_ps::<_CMP_GT_OQ>(cur, bound)
-            },
-            in_row,
-        );
-        let todo = _mm256_movemask_ps(_mm256_or_ps(unset, open));
-        if todo == 0 {
+    // As in `composite_groups_avx2`: a chunk of groups is tested and sampled, then compared, so
+    // that the gathers' cache misses overlap; each pixel gets the same operations.
+    const CHUNK: usize = 4;
+    let mut chunk = [(
+        0usize,
+        _mm256_setzero_ps(),
+        _mm256_setzero_ps(),
+        _mm256_setzero_ps(),
+    ); CHUNK];
+    loop {
+        let mut filled = 0;
+        let mut stop = false;
+        while filled < CHUNK && x <= hi && x + 8 <= row.len() {
+            let in_row = first_lanes((hi - x + 1).min(8));
+            let cur = unsafe { _mm256_loadu_ps(row.as_ptr().add(x)) };
+            let cells = unsafe { sampler.locate(x) };
+            let brick = unsafe { sampler.bricks_of(&cells) };
+            let bound = unsafe { _mm256_i32gather_ps::<4>(bounds, brick) };
+            let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_row);
+            let open = _mm256_and_ps(
+                if mip {
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(cur, bound)
+                } else {
+                    _mm256_cmp_ps::<_CMP_GT_OQ>(cur, bound)
+                },
+                in_row,
+            );
+            let todo = _mm256_movemask_ps(_mm256_or_ps(unset, open));
+            if todo == 0 {
+                x += 8;
+                continue;
+            }
+            let Some(v) = (unsafe { sampler.sample(&cells) }) else {
+                stop = true;
+                break;
+            };
+            c.samples += u64::from(lanes(todo));
+            chunk[filled] = (x, cur, v, _mm256_or_ps(unset, open));
+            // `unset` is kept apart from `open` below through `cur` (NaN where unset).
+            filled += 1;
             x += 8;
-            continue;
         }
-        let Some(v) = (unsafe { sampler.sample(&cells) }) else {
-            break;
-        };
-        c.samples += u64::from(lanes(todo));
-        let better = if mip {
-            _mm256_cmp_ps::<_CMP_GT_OQ>(v, cur)
-        } else {
-            _mm256_cmp_ps::<_CMP_LT_OQ>(v, cur)
-        };
-        // Lanes whose brick cannot beat them keep their value even where rounding put a
-        // sample an ulp beyond the brick's range: the scalar twin does not sample them.
-        let take = _mm256_or_ps(unset, _mm256_and_ps(better, open));
-        unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(cur, v, take)) };
-        x += 8;
+        for &(gx, cur, v, todo) in &chunk[..filled] {
+            let better = if mip {
+                _mm256_cmp_ps::<_CMP_GT_OQ>(v, cur)
+            } else {
+                _mm256_cmp_ps::<_CMP_LT_OQ>(v, cur)
+            };
+            // Lanes whose brick cannot beat them keep their value even where rounding put a
+            // sample an ulp beyond the brick's range: the scalar twin does not sample them.
+            // An unset lane (NaN) is in `todo` and takes the sample; a set lane in `todo` is
+            // open and takes it where it is better.
+            let unset = _mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur);
+            let take = _mm256_and_ps(todo, _mm256_or_ps(unset, better));
+            let p = unsafe { row.as_mut_ptr().add(gx) };
+            unsafe { _mm256_storeu_ps(p, _mm256_blendv_ps(cur, v, take)) };
+        }
+        if stop || filled == 0 {
+            return x;
+        }
     }
-    x
 }
 
 /// A mask of the first `n` (≤ 8) of eight lanes: the pixels of a partial last group that belong
