@@ -93,6 +93,10 @@ pub struct Stats {
     pub kernel: String,
     /// Anti-aliasing rule.
     pub antialias: &'static str,
+    /// Image-aligned slabs, shaded composite: where the lights were evaluated, `voxels` (VTK's
+    /// order) or `samples` (also where `voxels` was asked for but the transfer function depends
+    /// on more than the density; decision 0019). Absent otherwise.
+    pub shade_at: Option<&'static str>,
     /// Sheets.
     pub sheets: usize,
     /// Sheet-normal axis, `i`, `j` or `k`.
@@ -649,6 +653,12 @@ impl Renderer {
                     sheets: s.sheets,
                     sheet_axis: "view",
                     sheet_spacing: s.sheet_spacing,
+                    shade_at: match slab_shading(&request.quality, &tables) {
+                        _ if settings.mode != volsplat_splat::RenderMode::Composite => None,
+                        Some(volsplat_splat::ShadeAt::Voxels) => Some("voxels"),
+                        Some(volsplat_splat::ShadeAt::Samples) => Some("samples"),
+                        None => None,
+                    },
                     threads: s.threads,
                     ..Stats::default()
                 };

@@ -507,6 +507,25 @@ fn slab_thickness_defaults_by_mode() {
     let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
     assert!(close(thickness(Mode::Composite, Some(false), None), 1.0));
     assert!(close(thickness(Mode::Composite, Some(true), None), 1.0));
+    // The stats say where the lights were evaluated; tables that depend on more than the
+    // density (a gradient-magnitude opacity ramp) shade at the samples whatever was asked.
+    let shade_at = |at, surface| {
+        let mut req = RenderRequest::new(blobs(24), 32, 32);
+        req.quality.visibility = VisibilityChoice::Image;
+        req.quality.shade_at = at;
+        req.scene.surface_enhance = surface;
+        Renderer::new()
+            .render(&req, &mut |_| true)
+            .unwrap()
+            .stats
+            .shade_at
+    };
+    assert_eq!(shade_at(ShadeAtChoice::Voxels, None), Some("voxels"));
+    assert_eq!(shade_at(ShadeAtChoice::Samples, None), Some("samples"));
+    assert_eq!(
+        shade_at(ShadeAtChoice::Voxels, Some([0.01, 0.2])),
+        Some("samples")
+    );
     assert!(close(
         thickness_at(Mode::Composite, Some(true), None, ShadeAtChoice::Samples),
         0.5
