@@ -605,12 +605,23 @@ impl RenderRequest {
             std::fs::read_to_string(path).map_err(|e| scene_err(format!("cannot read: {e}")))?;
         let mut warnings = Vec::new();
         let de = &mut serde_json::Deserializer::from_str(&text);
-        let req: RenderRequest = serde_ignored::deserialize(de, |p| {
+        // The path of the value that failed (`quality.shade_at`), for errors that serde reports
+        // without it (a wrong type, an unknown enum value).
+        let mut track = serde_path_to_error::Track::new();
+        let tracked = serde_path_to_error::Deserializer::new(de, &mut track);
+        let req: std::result::Result<RenderRequest, _> = serde_ignored::deserialize(tracked, |p| {
             // serde_ignored writes `?` for an enum variant's name, which it does not know.
             let p = p.to_string().replace(".?", "");
             warnings.push(format!("{}: unknown field `{p}` ignored", path.display()))
-        })
-        .map_err(|e| scene_err(e.to_string()))?;
+        });
+        let req = req.map_err(|e| {
+            let at = track.path().to_string();
+            scene_err(if at.is_empty() || at == "." {
+                e.to_string()
+            } else {
+                format!("{at}: {e}")
+            })
+        })?;
         Ok((req, warnings))
     }
 

@@ -231,6 +231,26 @@ fn scene_files_warn_on_unknown_fields_and_name_missing_ones() {
     std::fs::write(&p, r#"{"scene": {}, "width": 1, "height": 1}"#).unwrap();
     let e = RenderRequest::load(&p).unwrap_err().to_string();
     assert!(e.contains("missing field `volume`"), "{e}");
+    // A wrong value names the field it is in.
+    for (field, value) in [
+        ("shade_at", r#""corners""#),
+        ("visibility", r#""bogus""#),
+        ("slab", r#""thick""#),
+    ] {
+        std::fs::write(
+            &p,
+            format!(
+                r#"{{"scene": {{"volume": {{"phantom": {{"phantom": "blobs"}}}}}},
+                    "width": 1, "height": 1, "quality": {{"{field}": {value}}}}}"#
+            ),
+        )
+        .unwrap();
+        let e = RenderRequest::load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("quality.{field}:")) && e.contains("s.json"),
+            "{e}"
+        );
+    }
     std::fs::write(
         &p,
         r#"{"scene": {"volume": {"phantom": {"phantom": "cube"}}}, "width": 1, "height": 1}"#,
