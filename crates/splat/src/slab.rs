@@ -1631,8 +1631,7 @@ pub(crate) fn shaded_src(
             }
         }
     }
-    let col = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
-    Some([col[0], col[1], col[2], a])
+    Some(premultiplied(col, a))
 }
 
 /// The premultiplied, shaded colour of a sample of density `rho` at fractions `f` in a cell
@@ -1690,8 +1689,7 @@ fn voxel_shaded_src(
             }
         }
     }
-    let col = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
-    Some([col[0], col[1], col[2], a])
+    Some(premultiplied(col, a))
 }
 
 /// The opacity of a shaded sample from its [`ShadeTable`] entry `v`: path-corrected
@@ -1705,6 +1703,14 @@ fn shade_opacity(v: &[f32; 8], k: f32, corrected: bool) -> Option<f32> {
     } else {
         (v[0] > 0.0).then_some(v[0])
     }
+}
+
+/// The shaded colour `col` clamped to [0, 1] (as `maxps`/`minps` clamp) and multiplied by the
+/// opacity `a`: the premultiplied RGBA of a shaded sample.
+#[inline(always)]
+fn premultiplied(col: [f32; 3], a: f32) -> Rgba {
+    let c = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
+    [c[0], c[1], c[2], a]
 }
 
 /// Entries per data unit and the last entry's index of a table of `n` entries spanning
@@ -2998,8 +3004,6 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
         if _mm256_movemask_ps(contributes) == 0 {
             return ([_mm256_setzero_ps(); 4], contributes);
         }
-        let zero = _mm256_setzero_ps();
-        let one = _mm256_set1_ps(1.0);
         let mut col = [v[1], v[2], v[3]];
         let (diffuse, specular, _) = self.t.switches();
         if diffuse || specular {
@@ -3035,10 +3039,7 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
                 }
             }
         }
-        for c in &mut col {
-            *c = _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(*c, zero), one), a);
-        }
-        ([col[0], col[1], col[2], a], contributes)
+        (premultiplied8(col, a), contributes)
     }
 }
 
@@ -3217,10 +3218,22 @@ fn shade_light8(
             }
         }
     }
-    for c in &mut col {
-        *c = _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(*c, zero), one), a);
-    }
-    [col[0], col[1], col[2], a]
+    premultiplied8(col, a)
+}
+
+/// The shaded colour `col` clamped to [0, 1] and multiplied by the opacity `a`, on eight lanes
+/// ([`premultiplied`]'s operations).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn premultiplied8(
+    col: [std::arch::x86_64::__m256; 3],
+    a: std::arch::x86_64::__m256,
+) -> [std::arch::x86_64::__m256; 4] {
+    use std::arch::x86_64::*;
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    let c = col.map(|c| _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(c, zero), one), a));
+    [c[0], c[1], c[2], a]
 }
 
 /// MIP (`mip`) or MinIP over pixels `lo..=hi` of a row, eight at a time: each lane's cell is

@@ -83,7 +83,7 @@ fn camera(grid: &Grid, az: f64, el: f64, roll: f64, zoom: f64, perspective: bool
 
 /// Transfer function over the phantom's range: partly transparent and coloured, its opacity
 /// unit distance scaled with the grid so that every spacing gives the same picture.
-fn tables(grid: &Grid) -> CrioTables {
+fn transfer_function(grid: &Grid) -> TransferFunction {
     let (lo, hi) = grid.bounds_world();
     let mut tf = TransferFunction::ramp(0.0, 1.1, 0.25);
     tf.color = vec![
@@ -92,24 +92,24 @@ fn tables(grid: &Grid) -> CrioTables {
         [1.1, 1.0, 1.0, 1.0],
     ];
     tf.scalar_opacity_unit_distance = (hi - lo).min_element() / 23.0;
-    CrioTables::from_transfer_function(&tf, 16).unwrap()
+    tf
+}
+
+/// [`transfer_function`]'s tables.
+fn tables(grid: &Grid) -> CrioTables {
+    CrioTables::from_transfer_function(&transfer_function(grid), 16).unwrap()
 }
 
 /// [`tables`] lit: ambient, diffuse and specular under the default headlight (the slab
-/// renderer's shaded kernel).
+/// renderer's shaded kernels).
 fn shaded_tables(grid: &Grid) -> CrioTables {
-    let (lo, hi) = grid.bounds_world();
-    let mut tf = TransferFunction::ramp(0.0, 1.1, 0.25);
-    tf.color = vec![
-        [0.0, 0.2, 0.3, 1.0],
-        [0.5, 1.0, 0.6, 0.2],
-        [1.1, 1.0, 1.0, 1.0],
-    ];
-    tf.scalar_opacity_unit_distance = (hi - lo).min_element() / 23.0;
-    tf.shade = true;
-    tf.ambient = 0.2;
-    tf.diffuse = 0.7;
-    tf.specular = 0.3;
+    let tf = TransferFunction {
+        shade: true,
+        ambient: 0.2,
+        diffuse: 0.7,
+        specular: 0.3,
+        ..transfer_function(grid)
+    };
     CrioTables::from_transfer_function(&tf, 16).unwrap()
 }
 
