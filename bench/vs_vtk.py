@@ -204,9 +204,25 @@ def compare(a_png, b_png):
 
 # ---------------------------------------------------------------------------------------------
 
+def volumes(scenes_dir, data_dir):
+    """The volumes to measure: our two MRIs first, then any other `<name>.nrrd` or `<name>.nhdr` in
+    `data_dir` that has a scene file `<name>__<scene>.camera.json` in `scenes_dir` (so a CT or a
+    large MRI dropped beside them, with its own cameras and transfer functions, is measured too)."""
+    found = dict(VOLUMES)
+    names = set()
+    if os.path.isdir(scenes_dir):
+        names = {f.split("__", 1)[0] for f in os.listdir(scenes_dir) if "__" in f}
+    for name in sorted(names - set(found)):
+        for ext in (".nrrd", ".nhdr"):
+            if os.path.exists(os.path.join(data_dir, name + ext)):
+                found[name] = name + ext
+                break
+    return found
+
+
 def scene_list(scenes_dir, data_dir, only):
     out = []
-    for vol_name, vol_file in VOLUMES.items():
+    for vol_name, vol_file in volumes(scenes_dir, data_dir).items():
         vol = os.path.join(data_dir, vol_file)
         if not os.path.exists(vol):
             print(f"skipping {vol_name}: {vol} not found", file=sys.stderr)
@@ -221,6 +237,8 @@ def scene_list(scenes_dir, data_dir, only):
             out.append((label, vol_name, name, vol, stem + ".camera.json", stem + ".tf.json"))
     return out
 
+
+# ---------------------------------------------------------------------------------------------
 
 def make_synthetic(n, vol):
     """Writes the synthetic probe volume (see `synthetic_scene`) to `vol`, atomically."""

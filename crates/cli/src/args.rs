@@ -3,7 +3,8 @@
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 pub use volsplat::{
-    AntialiasChoice, KernelChoice, Mode, OrderChoice, PhantomKind, ShadeAtChoice, VisibilityChoice,
+    AntialiasChoice, KernelChoice, Mode, OrderChoice, PhantomKind, PreintegrateChoice,
+    ShadeAtChoice, VisibilityChoice,
 };
 
 /// Volume rendering by splatting (Westover 1991).
@@ -328,6 +329,18 @@ pub struct RenderOptions {
         hide_short_help = true
     )]
     pub shade_at: ShadeAtChoice,
+    /// Image-aligned slabs, composite: classify each slab by the ray's segment from the
+    /// previous plane's sample to its own (`on`, pre-integrated: no rings where a
+    /// transfer-function ramp is sharper than the data's steps), by its one sample (`off`), or
+    /// by segment only where the ramp is sharp (`auto`; docs/decisions/0020).
+    #[arg(
+        long,
+        value_enum,
+        default_value = "auto",
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub preintegrate: PreintegrateChoice,
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
@@ -510,6 +523,7 @@ pub const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
     ("opacity_cutoff", "--opacity-cutoff"),
     ("slab", "--slab"),
     ("shade_at", "--shade-at"),
+    ("preintegrate", "--preintegrate"),
     ("antialias", "--antialias"),
     ("splat_list", "--splat-list"),
     ("list_threshold", "--list-threshold"),

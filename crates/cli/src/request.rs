@@ -377,7 +377,8 @@ pub fn build_request(
         subsample,
         list_threshold,
         slab,
-        shade_at
+        shade_at,
+        preintegrate
     );
     if set("threads") {
         req.threads = o.threads;

@@ -261,8 +261,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     ),
     (
         // Every default (decision 0019: `auto` draws shaded composite with one-voxel slabs
-        // shaded at the voxels, VTK's order; decision 0018's cutoff; area anti-aliasing).
-        "demo head, defaults (slabs shaded at the voxels)",
+        // shaded at the voxels, VTK's order; decision 0018's cutoff; area anti-aliasing;
+        // decision 0020: the demo's automatic ramp is sharp, so the slabs are pre-integrated).
+        "demo head, defaults (slabs shaded at the voxels, pre-integrated)",
         &[
             "--phantom-size",
             "40",
@@ -272,6 +273,25 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "30",
             "--elevation",
             "15",
+        ],
+        "npy",
+        // Recorded 2026-11-25 (decision 0020).
+        0x4c334ee53be69a53,
+    ),
+    (
+        // The same by point (the defaults before decision 0020).
+        "demo head, slabs shaded at the voxels, by point",
+        &[
+            "--phantom-size",
+            "40",
+            "--size",
+            "48x40",
+            "--azimuth",
+            "30",
+            "--elevation",
+            "15",
+            "--preintegrate",
+            "off",
         ],
         "npy",
         // Recorded 2026-11-25: 44.6 dB from the same slabs shaded at the samples, 29.8 dB from

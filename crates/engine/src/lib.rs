@@ -40,8 +40,8 @@ pub use renderer::{
 };
 pub use request::{
     AntialiasChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice, DisplayChoice,
-    DisplayOptions, KernelChoice, Mode, OrderChoice, Quality, RenderRequest, RendererChoice,
-    ShadeAtChoice, VisibilityChoice,
+    DisplayOptions, KernelChoice, Mode, OrderChoice, PreintegrateChoice, Quality, RenderRequest,
+    RendererChoice, ShadeAtChoice, VisibilityChoice,
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,

@@ -97,6 +97,10 @@ pub struct Stats {
     /// order) or `samples` (also where `voxels` was asked for but the transfer function depends
     /// on more than the density; decision 0019). Absent otherwise.
     pub shade_at: Option<&'static str>,
+    /// Image-aligned slabs, composite: whether the slabs were classified by segment
+    /// (pre-integrated; decision 0020). Absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preintegrated: Option<bool>,
     /// Sheets.
     pub sheets: usize,
     /// Sheet-normal axis, `i`, `j` or `k`.
@@ -659,6 +663,8 @@ impl Renderer {
                         Some(volsplat_splat::ShadeAt::Samples) => Some("samples"),
                         None => None,
                     },
+                    preintegrated: (settings.mode == volsplat_splat::RenderMode::Composite)
+                        .then_some(s.preintegrated),
                     threads: s.threads,
                     ..Stats::default()
                 };

@@ -168,6 +168,23 @@ pub enum ShadeAtChoice {
     Samples,
 }
 
+/// Whether image-aligned slabs classify composite by the ray's segment between two planes
+/// ([`volsplat_splat::Preintegrate`]; decision 0020).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum PreintegrateChoice {
+    /// By segment where the transfer function's steepest ramp is sharp against the data's value
+    /// range (rings and popping otherwise: a CT's skin), by point elsewhere (noisy data, smooth
+    /// ramps: an MRI). The default.
+    #[default]
+    Auto,
+    /// Always by segment (pre-integrated classification, Engel, Kraus & Ertl 2001).
+    On,
+    /// Always one point per slab.
+    Off,
+}
+
 /// Traversal order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -210,6 +227,11 @@ pub struct Quality {
     /// Image-aligned visibility, shaded composite: where the lights are evaluated (default: at
     /// the voxels, interpolated, as VTK does; decision 0019).
     pub shade_at: ShadeAtChoice,
+    /// Image-aligned visibility, composite: classify each slab by the ray's segment from the
+    /// previous plane's sample to its own (pre-integrated classification; no rings where a
+    /// transfer-function ramp is sharper than the data's steps) or by its one sample; default
+    /// `auto` (decision 0020).
+    pub preintegrate: PreintegrateChoice,
 }
 
 /// The front ends' early-termination opacity ([`Quality::opacity_cutoff`]): VTK's ray casters
@@ -230,6 +252,7 @@ impl Default for Quality {
             list_threshold: 0.0,
             slab: None,
             shade_at: ShadeAtChoice::Voxels,
+            preintegrate: PreintegrateChoice::Auto,
         }
     }
 }
@@ -570,6 +593,11 @@ impl RenderRequest {
             shade_at: match q.shade_at {
                 ShadeAtChoice::Voxels => volsplat_splat::ShadeAt::Voxels,
                 ShadeAtChoice::Samples => volsplat_splat::ShadeAt::Samples,
+            },
+            preintegrate: match q.preintegrate {
+                PreintegrateChoice::Auto => volsplat_splat::Preintegrate::Auto,
+                PreintegrateChoice::On => volsplat_splat::Preintegrate::On,
+                PreintegrateChoice::Off => volsplat_splat::Preintegrate::Off,
             },
             opacity_cutoff: q.opacity_cutoff,
             antialias: match q.antialias {

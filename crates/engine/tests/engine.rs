@@ -236,6 +236,7 @@ fn scene_files_warn_on_unknown_fields_and_name_missing_ones() {
         ("shade_at", r#""corners""#),
         ("visibility", r#""bogus""#),
         ("slab", r#""thick""#),
+        ("preintegrate", r#""yes""#),
     ] {
         std::fs::write(
             &p,
@@ -557,4 +558,56 @@ fn slab_thickness_defaults_by_mode() {
         0.25
     ));
     assert!(close(thickness(Mode::Mip, None, Some(2.0)), 2.0));
+}
+
+/// Pre-integration (decision 0020): `auto` classifies composite slabs by segment where the
+/// transfer function's ramp is sharp and by point where it is smooth, `on` and `off` force it,
+/// and the stats say which was used (absent for MIP).
+#[test]
+fn preintegration_by_choice_and_by_ramp() {
+    use volsplat::{PreintegrateChoice, VisibilityChoice};
+    let run = |choice, sharp: bool, mode: Mode| {
+        let mut req = RenderRequest::new(blobs(24), 32, 32);
+        req.quality.visibility = VisibilityChoice::Image;
+        req.quality.preintegrate = choice;
+        req.mode = mode;
+        let mut r = Renderer::new();
+        let mut tf = r.transfer_function(&req).unwrap();
+        let (lo, hi) = (
+            tf.scalar_opacity[0][0],
+            tf.scalar_opacity.last().unwrap()[0],
+        );
+        let mid = 0.5 * (lo + hi);
+        tf.scalar_opacity = if sharp {
+            vec![
+                [lo, 0.0],
+                [mid - 0.005 * (hi - lo), 0.0],
+                [mid + 0.005 * (hi - lo), 0.6],
+                [hi, 0.7],
+            ]
+        } else {
+            vec![[lo, 0.0], [hi, 0.05]]
+        };
+        req.scene.transfer_function = TransferSpec::Function(tf);
+        let out = r.render(&req, &mut |_| true).unwrap();
+        (out.stats.preintegrated, bits(&out))
+    };
+    let (auto_sharp, a) = run(PreintegrateChoice::Auto, true, Mode::Composite);
+    let (on_sharp, b) = run(PreintegrateChoice::On, true, Mode::Composite);
+    let (off_sharp, c) = run(PreintegrateChoice::Off, true, Mode::Composite);
+    assert_eq!(
+        (auto_sharp, on_sharp, off_sharp),
+        (Some(true), Some(true), Some(false))
+    );
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    assert_eq!(
+        run(PreintegrateChoice::Auto, false, Mode::Composite).0,
+        Some(false)
+    );
+    assert_eq!(
+        run(PreintegrateChoice::On, false, Mode::Composite).0,
+        Some(true)
+    );
+    assert_eq!(run(PreintegrateChoice::On, true, Mode::Mip).0, None);
 }

@@ -419,3 +419,27 @@ def test_shade_at(vol):
     assert not np.array_equal(samples.rgba, auto.rgba)
     with pytest.raises(volsplat.InvalidInputError, match="shade_at|shade-at"):
         volsplat.render(vol, transfer_function=tf, size=48, shade_at="corners")
+
+
+def test_preintegrate(vol):
+    """Composite slabs: `preintegrate` classifies each slab by its segment of the ray ("on"), by
+    its one sample ("off"), or by segment where the ramp is sharp ("auto", decision 0020); the
+    stats say which was used."""
+    sharp = volsplat.TransferFunction(
+        color=[[0, 0.9, 0.6, 0.4], [3000, 1, 1, 1]],
+        opacity=[[0, 0.0], [990, 0.0], [1010, 0.5], [3000, 0.6]],
+    )
+    smooth = volsplat.TransferFunction(
+        color=[[0, 0.9, 0.6, 0.4], [3000, 1, 1, 1]],
+        opacity=[[0, 0.0], [3000, 0.02]],
+    )
+    on = volsplat.render(vol, transfer_function=sharp, size=48, preintegrate="on")
+    off = volsplat.render(vol, transfer_function=sharp, size=48, preintegrate="off")
+    auto = volsplat.render(vol, transfer_function=sharp, size=48)
+    assert on.stats["preintegrated"] and not off.stats["preintegrated"]
+    assert auto.stats["preintegrated"]
+    np.testing.assert_array_equal(auto.rgba, on.rgba)
+    assert not np.array_equal(on.rgba, off.rgba)
+    assert not volsplat.render(vol, transfer_function=smooth, size=48).stats["preintegrated"]
+    with pytest.raises(volsplat.InvalidInputError, match="preintegrate"):
+        volsplat.render(vol, transfer_function=sharp, size=48, preintegrate="sometimes")

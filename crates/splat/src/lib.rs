@@ -39,7 +39,7 @@ pub use geometry::{Order, SplatGeometry};
 pub use list::{ExtractSettings, SplatList, SplatRecord, render_list, render_list_with_progress};
 pub use normals::ShadeAt;
 pub use render::{
-    Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render, render_any,
-    render_with_progress,
+    Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
+    render_any, render_with_progress,
 };
 pub use slab::{force_scalar_sampling, render_slabs, render_slabs_any};

@@ -72,7 +72,7 @@ use crate::bricks::{BRICK, BrickGrid};
 use crate::error::{Result, SplatError};
 use crate::normals::{NormalField, ShadeAt, VoxelShading};
 use crate::render::{
-    Progress, RenderMode, RenderSettings, RenderStats, Rendered, finish, ms, validate,
+    Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, finish, ms, validate,
 };
 use rayon::prelude::*;
 use std::time::Instant;
@@ -249,6 +249,24 @@ pub fn render_slabs<T: Scalar>(
         }
         _ => (None, &[]),
     };
+    let preint = match settings.preintegrate {
+        Preintegrate::Off => false,
+        Preintegrate::On => true,
+        Preintegrate::Auto => {
+            let (alphas, scale): (Vec<f32>, f32) = match (&post, &shade_table) {
+                (Some(t), _) => (t.values.iter().map(|v| v[3]).collect(), t.scale),
+                (None, Some(t)) => (t.rows.iter().map(|r| r[0]).collect(), t.scale),
+                _ => (Vec::new(), 0.0),
+            };
+            let (lo, hi) = bricks
+                .ranges
+                .iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |a, r| {
+                    (a.0.min(r[0]), a.1.max(r[1]))
+                });
+            ring_risk(&alphas, scale, hi - lo) > RING_RISK
+        }
+    };
     let ctx = Ctx {
         data: volume.data(),
         dims: grid.dims,
@@ -276,6 +294,7 @@ pub fn render_slabs<T: Scalar>(
         shaded: shade_table.as_ref(),
         voxel: voxel_shading.as_ref(),
         codes,
+        preint,
         mode: settings.mode,
         shade,
         cutoff: settings.opacity_cutoff,
@@ -306,6 +325,7 @@ pub fn render_slabs<T: Scalar>(
     let band_h = settings.band_height;
     let n_bands = h.div_ceil(band_h);
     let mut stats = RenderStats {
+        preintegrated: composite && preint && (post.is_some() || voxel_shading.is_some()),
         sheets: n_planes,
         sheet_axis: 3,
         sheet_spacing: delta,
@@ -607,6 +627,9 @@ struct Ctx<'a, T> {
     /// ([`ShadeAt::Voxels`]), and the voxels' codes ([`NormalField::codes`]; empty otherwise).
     voxel: Option<&'a VoxelShading>,
     codes: &'a [u16],
+    /// Pre-integrated classification of the segments between planes
+    /// ([`RenderSettings::preintegrate`]).
+    preint: bool,
     mode: RenderMode,
     shade: bool,
     cutoff: f32,
@@ -772,6 +795,12 @@ impl<T: Scalar> Ctx<'_, T> {
         let kf = self.path_factors(y0, rows);
         let (din, dout) = self.ray_extents(y0, rows);
         let half = (0.5 * self.delta) as f32;
+        let preint = self.preint_for(post);
+        let (mut prev, mut stamp) = if preint {
+            (vec![0.0f32; rows * w], vec![u32::MAX; rows * w])
+        } else {
+            (Vec::new(), Vec::new())
+        };
         for p in 0..self.n_planes {
             let d = self.depth(p);
             let mut any_live = false;
@@ -791,6 +820,15 @@ impl<T: Scalar> Ctx<'_, T> {
                 if lo > hi {
                     continue;
                 }
+                let (back_s, back_st) = if preint && matches!(post, Post::Voxel(..)) {
+                    let (s0, st0) = self.view.row(y, d - self.delta);
+                    (
+                        [0, 1, 2].map(|a| s0[a] as f32 - walk.s32[a]),
+                        [0, 1, 2].map(|a| st0[a] as f32 - walk.st32[a]),
+                    )
+                } else {
+                    ([0.0; 3], [0.0; 3])
+                };
                 let mut row = RowCtx {
                     r: &mut band.r[o..o + w],
                     g: &mut band.g[o..o + w],
@@ -801,6 +839,15 @@ impl<T: Scalar> Ctx<'_, T> {
                     dout: &dout[o..o + w],
                     d: d as f32,
                     half,
+                    prev: if preint { &mut prev[o..o + w] } else { &mut [] },
+                    stamp: if preint {
+                        &mut stamp[o..o + w]
+                    } else {
+                        &mut []
+                    },
+                    plane: p as u32,
+                    back_s,
+                    back_st,
                 };
                 let (a, b) = (lo as usize, hi as usize);
                 #[allow(unused_mut)]
@@ -846,16 +893,42 @@ impl<T: Scalar> Ctx<'_, T> {
         c.samples += 1;
         let rho = self.sample_cell(cell, f);
         let k = boundary_factor(row.kf[x], row.din[x], row.dout[x], row.d, row.half);
-        let corrected = self.view.perspective || k != 1.0;
+        let preint = self.preint_for(post);
+        // Pre-integration: the density at the pixel's sample on the plane before, or this
+        // sample's where there is none (the segment is then one point).
+        let u = if preint {
+            let u = if row.stamp[x] == row.plane {
+                row.prev[x]
+            } else {
+                rho
+            };
+            row.prev[x] = rho;
+            row.stamp[x] = row.plane + 1;
+            u
+        } else {
+            rho
+        };
+        let corrected = preint || self.view.perspective || k != 1.0;
         let src = match post {
+            Post::Table(t) if preint => Self::post_seg_src(t.segment(u, rho), k),
             Post::Table(t) => Self::post_src(t, rho, k, corrected),
             Post::Shaded(t) => shaded_src(t, rho, self.gradient_lerp(cell, f), k, corrected),
             Post::Voxel(t, vs) => {
+                let (v, (cell, f)) = if preint {
+                    let v = t.segment_entry(u, rho);
+                    let h = match shade_opacity(&v, k, corrected) {
+                        Some(a) if u != rho => light_shift(k * v[7], a),
+                        _ => 0.0,
+                    };
+                    (v, self.light_cell(walk, row, x, h))
+                } else {
+                    (t.entry(rho), (cell, f))
+                };
                 let base = self.base(cell);
                 let [ux, uy, uz] = self.up;
                 let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
                 let codes = offs.map(|o| self.codes[base + o]);
-                voxel_shaded_src(t, vs, rho, &codes, f, k, corrected)
+                voxel_shaded_src(t, vs, v, &codes, f, k, corrected)
             }
         };
         let Some(src) = src else {
@@ -876,12 +949,7 @@ impl<T: Scalar> Ctx<'_, T> {
         if corrected {
             // Colour and log-transmittance per table entry: the path correction is one exp2
             // (no log2, no division).
-            let [cr, cg, cb, l] = t.lookup_in(&t.persp, rho);
-            if l >= 0.0 {
-                return None;
-            }
-            let a = 1.0 - exp2_neg(k * l);
-            Some([cr * a, cg * a, cb * a, a])
+            Self::post_seg_src(t.lookup_in(&t.persp, rho), k)
         } else {
             let v = t.lookup(rho);
             if v[3] <= 0.0 || v[3].is_nan() {
@@ -889,6 +957,51 @@ impl<T: Scalar> Ctx<'_, T> {
             }
             Some(v)
         }
+    }
+
+    /// Pre-integration shaded at the voxels: the cell and fractions where the segment of
+    /// pixel `x` is lit, `q + h·(back_s + x·back_st)` with `q` the sample's position
+    /// ([`Ctx::cell_f32`]) and `h` from [`light_shift`]; the scalar twin of
+    /// [`VoxelShadeSource::light_cells`].
+    #[inline(always)]
+    fn light_cell(
+        &self,
+        walk: &Walk,
+        row: &RowCtx<'_>,
+        x: usize,
+        h: f32,
+    ) -> ([usize; 3], [f32; 3]) {
+        let xf = x as f32;
+        let mut c = [0usize; 3];
+        let mut f = [0.0f32; 3];
+        for a in 0..3 {
+            let q = walk.s32[a] + xf * walk.st32[a];
+            let q = q + h * (row.back_s[a] + xf * row.back_st[a]);
+            let i = (q as i32).clamp(0, self.max_cell[a] as i32);
+            c[a] = i as usize;
+            f[a] = (q - i as f32).clamp(0.0, 1.0);
+        }
+        (c, f)
+    }
+
+    /// The premultiplied colour of `[c_r, c_g, c_b, log2(1 − α)]` (a `persp` entry, or a
+    /// segment's averages, [`PostTable::segment`]) with slab exponent `k`: `c·a` and
+    /// `a = 1 − 2^(k·L)`, or `None` where `L ≥ 0` (no opacity; NaN neither).
+    #[inline(always)]
+    fn post_seg_src([cr, cg, cb, l]: Rgba, k: f32) -> Option<Rgba> {
+        // `l < 0` is false for NaN too.
+        (l < 0.0).then(|| {
+            let a = 1.0 - exp2_neg(k * l);
+            [cr * a, cg * a, cb * a, a]
+        })
+    }
+
+    /// Whether the samples of `post` are pre-integrated: asked for ([`RenderSettings::preintegrate`])
+    /// and classified through a density table (unshaded, or shaded at the voxels; shading at
+    /// the samples keeps one point per slab).
+    #[inline(always)]
+    fn preint_for(&self, post: Post<'_>) -> bool {
+        self.preint && !matches!(post, Post::Shaded(_))
     }
 
     /// Calls `f(a, b)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells lie in
@@ -1354,10 +1467,69 @@ struct PostTable {
     /// per lookup for [`composite_run_avx2`].
     pairs: Vec<[f32; 8]>,
     persp_pairs: Vec<[f32; 8]>,
+    /// Pre-integration ([`PostTable::segment`]): `[∫c_r·L, ∫c_g·L, ∫c_b·L, ∫L]` from the first
+    /// entry to entry `i` (`L = log2(1 − α)`, `c` the colour of `persp`; integrals in entries,
+    /// trapezoidal, summed in f64), and the same paired as `pairs`.
+    integ: Vec<Rgba>,
+    integ_pairs: Vec<[f32; 8]>,
     lo: f32,
     scale: f32,
     last: f32,
     values: Vec<Rgba>,
+}
+
+/// [`Preintegrate::Auto`] pre-integrates where [`ring_risk`] exceeds this: where the steepest
+/// ramp of the transfer function takes a slab's opacity through more than 1 across a quarter of
+/// the data's value range. Measured (decision 0020): a CT's sharp skin ramp (0 → 0.1 over
+/// 40 HU) scores 1.8 and pops 1.84× at one voxel by point, 1.11× by segment; its bone ramp
+/// (0 → 0.72 over 657 HU) scores 0.8 and the MRIs' ramps 0.1–0.35, where the segments lose.
+pub const RING_RISK: f32 = 1.0;
+
+/// How much a slab's opacity can change across a quarter of the data's value range at the
+/// steepest ramp of a density table: `max |α[i+1] − α[i]|·entries_per_unit·data_range/4`, with
+/// `alphas` the table's opacities per slab at `entries_per_unit` entries per data unit and
+/// `data_range` the data's `max − min` (data units). A quarter of the range stands for the value
+/// step across a sharp boundary of the data (air to skin, soft tissue to bone); 0 for an empty
+/// table or range.
+pub fn ring_risk(alphas: &[f32], entries_per_unit: f32, data_range: f32) -> f32 {
+    let steepest = alphas
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| d.is_finite())
+        .fold(0.0f32, f32::max);
+    let r = steepest * entries_per_unit * data_range * 0.25;
+    if r.is_finite() { r } else { 0.0 }
+}
+
+/// The most negative `log2(1 − α)` that the pre-integration tables integrate (α = 1 − 2⁻²⁴,
+/// opaque at f32 precision): a bound on the integrals, so that the difference of two of them
+/// keeps its precision in f32 ([`integral_rows`]).
+const SEGMENT_LOG_FLOOR: f32 = -24.0;
+
+/// Segments shorter than this many table entries are classified at their middle value (the
+/// table is linear there, so that is the segment's average up to a kink), longer ones through
+/// the integral tables ([`PostTable::segment`], [`ShadeTable::segment_entry`]).
+const SEGMENT_MIN_ENTRIES: f32 = 1.0;
+
+/// Cumulative trapezoidal integrals over table entries of `rows` (`N` channels): channel `w` of
+/// the result integrates the weight `max(row[w], SEGMENT_LOG_FLOOR)` (a `log2(1 − α)`), every
+/// other channel `c` integrates `row[c]·weight`; entry 0 is zero. Summed in f64 and rounded once.
+fn integral_rows<const N: usize>(rows: &[[f32; N]], w: usize) -> Vec<[f32; N]> {
+    let weighted = |r: &[f32; N]| -> [f64; N] {
+        let l = f64::from(r[w].max(SEGMENT_LOG_FLOOR));
+        std::array::from_fn(|c| if c == w { l } else { f64::from(r[c]) * l })
+    };
+    let mut acc = [0.0f64; N];
+    let mut out = Vec::with_capacity(rows.len());
+    out.push([0.0f32; N]);
+    for pair in rows.windows(2) {
+        let (a, b) = (weighted(&pair[0]), weighted(&pair[1]));
+        for c in 0..N {
+            acc[c] += 0.5 * (a[c] + b[c]);
+        }
+        out.push(acc.map(|v| v as f32));
+    }
+    out
 }
 
 impl PostTable {
@@ -1421,9 +1593,12 @@ impl PostTable {
                 .collect()
         };
         let (scale, last) = table_steps(lo, hi, n);
+        let integ = integral_rows(&persp, 3);
         Some(PostTable {
             pairs: paired(&values),
             persp_pairs: paired(&persp),
+            integ_pairs: paired(&integ),
+            integ,
             persp,
             lo,
             scale,
@@ -1440,7 +1615,44 @@ impl PostTable {
     /// Linear interpolation in `values` (either table) at density `x`.
     #[inline(always)]
     fn lookup_in(&self, values: &[Rgba], x: f32) -> Rgba {
-        let t = ((x - self.lo) * self.scale).max(0.0).min(self.last);
+        Self::at(values, self.pos(x))
+    }
+
+    /// The table position of density `x`: `min(max((x − lo)·scale, 0), last)` (NaN → 0).
+    #[inline(always)]
+    fn pos(&self, x: f32) -> f32 {
+        ((x - self.lo) * self.scale).max(0.0).min(self.last)
+    }
+
+    /// The pre-integrated classification of the segment of a ray whose density goes linearly
+    /// from `u` (the previous plane) to `v` (this plane): `[c̄_r, c̄_g, c̄_b, L̄]` with `L̄` the
+    /// mean of `L = log2(1 − α)` over the segment's densities and `c̄` the colour weighted by
+    /// `L` (Engel, Kraus & Ertl 2001, with the self-attenuation inside the segment left out of
+    /// the colour: `c̄ = ∫c·L / ∫L`, exact where the colour is constant). Segments shorter than
+    /// [`SEGMENT_MIN_ENTRIES`] take the entry at their middle (`persp`). Where the segment has
+    /// no opacity (`∫L = 0`) `L̄` is 0 and the colours 0/0 (NaN): it contributes nothing
+    /// ([`Ctx::post_seg_src`], and the kernels' masks).
+    #[inline(always)]
+    fn segment(&self, u: f32, v: f32) -> Rgba {
+        let (tu, tv) = (self.pos(u), self.pos(v));
+        let dt = tv - tu;
+        if dt.abs() < SEGMENT_MIN_ENTRIES {
+            return Self::at(&self.persp, (tu + tv) * 0.5);
+        }
+        let (a, b) = (Self::at(&self.integ, tu), Self::at(&self.integ, tv));
+        let dl = b[3] - a[3];
+        let inv = 1.0 / dl;
+        [
+            (b[0] - a[0]) * inv,
+            (b[1] - a[1]) * inv,
+            (b[2] - a[2]) * inv,
+            dl / dt,
+        ]
+    }
+
+    /// Linear interpolation in `values` at table position `t` (in `[0, last]`).
+    #[inline(always)]
+    fn at(values: &[Rgba], t: f32) -> Rgba {
         // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
         let i = t as i32 as usize;
         let f = t - i as f32;
@@ -1467,6 +1679,9 @@ pub(crate) struct ShadeTable {
     /// emission `classify` adds, `d` the reflection colour; `log2(1 − α)` is −126 for `α = 1`),
     /// with the last entry repeated so that entry `i + 1` exists for every `i ≤ last`.
     rows: Vec<[f32; 8]>,
+    /// Pre-integration ([`ShadeTable::segment_entry`]): `[∫L, ∫e·L, ∫d·L, 0]` from the first
+    /// entry (as [`PostTable`]'s `integ`), the last entry repeated as in `rows`.
+    integ: Vec<[f32; 8]>,
     /// `x^n` at `x = i / SPEC` for `i` in `0..=SPEC`, the last repeated (as `classify`'s own
     /// table of 4097 entries).
     spec_pow: Vec<f32>,
@@ -1523,6 +1738,12 @@ impl ShadeTable {
             })
             .collect();
         rows.push(rows[n - 1]);
+        // Integrate L (channel 7) and e·L, d·L; then store as [∫L, ∫e·L, ∫d·L, 0].
+        let mut integ: Vec<[f32; 8]> = integral_rows(&rows[..n], 7)
+            .into_iter()
+            .map(|r| [r[7], r[1], r[2], r[3], r[4], r[5], r[6], 0.0])
+            .collect();
+        integ.push(integ[n - 1]);
         let sh = classifier.shading();
         let p = sh.specular_power as f64;
         let mut spec_pow: Vec<f32> = (0..=Self::SPEC)
@@ -1535,6 +1756,7 @@ impl ShadeTable {
             scale,
             last,
             rows,
+            integ,
             spec_pow,
             lights: classifier.lights().to_vec(),
             diffuse: sh.diffuse,
@@ -1551,12 +1773,49 @@ impl ShadeTable {
     /// The entry at density `x`, linearly interpolated.
     #[inline(always)]
     fn entry(&self, x: f32) -> [f32; 8] {
-        let t = ((x - self.lo) * self.scale).max(0.0).min(self.last);
+        Self::at(&self.rows, self.pos(x))
+    }
+
+    /// The table position of density `x` (as [`PostTable::pos`]).
+    #[inline(always)]
+    fn pos(&self, x: f32) -> f32 {
+        ((x - self.lo) * self.scale).max(0.0).min(self.last)
+    }
+
+    /// Row `t` of `rows` (a position in `[0, last]`), linearly interpolated.
+    #[inline(always)]
+    fn at(rows: &[[f32; 8]], t: f32) -> [f32; 8] {
         // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
         let i = t as i32 as usize;
         let f = t - i as f32;
-        let (a, b) = (self.rows[i], self.rows[i + 1]);
+        let (a, b) = (rows[i], rows[i + 1]);
         std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
+    }
+
+    /// The pre-integrated entry of the segment from density `u` (the previous plane) to `v`
+    /// ([`PostTable::segment`]'s averages): `[0, ē, d̄, L̄]`, emission and reflection colours
+    /// weighted by `L`. The opacity slot is 0: pre-integrated samples always take the
+    /// path-corrected opacity `1 − 2^(k·L̄)` ([`shade_opacity`] with `corrected`).
+    #[inline(always)]
+    fn segment_entry(&self, u: f32, v: f32) -> [f32; 8] {
+        let (tu, tv) = (self.pos(u), self.pos(v));
+        let dt = tv - tu;
+        if dt.abs() < SEGMENT_MIN_ENTRIES {
+            return Self::at(&self.rows, (tu + tv) * 0.5);
+        }
+        let (a, b) = (Self::at(&self.integ, tu), Self::at(&self.integ, tv));
+        let dl = b[0] - a[0];
+        let inv = 1.0 / dl;
+        [
+            0.0,
+            (b[1] - a[1]) * inv,
+            (b[2] - a[2]) * inv,
+            (b[3] - a[3]) * inv,
+            (b[4] - a[4]) * inv,
+            (b[5] - a[5]) * inv,
+            (b[6] - a[6]) * inv,
+            dl / dt,
+        ]
     }
 
     /// The lights of the frame.
@@ -1634,25 +1893,25 @@ pub(crate) fn shaded_src(
     Some(premultiplied(col, a))
 }
 
-/// The premultiplied, shaded colour of a sample of density `rho` at fractions `f` in a cell
-/// whose eight corners (`x` fastest) have the direction codes `codes`, with slab exponent `k`,
-/// or `None` where it has no opacity: shaded at the voxels ([`ShadeAt::Voxels`]): the
-/// diffuse and specular light of each corner's code ([`VoxelShading`]) interpolated as
+/// The premultiplied, shaded colour of a sample with [`ShadeTable`] entry `v` (at its density,
+/// [`ShadeTable::entry`], or its segment's, [`ShadeTable::segment_entry`]) lit at fractions `f`
+/// in a cell whose eight corners (`x` fastest) have the direction codes `codes`, with slab
+/// exponent `k`, or `None` where it has no opacity: shaded at the voxels ([`ShadeAt::Voxels`]):
+/// the diffuse and specular light of each corner's code ([`VoxelShading`]) interpolated as
 /// [`Ctx::sample_cell`] interpolates the values, then `e + d·D + s·S` per channel (emission `e`
-/// and reflection colour `d` from [`ShadeTable`] at `rho`; `s` the specular colour), clamped to
-/// [0, 1], times the opacity. The scalar twin of [`VoxelShadeSource`]: the same f32 operations
+/// and reflection colour `d` from `v`; `s` the specular colour), clamped to [0, 1], times the
+/// opacity. The scalar twin of [`VoxelShadeSource`]: the same f32 operations
 /// in the same order.
 #[inline(always)]
 fn voxel_shaded_src(
     t: &ShadeTable,
     vs: &VoxelShading,
-    rho: f32,
+    v: [f32; 8],
     codes: &[u16; 8],
     f: [f32; 3],
     k: f32,
     corrected: bool,
 ) -> Option<Rgba> {
-    let v = t.entry(rho);
     let a = shade_opacity(&v, k, corrected)?;
     let mut col = [v[1], v[2], v[3]];
     let (diffuse, specular, _) = t.switches();
@@ -1702,6 +1961,24 @@ fn shade_opacity(v: &[f32; 8], k: f32, corrected: bool) -> Option<f32> {
         (v[7] < 0.0).then(|| 1.0 - exp2_neg(k * v[7]))
     } else {
         (v[0] > 0.0).then_some(v[0])
+    }
+}
+
+/// Pre-integration shaded at the voxels: where along its segment a slab is lit, as the
+/// fraction `h` of the way back from this plane's sample to the plane before's. The light that
+/// leaves a segment comes from where its opacity is seen: with the segment's optical depth
+/// `D = −k·L̄·ln 2` spread evenly, the centroid of `τ·e^(−τt)` lies `t_c = 1/D − 1/(e^D − 1)`
+/// of the way from its front (½ for a faint segment, towards the front for an opaque one), so
+/// `h = 1 − t_c`; `1/(e^D − 1) = (1 − a)/a` with `a = 1 − 2^(k·L̄)` the slab's opacity. Below
+/// `D = 10⁻³` the series `½ + D/12`. `kl = k·L̄ < 0`.
+#[inline(always)]
+fn light_shift(kl: f32, a: f32) -> f32 {
+    let d = kl * -std::f32::consts::LN_2;
+    if d < 1e-3 {
+        0.5 + d * (1.0 / 12.0)
+    } else {
+        let tc = 1.0 / d - (1.0 - a) / a;
+        1.0 - max_ps(tc, 0.0)
     }
 }
 
@@ -1858,6 +2135,17 @@ struct RowCtx<'a> {
     /// The plane's eye depth and half the slab thickness (world units).
     d: f32,
     half: f32,
+    /// Pre-integration ([`Ctx::preint`]): per pixel the density sampled at the last plane
+    /// that sampled it, and that plane's index + 1 (`u32::MAX` before any), so that a sample
+    /// knows whether its pixel was sampled on the plane just before; `plane` is this plane's
+    /// index. Empty without pre-integration.
+    prev: &'a mut [f32],
+    stamp: &'a mut [u32],
+    plane: u32,
+    /// Pre-integration shaded at the voxels: the index-space step from this plane's sample of
+    /// pixel `x` to the plane before's, `back_s + x·back_st` (f32; [`Ctx::light_cell`]).
+    back_s: [f32; 3],
+    back_st: [f32; 3],
 }
 
 /// The opacity exponent of the slab at depth `d` for a ray with path factor `kf` that lies in
@@ -1931,6 +2219,8 @@ struct Sampler8<T> {
 struct Cells8 {
     cell: [std::arch::x86_64::__m256i; 3],
     pos: [std::arch::x86_64::__m256; 3],
+    /// The lanes' pixel columns as f32.
+    xf: std::arch::x86_64::__m256,
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -2023,7 +2313,7 @@ impl<T: Scalar> Sampler8<T> {
                 self.maxc[ax],
             );
         }
-        Cells8 { cell, pos }
+        Cells8 { cell, pos, xf }
     }
 
     /// The brick (`BrickGrid::index`) of each lane's cell.
@@ -2435,6 +2725,9 @@ unsafe fn composite_groups_avx2<T: Scalar>(
     let d_plus = _mm256_set1_ps(d + row.half);
     let two_half_v = _mm256_set1_ps(two_half);
     let persp = ctx.view.perspective;
+    let preint = ctx.preint_for(post);
+    let this_plane = _mm256_set1_epi32(row.plane as i32);
+    let next_stamp = _mm256_set1_epi32(row.plane.wrapping_add(1) as i32);
     let mut x = a;
     // Groups are taken in chunks: first each group of the chunk is tested and sampled, then each
     // is classified and composited. The gathers of a chunk's groups then do not wait on one
@@ -2446,6 +2739,7 @@ unsafe fn composite_groups_avx2<T: Scalar>(
         ar: __m256,
         live: __m256,
         frac: [__m256; 3],
+        u: __m256,
         rho: __m256,
         pre: P,
     }
@@ -2505,11 +2799,35 @@ unsafe fn composite_groups_avx2<T: Scalar>(
                 break;
             };
             c.samples += u64::from(lanes(live_bits));
+            // Pre-integration: the densities of the plane before where these pixels were sampled
+            // there, then this plane's (in the lanes sampled) for the next ([`Ctx::composite_one`]).
+            let u = if preint {
+                // SAFETY: x + 8 ≤ the row's length, and `prev`, `stamp` are as long as it.
+                let pp = unsafe { row.prev.as_mut_ptr().add(x) };
+                let sp = unsafe { row.stamp.as_mut_ptr().add(x) } as *mut __m256i;
+                let (pv, st) = unsafe { (_mm256_loadu_ps(pp), _mm256_loadu_si256(sp)) };
+                let have = _mm256_castsi256_ps(_mm256_cmpeq_epi32(st, this_plane));
+                unsafe {
+                    _mm256_storeu_ps(pp, _mm256_blendv_ps(pv, rho, live));
+                    _mm256_storeu_si256(
+                        sp,
+                        _mm256_castps_si256(_mm256_blendv_ps(
+                            _mm256_castsi256_ps(st),
+                            _mm256_castsi256_ps(next_stamp),
+                            live,
+                        )),
+                    );
+                }
+                _mm256_blendv_ps(rho, pv, have)
+            } else {
+                rho
+            };
             chunk[filled] = Some(Sampled {
                 x,
                 ar,
                 live,
                 frac,
+                u,
                 rho,
                 pre,
             });
@@ -2522,6 +2840,7 @@ unsafe fn composite_groups_avx2<T: Scalar>(
                 ar,
                 live,
                 frac,
+                u,
                 rho,
                 pre,
             }) = g.take()
@@ -2544,12 +2863,12 @@ unsafe fn composite_groups_avx2<T: Scalar>(
                 _mm256_blendv_ps(kf, _mm256_mul_ps(kf, q), cut)
             };
             // Lanes that take the path-corrected form.
-            let corrected = if persp {
+            let corrected = if persp || preint {
                 _mm256_castsi256_ps(_mm256_set1_epi32(-1))
             } else {
                 _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, one)
             };
-            let (src, contributes) = unsafe { src.src(&pre, frac, rho, k, corrected) };
+            let (src, contributes) = unsafe { src.src(&pre, frac, u, rho, k, corrected) };
             let mask = _mm256_and_ps(contributes, live);
             let bits = _mm256_movemask_ps(mask);
             if bits != 0 {
@@ -2600,6 +2919,7 @@ unsafe fn composite_run_avx2<T: Scalar>(
             let src = PostSource {
                 t,
                 sampler: &sampler,
+                preint: ctx.preint_for(post),
             };
             composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c)
         },
@@ -2613,6 +2933,9 @@ unsafe fn composite_run_avx2<T: Scalar>(
                 sampler: &sampler,
                 codes: ctx.codes.as_ptr() as *const i32,
                 x_shift: _mm_cvtsi32_si128(16 * ctx.up[0] as i32),
+                preint: ctx.preint_for(post),
+                back_s: row.back_s.map(|v| _mm256_set1_ps(v)),
+                back_st: row.back_st.map(|v| _mm256_set1_ps(v)),
             };
             unsafe { composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c) }
         }
@@ -2657,7 +2980,9 @@ trait Source8<T> {
 
     /// The premultiplied colours of the samples `rho` at fractions `frac` with slab exponents
     /// `k`, and the mask of lanes that contribute; `corrected` is the mask of lanes whose
-    /// opacity takes the path correction (perspective, or `k ≠ 1`).
+    /// opacity takes the path correction (perspective, `k ≠ 1`, or pre-integration). `u`:
+    /// the densities at the pixels' samples on the plane before (`rho` where there are none),
+    /// read by the sources that pre-integrate ([`Ctx::preint_for`]).
     ///
     /// # Safety
     /// The CPU must support AVX2; `pre` must come from [`Source8::sample`].
@@ -2665,6 +2990,7 @@ trait Source8<T> {
         &self,
         pre: &Self::Pre,
         frac: [std::arch::x86_64::__m256; 3],
+        u: std::arch::x86_64::__m256,
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
@@ -2678,6 +3004,8 @@ trait Source8<T> {
 struct PostSource<'a, T> {
     t: &'a PostTable,
     sampler: &'a Sampler8<T>,
+    /// Classify the segment from `u` to `rho` ([`post_segment8`]).
+    preint: bool,
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -2708,6 +3036,7 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
         &self,
         _: &(),
         _: [std::arch::x86_64::__m256; 3],
+        u: std::arch::x86_64::__m256,
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
@@ -2716,6 +3045,21 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
         let t = self.t;
         let zero = _mm256_setzero_ps();
         let one = _mm256_set1_ps(1.0);
+        if self.preint {
+            // Every lane is path-corrected ([`Ctx::post_seg_src`]).
+            // SAFETY: the caller guarantees AVX2.
+            let v = unsafe { post_segment8(t, u, rho) };
+            let l = v[3];
+            let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(l, zero);
+            let a = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, l)));
+            let src = [
+                _mm256_mul_ps(v[0], a),
+                _mm256_mul_ps(v[1], a),
+                _mm256_mul_ps(v[2], a),
+                a,
+            ];
+            return (src, ok);
+        }
         let pos = table_pos8(rho, t.lo, t.scale, t.last);
         let corrected_bits = _mm256_movemask_ps(corrected);
         let mut src = [zero; 4];
@@ -2838,12 +3182,16 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         &self,
         pre: &Self::Pre,
         frac: [std::arch::x86_64::__m256; 3],
+        _: std::arch::x86_64::__m256,
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
     ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
-        let (v, a, contributes) = shade_terms8(self.t, rho, k, corrected);
+        let pos = table_pos8(rho, self.t.lo, self.t.scale, self.t.last);
+        // SAFETY: positions are clamped to [0, last], and row last + 1 exists.
+        let v = unsafe { interp8(&self.t.rows, pos, false) };
+        let (v, a, contributes) = shade_terms8(v, k, corrected);
         if _mm256_movemask_ps(contributes) == 0 {
             return ([_mm256_setzero_ps(); 4], contributes);
         }
@@ -2926,10 +3274,55 @@ struct VoxelShadeSource<'a, T> {
     codes: *const i32,
     /// Bits from a corner's code to the next one's along x in a 32-bit word: `16·ux`.
     x_shift: std::arch::x86_64::__m128i,
+    /// Classify the segment from `u` to `rho` ([`shade_segment8`]) and light it at its middle
+    /// ([`VoxelShadeSource::light_cells`]).
+    preint: bool,
+    /// [`RowCtx::back_s`], [`RowCtx::back_st`] broadcast.
+    back_s: [std::arch::x86_64::__m256; 3],
+    back_st: [std::arch::x86_64::__m256; 3],
 }
 
 #[cfg(target_arch = "x86_64")]
 impl<T: Scalar> VoxelShadeSource<'_, T> {
+    /// [`Ctx::light_cell`] on eight lanes: the linear indices and fractions of the cells
+    /// where the segments are lit, `h` of the way back from the samples at `pos`.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn light_cells(
+        &self,
+        pos: &[std::arch::x86_64::__m256; 3],
+        xf: std::arch::x86_64::__m256,
+        h: std::arch::x86_64::__m256,
+    ) -> (std::arch::x86_64::__m256i, [std::arch::x86_64::__m256; 3]) {
+        use std::arch::x86_64::*;
+        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+        let izero = _mm256_setzero_si256();
+        let mut cell = [izero; 3];
+        let mut frac = [zero; 3];
+        for a in 0..3 {
+            let step = _mm256_add_ps(self.back_s[a], _mm256_mul_ps(xf, self.back_st[a]));
+            let q = _mm256_add_ps(pos[a], _mm256_mul_ps(h, step));
+            cell[a] = _mm256_min_epi32(
+                _mm256_max_epi32(_mm256_cvttps_epi32(q), izero),
+                self.sampler.maxc[a],
+            );
+            let d = _mm256_sub_ps(q, _mm256_cvtepi32_ps(cell[a]));
+            frac[a] = _mm256_min_ps(_mm256_max_ps(d, zero), one);
+        }
+        // SAFETY: the caller guarantees AVX2.
+        let base = unsafe {
+            self.sampler.base_of(&Cells8 {
+                cell,
+                pos: *pos,
+                xf,
+            })
+        };
+        (base, frac)
+    }
+
     /// The diffuse and specular light of plane `p` at the corners' codes `q` (`x` fastest),
     /// interpolated and scaled ([`voxel_shaded_src`]'s operations).
     ///
@@ -2968,8 +3361,12 @@ impl<T: Scalar> VoxelShadeSource<'_, T> {
 
 #[cfg(target_arch = "x86_64")]
 impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
-    /// The cells' linear indices.
-    type Pre = std::arch::x86_64::__m256i;
+    /// The cells' linear indices, the samples' positions and the pixel columns.
+    type Pre = (
+        std::arch::x86_64::__m256i,
+        [std::arch::x86_64::__m256; 3],
+        std::arch::x86_64::__m256,
+    );
 
     #[inline]
     #[target_feature(enable = "avx2")]
@@ -2981,32 +3378,51 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
     #[target_feature(enable = "avx2")]
     unsafe fn sample(
         &self,
-        _: &Cells8,
+        cells: &Cells8,
         base: std::arch::x86_64::__m256i,
         frac: [std::arch::x86_64::__m256; 3],
     ) -> Option<(std::arch::x86_64::__m256, Self::Pre)> {
         // SAFETY: the caller's guarantees are sample_at's.
-        unsafe { self.sampler.sample_at(base, frac) }.map(|rho| (rho, base))
+        unsafe { self.sampler.sample_at(base, frac) }.map(|rho| (rho, (base, cells.pos, cells.xf)))
     }
 
     #[inline]
     #[target_feature(enable = "avx2")]
     unsafe fn src(
         &self,
-        base: &Self::Pre,
+        pre: &Self::Pre,
         frac: [std::arch::x86_64::__m256; 3],
+        u: std::arch::x86_64::__m256,
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
     ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
-        let (v, a, contributes) = shade_terms8(self.t, rho, k, corrected);
+        // SAFETY (both): the caller guarantees AVX2; positions are clamped to [0, last], and
+        // row last + 1 exists.
+        let v = if self.preint {
+            unsafe { shade_segment8(self.t, u, rho) }
+        } else {
+            let pos = table_pos8(rho, self.t.lo, self.t.scale, self.t.last);
+            unsafe { interp8(&self.t.rows, pos, false) }
+        };
+        let (v, a, contributes) = shade_terms8(v, k, corrected);
         if _mm256_movemask_ps(contributes) == 0 {
             return ([_mm256_setzero_ps(); 4], contributes);
         }
         let mut col = [v[1], v[2], v[3]];
         let (diffuse, specular, _) = self.t.switches();
         if diffuse || specular {
+            let (base, frac) = if self.preint {
+                // Lanes that contribute and whose segment is not one value (`light_shift`).
+                let mid = _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(u, rho), contributes);
+                let h = _mm256_and_ps(light_shift8(_mm256_mul_ps(k, v[7]), a), mid);
+                // SAFETY: the caller guarantees AVX2.
+                unsafe { self.light_cells(&pre.1, pre.2, h) }
+            } else {
+                (pre.0, frac)
+            };
+            let base = &base;
             let o = self.sampler.offs;
             let mask = _mm256_set1_epi32(0xffff);
             let mut q = [_mm256_setzero_si256(); 8];
@@ -3103,14 +3519,140 @@ fn lerp8(
     _mm256_add_ps(p, _mm256_mul_ps(f, _mm256_sub_ps(q, p)))
 }
 
-/// The first half of [`shaded_src`] on eight lanes: the table's entries at `rho`, the
-/// opacity (path-corrected in the `corrected` lanes) and the mask of lanes that contribute.
+/// Which lanes of a segment from table position `tu` to `tv` take the middle entry (shorter
+/// than [`SEGMENT_MIN_ENTRIES`]), the middle position, and `tv − tu`.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn segment_split8(
+    tu: std::arch::x86_64::__m256,
+    tv: std::arch::x86_64::__m256,
+) -> (
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+) {
+    use std::arch::x86_64::*;
+    let dt = _mm256_sub_ps(tv, tu);
+    let abs = _mm256_andnot_ps(_mm256_set1_ps(-0.0), dt);
+    let short = _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(SEGMENT_MIN_ENTRIES));
+    let mid = _mm256_mul_ps(_mm256_add_ps(tu, tv), _mm256_set1_ps(0.5));
+    (short, mid, dt)
+}
+
+/// [`light_shift`] on eight lanes (the branch as a blend).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn light_shift8(
+    kl: std::arch::x86_64::__m256,
+    a: std::arch::x86_64::__m256,
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let one = _mm256_set1_ps(1.0);
+    let d = _mm256_mul_ps(kl, _mm256_set1_ps(-std::f32::consts::LN_2));
+    let series = _mm256_add_ps(
+        _mm256_set1_ps(0.5),
+        _mm256_mul_ps(d, _mm256_set1_ps(1.0 / 12.0)),
+    );
+    let tc = _mm256_sub_ps(
+        _mm256_div_ps(one, d),
+        _mm256_div_ps(_mm256_sub_ps(one, a), a),
+    );
+    let full = _mm256_sub_ps(one, _mm256_max_ps(tc, _mm256_setzero_ps()));
+    let small = _mm256_cmp_ps::<_CMP_LT_OQ>(d, _mm256_set1_ps(1e-3));
+    _mm256_blendv_ps(full, series, small)
+}
+
+/// [`PostTable::segment`] on eight lanes: the same f32 operations, the branch as a blend.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn post_segment8(
+    t: &PostTable,
+    u: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+) -> [std::arch::x86_64::__m256; 4] {
+    use std::arch::x86_64::*;
+    let tu = table_pos8(u, t.lo, t.scale, t.last);
+    let tv = table_pos8(v, t.lo, t.scale, t.last);
+    let (short, mid, dt) = segment_split8(tu, tv);
+    let bits = _mm256_movemask_ps(short);
+    let mut out = [_mm256_setzero_ps(); 4];
+    // SAFETY (interp8): positions lie in [0, last], rows of the paired tables.
+    if bits != 0 {
+        let m = unsafe { interp8(&t.persp_pairs, mid, true) };
+        out = [m[0], m[1], m[2], m[3]];
+    }
+    if bits != 0xff {
+        let a = unsafe { interp8(&t.integ_pairs, tu, true) };
+        let b = unsafe { interp8(&t.integ_pairs, tv, true) };
+        let dl = _mm256_sub_ps(b[3], a[3]);
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), dl);
+        let seg = [
+            _mm256_mul_ps(_mm256_sub_ps(b[0], a[0]), inv),
+            _mm256_mul_ps(_mm256_sub_ps(b[1], a[1]), inv),
+            _mm256_mul_ps(_mm256_sub_ps(b[2], a[2]), inv),
+            _mm256_div_ps(dl, dt),
+        ];
+        for ch in 0..4 {
+            out[ch] = _mm256_blendv_ps(seg[ch], out[ch], short);
+        }
+    }
+    out
+}
+
+/// [`ShadeTable::segment_entry`] on eight lanes: the same f32 operations, the branch as a blend.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn shade_segment8(
+    t: &ShadeTable,
+    u: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+) -> [std::arch::x86_64::__m256; 8] {
+    use std::arch::x86_64::*;
+    let tu = table_pos8(u, t.lo, t.scale, t.last);
+    let tv = table_pos8(v, t.lo, t.scale, t.last);
+    let (short, mid, dt) = segment_split8(tu, tv);
+    let bits = _mm256_movemask_ps(short);
+    let zero = _mm256_setzero_ps();
+    let mut out = [zero; 8];
+    // SAFETY (interp8): positions lie in [0, last], and row last + 1 exists in both tables.
+    if bits != 0 {
+        out = unsafe { interp8(&t.rows, mid, false) };
+    }
+    if bits != 0xff {
+        let a = unsafe { interp8(&t.integ, tu, false) };
+        let b = unsafe { interp8(&t.integ, tv, false) };
+        let dl = _mm256_sub_ps(b[0], a[0]);
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), dl);
+        let mut seg = [zero; 8];
+        for ch in 1..7 {
+            seg[ch] = _mm256_mul_ps(_mm256_sub_ps(b[ch], a[ch]), inv);
+        }
+        seg[7] = _mm256_div_ps(dl, dt);
+        for ch in 0..8 {
+            out[ch] = _mm256_blendv_ps(seg[ch], out[ch], short);
+        }
+    }
+    out
+}
+
+/// The first half of [`shaded_src`] on eight lanes, from the table's entries `v` (at the
+/// samples, or of the segments, [`shade_segment8`]): the opacity (path-corrected in the
+/// `corrected` lanes) and the mask of lanes that contribute.
 #[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn shade_terms8(
-    t: &ShadeTable,
-    rho: std::arch::x86_64::__m256,
+    v: [std::arch::x86_64::__m256; 8],
     k: std::arch::x86_64::__m256,
     corrected: std::arch::x86_64::__m256,
 ) -> (
@@ -3121,9 +3663,6 @@ fn shade_terms8(
     use std::arch::x86_64::*;
     let zero = _mm256_setzero_ps();
     let one = _mm256_set1_ps(1.0);
-    let pos = table_pos8(rho, t.lo, t.scale, t.last);
-    // SAFETY: positions are clamped to [0, last], and row last + 1 exists (the repeated entry).
-    let v = unsafe { interp8(&t.rows, pos, false) };
     let corrected_bits = _mm256_movemask_ps(corrected);
     let mut a = v[0];
     let mut contributes = _mm256_cmp_ps::<_CMP_GT_OQ>(v[0], zero);
@@ -3416,6 +3955,98 @@ mod tests {
             order.sort_unstable();
             assert_eq!(order, (0..n).collect::<Vec<_>>(), "n = {n}");
         }
+    }
+
+    /// A post table over `[0, n − 1]` (one entry per data unit) from `persp` entries.
+    fn post_table(persp: Vec<Rgba>) -> PostTable {
+        let n = persp.len();
+        let (scale, last) = table_steps(0.0, (n - 1) as f32, n);
+        let integ = integral_rows(&persp, 3);
+        PostTable {
+            pairs: Vec::new(),
+            persp_pairs: Vec::new(),
+            integ_pairs: Vec::new(),
+            values: Vec::new(),
+            persp,
+            integ,
+            lo: 0.0,
+            scale,
+            last,
+        }
+    }
+
+    /// [`PostTable::segment`] against the averages of the interpolated table computed by brute
+    /// force (10⁵ points per segment): `L̄` the mean of `L`, `c̄` the `L`-weighted mean colour, for
+    /// segments up and down the table across a sharp ramp and a colour step, and the middle
+    /// entry for segments shorter than one entry (one point where `u = v`).
+    #[test]
+    fn segments_average_the_table() {
+        let n = 64;
+        let persp: Vec<Rgba> = (0..n)
+            .map(|i| {
+                let l = match i {
+                    0..20 => 0.0,
+                    20..24 => -0.75 * (i - 19) as f32,
+                    _ => -3.0 - 0.01 * i as f32,
+                };
+                let c = if i < 30 {
+                    [0.9, 0.2, 0.1]
+                } else {
+                    [0.3, 0.6, 1.0]
+                };
+                [c[0], c[1], c[2], l]
+            })
+            .collect();
+        let t = post_table(persp);
+        let brute = |u: f32, v: f32| -> Rgba {
+            let m = 100_000;
+            let (mut sl, mut sc) = (0.0f64, [0.0f64; 3]);
+            for k in 0..m {
+                let x = u + (v - u) * (k as f32 + 0.5) / m as f32;
+                let e = t.lookup_in(&t.persp, x);
+                sl += f64::from(e[3]);
+                for c in 0..3 {
+                    sc[c] += f64::from(e[c]) * f64::from(e[3]);
+                }
+            }
+            let c = sc.map(|c| if sl != 0.0 { (c / sl) as f32 } else { 0.0 });
+            [c[0], c[1], c[2], (sl / m as f64) as f32]
+        };
+        for (u, v) in [
+            (10.0, 30.0),
+            (30.0, 10.0),
+            (18.3, 24.9),
+            (21.2, 22.7),
+            (0.0, 63.0),
+            (25.5, 40.25),
+        ] {
+            let (s, b) = (t.segment(u, v), brute(u, v));
+            for c in 0..4 {
+                assert!(
+                    (s[c] - b[c]).abs() < 0.01 * b[3].abs().max(0.1),
+                    "segment {u}..{v}, channel {c}: {} vs {}",
+                    s[c],
+                    b[c]
+                );
+            }
+        }
+        // Shorter than one entry: the middle entry, exactly; one value: that entry.
+        assert_eq!(t.segment(21.2, 21.9), t.lookup_in(&t.persp, 21.55));
+        assert_eq!(t.segment(22.5, 22.5), t.lookup_in(&t.persp, 22.5));
+        // No opacity over the segment: L̄ = 0 (colours 0/0, NaN), which contributes nothing.
+        assert_eq!(t.segment(3.0, 12.0)[3], 0.0);
+        assert!(Ctx::<f32>::post_seg_src(t.segment(3.0, 12.0), 1.0).is_none());
+    }
+
+    #[test]
+    fn ring_risk_scales_with_the_steepest_step() {
+        // 0 → 0.5 over 5 entries of 0.1 data unit each, data range 40: 0.1/entry · 10
+        // entries/unit · 10 = 10.
+        let alphas = [0.0, 0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.5];
+        assert!((ring_risk(&alphas, 10.0, 40.0) - 10.0).abs() < 1e-4);
+        assert_eq!(ring_risk(&[0.3; 16], 10.0, 40.0), 0.0);
+        assert_eq!(ring_risk(&[], 10.0, 40.0), 0.0);
+        assert_eq!(ring_risk(&alphas, 10.0, f32::INFINITY), 0.0);
     }
 
     #[test]

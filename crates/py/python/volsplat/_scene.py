@@ -26,6 +26,7 @@ _QUALITY = (
     "list_threshold",
     "slab",
     "shade_at",
+    "preintegrate",
 )
 _SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping")
 _ORBIT = ("azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
@@ -91,6 +92,8 @@ class Scene:
       ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``slab`` (image-aligned slab
       thickness in voxels; default ``None``: 1 for composite, 0.5 for MIP, MinIP and shading at
       the samples), ``shade_at`` (``"voxels"``, the default, as VTK shades, or ``"samples"``),
+      ``preintegrate`` (``"auto"``, the default: by segment where the transfer function's ramp
+      is sharp; ``"on"``; ``"off"``: one point per slab),
       ``order`` (``"ftb"``/``"btf"``),
       ``opacity_cutoff``, ``subsample``, ``list_threshold``; or ``quality={...}``.
     - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
