@@ -185,7 +185,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "60",
         ],
         "npy",
-        0xfd321f7e00332956,
+        // Re-recorded for decision 0020: the pixel is 1.34 voxels, so 1.34 × 1.34 rays per
+        // pixel, area-filtered (2 × 2 before).
+        0x0b289e580f661335,
     ),
     (
         "composite, image-aligned slabs, perspective",
@@ -205,9 +207,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "45",
         ],
         "npy",
-        // Re-recorded for decision 0017 (unshaded composite slabs default to one voxel); the
-        // half-voxel slabs keep their bits in the next case.
-        0xd304c6d6f5894f84,
+        // Re-recorded for decision 0017 (unshaded composite slabs default to one voxel; the
+        // half-voxel slabs keep their bits in the next case) and decision 0020 (1.26 × 1.26 rays
+        // per pixel, area-filtered, where there were 2 × 2).
+        0xc068b08ed71b5297,
     ),
     (
         "composite, image-aligned half-voxel slabs, perspective",
@@ -229,7 +232,8 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "45",
         ],
         "npy",
-        0x6839a1c4ba690d6c,
+        // Re-recorded for decision 0020 (fractional rays per pixel, area-filtered).
+        0xacb41f8b18d0b810,
     ),
     (
         "shaded, image-aligned slabs",

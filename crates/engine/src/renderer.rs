@@ -97,6 +97,10 @@ pub struct Stats {
     /// order) or `samples` (also where `voxels` was asked for but the transfer function depends
     /// on more than the density; decision 0019). Absent otherwise.
     pub shade_at: Option<&'static str>,
+    /// Image-aligned slabs: rays per pixel and axis, area-averaged into each pixel, where the
+    /// view is minified (anti-aliasing; decision 0020). Absent with one ray per pixel.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub supersampling: Option<f64>,
     /// Image-aligned slabs, composite: whether the slabs were classified by segment
     /// (pre-integrated; decision 0020). Absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -648,12 +652,12 @@ impl Renderer {
                     splats_terminated: s.splats_terminated,
                     pixel_updates: s.pixel_updates,
                     kernel: "tent".into(),
-                    antialias: match s.supersampling {
-                        0 | 1 => "none",
-                        2 => "supersample-2x2",
-                        3 => "supersample-3x3",
-                        _ => "supersample-4x4",
+                    antialias: if s.supersampling > 1.0 {
+                        "area"
+                    } else {
+                        "none"
                     },
+                    supersampling: (s.supersampling > 1.0).then_some(s.supersampling),
                     sheets: s.sheets,
                     sheet_axis: "view",
                     sheet_spacing: s.sheet_spacing,

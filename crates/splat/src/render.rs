@@ -190,9 +190,10 @@ pub struct RenderStats {
     pub footprint_half_extent: [f64; 2],
     /// Threads in the rayon pool that ran the render.
     pub threads: usize,
-    /// Image-aligned slabs: sub-pixel rays per axis averaged into each pixel (anti-aliasing of
-    /// minified views, [`crate::slab`]); 0 or 1 means one ray per pixel.
-    pub supersampling: usize,
+    /// Image-aligned slabs: rays per pixel and axis area-averaged into each pixel (anti-aliasing
+    /// of minified views, [`crate::slab`]; a fraction where the pixel is a fraction larger than
+    /// a voxel); 0 or 1 means one ray per pixel.
+    pub supersampling: f64,
     /// Image-aligned slabs, composite: whether the slabs were classified by segment
     /// ([`Preintegrate`]).
     pub preintegrated: bool,
