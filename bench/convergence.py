@@ -11,10 +11,12 @@ For the composite, shaded and perspective scenes of `../shared/data/scenes`:
    smallest spacing, rendered 4× larger and box-filtered 4×4 down (cached in
    `target/convergence-cache/`, keyed by scene, size and file times);
 2. **VTK's usual render**: sample distance 1/2 of the smallest spacing, at the size itself;
-3. **volsplat** in each mode (default: `auto` = no flags, what a user gets (decisions 0016, 0017
-   and 0019: one-voxel slabs for composite, shaded at the voxels as VTK shades); `sheet` =
-   `--visibility sheet`, Westover's sheet buffers; `image` = `--visibility image --slab 0.5`;
-   `image-1` = `--visibility image --slab 1`; `image-samples` = half-voxel slabs shading every
+3. **volsplat** in each mode (default: `auto` = no flags, what a user gets (decisions 0016, 0017,
+   0019 and 0020: one-voxel slabs for composite, shaded at the voxels as VTK shades,
+   pre-integrated where the transfer function's ramp is sharp); `sheet` = `--visibility sheet`,
+   Westover's sheet buffers; `image` = `--visibility image --slab 0.5`; `point` and `segment` =
+   one-voxel slabs classified by their one sample (`--preintegrate off`) or by the ray's segment
+   between two planes (`--preintegrate on`); `image-samples` = half-voxel slabs shading every
    sample, `--shade-at samples`), same camera and transfer-function files, linear PNG as VTK
    writes it;
 4. **PSNR** (RGB, 8-bit linear values over black, peak 1) of each against the reference;
@@ -54,7 +56,8 @@ DEFAULT_MODES = [
     ("auto", ""),
     ("sheet", "--visibility sheet"),
     ("image", "--visibility image --slab 0.5"),
-    ("image-1", "--visibility image --slab 1"),
+    ("point", "--visibility image --slab 1 --preintegrate off"),
+    ("segment", "--visibility image --slab 1 --preintegrate on"),
     ("image-samples", "--visibility image --slab 0.5 --shade-at samples"),
 ]
 

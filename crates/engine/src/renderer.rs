@@ -105,6 +105,10 @@ pub struct Stats {
     /// (pre-integrated; decision 0020). Absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub preintegrated: Option<bool>,
+    /// Image-aligned slabs, composite: how sharp the transfer function's steepest ramp is
+    /// against the data (`volsplat_splat::slab::ring_risk`; `auto` pre-integrates above 4).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ring_risk: Option<f64>,
     /// Sheets.
     pub sheets: usize,
     /// Sheet-normal axis, `i`, `j` or `k`.
@@ -669,6 +673,8 @@ impl Renderer {
                     },
                     preintegrated: (settings.mode == volsplat_splat::RenderMode::Composite)
                         .then_some(s.preintegrated),
+                    ring_risk: (settings.mode == volsplat_splat::RenderMode::Composite)
+                        .then_some(s.ring_risk),
                     threads: s.threads,
                     ..Stats::default()
                 };

@@ -197,6 +197,10 @@ pub struct RenderStats {
     /// Image-aligned slabs, composite: whether the slabs were classified by segment
     /// ([`Preintegrate`]).
     pub preintegrated: bool,
+    /// Image-aligned slabs, composite through a density table: the frame's
+    /// [`crate::slab::ring_risk`], which [`Preintegrate::Auto`] compares with
+    /// [`crate::slab::RING_RISK`] (0 otherwise).
+    pub ring_risk: f64,
 }
 
 impl RenderStats {
