@@ -1640,6 +1640,37 @@ const SEGMENT_LOG_FLOOR: f32 = -24.0;
 /// the integral tables ([`PostTable::segment`], [`ShadeTable::segment_entry`]).
 const SEGMENT_MIN_ENTRIES: f32 = 1.0;
 
+/// The averages over the segment between table positions `tu` and `tv` ([`PostTable::segment`],
+/// [`ShadeTable::segment_entry`]): shorter than [`SEGMENT_MIN_ENTRIES`], the entry at the
+/// middle (`at(false, ·)`); else from the integral rows (`at(true, ·)`), `L̄ = Δ∫L / Δt` in slot
+/// `L`, each other slot `Δ∫x·L / Δ∫L`, and 0 in slot `W` (where the rows hold `∫L`) if it is
+/// not `L`. The post table integrates into slot 3 and returns `[c̄, L̄]` (`W = L = 3`); the
+/// shade table integrates into slot 0 and returns `[0, ē, d̄, L̄]` (`W = 0`, `L = 7`).
+#[inline(always)]
+fn segment_average<const N: usize, const W: usize, const L: usize>(
+    tu: f32,
+    tv: f32,
+    at: impl Fn(bool, f32) -> [f32; N],
+) -> [f32; N] {
+    let (w, l) = (W, L);
+    let dt = tv - tu;
+    if dt.abs() < SEGMENT_MIN_ENTRIES {
+        return at(false, (tu + tv) * 0.5);
+    }
+    let (a, b) = (at(true, tu), at(true, tv));
+    let dl = b[w] - a[w];
+    let inv = 1.0 / dl;
+    std::array::from_fn(|c| {
+        if c == l {
+            dl / dt
+        } else if c == w {
+            0.0
+        } else {
+            (b[c] - a[c]) * inv
+        }
+    })
+}
+
 /// Cumulative trapezoidal integrals over table entries of `rows` (`N` channels): channel `w` of
 /// the result integrates the weight `max(row[w], SEGMENT_LOG_FLOOR)` (a `log2(1 − α)`), every
 /// other channel `c` integrates `row[c]·weight`; entry 0 is zero. Summed in f64 and rounded once.
@@ -1763,20 +1794,8 @@ impl PostTable {
     /// ([`Ctx::post_seg_src`], and the kernels' masks).
     #[inline(always)]
     fn segment(&self, u: f32, v: f32) -> Rgba {
-        let (tu, tv) = (self.pos(u), self.pos(v));
-        let dt = tv - tu;
-        if dt.abs() < SEGMENT_MIN_ENTRIES {
-            return Self::at(&self.persp, (tu + tv) * 0.5);
-        }
-        let (a, b) = (Self::at(&self.integ, tu), Self::at(&self.integ, tv));
-        let dl = b[3] - a[3];
-        let inv = 1.0 / dl;
-        [
-            (b[0] - a[0]) * inv,
-            (b[1] - a[1]) * inv,
-            (b[2] - a[2]) * inv,
-            dl / dt,
-        ]
+        let at = |integ: bool, t| Self::at(if integ { &self.integ } else { &self.persp }, t);
+        segment_average::<4, 3, 3>(self.pos(u), self.pos(v), at)
     }
 
     /// Linear interpolation in `values` at table position `t` (in `[0, last]`).
@@ -1927,24 +1946,8 @@ impl ShadeTable {
     /// path-corrected opacity `1 − 2^(k·L̄)` ([`shade_opacity`] with `corrected`).
     #[inline(always)]
     fn segment_entry(&self, u: f32, v: f32) -> [f32; 8] {
-        let (tu, tv) = (self.pos(u), self.pos(v));
-        let dt = tv - tu;
-        if dt.abs() < SEGMENT_MIN_ENTRIES {
-            return Self::at(&self.rows, (tu + tv) * 0.5);
-        }
-        let (a, b) = (Self::at(&self.integ, tu), Self::at(&self.integ, tv));
-        let dl = b[0] - a[0];
-        let inv = 1.0 / dl;
-        [
-            0.0,
-            (b[1] - a[1]) * inv,
-            (b[2] - a[2]) * inv,
-            (b[3] - a[3]) * inv,
-            (b[4] - a[4]) * inv,
-            (b[5] - a[5]) * inv,
-            (b[6] - a[6]) * inv,
-            dl / dt,
-        ]
+        let at = |integ: bool, t| Self::at(if integ { &self.integ } else { &self.rows }, t);
+        segment_average::<8, 0, 7>(self.pos(u), self.pos(v), at)
     }
 
     /// The lights of the frame.
@@ -3693,7 +3696,58 @@ fn light_shift8(
     _mm256_blendv_ps(full, series, small)
 }
 
-/// [`PostTable::segment`] on eight lanes: the same f32 operations, the branch as a blend.
+/// [`segment_average`] on eight lanes: the same f32 operations, the branch as a blend;
+/// `mid_rows` and `integ` are the table's entry rows and integral rows, `paired` as
+/// [`interp8`] reads them.
+///
+/// # Safety
+/// The CPU must support AVX2; for every position in `[0, last]` the rows [`interp8`] reads must
+/// exist in both tables.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn segment_average8<const N: usize, const W: usize, const L: usize>(
+    (lo, scale, last): (f32, f32, f32),
+    u: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+    mid_rows: &[[f32; 8]],
+    integ: &[[f32; 8]],
+    paired: bool,
+) -> [std::arch::x86_64::__m256; N] {
+    use std::arch::x86_64::*;
+    let (w, l) = (W, L);
+    let tu = table_pos8(u, lo, scale, last);
+    let tv = table_pos8(v, lo, scale, last);
+    let (short, mid, dt) = segment_split8(tu, tv);
+    let bits = _mm256_movemask_ps(short);
+    let zero = _mm256_setzero_ps();
+    let mut out = [zero; N];
+    // SAFETY (interp8): the caller's guarantee.
+    if bits != 0 {
+        let m = unsafe { interp8(mid_rows, mid, paired) };
+        out = std::array::from_fn(|c| m[c]);
+    }
+    if bits != 0xff {
+        let a = unsafe { interp8(integ, tu, paired) };
+        let b = unsafe { interp8(integ, tv, paired) };
+        let dl = _mm256_sub_ps(b[w], a[w]);
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), dl);
+        for (c, o) in out.iter_mut().enumerate() {
+            let seg = if c == l {
+                _mm256_div_ps(dl, dt)
+            } else if c == w {
+                zero
+            } else {
+                _mm256_mul_ps(_mm256_sub_ps(b[c], a[c]), inv)
+            };
+            *o = _mm256_blendv_ps(seg, *o, short);
+        }
+    }
+    out
+}
+
+/// [`PostTable::segment`] on eight lanes ([`segment_average8`]).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -3705,36 +3759,20 @@ unsafe fn post_segment8(
     u: std::arch::x86_64::__m256,
     v: std::arch::x86_64::__m256,
 ) -> [std::arch::x86_64::__m256; 4] {
-    use std::arch::x86_64::*;
-    let tu = table_pos8(u, t.lo, t.scale, t.last);
-    let tv = table_pos8(v, t.lo, t.scale, t.last);
-    let (short, mid, dt) = segment_split8(tu, tv);
-    let bits = _mm256_movemask_ps(short);
-    let mut out = [_mm256_setzero_ps(); 4];
-    // SAFETY (interp8): positions lie in [0, last], rows of the paired tables.
-    if bits != 0 {
-        let m = unsafe { interp8(&t.persp_pairs, mid, true) };
-        out = [m[0], m[1], m[2], m[3]];
+    // SAFETY: the paired tables have a row per position in [0, last].
+    unsafe {
+        segment_average8::<4, 3, 3>(
+            (t.lo, t.scale, t.last),
+            u,
+            v,
+            &t.persp_pairs,
+            &t.integ_pairs,
+            true,
+        )
     }
-    if bits != 0xff {
-        let a = unsafe { interp8(&t.integ_pairs, tu, true) };
-        let b = unsafe { interp8(&t.integ_pairs, tv, true) };
-        let dl = _mm256_sub_ps(b[3], a[3]);
-        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), dl);
-        let seg = [
-            _mm256_mul_ps(_mm256_sub_ps(b[0], a[0]), inv),
-            _mm256_mul_ps(_mm256_sub_ps(b[1], a[1]), inv),
-            _mm256_mul_ps(_mm256_sub_ps(b[2], a[2]), inv),
-            _mm256_div_ps(dl, dt),
-        ];
-        for ch in 0..4 {
-            out[ch] = _mm256_blendv_ps(seg[ch], out[ch], short);
-        }
-    }
-    out
 }
 
-/// [`ShadeTable::segment_entry`] on eight lanes: the same f32 operations, the branch as a blend.
+/// [`ShadeTable::segment_entry`] on eight lanes ([`segment_average8`]).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -3746,32 +3784,8 @@ unsafe fn shade_segment8(
     u: std::arch::x86_64::__m256,
     v: std::arch::x86_64::__m256,
 ) -> [std::arch::x86_64::__m256; 8] {
-    use std::arch::x86_64::*;
-    let tu = table_pos8(u, t.lo, t.scale, t.last);
-    let tv = table_pos8(v, t.lo, t.scale, t.last);
-    let (short, mid, dt) = segment_split8(tu, tv);
-    let bits = _mm256_movemask_ps(short);
-    let zero = _mm256_setzero_ps();
-    let mut out = [zero; 8];
-    // SAFETY (interp8): positions lie in [0, last], and row last + 1 exists in both tables.
-    if bits != 0 {
-        out = unsafe { interp8(&t.rows, mid, false) };
-    }
-    if bits != 0xff {
-        let a = unsafe { interp8(&t.integ, tu, false) };
-        let b = unsafe { interp8(&t.integ, tv, false) };
-        let dl = _mm256_sub_ps(b[0], a[0]);
-        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), dl);
-        let mut seg = [zero; 8];
-        for ch in 1..7 {
-            seg[ch] = _mm256_mul_ps(_mm256_sub_ps(b[ch], a[ch]), inv);
-        }
-        seg[7] = _mm256_div_ps(dl, dt);
-        for ch in 0..8 {
-            out[ch] = _mm256_blendv_ps(seg[ch], out[ch], short);
-        }
-    }
-    out
+    // SAFETY: both tables repeat their last row, so row last + 1 exists.
+    unsafe { segment_average8::<8, 0, 7>((t.lo, t.scale, t.last), u, v, &t.rows, &t.integ, false) }
 }
 
 /// The first half of [`shaded_src`] on eight lanes, from the table's entries `v` (at the
