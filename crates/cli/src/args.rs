@@ -302,9 +302,9 @@ pub struct RenderOptions {
     )]
     pub subsample: usize,
     /// Front-to-back early termination: a pixel whose opacity reaches this value takes no more
-    /// samples or splats. The default 0.99 is VTK's level (a pixel changes by at most 1 % of the
-    /// light behind where it stops; docs/decisions/0018); 0.999999 changes no pixel by more than
-    /// 1e-6; values ≥ 1 disable it.
+    /// samples or splats. The default, 1 − 255/32767 ≈ 0.9922, is where VTK's fixed-point ray
+    /// caster stops (a pixel changes by at most 0.78 % of the light behind where it stops;
+    /// docs/decisions/0018); 0.999999 changes no pixel by more than 1e-6; values ≥ 1 disable it.
     #[arg(
         long,
         default_value_t = volsplat::DEFAULT_OPACITY_CUTOFF,

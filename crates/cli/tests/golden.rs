@@ -27,7 +27,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "--visibility",
             "sheet",
             // The early-termination cutoff these hashes were recorded with (the default before
-            // decision 0018 made it VTK's 0.99): 1 − 2⁻²⁰.
+            // decision 0018 made it VTK's level): 1 − 2⁻²⁰.
             "--opacity-cutoff",
             "0.99999905",
             // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
@@ -69,8 +69,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         // Re-recorded 2026-11-25 for decision 0018 (early termination at VTK's 0.99 by
         // default): 95.0 dB from the picture at 1 − 2⁻²⁰, largest difference 7.8e-4, on 4.7 %
         // of the pixels; and again for the sheets' shading through the slab kernel's table:
-        // 101.6 dB from that, largest difference 3.4e-4.
-        0x3d9992a935562c6f,
+        // 101.6 dB from that, largest difference 3.4e-4; and again when the cutoff became VTK's
+        // exact 1 − 255/32767 (decision 0018's amendment): 95.2 dB from the picture at 0.99,
+        // largest difference 7.8e-4, on 1.9 % of the pixels.
+        0xb53f1e38f9552d74,
     ),
     (
         // sRGB-encoded, the default before decision 0012 made PNGs linear.
@@ -104,7 +106,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "--visibility",
             "sheet",
             // The early-termination cutoff these hashes were recorded with (the default before
-            // decision 0018 made it VTK's 0.99): 1 − 2⁻²⁰.
+            // decision 0018 made it VTK's level): 1 − 2⁻²⁰.
             "--opacity-cutoff",
             "0.99999905",
             // Swan's rule, the default anti-aliasing before decision 0006's 2026-11-24 amendment.
@@ -239,7 +241,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         "shaded, image-aligned slabs",
         &[
             // The early-termination cutoff these hashes were recorded with (the default before
-            // decision 0018 made it VTK's 0.99): 1 − 2⁻²⁰.
+            // decision 0018 made it VTK's level): 1 − 2⁻²⁰.
             "--opacity-cutoff",
             "0.99999905",
             "--visibility",
@@ -265,7 +267,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
     ),
     (
         // Every default (decision 0019: `auto` draws shaded composite with one-voxel slabs
-        // shaded at the voxels, VTK's order; decision 0018's cutoff; area anti-aliasing;
+        // shaded at the voxels, VTK's order; decision 0018's cutoff (VTK's 1 − 255/32767); area anti-aliasing;
         // decision 0020: on this 40³ grid a slab is thick enough for the automatic ramp's
         // ring risk to reach 4.6, so the slabs are pre-integrated; 2.2 at the demo's 84 × 128²).
         "demo head, defaults (slabs shaded at the voxels, pre-integrated)",
@@ -280,8 +282,10 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "15",
         ],
         "npy",
-        // Recorded 2026-11-25 (decision 0020).
-        0x4c334ee53be69a53,
+        // Recorded 2026-11-25 (decision 0020); re-recorded for the cutoff 1 − 255/32767
+        // (decision 0018's amendment): 70.9 dB from the picture at 0.99, largest difference
+        // 4.8e-3, on 3.0 % of the pixels.
+        0xc05aa547d6d8e34d,
     ),
     (
         // The same by point (the defaults before decision 0020).
@@ -300,8 +304,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         ],
         "npy",
         // Recorded 2026-11-25: 44.6 dB from the same slabs shaded at the samples, 29.8 dB from
-        // the sheets (blurrier on this 40³ phantom).
-        0x8a72fd6e5b1e42ef,
+        // the sheets (blurrier on this 40³ phantom); re-recorded for the cutoff 1 − 255/32767:
+        // 71.8 dB from the picture at 0.99, largest difference 4.2e-3, on 2.8 % of the pixels.
+        0x862321bdf1f946d4,
     ),
     (
         "X-ray",

@@ -210,10 +210,10 @@ pub struct Quality {
     /// Traversal order (dense renderer).
     pub order: OrderChoice,
     /// Front-to-back early termination: pixels at this opacity take no more samples or splats
-    /// (> 0; ≥ 1 disables it). The default, [`DEFAULT_OPACITY_CUTOFF`] (0.99), is VTK's level
-    /// (docs/decisions/0018-early-termination-at-vtks-level.md): it changes a pixel by at most
-    /// 1 % of the light behind the point where it stops; `1 − 2⁻²⁰` changes none by more than
-    /// 1e-6.
+    /// (> 0; ≥ 1 disables it). The default, [`DEFAULT_OPACITY_CUTOFF`] (1 − 255/32767 ≈
+    /// 0.9922), is VTK's level (docs/decisions/0018-early-termination-at-vtks-level.md): it
+    /// changes a pixel by at most 0.78 % of the light behind the point where it stops;
+    /// `1 − 2⁻²⁰` changes none by more than 1e-6.
     pub opacity_cutoff: f32,
     /// Splat every N-th voxel per axis (1..=64).
     pub subsample: usize,
@@ -234,11 +234,12 @@ pub struct Quality {
     pub preintegrate: PreintegrateChoice,
 }
 
-/// The front ends' early-termination opacity ([`Quality::opacity_cutoff`]): VTK's ray casters
-/// stop a ray at about this opacity (`vtkFixedPointVolumeRayCastMapper` when less than 255/32768
-/// of the light remains), and issue 12 asks for termination at that level. A pixel changes by at
-/// most 1 % of what lies behind the point where it stops (decision 0018).
-pub const DEFAULT_OPACITY_CUTOFF: f32 = 0.99;
+/// The front ends' early-termination opacity ([`Quality::opacity_cutoff`]), 1 − 255/32767 ≈
+/// 0.99222: `vtkFixedPointVolumeRayCastMapper` stops a ray once its 15-bit remaining opacity
+/// falls below `0xff` out of `0x7fff`, and issue 12 asks for termination at VTK's level. A pixel
+/// changes by at most 0.78 % of what lies behind the point where it stops (decision 0018 and its
+/// 2026-11-25 amendment, which replaced the rounded 0.99).
+pub const DEFAULT_OPACITY_CUTOFF: f32 = 1.0 - 255.0 / 32767.0;
 
 impl Default for Quality {
     fn default() -> Self {

@@ -477,7 +477,7 @@ pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
         return bad(
             "opacity_cutoff",
             s.opacity_cutoff.to_string(),
-            "an opacity > 0 (VTK stops rays at 0.99)",
+            "an opacity > 0 (VTK stops rays at 0.9922)",
         );
     }
     if s.footprint.max_entries == 0 {
