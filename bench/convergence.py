@@ -83,6 +83,21 @@ def vtk_render(env, prefix, vol, cam, tf, out_png, size, factor):
                                   cam, tf, out_png, str(size), "2", "0", str(factor)], env=env)
 
 
+def converged_reference(env, prefix, cache, label, vol, cam, tf, n):
+    """(cache key, the VTK-made converged reference as an RGB float array): rendered at 4n² with
+    sample distance 1/8 of the smallest spacing and box-filtered to n², cached in `cache` under a
+    key of the scene, the size and the files' times."""
+    key = hashlib.sha1(json.dumps([label, n, os.path.getmtime(vol), os.path.getmtime(cam),
+                                   os.path.getmtime(tf)]).encode()).hexdigest()[:12]
+    ref_png = os.path.join(cache, f"{label}.{n}.{key}.ref4x.png")
+    if not os.path.exists(ref_png):
+        print(f"{label}: converged reference (VTK, 1/8 spacing, {4 * n}²) …", file=sys.stderr,
+              flush=True)
+        vtk_render(env, prefix, vol, cam, tf, ref_png + ".tmp.png", 4 * n, 0.125)
+        os.replace(ref_png + ".tmp.png", ref_png)
+    return key, box_down(vs_vtk.read_png(ref_png), 4)
+
+
 def box_down(img, k):
     h, w, c = img.shape
     return img.reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
@@ -140,15 +155,7 @@ def main():
     rows, pops, float_rows = [], [], []
     for label, vol_name, name, vol, cam, tf in scenes:
         flags = vs_vtk.volsplat_flags(name, cam)
-        key = hashlib.sha1(json.dumps([label, n, os.path.getmtime(vol), os.path.getmtime(cam),
-                                       os.path.getmtime(tf)]).encode()).hexdigest()[:12]
-        ref_png = os.path.join(cache, f"{label}.{n}.{key}.ref4x.png")
-        if not os.path.exists(ref_png):
-            print(f"{label}: converged reference (VTK, 1/8 spacing, {4 * n}²) …", file=sys.stderr,
-                  flush=True)
-            vtk_render(env, prefix, vol, cam, tf, ref_png + ".tmp.png", 4 * n, 0.125)
-            os.replace(ref_png + ".tmp.png", ref_png)
-        ref = box_down(vs_vtk.read_png(ref_png), 4)
+        key, ref = converged_reference(env, prefix, cache, label, vol, cam, tf, n)
         vtk_png = os.path.join(work, f"{label}.vtk.png")
         vtk_render(env, prefix, vol, cam, tf, vtk_png, n, 0.5)
         images = {"reference": ref, "VTK": vs_vtk.read_png(vtk_png)}
@@ -247,7 +254,7 @@ transfer-function files. **VTK usual**: the same at sample distance 1/2, {n}². 
 The same images against `testkit`'s float integrator (1/8 spacing, 2×2 rays per pixel), which
 evaluates the transfer function at the interpolated value exactly; "VTK converged" is the reference
 of the first table, measured against this one. The two references differ by VTK's fixed-point
-rounding.
+rounding, measured in [vtk-bias.md](vtk-bias.md) (`bench/vtk_bias.py`).
 
 {chr(10).join(float_lines) if float_lines[2:] else "(not run: --no-float)"}
 

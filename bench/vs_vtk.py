@@ -43,8 +43,9 @@ VOLUMES = {"mri_brainsmall": "mri_brainsmall.nrrd", "mri_colin27": "mri_colin27.
 ORDER = ["composite_ortho", "composite_shaded_ortho", "mip_ortho", "composite_persp"]
 
 
-def ensure_venv():
-    """Re-executes this script with the virtual environment's Python, creating it if needed."""
+def ensure_venv(script=None):
+    """Re-executes `script` (default: this one) with the virtual environment's Python, creating
+    it if needed."""
     venv = os.environ.get("VTK_VENV", os.path.join(ROOT, "target", "vtk-venv"))
     py = os.path.join(venv, "bin", "python")
     if os.path.realpath(sys.prefix) == os.path.realpath(venv):
@@ -55,7 +56,7 @@ def ensure_venv():
         print(f"installing vtk and numpy into {venv} …", file=sys.stderr)
         subprocess.run([sys.executable, "-m", "venv", venv], check=True)
         subprocess.run([py, "-m", "pip", "install", "-q", "vtk", "numpy"], check=True)
-    os.execv(py, [py, os.path.abspath(__file__)] + sys.argv[1:])
+    os.execv(py, [py, os.path.abspath(script or __file__)] + sys.argv[1:])
 
 
 def run_measured(cmd, env=None):
