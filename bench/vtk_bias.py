@@ -55,10 +55,7 @@ def write_probe(work):
                 f"encoding: raw\ndata file: probe.raw\n")
     c = (n - 1) / 2
     cam = os.path.join(work, "probe.camera.json")
-    # 400.37, not 400: with the eye a whole number of voxels from the faces, a plane of
-    # volsplat's slabs falls on the entry face to rounding and half a slab of path is lost there
-    # (a known boundary case, `docs/BENCHMARKS.md` §17.3); this probe measures classification.
-    json.dump({"position": [c, c, 400.37], "focal_point": [c, c, c], "view_up": [0, 1, 0],
+    json.dump({"position": [c, c, 400.0], "focal_point": [c, c, c], "view_up": [0, 1, 0],
                "view_angle": 30.0, "parallel_projection": True, "parallel_scale": c}, open(cam, "w"))
     tf = os.path.join(work, "probe.tf.json")
     json.dump({"color": [[0, 1, 1, 1], [255, 1, 1, 1]],

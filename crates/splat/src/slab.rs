@@ -1438,6 +1438,7 @@ impl<T: Scalar> Ctx<'_, T> {
         let v = &self.view;
         let mut din = Vec::with_capacity(rows * self.width);
         let mut dout = Vec::with_capacity(rows * self.width);
+        let (mut entry_walk, mut exit_walk) = (None, None);
         for y in y0..y0 + rows {
             for x in 0..self.width {
                 let (u, w) = v.offsets(x as f64, y as f64);
@@ -1477,7 +1478,10 @@ impl<T: Scalar> Ctx<'_, T> {
                     cut(n.dot(aw) + off, n.dot(bw), 0.0, f64::INFINITY);
                 }
                 let (a, b) = if lo <= hi {
-                    (lo as f32, hi as f32)
+                    (
+                        self.snap_entry(y, x, lo, &mut entry_walk),
+                        self.snap_exit(y, x, hi, &mut exit_walk),
+                    )
                 } else {
                     (f32::INFINITY, f32::NEG_INFINITY)
                 };
@@ -1486,6 +1490,77 @@ impl<T: Scalar> Ctx<'_, T> {
             }
         }
         (din, dout)
+    }
+
+    /// Whether pixel `x` of row `y` is sampled on plane `j` (an absolute plane number,
+    /// depth `j·Δ`): the walk's own fixed-point test and clipping, memoised per row and plane
+    /// in `memo`.
+    fn sampled_on(&self, y: usize, x: usize, j: i64, memo: &mut SpanMemo) -> bool {
+        let p = j - self.j0;
+        if p < 0 || p >= self.n_planes as i64 {
+            return false;
+        }
+        let span = match *memo {
+            Some((my, mj, span)) if my == y && mj == j => span,
+            _ => {
+                let d = self.depth(p as usize);
+                let walk = self.walk(y, d);
+                let c = self.clip_span(y, d, walk.span);
+                let span = (c.0.max(walk.span.0), c.1.min(walk.span.1));
+                *memo = Some((y, j, span));
+                span
+            }
+        };
+        span.0 <= x as i64 && x as i64 <= span.1
+    }
+
+    /// The depth where the ray of pixel `(x, y)` enters the volume (`lo`, f64), as
+    /// [`boundary_factor`] must see it: where `lo` lies on a plane to within rounding, whether
+    /// that plane's sample is taken is the walk's fixed-point decision, and the depth handed on
+    /// is moved (by the rounding, at most) so that the first plane sampled, and only it, takes
+    /// the path from `lo`. Without this a plane on the entry face to rounding was left out by
+    /// the walk while the next plane took only its own half slab: half a slab of path lost
+    /// (`docs/BENCHMARKS.md` §17.3).
+    fn snap_entry(&self, y: usize, x: usize, lo: f64, memo: &mut SpanMemo) -> f32 {
+        let j = (lo / self.delta).round();
+        if (lo - j * self.delta).abs() > self.snap_tolerance(lo) {
+            return lo as f32;
+        }
+        let half = (0.5 * self.delta) as f32;
+        // `boundary_factor`'s front of plane j + 1: the slab before it starts a ray there.
+        let front_next = ((j + 1.0) * self.delta) as f32 - 2.0 * half;
+        let din = lo as f32;
+        if self.sampled_on(y, x, j as i64, memo) {
+            din.min(front_next)
+        } else if front_next < din {
+            din
+        } else {
+            front_next.next_up()
+        }
+    }
+
+    /// [`Ctx::snap_entry`] for the depth `hi` where the ray leaves the volume.
+    fn snap_exit(&self, y: usize, x: usize, hi: f64, memo: &mut SpanMemo) -> f32 {
+        let j = (hi / self.delta).round();
+        if (hi - j * self.delta).abs() > self.snap_tolerance(hi) {
+            return hi as f32;
+        }
+        let half = (0.5 * self.delta) as f32;
+        let back_prev = ((j - 1.0) * self.delta) as f32 + 2.0 * half;
+        let dout = hi as f32;
+        if self.sampled_on(y, x, j as i64, memo) {
+            dout.max(back_prev)
+        } else if back_prev > dout {
+            dout
+        } else {
+            back_prev.next_down()
+        }
+    }
+
+    /// How near a plane an entry or exit depth `d` must lie for [`Ctx::snap_entry`] to ask the
+    /// walk: well above the rounding of f32 depths and 32.32 positions, far below a slab.
+    fn snap_tolerance(&self, d: f64) -> f64 {
+        (1e-3 * self.delta).max(8.0 * f32::EPSILON as f64 * d.abs())
     }
 
     /// The path factor `k = √(1 + u² + v²)` of every pixel of the rows `[y0, y0 + rows)`: 1 in
@@ -2297,6 +2372,9 @@ fn boundary_factor(kf: f32, din: f32, dout: f32, d: f32, half: f32) -> f32 {
         kf
     }
 }
+
+/// The last walk [`Ctx::sampled_on`] made: its row, absolute plane number and sampled span.
+type SpanMemo = Option<(usize, i64, (i64, i64))>;
 
 /// `0..n` coarse to fine: every 16th, then the odd multiples of 8, of 4, of 2, and the odd
 /// numbers; each number once.

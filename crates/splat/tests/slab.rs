@@ -7,8 +7,8 @@ use volsplat_core::glam::DVec3;
 use volsplat_core::phantom::{self, Blob, GaussianBlobs};
 use volsplat_core::{Camera, CrioTables, Grid, Image, Projection, TransferFunction, Volume};
 use volsplat_splat::{
-    BrickGrid, ClipPlane, RenderMode, RenderSettings, Rendered, ShadeAt, SplatError, Visibility,
-    render, render_slabs,
+    BrickGrid, ClipPlane, Preintegrate, RenderMode, RenderSettings, Rendered, ShadeAt, SplatError,
+    Visibility, render, render_slabs,
 };
 use volsplat_testkit::metrics::image_psnr;
 use volsplat_testkit::reference::{
@@ -913,4 +913,70 @@ fn preintegration_removes_the_rings_of_a_sharp_ramp() {
         };
         assert!(!slabs(&blobs, &cam, &tables, &s).stats.preintegrated);
     }
+}
+
+/// A slab plane that falls on a face of the volume to rounding (the eye a whole number of voxels
+/// from an axis-aligned face) is either sampled or not by the walk's fixed-point test; the
+/// boundary rule must agree with it, or half a slab of path is lost at that face. A volume of
+/// one value everywhere, opaque at a known rate, seen along z through its full depth: each pixel's
+/// opacity must match the closed form `1 − (1 − α)^L` for every plane phase, in both projections
+/// (the centre pixel in perspective, where the ray is normal to the faces), with and without
+/// pre-integration: the path it implies within 0.01 voxel (the path-corrected `exp2` form is good
+/// to about 10⁻⁴ of the path; the half slab lost before the fix was 0.25–0.5 voxel).
+#[test]
+fn a_plane_on_a_face_keeps_the_whole_path() {
+    let rate = 0.02; // opacity per unit length at the volume's value
+    let tf = TransferFunction {
+        color: vec![[0.0, 1.0, 1.0, 1.0], [1.0, 1.0, 1.0, 1.0]],
+        scalar_opacity: vec![[0.0, 0.0], [1.0, 2.0 * rate]],
+        scalar_opacity_unit_distance: 1.0,
+        shade: false,
+        ..TransferFunction::ramp(0.0, 1.0, 1.0)
+    };
+    // 4097 entries put the value 0.5 on an entry: no table interpolation in the way.
+    let tables = CrioTables::from_transfer_function(&tf, 4097).unwrap();
+    let mut failures = Vec::new();
+    // Eye distances that put the faces a whole number of voxels away; the walk's rounding puts
+    // a plane on a face inside the volume for some and outside for others (64 at 400 lost half
+    // a slab before the fix).
+    for (n, eye) in [(24usize, 100.0), (64, 400.0), (40, 257.0)] {
+        let grid = Grid::with_dims([n; 3]).unwrap();
+        let vol = Volume::new(grid, vec![0.5f32; n * n * n]).unwrap();
+        let c = (n - 1) as f64 / 2.0;
+        let length = (n - 1) as f64;
+        let exact = 1.0 - (1.0 - rate).powf(length);
+        for parallel in [true, false] {
+            for slab in [1.0, 0.5] {
+                for phase in [0.0, 0.25, 1.0 / 3.0] {
+                    for preintegrate in [Preintegrate::Off, Preintegrate::On] {
+                        let cam = Camera {
+                            position: [c, c, eye + phase],
+                            focal_point: [c, c, c],
+                            view_up: [0.0, 1.0, 0.0],
+                            view_angle: 5.0,
+                            parallel_projection: parallel,
+                            parallel_scale: c,
+                        };
+                        let s = RenderSettings {
+                            slab,
+                            preintegrate,
+                            ..settings(33, 33, RenderMode::Composite)
+                        };
+                        let img = slabs(&vol, &cam, &tables, &s).image;
+                        let a = img.get(16, 16)[3] as f64;
+                        let path = (1.0 - a).ln() / (1.0 - rate).ln();
+                        let case = format!(
+                            "n={n} eye={eye} parallel={parallel} slab={slab} phase={phase:.3} \
+                             {preintegrate:?}: opacity {a:.6}, exact {exact:.6} \
+                             (path {path:.4} of {length})"
+                        );
+                        if (path - length).abs() >= 0.01 {
+                            failures.push(case);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
 }
