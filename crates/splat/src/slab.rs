@@ -1043,10 +1043,9 @@ impl<T: Scalar> Ctx<'_, T> {
             Post::Voxel(t, vs) => {
                 let (v, (cell, f)) = if preint {
                     let v = t.segment_entry(u, rho);
+                    // Lit at the segment's middle (`SEGMENT_LIGHT_AT`).
                     let h = match shade_opacity(&v, k, corrected) {
-                        Some(_) if u != rho => {
-                            light_shift(k * t.log_at(u), k * t.log_at(rho), k * v[7])
-                        }
+                        Some(_) if u != rho => SEGMENT_LIGHT_AT,
                         _ => 0.0,
                     };
                     (v, self.light_cell(walk, row, x, h))
@@ -1090,7 +1089,7 @@ impl<T: Scalar> Ctx<'_, T> {
 
     /// Pre-integration shaded at the voxels: the cell and fractions where the segment of
     /// pixel `x` is lit, `q + h·(back_s + x·back_st)` with `q` the sample's position
-    /// ([`Ctx::cell_f32`]) and `h` from [`light_shift`]; the scalar twin of
+    /// ([`Ctx::cell_f32`]) and `h` the fraction [`SEGMENT_LIGHT_AT`]; the scalar twin of
     /// [`VoxelShadeSource::light_cells`].
     #[inline(always)]
     fn light_cell(
@@ -2027,17 +2026,6 @@ impl ShadeTable {
         segment_average::<8, 0, 7>(self.pos(u), self.pos(v), at)
     }
 
-    /// `L = log2(1 − α)` at density `x`, linearly interpolated (the last slot of
-    /// [`ShadeTable::at`]; [`log_at8`] is its twin).
-    #[inline(always)]
-    fn log_at(&self, x: f32) -> f32 {
-        let t = self.pos(x);
-        let i = t as i32 as usize;
-        let f = t - i as f32;
-        let (a, b) = (self.rows[i][7], self.rows[i + 1][7]);
-        a + f * (b - a)
-    }
-
     /// The lights of the frame.
     pub(crate) fn lights(&self) -> &[volsplat_core::FrameLight] {
         &self.lights
@@ -2184,68 +2172,16 @@ fn shade_opacity(v: &[f32; 8], k: f32, corrected: bool) -> Option<f32> {
     }
 }
 
-/// Pre-integration shaded at the voxels: where along its segment a slab is lit, as the
-/// fraction `h` of the way back from this plane's sample to the plane before's. The light that
-/// leaves a segment comes from where its opacity is seen, the centroid of `τ(t)·e^(−∫₀ᵗτ)` over
-/// the segment `t ∈ [0, 1]` from its front. The extinction `τ` along the segment is modelled as a
-/// step from its value at the front sample to its value at the back sample, placed at `t₀` so
-/// that the mean matches the segment's pre-integrated mean: a sharp ramp crossed inside the
-/// segment puts `t₀` where it is crossed. Inputs are `k·L` (`L = log2(1 − α)`, `≤ 0`) at the
-/// front sample, at the back sample and averaged over the segment; for both parts the centroid
-/// is closed-form (`∫₀ˡ t·σe^(−σt) dt = l·g(σl)`, `g(x) = (1 − e^(−x)(1 + x))/x`, its series
-/// below `x = 0.05`); below an optical depth of 10⁻³ the extinction's own centroid; where the
-/// ends have no opacity, the middle. [`light_shift8`] is its twin, operation for operation.
-///
-/// The step model replaced the centroid of an evenly spread extinction (stop 24), which lit
-/// opaque segments near their front, in the air before a sharp ramp: against the renderer's own
-/// 1/8-voxel slabs, +1.5 dB on a sharp shaded bone ramp of the CT-like phantom, +1.1 dB on
-/// `ct-skin`, ±0.15 dB on the Slicer presets (`docs/BENCHMARKS.md` §17.4).
-#[inline(always)]
-fn light_shift(kf: f32, kb: f32, km: f32) -> f32 {
-    let ln2 = std::f32::consts::LN_2;
-    let (b1, b2, bm) = (
-        max_ps(0.0 - kf, 0.0),
-        max_ps(0.0 - kb, 0.0),
-        max_ps(0.0 - km, 0.0),
-    );
-    let span = b2 - b1;
-    let t0 = if span.abs() > STEP_MIN_SPAN {
-        min_ps(max_ps((b2 - bm) / span, 0.0), 1.0)
-    } else {
-        0.5
-    };
-    let s0 = 1.0 - t0;
-    let (za, zb) = (b1 * t0, b2 * s0);
-    let depth = za + zb;
-    let tc = if depth * ln2 < 1e-3 {
-        // Faint: the extinction's centroid, (∫t·τ)/(∫τ).
-        if depth > 0.0 {
-            (b1 * (t0 * t0) + b2 * (1.0 - t0 * t0)) / (2.0 * depth)
-        } else {
-            0.5
-        }
-    } else {
-        let (ea, eb) = (exp2_neg(0.0 - za), exp2_neg(0.0 - zb));
-        let front = t0 * centroid_g(za * ln2, ea);
-        let back = ea * (t0 * (1.0 - eb) + s0 * centroid_g(zb * ln2, eb));
-        (front + back) / (1.0 - ea * eb)
-    };
-    1.0 - min_ps(max_ps(tc, 0.0), 1.0)
-}
-
-/// Below this difference between the ends' `log2` depths the step has no place: the middle.
-const STEP_MIN_SPAN: f32 = 1e-6;
-
-/// `g(x) = (1 − e·(1 + x))/x` with `e = e^(−x)`, `x ≥ 0`: `∫₀¹ s·x·e^(−xs) ds`; below 0.05 its
-/// series `x·(½ − x·(⅓ − x/8))` (the closed form loses digits there in f32).
-#[inline(always)]
-fn centroid_g(x: f32, e: f32) -> f32 {
-    if x < 0.05 {
-        x * (0.5 - x * (1.0 / 3.0 - x * 0.125))
-    } else {
-        (1.0 - e * (1.0 + x)) / x
-    }
-}
+/// Pre-integration shaded at the voxels: where along its segment a slab is lit, as the fraction
+/// of the way back from this plane's sample to the plane before's: the middle. A ramp that the
+/// segment crosses is crossed anywhere along it with equal chance, and the middle is where the
+/// segment's path is centred. Two better-founded placements were measured against it
+/// (`docs/BENCHMARKS.md` §17.4, decision 0020's amendment): the visible centroid of an evenly
+/// spread extinction (stop 24) lit opaque segments near their front, in the air before a sharp
+/// ramp, and lost up to 1.1 dB to the middle; the centroid of a step in extinction between the
+/// segment's two samples gained 0.4 dB over the middle on one scene `auto` pre-integrates and
+/// nothing on the others, for 10–17 % of the frame.
+const SEGMENT_LIGHT_AT: f32 = 0.5;
 
 /// The shaded colour `col` clamped to [0, 1] (as `maxps`/`minps` clamp) and multiplied by the
 /// opacity `a`: the premultiplied RGBA of a shaded sample.
@@ -3682,16 +3618,9 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
         let (diffuse, specular, _) = self.t.switches();
         if diffuse || specular {
             let (base, frac) = if self.preint {
-                // Lanes that contribute and whose segment is not one value (`light_shift`).
+                // Lanes that contribute and whose segment is not one value (`SEGMENT_LIGHT_AT`).
                 let mid = _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(u, rho), contributes);
-                // SAFETY (log_at8): the caller guarantees AVX2; the table has its extra row.
-                let (lu, lr) = unsafe { (log_at8(self.t, u), log_at8(self.t, rho)) };
-                let h = light_shift8(
-                    _mm256_mul_ps(k, lu),
-                    _mm256_mul_ps(k, lr),
-                    _mm256_mul_ps(k, v[7]),
-                );
-                let h = _mm256_and_ps(h, mid);
+                let h = _mm256_and_ps(_mm256_set1_ps(SEGMENT_LIGHT_AT), mid);
                 // SAFETY: the caller guarantees AVX2.
                 unsafe { self.light_cells(&pre.1, pre.2, h) }
             } else {
@@ -3813,120 +3742,6 @@ fn segment_split8(
     let short = _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(SEGMENT_MIN_ENTRIES));
     let mid = _mm256_mul_ps(_mm256_add_ps(tu, tv), _mm256_set1_ps(0.5));
     (short, mid, dt)
-}
-
-/// [`light_shift`] on eight lanes: the same f32 operations, the branches as blends.
-#[cfg(target_arch = "x86_64")]
-#[inline]
-#[target_feature(enable = "avx2")]
-fn light_shift8(
-    kf: std::arch::x86_64::__m256,
-    kb: std::arch::x86_64::__m256,
-    km: std::arch::x86_64::__m256,
-) -> std::arch::x86_64::__m256 {
-    use std::arch::x86_64::*;
-    let zero = _mm256_setzero_ps();
-    let one = _mm256_set1_ps(1.0);
-    let half = _mm256_set1_ps(0.5);
-    let ln2 = _mm256_set1_ps(std::f32::consts::LN_2);
-    let b1 = _mm256_max_ps(_mm256_sub_ps(zero, kf), zero);
-    let b2 = _mm256_max_ps(_mm256_sub_ps(zero, kb), zero);
-    let bm = _mm256_max_ps(_mm256_sub_ps(zero, km), zero);
-    let span = _mm256_sub_ps(b2, b1);
-    let stepped = _mm256_cmp_ps::<_CMP_GT_OQ>(
-        _mm256_andnot_ps(_mm256_set1_ps(-0.0), span),
-        _mm256_set1_ps(STEP_MIN_SPAN),
-    );
-    let t0 = _mm256_min_ps(
-        _mm256_max_ps(_mm256_div_ps(_mm256_sub_ps(b2, bm), span), zero),
-        one,
-    );
-    let t0 = _mm256_blendv_ps(half, t0, stepped);
-    let s0 = _mm256_sub_ps(one, t0);
-    let za = _mm256_mul_ps(b1, t0);
-    let zb = _mm256_mul_ps(b2, s0);
-    let depth = _mm256_add_ps(za, zb);
-    // Faint: the extinction's centroid (the middle where the ends have no opacity).
-    let tt = _mm256_mul_ps(t0, t0);
-    let faint = _mm256_div_ps(
-        _mm256_add_ps(
-            _mm256_mul_ps(b1, tt),
-            _mm256_mul_ps(b2, _mm256_sub_ps(one, tt)),
-        ),
-        _mm256_mul_ps(_mm256_set1_ps(2.0), depth),
-    );
-    let faint = _mm256_blendv_ps(half, faint, _mm256_cmp_ps::<_CMP_GT_OQ>(depth, zero));
-    let ea = exp2_neg8(_mm256_sub_ps(zero, za));
-    let eb = exp2_neg8(_mm256_sub_ps(zero, zb));
-    let front = _mm256_mul_ps(t0, centroid_g8(_mm256_mul_ps(za, ln2), ea));
-    let back = _mm256_mul_ps(
-        ea,
-        _mm256_add_ps(
-            _mm256_mul_ps(t0, _mm256_sub_ps(one, eb)),
-            _mm256_mul_ps(s0, centroid_g8(_mm256_mul_ps(zb, ln2), eb)),
-        ),
-    );
-    let full = _mm256_div_ps(
-        _mm256_add_ps(front, back),
-        _mm256_sub_ps(one, _mm256_mul_ps(ea, eb)),
-    );
-    let is_faint = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_mul_ps(depth, ln2), _mm256_set1_ps(1e-3));
-    let tc = _mm256_blendv_ps(full, faint, is_faint);
-    _mm256_sub_ps(one, _mm256_min_ps(_mm256_max_ps(tc, zero), one))
-}
-
-/// [`centroid_g`] on eight lanes.
-#[cfg(target_arch = "x86_64")]
-#[inline]
-#[target_feature(enable = "avx2")]
-fn centroid_g8(
-    x: std::arch::x86_64::__m256,
-    e: std::arch::x86_64::__m256,
-) -> std::arch::x86_64::__m256 {
-    use std::arch::x86_64::*;
-    let one = _mm256_set1_ps(1.0);
-    let series = _mm256_mul_ps(
-        x,
-        _mm256_sub_ps(
-            _mm256_set1_ps(0.5),
-            _mm256_mul_ps(
-                x,
-                _mm256_sub_ps(
-                    _mm256_set1_ps(1.0 / 3.0),
-                    _mm256_mul_ps(x, _mm256_set1_ps(0.125)),
-                ),
-            ),
-        ),
-    );
-    let closed = _mm256_div_ps(
-        _mm256_sub_ps(one, _mm256_mul_ps(e, _mm256_add_ps(one, x))),
-        x,
-    );
-    _mm256_blendv_ps(
-        closed,
-        series,
-        _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_set1_ps(0.05)),
-    )
-}
-
-/// [`ShadeTable::log_at`] on eight lanes: `L` at densities `rho`, two gathers.
-///
-/// # Safety
-/// The CPU must support AVX2; the table has a row after its last (as [`ShadeTable::at`] reads).
-#[cfg(target_arch = "x86_64")]
-#[inline]
-#[target_feature(enable = "avx2")]
-unsafe fn log_at8(t: &ShadeTable, rho: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
-    use std::arch::x86_64::*;
-    let pos = table_pos8(rho, t.lo, t.scale, t.last);
-    let i = _mm256_cvttps_epi32(pos);
-    let f = _mm256_sub_ps(pos, _mm256_cvtepi32_ps(i));
-    let base = t.rows.as_ptr() as *const f32;
-    let idx = _mm256_add_epi32(_mm256_slli_epi32::<3>(i), _mm256_set1_epi32(7));
-    // SAFETY: rows i and i + 1 exist (i ≤ last), 8 floats each.
-    let a = unsafe { _mm256_i32gather_ps::<4>(base, idx) };
-    let b = unsafe { _mm256_i32gather_ps::<4>(base, _mm256_add_epi32(idx, _mm256_set1_epi32(8))) };
-    _mm256_add_ps(a, _mm256_mul_ps(f, _mm256_sub_ps(b, a)))
 }
 
 /// [`segment_average`] on eight lanes: the same f32 operations, the branch as a blend;
