@@ -84,7 +84,8 @@ pub struct RenderSettings {
     /// Footprint table sizing.
     pub footprint: FootprintSettings,
     /// Scanlines per band of the parallel decomposition (fixed, so output does not depend on the
-    /// thread count).
+    /// thread count); a positive multiple of 4. The image-aligned slabs take at most 8 (their
+    /// bands' work is uneven; their image does not depend on the band height).
     pub band_height: usize,
     /// Sheets classified together before the bands splat them.
     pub sheets_per_batch: usize,

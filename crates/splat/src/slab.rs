@@ -111,6 +111,13 @@ pub fn default_slab(mode: RenderMode, shading: Option<ShadeAt>) -> f64 {
     }
 }
 
+/// The most rows of one band of the slabs' parallel decomposition (`RenderSettings::band_height`
+/// caps it further). `docs/BENCHMARKS.md` §18.3.
+const SLAB_BAND_ROWS: usize = 8;
+
+/// Bands per thread between two progress reports of the slabs (the threads meet at each report).
+const BANDS_PER_THREAD: usize = 8;
+
 /// Renders any volume with image-aligned, post-classified slabs; see [`render_slabs`].
 pub fn render_slabs_any(
     volume: &AnyVolume,
@@ -323,7 +330,11 @@ pub fn render_slabs<T: Scalar>(
         _ => [0.0; 4],
     };
     let mut acc = vec![init; w * h];
-    let band_h = settings.band_height;
+    // Bands of at most `SLAB_BAND_ROWS` rows: a band's work is very uneven here (a band through
+    // an opaque object stops after a few planes, one beside it runs through the whole volume),
+    // so many small bands balance the threads better than a few large ones. The image does not
+    // depend on the band height (every pixel's arithmetic is its own).
+    let band_h = settings.band_height.min(SLAB_BAND_ROWS);
     let n_bands = h.div_ceil(band_h);
     let mut stats = RenderStats {
         preintegrated: composite && preint && (post.is_some() || voxel_shading.is_some()),
@@ -336,7 +347,9 @@ pub fn render_slabs<T: Scalar>(
     };
     stats.setup_ms = ms(t_start);
     let t_render = Instant::now();
-    let group = (2 * rayon::current_num_threads()).max(4);
+    // Bands handed to the threads between two progress reports: the threads wait for the
+    // slowest band of a group, so a group holds several bands per thread.
+    let group = (BANDS_PER_THREAD * rayon::current_num_threads()).max(2 * BANDS_PER_THREAD);
     let mut done = 0;
     let mut counters = Counters::default();
     let chunks: Vec<(usize, &mut [Rgba])> = acc.chunks_mut(band_h * w).enumerate().collect();

@@ -321,26 +321,74 @@ fn no_popping_across_the_diagonal() {
     );
 }
 
-/// Progress is reported per group of bands and a `false` cancels.
+/// Progress is reported per group of bands (eight bands per thread, at least sixteen) and a
+/// `false` cancels.
 #[test]
 fn progress_and_cancellation() {
     let vol = volume(32);
     let cam = camera(vol.grid(), 20.0, 10.0, true);
     let s = RenderSettings {
         band_height: 4,
-        ..settings(64, 64, RenderMode::Composite)
+        ..settings(64, 192, RenderMode::Composite)
     };
+    // One thread: 48 bands of 4 rows in groups of 16.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
     let mut calls = Vec::new();
-    render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |p| {
-        calls.push((p.sheets_done, p.sheets_total));
-        true
+    pool.install(|| {
+        render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |p| {
+            calls.push((p.sheets_done, p.sheets_total));
+            true
+        })
     })
     .unwrap();
-    assert!(calls.len() >= 2, "{calls:?}");
-    assert!(calls.windows(2).all(|w| w[0].0 < w[1].0));
-    assert_eq!(calls.last().unwrap().0, 16);
-    let err = render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| false).unwrap_err();
+    assert_eq!(calls, vec![(16, 48), (32, 48), (48, 48)]);
+    let err = pool
+        .install(|| render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| false))
+        .unwrap_err();
     assert!(matches!(err, SplatError::Cancelled), "{err}");
+}
+
+/// The slabs' bands are at most eight rows, whatever `band_height` asks for above it, and the
+/// image does not depend on the band height.
+#[test]
+fn the_image_does_not_depend_on_the_band_height() {
+    let vol = volume(36);
+    for (mode, tables) in [
+        (RenderMode::Composite, shaded_tables()),
+        (RenderMode::Composite, unshaded_tables()),
+        (RenderMode::Mip, unshaded_tables()),
+    ] {
+        for parallel in [true, false] {
+            let cam = camera(vol.grid(), 61.0, 17.0, parallel);
+            let run = |band_height: usize| {
+                let s = RenderSettings {
+                    band_height,
+                    ..settings(70, 52, mode)
+                };
+                let mut calls = Vec::new();
+                let r = render_slabs(&vol, &cam, &tables, &s, None, &mut |p| {
+                    calls.push(p.sheets_total);
+                    true
+                })
+                .unwrap();
+                (r, calls.last().copied())
+            };
+            let (four, n4) = run(4);
+            assert_eq!(n4, Some(13), "52 rows in bands of 4");
+            for band_height in [8, 32] {
+                let (other, n) = run(band_height);
+                assert_eq!(n, Some(7), "52 rows in bands of 8 (asked {band_height})");
+                assert_eq!(
+                    four.image.pixels(),
+                    other.image.pixels(),
+                    "{mode:?}, parallel {parallel}, band height {band_height}"
+                );
+            }
+        }
+    }
 }
 
 /// Bad settings are named errors.
