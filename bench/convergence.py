@@ -9,8 +9,12 @@ For the composite, shaded and perspective scenes of `../shared/data/scenes`:
 
 1. **Converged reference**: VTK's `vtkFixedPointVolumeRayCastMapper` with sample distance 1/8 of the
    smallest spacing, rendered 4× larger and box-filtered 4×4 down (cached in
-   `target/convergence-cache/`, keyed by scene, size and file times);
-2. **VTK's usual render**: sample distance 1/2 of the smallest spacing, at the size itself;
+   `target/convergence-cache/`, keyed by scene, size, thread count and file times), with **one**
+   VTK thread: VTK's gradients are computed in one z-chunk per thread and the last slice of each
+   chunk gets a one-sided, half-weighted z difference, so a shaded render changes with the thread
+   count (`bench/vtk_bias.py` measures how much);
+2. **VTK's usual render**: sample distance 1/2 of the smallest spacing, at the size itself, with
+   VTK's default threads (all cores);
 3. **volsplat** in each mode (default: `auto` = no flags, what a user gets (decisions 0016, 0017,
    0019 and 0020: one-voxel slabs for composite, shaded at the voxels as VTK shades,
    pre-integrated where the transfer function's ramp is sharp); `sheet` = `--visibility sheet`,
@@ -23,10 +27,11 @@ For the composite, shaded and perspective scenes of `../shared/data/scenes`:
 5. **Float reference** (a second, independent one): `testkit`'s brute-force integrator
    (`cargo run --release -p volsplat-testkit --example reference_render`): float arithmetic,
    trilinear samples every 1/8 of the smallest spacing, interpolated central-difference gradients,
-   2×2 rays per pixel box-averaged. It integrates exactly the model both tools claim (the transfer
+   2×2 rays per pixel box-averaged; shaded scenes lit at the voxels with the light interpolated
+   (VTK's order, decision 0019). It integrates exactly the model both tools claim (the transfer
    function evaluated at the interpolated value), without VTK's 15-bit fixed-point rounding (its
-   table index is the interpolated value rounded *up*, and its compositing rounds up), so PSNR is
-   reported against it too, for VTK as well;
+   table index is the interpolated value rounded *up*, and its compositing rounds up) and without
+   its threads' gradient slices, so PSNR is reported against it too, for VTK as well;
 6. **Popping**: the scene's camera turned by 44° and 46° about its view-up axis (VTK's `Azimuth`,
    camera files written here and used by both tools); per mode the RMS change of the image divided
    by the RMS change of VTK at 1/8 sampling (not supersampled, to keep it cheap);
@@ -78,22 +83,35 @@ def rotated_camera(cam_path, degrees, out_path):
     return out_path
 
 
-def vtk_render(env, prefix, vol, cam, tf, out_png, size, factor):
+# VTK's threads for the reference renders. One: `vtkFixedPointVolumeRayCastMapper` computes its
+# gradients in z-chunks, one per thread, and the last slice of each chunk gets a one-sided,
+# half-weighted z difference (`ComputeCS1CGradientsFunctor`'s `z < z_limit - 1` test), so a shaded
+# render depends on the thread count (bench/vtk_bias.py measures it). With one thread only the
+# volume's own last slice is one-sided.
+REF_THREADS = 1
+# VTK's threads for its "usual" render: VTK's default, all the cores of this machine (2 on the
+# machine of the recorded numbers).
+USUAL_THREADS = os.cpu_count() or 2
+
+
+def vtk_render(env, prefix, vol, cam, tf, out_png, size, factor, threads=USUAL_THREADS):
     vs_vtk.run_measured(prefix + [sys.executable, os.path.join(HERE, "vs_vtk.py"), "--vtk-worker", vol,
-                                  cam, tf, out_png, str(size), "2", "0", str(factor)], env=env)
+                                  cam, tf, out_png, str(size), str(threads), "0", str(factor)],
+                        env=env)
 
 
-def converged_reference(env, prefix, cache, label, vol, cam, tf, n):
+def converged_reference(env, prefix, cache, label, vol, cam, tf, n, threads=REF_THREADS):
     """(cache key, the VTK-made converged reference as an RGB float array): rendered at 4n² with
-    sample distance 1/8 of the smallest spacing and box-filtered to n², cached in `cache` under a
-    key of the scene, the size and the files' times."""
+    sample distance 1/8 of the smallest spacing and `threads` VTK threads, and box-filtered to n²,
+    cached in `cache` under a key of the scene, the size, the thread count and the files' times."""
     key = hashlib.sha1(json.dumps([label, n, os.path.getmtime(vol), os.path.getmtime(cam),
-                                   os.path.getmtime(tf)]).encode()).hexdigest()[:12]
+                                   os.path.getmtime(tf)] + ([threads] if threads != 2 else []))
+                       .encode()).hexdigest()[:12]
     ref_png = os.path.join(cache, f"{label}.{n}.{key}.ref4x.png")
     if not os.path.exists(ref_png):
-        print(f"{label}: converged reference (VTK, 1/8 spacing, {4 * n}²) …", file=sys.stderr,
-              flush=True)
-        vtk_render(env, prefix, vol, cam, tf, ref_png + ".tmp.png", 4 * n, 0.125)
+        print(f"{label}: converged reference (VTK, 1/8 spacing, {4 * n}², {threads} thread(s)) …",
+              file=sys.stderr, flush=True)
+        vtk_render(env, prefix, vol, cam, tf, ref_png + ".tmp.png", 4 * n, 0.125, threads)
         os.replace(ref_png + ".tmp.png", ref_png)
     return key, box_down(vs_vtk.read_png(ref_png), 4)
 
@@ -184,7 +202,7 @@ def main():
         for deg in (44, 46):
             cpath = rotated_camera(cam, deg, os.path.join(work, f"{label}.az{deg}.camera.json"))
             r_png = os.path.join(work, f"{label}.az{deg}.ref.png")
-            vtk_render(env, prefix, vol, cpath, tf, r_png, n, 0.125)
+            vtk_render(env, prefix, vol, cpath, tf, r_png, n, 0.125, REF_THREADS)
             turned[("reference", deg)] = vs_vtk.read_png(r_png)
             for m, mflags in modes:
                 out = os.path.join(work, f"{label}.az{deg}.{m}.png")
@@ -240,8 +258,9 @@ Generated by `{cmd.strip()}` on {datetime.date.today()} ({platform.machine()}, {
 VTK {vtk_version()}). Do not edit by hand: run the script again.
 
 **Reference.** VTK's `vtkFixedPointVolumeRayCastMapper`, linear interpolation, sample distance 1/8 of
-the smallest spacing, rendered at {4 * n}² and box-filtered 4×4 to {n}²; the scene's camera and
-transfer-function files. **VTK usual**: the same at sample distance 1/2, {n}². **Modes**:
+the smallest spacing, rendered at {4 * n}² with one VTK thread and box-filtered 4×4 to {n}²; the
+scene's camera and transfer-function files. **VTK usual**: the same at sample distance 1/2, {n}²,
+{USUAL_THREADS} VTK threads (its default on this machine). **Modes**:
 
 {mode_list}
 
@@ -252,9 +271,12 @@ transfer-function files. **VTK usual**: the same at sample distance 1/2, {n}². 
 ## PSNR against the float reference (dB)
 
 The same images against `testkit`'s float integrator (1/8 spacing, 2×2 rays per pixel), which
-evaluates the transfer function at the interpolated value exactly; "VTK converged" is the reference
-of the first table, measured against this one. The two references differ by VTK's fixed-point
-rounding, measured in [vtk-bias.md](vtk-bias.md) (`bench/vtk_bias.py`).
+evaluates the transfer function at the interpolated value exactly and lights shaded scenes at the
+voxels as VTK does; "VTK converged" is the reference of the first table, measured against this
+one. The two references differ by VTK's fixed-point rounding, measured in
+[vtk-bias.md](vtk-bias.md) (`bench/vtk_bias.py`), which also shows that VTK's reference does not
+converge as its sampling is refined. `image-samples` lights every sample instead (the other order),
+so on the shaded rows it is measured against a model it does not follow.
 
 {chr(10).join(float_lines) if float_lines[2:] else "(not run: --no-float)"}
 
@@ -277,15 +299,18 @@ Each montage is downscaled 2×; differences are |mode − reference| × 8 per ch
 
 def float_reference(a, cache, key, label, vol, cam, tf, n):
     """The float reference image (RGB, premultiplied over black, 8-bit quantised as the PNGs are),
-    cached like VTK's."""
+    cached like VTK's. Shaded scenes are lit at the voxels and the light interpolated, VTK's order
+    (`ReferenceSettings::shade_at_voxels`, decision 0019), so that it measures what VTK's reference
+    would be without its rounding."""
     import numpy as np
-    path = os.path.join(cache, f"{label}.{n}.{key}.float.npy")
+    voxels = bool(json.load(open(tf)).get("shade", False))
+    path = os.path.join(cache, f"{label}.{n}.{key}.float{'-voxels' if voxels else ''}.npy")
     if not os.path.exists(path):
-        print(f"{label}: float reference (testkit, 1/8 spacing, 2×2 rays) …", file=sys.stderr,
-              flush=True)
+        print(f"{label}: float reference (testkit, 1/8 spacing, 2×2 rays"
+              f"{', lit at the voxels' if voxels else ''}) …", file=sys.stderr, flush=True)
         subprocess.run(["cargo", "run", "-q", "--release", "-p", "volsplat-testkit", "--example",
                         "reference_render", "--", vol, cam, tf, str(n), "0.125", "2",
-                        path + ".tmp.npy"], check=True, cwd=ROOT)
+                        path + ".tmp.npy"] + (["voxels"] if voxels else []), check=True, cwd=ROOT)
         os.replace(path + ".tmp.npy", path)
     rgb = np.load(path)[..., :3].astype(np.float64)
     return np.round(np.clip(rgb, 0, 1) * 255) / 255
