@@ -203,9 +203,10 @@ fn empty_space_skipping_is_exact() {
     }
 }
 
-/// The same bits for 1, 2 and 3 threads, in every mode and projection.
-#[test]
-fn bit_identical_for_any_thread_count() {
+/// Calls `f` with a 36³ volume, a 70 × 52 image's camera and the settings for it, for shaded and
+/// unshaded composite and MIP, orthographic and perspective: the cases of the tests that compare
+/// two renders of the same scene bit for bit.
+fn each_mode_and_projection(mut f: impl FnMut(&Volume<f32>, &Camera, &CrioTables, RenderSettings)) {
     let vol = volume(36);
     for (mode, tables) in [
         (RenderMode::Composite, shaded_tables()),
@@ -214,32 +215,41 @@ fn bit_identical_for_any_thread_count() {
     ] {
         for parallel in [true, false] {
             let cam = camera(vol.grid(), 61.0, 17.0, parallel);
-            let s = RenderSettings {
-                band_height: 8,
-                ..settings(70, 52, mode)
-            };
-            let run = |threads: usize| {
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap()
-                    .install(|| slabs(&vol, &cam, &tables, &s))
-            };
-            let one = run(1);
-            for t in [2, 3] {
-                let other = run(t);
-                assert_eq!(
-                    one.image.pixels(),
-                    other.image.pixels(),
-                    "{mode:?} {t} threads"
-                );
-                if let (Some(a), Some(b)) = (&one.values, &other.values) {
-                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(bits(a.values()), bits(b.values()));
-                }
-            }
+            f(&vol, &cam, &tables, settings(70, 52, mode));
         }
     }
+}
+
+/// The same bits for 1, 2 and 3 threads, in every mode and projection.
+#[test]
+fn bit_identical_for_any_thread_count() {
+    each_mode_and_projection(|vol, cam, tables, s| {
+        let s = RenderSettings {
+            band_height: 8,
+            ..s
+        };
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| slabs(vol, cam, tables, &s))
+        };
+        let one = run(1);
+        for t in [2, 3] {
+            let other = run(t);
+            assert_eq!(
+                one.image.pixels(),
+                other.image.pixels(),
+                "{:?} {t} threads",
+                s.mode
+            );
+            if let (Some(a), Some(b)) = (&one.values, &other.values) {
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(a.values()), bits(b.values()));
+            }
+        }
+    });
 }
 
 /// A clipping plane removes exactly the samples on its far side: half the volume cut away by
@@ -355,40 +365,33 @@ fn progress_and_cancellation() {
 /// image does not depend on the band height.
 #[test]
 fn the_image_does_not_depend_on_the_band_height() {
-    let vol = volume(36);
-    for (mode, tables) in [
-        (RenderMode::Composite, shaded_tables()),
-        (RenderMode::Composite, unshaded_tables()),
-        (RenderMode::Mip, unshaded_tables()),
-    ] {
-        for parallel in [true, false] {
-            let cam = camera(vol.grid(), 61.0, 17.0, parallel);
-            let run = |band_height: usize| {
-                let s = RenderSettings {
-                    band_height,
-                    ..settings(70, 52, mode)
-                };
-                let mut calls = Vec::new();
-                let r = render_slabs(&vol, &cam, &tables, &s, None, &mut |p| {
-                    calls.push(p.sheets_total);
-                    true
-                })
-                .unwrap();
-                (r, calls.last().copied())
+    each_mode_and_projection(|vol, cam, tables, s| {
+        let run = |band_height: usize| {
+            let s = RenderSettings {
+                band_height,
+                ..s.clone()
             };
-            let (four, n4) = run(4);
-            assert_eq!(n4, Some(13), "52 rows in bands of 4");
-            for band_height in [8, 32] {
-                let (other, n) = run(band_height);
-                assert_eq!(n, Some(7), "52 rows in bands of 8 (asked {band_height})");
-                assert_eq!(
-                    four.image.pixels(),
-                    other.image.pixels(),
-                    "{mode:?}, parallel {parallel}, band height {band_height}"
-                );
-            }
+            let mut calls = Vec::new();
+            let r = render_slabs(vol, cam, tables, &s, None, &mut |p| {
+                calls.push(p.sheets_total);
+                true
+            })
+            .unwrap();
+            (r, calls.last().copied())
+        };
+        let (four, n4) = run(4);
+        assert_eq!(n4, Some(13), "52 rows in bands of 4");
+        for band_height in [8, 32] {
+            let (other, n) = run(band_height);
+            assert_eq!(n, Some(7), "52 rows in bands of 8 (asked {band_height})");
+            assert_eq!(
+                four.image.pixels(),
+                other.image.pixels(),
+                "{:?}, band height {band_height}",
+                s.mode
+            );
         }
-    }
+    });
 }
 
 /// Bad settings are named errors.
