@@ -148,13 +148,19 @@ def save_png(arr, path):
     wr.Write()
 
 
-def main():
-    import numpy as np
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def add_scene_args(ap):
+    """The arguments this script and `bench/vtk_bias.py` share: the volsplat binary, the data folder
+    (`NAME.nrrd` or `.nhdr` beside `scenes/`), the image size in pixels and a scene filter."""
     ap.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "volsplat"))
     ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
     ap.add_argument("--size", type=int, default=512)
-    ap.add_argument("--only", default="")
+    ap.add_argument("--only", default="", help="comma-separated substrings of scene labels")
+
+
+def main():
+    import numpy as np
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_scene_args(ap)
     ap.add_argument("--mode", action="append", default=None, help='LABEL="volsplat flags"')
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "convergence"))
     ap.add_argument("--no-docs", action="store_true")

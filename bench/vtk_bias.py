@@ -97,11 +97,8 @@ def probe_offset(img, size):
 def main():
     import numpy as np
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "volsplat"))
-    ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
-    ap.add_argument("--size", type=int, default=512)
+    convergence.add_scene_args(ap)
     ap.add_argument("--shifts", default="0,0.5,1")
-    ap.add_argument("--only", default="", help="comma-separated substrings of scene labels")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "convergence", "vtk-bias.md"))
     ap.add_argument("--no-docs", action="store_true")
     a = ap.parse_args()
