@@ -409,21 +409,10 @@ pub struct ImageOptions {
     pub wl: Option<String>,
 }
 
-/// A `--view` value (also A, P, L, R, S, I).
+/// A `--view` value (also A, P, L, R, S, I): the engine's names, as Python's `view=`.
 fn parse_view(s: &str) -> Result<volsplat::core::AnatomicalView, String> {
-    use volsplat::core::AnatomicalView as V;
-    Ok(match s.to_ascii_lowercase().as_str() {
-        "anterior" | "a" | "front" => V::Anterior,
-        "posterior" | "p" | "back" => V::Posterior,
-        "left" | "l" => V::Left,
-        "right" | "r" => V::Right,
-        "superior" | "s" | "top" => V::Superior,
-        "inferior" | "i" | "bottom" => V::Inferior,
-        _ => {
-            return Err(format!(
-                "`{s}`: expected anterior, posterior, left, right, superior or inferior"
-            ));
-        }
+    volsplat::core::AnatomicalView::from_name(s).map_err(|_| {
+        format!("`{s}`: expected anterior, posterior, left, right, superior or inferior")
     })
 }
 

@@ -95,7 +95,7 @@ pub use image::{PngBitDepth, PngSettings, rgb_codes, srgb_encode, write_png, wri
 pub use info::{VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
 pub use json::{
     CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_camera_with, load_transfer_function,
-    load_transfer_function_with, save_camera, save_transfer_function,
+    load_transfer_function_named, load_transfer_function_with, save_camera, save_transfer_function,
 };
 pub use limits::Limits;
 pub use metaimage::{read_metaimage, read_metaimage_with};

@@ -199,9 +199,26 @@ pub(crate) fn read_payload(spec: &PayloadSpec<'_>, grid: Grid) -> Result<AnyVolu
             file.seek(SeekFrom::Start(offset))
                 .map_err(|e| IoError::os(path, "seek", e))?;
             // `needed` fits in usize (checked above) and the file holds at least that much.
-            let mut bytes = vec![0u8; needed as usize];
-            file.read_exact(&mut bytes)
+            // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
+            let mut bytes = Vec::new();
+            bytes.try_reserve_exact(needed as usize).map_err(|_| {
+                let oom = std::io::ErrorKind::OutOfMemory.into();
+                IoError::os(path, "allocate the raw payload", oom)
+            })?;
+            // Into the reserved capacity (no zero-filling pass; `take` keeps it from growing).
+            let got = (&mut file)
+                .take(needed)
+                .read_to_end(&mut bytes)
                 .map_err(|e| IoError::os(path, "read raw payload", e))?;
+            if (got as u64) < needed {
+                return Err(IoError::Truncated {
+                    path: path.to_path_buf(),
+                    what: format!("raw payload starting at byte {offset}"),
+                    expected: needed,
+                    actual: got as u64,
+                    unit: "bytes",
+                });
+            }
             decode(bytes, spec.file_type, spec.big_endian, grid, path)
         }
         Encoding::Gzip | Encoding::ZlibOrGzip => {
@@ -326,7 +343,10 @@ impl std::io::Write for BoundedVec {
             let target = want
                 .max(self.vec.capacity().saturating_mul(2))
                 .min(self.limit);
-            self.vec.reserve_exact(target - self.vec.len());
+            // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
+            self.vec
+                .try_reserve_exact(target - self.vec.len())
+                .map_err(|_| std::io::Error::from(std::io::ErrorKind::OutOfMemory))?;
         }
         self.vec.extend_from_slice(buf);
         Ok(buf.len())
