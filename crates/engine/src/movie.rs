@@ -317,7 +317,11 @@ impl CameraPath {
         } else if t >= k[n - 1].time {
             (n - 2, 1.0)
         } else {
-            let i = k.windows(2).position(|w| t < w[1].time).unwrap_or(n - 2);
+            // The last key at or before t (binary search; t is inside the span here).
+            let i = k
+                .partition_point(|key| key.time <= t)
+                .saturating_sub(1)
+                .min(n - 2);
             (i, (t - k[i].time) / (k[i + 1].time - k[i].time))
         };
         let j = (i + 1).min(n - 1);
@@ -549,7 +553,7 @@ impl Flight {
         // Counted in floating point, so that a duration of 1e300 s is refused rather than
         // wrapping to zero frames.
         let frames = (file.duration() * fps + 1e-9).floor() + 1.0;
-        if !(frames <= MAX_MOVIE_FRAMES as f64) {
+        if frames.is_nan() || frames > MAX_MOVIE_FRAMES as f64 {
             return Err(EngineError::request(
                 "keyframes",
                 format!(
@@ -670,19 +674,23 @@ impl Flight {
     /// through it.
     fn segment(&self, t: f64) -> (usize, f64) {
         let times = &self.times;
+        // Binary search: a flight may have many keyframes and many frames.
         let i = times
-            .windows(2)
-            .position(|w| t < w[1])
-            .unwrap_or(times.len() - 2);
+            .partition_point(|&kt| kt <= t)
+            .saturating_sub(1)
+            .min(times.len() - 2);
         let u = ((t - times[i]) / (times[i + 1] - times[i])).clamp(0.0, 1.0);
         (i, u)
     }
 
     fn camera(&self, t: f64) -> Camera {
         // Keyframe times land exactly on their keyframe camera.
-        match self.times.iter().position(|&kt| kt == t) {
-            Some(i) => self.cameras[i].clone(),
-            None => self.path.sample(t),
+        match self
+            .times
+            .binary_search_by(|kt| kt.partial_cmp(&t).unwrap_or(std::cmp::Ordering::Less))
+        {
+            Ok(i) => self.cameras[i].clone(),
+            Err(_) => self.path.sample(t),
         }
     }
 
