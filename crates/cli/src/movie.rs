@@ -143,6 +143,72 @@ impl Frames {
     }
 }
 
+/// Every frame's camera, transfer function and clipping, checked whole before the first frame
+/// is rendered: a keyframed flight, or a turntable about `axis` (`None`: the scene's up).
+fn plan_frames(
+    a: &MovieArgs,
+    req: &volsplat::RenderRequest,
+    renderer: &mut Renderer,
+    keyframes: Option<&KeyframeFile>,
+    axis: Option<TurnAxis>,
+) -> Result<Frames> {
+    let camera = renderer.camera(req).map_err(explain)?;
+    Ok(match keyframes {
+        Some(k) => {
+            let tf = renderer.transfer_function(req).map_err(explain)?;
+            Frames::Flight(
+                Flight::new(k, &camera, &tf, &req.scene.clipping, a.fps).map_err(explain)?,
+            )
+        }
+        None => {
+            let axis = match axis {
+                Some(axis) => axis,
+                None => {
+                    let bounds = renderer.volume(&req.scene.volume)?.grid().bounds_world();
+                    TurnAxis::World(scene_up(&req.scene.camera, bounds).map_err(explain)?)
+                }
+            };
+            Frames::Turntable(turntable(&camera, axis, a.degrees, a.frames).map_err(explain)?)
+        }
+    })
+}
+
+/// Says what a movie wrote (and removed), unless quiet.
+fn say_written(
+    files: &volsplat::io::movie::MovieFiles,
+    frames: usize,
+    w: usize,
+    h: usize,
+    t0: Instant,
+) {
+    let written = &files.written;
+    let what = match written.as_slice() {
+        [one] => one.display().to_string(),
+        many => format!(
+            "{} frames {} … {}",
+            many.len(),
+            many.first()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default(),
+            many.last()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default()
+        ),
+    };
+    say!(
+        "wrote {what} ({frames} frames, {w}×{h}, {:.1} s)",
+        t0.elapsed().as_secs_f64()
+    );
+    if let Some(first) = files.removed.first() {
+        let n = files.removed.len();
+        say!(
+            "removed {n} frame{} of an earlier, longer movie ({} …)",
+            if n == 1 { "" } else { "s" },
+            first.display()
+        );
+    }
+}
+
 /// The checks of `movie` that need no volume.
 fn check_movie_args(a: &MovieArgs) -> Result<(usize, usize)> {
     let size = parse_image_size(&a.options.size, "--size")?;
@@ -190,25 +256,7 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
     req.validate().map_err(explain)?;
     let mut renderer = Renderer::with_limits(crate::request::reader_limits(&a.input)?);
     let label = req.scene.volume.label();
-    let camera = renderer.camera(&req).map_err(explain)?;
-    let tf = renderer.transfer_function(&req).map_err(explain)?;
-    // Every frame's camera, transfer function and clipping, checked whole before the first
-    // frame is rendered.
-    let frames = match &keyframes {
-        Some(k) => Frames::Flight(
-            Flight::new(k, &camera, &tf, &req.scene.clipping, a.fps).map_err(explain)?,
-        ),
-        None => {
-            let axis = match axis {
-                Some(axis) => axis,
-                None => {
-                    let bounds = renderer.volume(&req.scene.volume)?.grid().bounds_world();
-                    TurnAxis::World(scene_up(&req.scene.camera, bounds).map_err(explain)?)
-                }
-            };
-            Frames::Turntable(turntable(&camera, axis, a.degrees, a.frames).map_err(explain)?)
-        }
-    };
+    let frames = plan_frames(&a, &req, &mut renderer, keyframes.as_ref(), axis)?;
     let fps = keyframes.as_ref().and_then(|k| k.fps).unwrap_or(a.fps);
     let settings = MovieSettings {
         fps,
@@ -289,33 +337,7 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
     let files = writer.finish()?;
     bar.clear();
     if !a.quiet {
-        let written = &files.written;
-        let what = match written.as_slice() {
-            [one] => one.display().to_string(),
-            many => format!(
-                "{} frames {} … {}",
-                many.len(),
-                many.first()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_default(),
-                many.last()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_default()
-            ),
-        };
-        say!(
-            "wrote {what} ({} frames, {w}×{h}, {:.1} s)",
-            times.len(),
-            t0.elapsed().as_secs_f64()
-        );
-        if !files.removed.is_empty() {
-            say!(
-                "removed {} frame{} of an earlier, longer movie ({} …)",
-                files.removed.len(),
-                if files.removed.len() == 1 { "" } else { "s" },
-                files.removed[0].display()
-            );
-        }
+        say_written(&files, times.len(), w, h, t0);
     }
     // A signal during the last writes: what was written is whole and kept.
     stop.check(&format!(
