@@ -7,9 +7,10 @@ pub use volsplat::{
     ShadeAtChoice, VisibilityChoice,
 };
 
-/// Volume rendering by splatting (Westover 1991).
+/// Direct volume rendering on the CPU by splatting (Westover 1991; Swan et al. 1997), image-aligned
+/// slabs and Buchanan's NIL-map displays.
 #[derive(Debug, Parser)]
-#[command(name = "volsplat", version, about, long_about = None)]
+#[command(name = "volsplat", version, long_about = None)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -17,7 +18,7 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Render a volume (or the built-in demo phantom) to a PNG or .npy image.
+    /// Render a volume (or the built-in MRI head) to a PNG or .npy image.
     Render(Box<RenderArgs>),
     /// Render a turntable or a keyframed camera flight to PNG frames, GIF, APNG or video.
     Movie(Box<crate::movie::MovieArgs>),
@@ -140,8 +141,9 @@ pub struct ViewArgs {
     #[arg(long, value_name = "FACTOR")]
     pub zoom: Option<f64>,
     /// Perspective projection (VTK's default camera) instead of orthographic; switches a
-    /// --camera file's camera to perspective too. Implies the splat-list renderer (Swan et al.
-    /// 1997).
+    /// --camera file's camera to perspective too. Drawn with image-aligned slabs where
+    /// `--visibility auto` picks them (composite, MIP, MinIP), else with the splat list (Swan et
+    /// al. 1997), which takes the radial kernels only.
     #[arg(long, conflicts_with = "orthographic")]
     pub perspective: bool,
     /// Switch a --camera file's perspective camera to orthographic (VTK's ParallelProjectionOn);
@@ -174,7 +176,9 @@ pub struct RenderOptions {
     )]
     pub size: String,
     /// Ray function. xray: the line integral ∫ρ ds; its PNG is scaled so that the brightest
-    /// pixel is white, its .npy holds the unscaled values (data units × world units).
+    /// pixel is white, its .npy holds the unscaled values (data units × world units). X-ray
+    /// ignores the transfer function, MIP, MinIP and X-ray the lights, shading switches, surface
+    /// enhancement and depth cueing (a warning names what is ignored).
     #[arg(long, value_enum, default_value = "composite", help_heading = "Output")]
     pub mode: Mode,
     /// Transfer-function JSON file (VTK's volume property; format in README.md, section
@@ -189,7 +193,9 @@ pub struct RenderOptions {
     /// Built-in transfer function: 3D Slicer's presets (CT-Bone, CT-AAA, MR-Default, …; in
     /// absolute data units, e.g. Hounsfield) and volsplat's ct-skin and ramp; `volsplat presets`
     /// lists them. `auto` (the default): a function from the volume's histogram that makes the
-    /// background transparent (ct-skin for the demo head; an opaque grey window for MIP/MinIP).
+    /// background transparent (ct-skin for the synthetic CT `head` phantom; an opaque grey
+    /// window for MIP/MinIP). With --scene, a --mode other than the scene's takes the new mode's
+    /// default unless --tf or --preset is given.
     #[arg(
         long,
         value_name = "NAME",
@@ -224,7 +230,8 @@ pub struct RenderOptions {
     )]
     pub crop_mm: Option<String>,
     /// A clipping plane NX,NY,NZ,D (world frame): keeps the points with N·x + D ≥ 0, the side
-    /// the normal points to, as VTK. Repeat for several; the cut is smooth, not voxel-stepped.
+    /// the normal points to, as VTK. Repeat for several (at most 64); the cut is smooth, not
+    /// voxel-stepped.
     #[arg(
         long,
         value_name = "NX,NY,NZ,D",
@@ -241,8 +248,8 @@ pub struct RenderOptions {
     )]
     pub depth_cue: Option<String>,
     /// A directional light: direction X,Y,Z towards the light in the camera frame (x right, y up,
-    /// z towards the viewer), optionally followed by colour R,G,B. Repeat for several lights.
-    /// Default: one white headlight (0,0,1), as VTK.
+    /// z towards the viewer), optionally followed by colour R,G,B. Repeat for several lights
+    /// (at most 16). Default: one white headlight (0,0,1), as VTK.
     #[arg(
         long,
         value_name = "X,Y,Z[,R,G,B]",
@@ -345,7 +352,8 @@ pub struct RenderOptions {
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
     /// Render from a sparse splat list (Swan et al. §5): the visible voxels are extracted once
-    /// and reused for every frame. Always on for perspective views.
+    /// and reused for every frame. Perspective views use it where image-aligned slabs are not
+    /// chosen (X-ray, sheet-only options, --visibility sheet or every).
     #[arg(long, help_heading = "Performance", hide_short_help = true)]
     pub splat_list: bool,
     /// Splat list: keep voxels whose opacity (scalar × gradient opacity) exceeds this, in
@@ -379,7 +387,7 @@ pub struct ImageOptions {
     /// Linear PNG values: the default now; kept so that older command lines still work.
     #[arg(long, hide = true, conflicts_with = "srgb")]
     pub linear: bool,
-    /// Background colour R,G,B in [0, 1] (linear), composited under the image.
+    /// Background colour R,G,B, each a linear value in [0, 1], composited under the image.
     #[arg(
         long,
         value_name = "R,G,B",
@@ -445,7 +453,7 @@ pub struct RenderArgs {
     /// Print per-stage timings and counters as one JSON object on stdout.
     #[arg(long, help_heading = "Output")]
     pub stats: bool,
-    /// Don't print what was written (warnings and errors are still printed).
+    /// Don't print notes or what was written (warnings and errors are still printed).
     #[arg(short, long, help_heading = "Output")]
     pub quiet: bool,
     /// Render the request of a scene file (as written by --save-scene) instead of starting from
@@ -566,8 +574,8 @@ pub struct PhantomArgs {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Grid size: N (cube) or X,Y,Z (checkerboard: X,Y[,SQUARE]), as `render --phantom-size`.
-    /// Default: the phantom's own size, the one `render --phantom KIND` uses (head
-    /// 128×160×144; shepp-logan, blobs, marschner-lobb 128³).
+    /// Default: the phantom's own size, the one `render --phantom KIND` uses (brain: fixed,
+    /// 84×128×128; head 128×160×144; shepp-logan, blobs, marschner-lobb 128³).
     #[arg(long, value_name = "N|X,Y,Z")]
     pub grid: Option<String>,
     /// Renamed: `--size` means the image size in `render` and `bench`; use --grid here.
@@ -586,7 +594,7 @@ pub struct BenchArgs {
     pub view: ViewArgs,
     #[command(flatten)]
     pub options: RenderOptions,
-    /// Frames to time, after one warm-up frame.
+    /// Frames to time, after one warm-up frame (at most 100000).
     #[arg(long, default_value_t = 8)]
     pub frames: usize,
     /// Degrees of azimuth between frames (default 360/frames; 0 keeps the view fixed).

@@ -401,6 +401,7 @@ impl Renderer {
             .0,
         );
         let mut warnings: Vec<String> = tf_warning.into_iter().collect();
+        warnings.extend(request.ignored_options());
         let t_prep = Instant::now();
         report(progress, 0.05, "classify")?;
         // Decision 0016: `auto` draws unshaded composite, MIP and MinIP with image-aligned slabs

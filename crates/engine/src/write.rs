@@ -26,6 +26,36 @@ pub struct WriteOptions {
     pub window: Option<(f32, f32)>,
 }
 
+/// Checks a PNG background colour: three finite linear values in [0, 1]. The message names the
+/// offending component and value (`red is NaN; …`).
+pub fn check_background(background: [f32; 3]) -> std::result::Result<(), String> {
+    for (name, v) in ["red", "green", "blue"].iter().zip(background) {
+        if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+            return Err(format!(
+                "{name} is {v}; each component must be a linear value in [0, 1]"
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl WriteOptions {
+    /// Checks the options that need no image: the background ([`check_background`]) and the
+    /// grey window (finite, `lo < hi`). Errors name the field (`background`, `window`).
+    pub fn validate(&self) -> Result<()> {
+        check_background(self.png.background).map_err(|m| EngineError::request("background", m))?;
+        if let Some((lo, hi)) = self.window
+            && !(lo.is_finite() && hi.is_finite() && lo < hi)
+        {
+            return Err(EngineError::request(
+                "window",
+                format!("needs finite values with lo < hi, got {lo}:{hi}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Whether a render in `mode` is written as its scalar values (when it has them) rather than
 /// its RGBA image: X-ray always, MIP and MinIP when `window` is given.
 pub fn writes_values(has_values: bool, mode: Mode, window: Option<(f32, f32)>) -> bool {
@@ -45,8 +75,9 @@ impl Output {
 }
 
 /// Writes `image` (or `values`, see [`writes_values`]) of a render in `mode` to `path`,
-/// atomically; see the module docs. Errors name the file: an unknown extension, a window that is
-/// not finite with `lo < hi`, a window on a composite image, or the writer's own errors.
+/// atomically; see the module docs. Errors name the file: a background outside [0, 1] or not
+/// finite, a window that is not finite with `lo < hi`, a window on a composite image, an unknown
+/// extension, or the writer's own errors.
 pub fn write_image(
     path: &Path,
     image: &Image,
@@ -55,20 +86,18 @@ pub fn write_image(
     options: &WriteOptions,
 ) -> Result<()> {
     let bad = |message: String| EngineError::request("output", message);
-    if let Some((lo, hi)) = options.window {
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return Err(bad(format!(
-                "{}: a grey window needs finite values with lo < hi, got {lo}:{hi}",
-                path.display()
-            )));
+    options.validate().map_err(|e| match e {
+        EngineError::Request { field, message } => {
+            bad(format!("{}: {field} {message}", path.display()))
         }
-        if mode == Mode::Composite {
-            return Err(bad(format!(
-                "{}: a grey window applies to MIP, MinIP and X-ray; composite images take their \
-                 colours from the transfer function",
-                path.display()
-            )));
-        }
+        e => e,
+    })?;
+    if options.window.is_some() && mode == Mode::Composite {
+        return Err(bad(format!(
+            "{}: a grey window applies to MIP, MinIP and X-ray; composite images take their \
+             colours from the transfer function",
+            path.display()
+        )));
     }
     let ext = path
         .extension()
@@ -120,6 +149,43 @@ pub fn windowed_image(values: &ScalarImage, lo: f32, hi: f32) -> Image {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 28: `--background nan,0,0` wrote red as 0 and `2,2,2` was accepted; both are
+    /// errors naming the component, and nothing is written.
+    #[test]
+    fn backgrounds_outside_zero_to_one_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        let image = Image::new(2, 2);
+        for (bg, word) in [
+            ([f32::NAN, 0.0, 0.0], "red is NaN"),
+            ([2.0, 2.0, 2.0], "red is 2"),
+            ([0.0, -0.5, 0.0], "green is -0.5"),
+            ([0.0, 0.0, f32::INFINITY], "blue is inf"),
+        ] {
+            let options = WriteOptions {
+                png: PngSettings {
+                    background: bg,
+                    ..PngSettings::default()
+                },
+                window: None,
+            };
+            let e = write_image(&path, &image, None, Mode::Composite, &options)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(word) && e.contains("[0, 1]"), "{e}");
+            assert!(!path.exists());
+        }
+        let ok = WriteOptions {
+            png: PngSettings {
+                background: [0.0, 0.5, 1.0],
+                ..PngSettings::default()
+            },
+            window: None,
+        };
+        write_image(&path, &image, None, Mode::Composite, &ok).unwrap();
+        assert!(path.exists());
+    }
 
     #[test]
     fn windows_map_linearly_clamp_and_blacken_uncovered_pixels() {
