@@ -323,7 +323,10 @@ impl Renderer {
     /// The camera `request` resolves to (loads the volume for its bounds if needed).
     pub fn camera(&mut self, request: &RenderRequest) -> Result<Camera> {
         let vol = self.volume(&request.scene.volume)?;
-        request.scene.camera.resolve(vol.grid().bounds_world())
+        request
+            .scene
+            .camera
+            .resolve(vol.grid().drawn_bounds_world())
     }
 
     /// The transfer function `request` resolves to for its volume and mode.
@@ -379,7 +382,13 @@ impl Renderer {
             (Some(c), false) => c.value.1.clone(),
             _ => Vec::new(),
         };
-        let camera = request.scene.camera.resolve(vol.grid().bounds_world())?;
+        // The reset view frames the box the renderers draw: an axis of one sample is one
+        // spacing thick (decision 0021), so a single slice or voxel is framed, not a plane or
+        // a point.
+        let camera = request
+            .scene
+            .camera
+            .resolve(vol.grid().drawn_bounds_world())?;
         let range = *cached(&mut self.range, request.scene.volume.clone(), || {
             Ok(vol.value_range())
         })?
@@ -944,8 +953,14 @@ fn resolve_tf(
         TransferSpec::Auto => match scene {
             Some(tf) => tf,
             None if matches!(request.mode, Mode::Mip | Mode::Minip) => {
-                // Projections without a transfer function: an opaque grey window over the data.
-                TransferFunction::ramp(range.0, range.1, 1.0)
+                // Projections without a transfer function: an opaque grey window over the data
+                // (constant data: the unit below the value, which then shows white).
+                let (lo, hi) = if range.1 > range.0 {
+                    range
+                } else {
+                    (range.0 - 1.0, range.0)
+                };
+                TransferFunction::ramp(lo, hi, 1.0)
             }
             None if request.scene.volume.is_demo_head() => Preset::CtSkin.transfer_function(range),
             None => {
