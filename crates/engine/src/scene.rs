@@ -472,6 +472,10 @@ pub struct Scene {
     /// Cropping and clipping planes (splatting renderers), cut smoothly.
     #[serde(default, skip_serializing_if = "Clipping::is_empty")]
     pub clipping: Clipping,
+    /// X-ray mode: what is integrated (default `auto`: CT in Hounsfield units relative to air,
+    /// `max(HU + 1000, 0)`; other data as they are). See [`crate::xray`].
+    #[serde(default, skip_serializing_if = "crate::xray::XrayDensity::is_auto")]
+    pub xray_density: crate::xray::XrayDensity,
 }
 
 /// A clipping plane: keeps the world points `x` with `normal·x + offset ≥ 0` (the side the
