@@ -7,8 +7,10 @@
 //!
 //! The view volume is cut by planes parallel to the image plane, `Δ` world units apart, at the
 //! eye depths `d_j = Δ·j` (anchored to the eye, so they do not follow the volume as it turns:
-//! no popping when the sheet axis of Westover's sheets would switch). In each plane every pixel
-//! holds the reconstructed scalar `ρ̂ = Σ_v ρ_v·h(p − v)` summed over the voxels `v` whose
+//! no popping when the sheet axis of Westover's sheets would switch), across the box of voxel
+//! centres, an axis of one sample spanning its voxel (a single slice is one spacing thick;
+//! `docs/decisions/0021-thin-volumes.md`). In each plane every pixel holds the reconstructed
+//! scalar `ρ̂ = Σ_v ρ_v·h(p − v)` summed over the voxels `v` whose
 //! kernel `h` reaches the pixel's point `p` on the plane (the kernel's section by the plane, as
 //! in Mueller & Crawfis' slicing of each kernel by the slabs it overlaps). Then, per pixel
 //! (Mueller, Möller & Crawfis §3): the transfer function classifies `ρ̂`; where it has opacity
@@ -133,10 +135,10 @@ pub fn render_slabs_any(
 /// Renders `volume` seen by `camera` (orthographic or perspective) with image-aligned,
 /// post-classified slabs (module docs). `settings.slab` is the slab thickness in units of the
 /// smallest grid spacing, capped at the thinnest extent of the box the rays cross (decision
-/// 0021: an axis of one sample spans its voxel); `settings.mode` may not be X-ray. `bricks` is the volume's brick grid
-/// if the caller keeps one across frames (built here otherwise). `progress` is called after
-/// each group of image bands, with `sheets_done`/`sheets_total` counting bands; returning
-/// `false` cancels with [`SplatError::Cancelled`].
+/// 0021: an axis of one sample spans its voxel); `settings.mode` may not be X-ray. `bricks`
+/// is the volume's brick grid if the caller keeps one across frames (built here otherwise).
+/// `progress` is called after each group of image bands, with `sheets_done`/`sheets_total`
+/// counting bands; returning `false` cancels with [`SplatError::Cancelled`].
 pub fn render_slabs<T: Scalar>(
     volume: &Volume<T>,
     camera: &Camera,
@@ -825,8 +827,7 @@ impl<T: Scalar> Ctx<'_, T> {
     /// caster steps in 15-bit fixed point): integer steps are exact, so a pixel's position is
     /// the same whichever pixels around it are skipped. The span holds the pixels whose point
     /// lies in the box the rays cross, `[0, box_hi]` (the voxel centres' box, decision 0021),
-    /// checked in fixed point, so no clamping is
-    /// needed below 0.
+    /// checked in fixed point, so no clamping is needed below 0.
     fn walk(&self, y: usize, d: f64) -> Walk {
         let (start, step) = self.view.row(y, d);
         let mut r = (0, self.width as i64 - 1);
@@ -1452,8 +1453,8 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 
     /// The cell (lower corner) holding the fixed-point index position `q` (every component in
-    /// `[0, n − 1]`, as [`Ctx::walk`] guarantees) and the fractions in it. On the last voxel
-    /// plane the cell is the one below with fraction 1.
+    /// `[0, box_hi]`, as [`Ctx::walk`] guarantees) and the fractions in it. On the last voxel
+    /// plane the cell is the one below with fraction 1 (along an axis of one sample, cell 0).
     #[inline(always)]
     fn cell(&self, q: [i64; 3]) -> ([usize; 3], [f32; 3]) {
         let mut c = [0usize; 3];
@@ -1481,8 +1482,8 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 
     /// The eye depths `d_in` and `d_out` between which the ray of each pixel of the rows
-    /// `[y0, y0 + rows)` lies in the box the rays cross (`box_hi`) and on the kept side of every clipping
-    /// plane (`[+∞, −∞]` where it misses).
+    /// `[y0, y0 + rows)` lies in the box the rays cross (`box_hi`) and on the kept side of
+    /// every clipping plane (`[+∞, −∞]` where it misses).
     fn ray_extents(&self, y0: usize, rows: usize) -> (Vec<f32>, Vec<f32>) {
         let v = &self.view;
         let mut din = Vec::with_capacity(rows * self.width);

@@ -148,7 +148,8 @@ fn constant_thin_volumes_match_closed_forms() {
                     let img = draw(&vol, &cam, tables, drawer, RenderMode::Composite, size).image;
                     let p = img.pixels()[centre];
                     let a = 1.0 - (1.0 - ALPHA).powf(path);
-                    // Splats: the kernel's footprint normalisation (decision 0003), measured ≤ 0.0015.
+                    // Splats: the kernel's footprint normalisation (decision 0003), measured
+                    // ≤ 0.0015.
                     let tol = if drawer == Drawer::Splat { 0.004 } else { 2e-4 };
                     report.push(format!("{what}: α {:.5} vs {a:.5}", p[3]));
                     assert!((p[3] as f64 - a).abs() < tol, "{what}: α {} vs {a}", p[3]);
