@@ -181,6 +181,18 @@ pub struct RenderOptions {
     /// enhancement and depth cueing (a warning names what is ignored).
     #[arg(long, value_enum, default_value = "composite", help_heading = "Output")]
     pub mode: Mode,
+    /// X-ray: integrate max(ρ + VALUE, 0) instead of ρ. auto (default): 1000 where the values
+    /// look like CT in Hounsfield units (−900 or below and 300 or above: attenuation relative
+    /// to air, a radiograph), none otherwise; none: the raw values.
+    #[arg(
+        long,
+        value_name = "VALUE|auto|none",
+        allow_hyphen_values = true,
+        value_parser = |s: &str| s.parse::<volsplat::XrayDensity>(),
+        help_heading = "Output",
+        hide_short_help = true
+    )]
+    pub xray_offset: Option<volsplat::XrayDensity>,
     /// Transfer-function JSON file (VTK's volume property; format in README.md, section
     /// "Files").
     #[arg(

@@ -366,6 +366,9 @@ pub fn build_request_noted(
             .map(|p| parse_plane(p))
             .collect::<Result<_>>()?;
     }
+    if let Some(x) = o.xray_offset {
+        s.xray_density = x;
+    }
     if set("depth_cue") {
         s.depth_cue = o
             .depth_cue

@@ -32,6 +32,7 @@ pub mod renderer;
 pub mod request;
 pub mod scene;
 pub mod write;
+pub mod xray;
 
 pub use error::{EngineError, Result};
 pub use renderer::{
@@ -49,6 +50,7 @@ pub use scene::{
 };
 
 pub use write::{OUTPUT_EXTENSIONS, WriteOptions, windowed_image, write_image, writes_values};
+pub use xray::XrayDensity;
 
 /// The libraries underneath, for callers that need their types (cameras, volumes, images).
 pub use volsplat_core as core;

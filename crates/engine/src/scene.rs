@@ -476,6 +476,10 @@ pub struct Scene {
     /// Cropping and clipping planes (splatting renderers), cut smoothly.
     #[serde(default, skip_serializing_if = "Clipping::is_empty")]
     pub clipping: Clipping,
+    /// X-ray mode: what is integrated (default `auto`: CT in Hounsfield units relative to air,
+    /// `max(HU + 1000, 0)`; other data as they are). See [`crate::xray`].
+    #[serde(default, skip_serializing_if = "crate::xray::XrayDensity::is_auto")]
+    pub xray_density: crate::xray::XrayDensity,
 }
 
 /// Most lights a scene may hold. Each light is evaluated for every shaded voxel or sample, so
