@@ -163,7 +163,7 @@ impl Grid {
     }
 
     /// The index-space box `(lo, hi)` that the renderers draw (voxel units; integers are voxel
-    /// centres; `docs/decisions/0021-thin-volumes.md`): per axis the box of voxel centres
+    /// centres; `docs/decisions/0023-thin-volumes.md`): per axis the box of voxel centres
     /// `[0, n − 1]`, except that an axis of one sample spans that sample's voxel, `[−½, ½]`, so
     /// a single slice is one spacing thick, as a slice of two samples is. Along such an axis
     /// the reconstruction is the one sample's value.

@@ -385,7 +385,7 @@ impl Renderer {
             _ => Vec::new(),
         };
         // The reset view frames the box the renderers draw: an axis of one sample is one
-        // spacing thick (decision 0021), so a single slice or voxel is framed, not a plane or
+        // spacing thick (decision 0023), so a single slice or voxel is framed, not a plane or
         // a point.
         let camera = request
             .scene

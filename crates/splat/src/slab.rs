@@ -9,7 +9,7 @@
 //! eye depths `d_j = Δ·j` (anchored to the eye, so they do not follow the volume as it turns:
 //! no popping when the sheet axis of Westover's sheets would switch), across the box of voxel
 //! centres, an axis of one sample spanning its voxel (a single slice is one spacing thick;
-//! `docs/decisions/0021-thin-volumes.md`). In each plane every pixel holds the reconstructed
+//! `docs/decisions/0023-thin-volumes.md`). In each plane every pixel holds the reconstructed
 //! scalar `ρ̂ = Σ_v ρ_v·h(p − v)` summed over the voxels `v` whose
 //! kernel `h` reaches the pixel's point `p` on the plane (the kernel's section by the plane, as
 //! in Mueller & Crawfis' slicing of each kernel by the slabs it overlaps). Then, per pixel
@@ -135,7 +135,7 @@ pub fn render_slabs_any(
 /// Renders `volume` seen by `camera` (orthographic or perspective) with image-aligned,
 /// post-classified slabs (module docs). `settings.slab` is the slab thickness in units of the
 /// smallest grid spacing, capped at the thinnest extent of the box the rays cross (decision
-/// 0021: an axis of one sample spans its voxel); `settings.mode` may not be X-ray. `bricks`
+/// 0023: an axis of one sample spans its voxel); `settings.mode` may not be X-ray. `bricks`
 /// is the volume's brick grid if the caller keeps one across frames (built here otherwise).
 /// `progress` is called after each group of image bands, with `sheets_done`/`sheets_total`
 /// counting bands; returning `false` cancels with [`SplatError::Cancelled`].
@@ -202,7 +202,7 @@ pub fn render_slabs<T: Scalar>(
         return render_supersampled(volume, camera, tables, settings, Some(bricks), progress, ss);
     }
     // The box the rays cross: the voxel centres', an axis of one sample spanning its voxel
-    // (decision 0021). No thicker slabs than the box's thinnest extent, so that a ray through
+    // (decision 0023). No thicker slabs than the box's thinnest extent, so that a ray through
     // both of its widest faces meets a plane inside (a sheet one voxel thick under `--slab 2`
     // would otherwise fall between two planes and draw nothing); with slabs of at most one
     // voxel this never applies (every extent is a spacing or more).
@@ -400,7 +400,7 @@ pub fn render_slabs<T: Scalar>(
     })
 }
 
-/// The geometry the slabs' rays are set up in (`docs/decisions/0021-thin-volumes.md`): `grid`
+/// The geometry the slabs' rays are set up in (`docs/decisions/0023-thin-volumes.md`): `grid`
 /// itself where every axis has two samples or more; otherwise each axis of one sample becomes
 /// two "samples" half a spacing either side of the real one (the origin moved back by half a
 /// spacing), so the box of these centres, `[0, 1]` along that axis, is the voxel's extent
@@ -826,7 +826,7 @@ impl<T: Scalar> Ctx<'_, T> {
     /// Row `y` of the plane at depth `d` in 32.32 fixed-point index coordinates (VTK's ray
     /// caster steps in 15-bit fixed point): integer steps are exact, so a pixel's position is
     /// the same whichever pixels around it are skipped. The span holds the pixels whose point
-    /// lies in the box the rays cross, `[0, box_hi]` (the voxel centres' box, decision 0021),
+    /// lies in the box the rays cross, `[0, box_hi]` (the voxel centres' box, decision 0023),
     /// checked in fixed point, so no clamping is needed below 0.
     fn walk(&self, y: usize, d: f64) -> Walk {
         let (start, step) = self.view.row(y, d);

@@ -570,11 +570,11 @@ fn image_aligned_slabs_match_the_references_at_every_angle() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Thin volumes (issue 28 §1, `docs/decisions/0021-thin-volumes.md`): one, two and three samples
+// Thin volumes (issue 28 §1, `docs/decisions/0023-thin-volumes.md`): one, two and three samples
 // along one axis (a single slice, a 2-D image, Swan's checkerboard), each axis in turn, swept
 // like the volumes above (every 15° of azimuth × six elevations from −90° to 90°, so that many
 // views are edge-on to the sheet) through every renderer and mode, both projections, against
-// the reference integrator. Before decision 0021 the image-aligned slabs drew a one-sample axis
+// the reference integrator. Before decision 0023 the image-aligned slabs drew a one-sample axis
 // black (no plane inside a box of zero thickness) and the reference integrated nothing there.
 
 /// The thin grids: for each axis, 1, 2 and 3 samples along it (spacing 2, 1 and 0.5: a
@@ -600,7 +600,7 @@ fn thin_grids() -> Vec<(String, Grid)> {
     out
 }
 
-/// Blobs in the middle of the thin grid's drawn box (decision 0021), sized by its smallest
+/// Blobs in the middle of the thin grid's drawn box (decision 0023), sized by its smallest
 /// in-plane extent (σ 10–14 % of it, ≥ 2.9σ inside every in-plane face), so the thin axis cuts
 /// them through their centres.
 fn thin_blobs(grid: &Grid) -> GaussianBlobs {

@@ -1,9 +1,9 @@
-//! Thin volumes (issue 28 §1, `docs/decisions/0021-thin-volumes.md`): one, two and three samples
+//! Thin volumes (issue 28 §1, `docs/decisions/0023-thin-volumes.md`): one, two and three samples
 //! along an axis, through every renderer, against closed forms. A single slice (a 2-D image, one
 //! DICOM slice, Swan's checkerboard) used to render black with the image-aligned slabs, the
 //! front ends' default: their rays found no depth inside a box of zero thickness.
 //!
-//! What each renderer draws (decision 0021): the slabs, like the reference integrator and VTK's
+//! What each renderer draws (decision 0023): the slabs, like the reference integrator and VTK's
 //! ray casters, the box of voxel centres, an axis of one sample spanning its voxel (one spacing,
 //! centred on the sample); the splatting renderers (Westover's sheets, the splat list) every
 //! voxel's cell, each kernel integrating to one voxel along the ray. The two agree on a
@@ -181,7 +181,7 @@ fn constant_thin_volumes_match_closed_forms() {
 }
 
 /// Slabs thicker than the sheet: a one-voxel sheet under `--slab 16` (capped at the sheet's
-/// thickness, decision 0021) is drawn face-on wherever it lies between the planes, where it
+/// thickness, decision 0023) is drawn face-on wherever it lies between the planes, where it
 /// used to fall between two planes at most offsets and draw nothing.
 #[test]
 fn slabs_thicker_than_the_sheet_still_draw_it() {
@@ -373,7 +373,7 @@ fn thin_slabs_are_deterministic() {
 }
 
 /// The front ends' reset view frames a single slice (its drawn bounds are one spacing thick,
-/// decision 0021) and a single voxel (a cube), where the bounds of the voxel centres are a
+/// decision 0023) and a single voxel (a cube), where the bounds of the voxel centres are a
 /// plane and a point.
 #[test]
 fn the_reset_view_frames_single_slices_and_voxels() {

@@ -130,11 +130,11 @@ fn dolly_flicker_drops_with_swan() {
 
 /// The front ends' default renderer, the image-aligned slabs (decision 0016), on the same
 /// checkerboard sheet: it is drawn (issue 28 §1: a one-sample axis used to render black under
-/// the slabs; decision 0021), and their anti-aliasing of minified views (`area`: ⌈r⌉² rays per
+/// the slabs; decision 0023), and their anti-aliasing of minified views (`area`: ⌈r⌉² rays per
 /// pixel box-filtered, at most 4 × 4) removes most of the aliasing that one ray per pixel
 /// shows: measured 0.313 → 0.084 at 2.5 voxels per pixel and 0.500 → 0.031 at 5 (Swan's rule
 /// on the sheets above: 0.0001–0.0002; the slabs' rays sample, the splats filter). Before
-/// decision 0021 every image here was black (relative error NaN).
+/// decision 0023 every image here was black (relative error NaN).
 #[test]
 fn orthographic_minification_under_the_default_renderer() {
     let slab = |antialias| RenderSettings {

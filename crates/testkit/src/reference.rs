@@ -12,7 +12,7 @@
 //!
 //! The ray is clipped exactly to the box of voxel centres, `[0, dims − 1]³` in index space, an
 //! axis of one sample spanning its voxel, `[−½, ½]` ([`Grid::drawn_box_index`],
-//! `docs/decisions/0021-thin-volumes.md`), or with [`Extent::Cells`] to every voxel's cell,
+//! `docs/decisions/0023-thin-volumes.md`), or with [`Extent::Cells`] to every voxel's cell,
 //! `[−½, dims − ½]³`, the extent the splatting kernels cover ([`ray_box_interval`]); it is
 //! marched at a fixed world-space step along the ray, and the field is reconstructed by
 //! trilinear interpolation in index space ([`trilinear`]), constant beyond the outer voxel
@@ -54,7 +54,7 @@ pub struct ReferenceSettings {
     pub extent: Extent,
 }
 
-/// Which box of a grid the reference integrates over (`docs/decisions/0021-thin-volumes.md`).
+/// Which box of a grid the reference integrates over (`docs/decisions/0023-thin-volumes.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Extent {
     /// The box of voxel centres, with an axis of one sample spanning its voxel
@@ -721,7 +721,7 @@ mod tests {
         );
     }
 
-    /// Decision 0021: a single slice is one spacing thick (it integrated to 0 before), a slice of
+    /// Decision 0023: a single slice is one spacing thick (it integrated to 0 before), a slice of
     /// two samples too; under `Extent::Cells` two samples are two spacings thick.
     #[test]
     fn thin_volumes_have_the_extent_of_their_voxels() {
