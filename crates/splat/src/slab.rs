@@ -237,12 +237,6 @@ pub fn render_slabs<T: Scalar>(
     }
     let (w, h) = (settings.width, settings.height);
     let view = View::new(&proj, &geo, w, h);
-    let active = bricks.active(
-        &tables.opacity,
-        (tables.opacity.hi - tables.opacity.lo) / 4095.0,
-        false,
-    );
-    let all_active = active.iter().all(|&a| a);
     let post = (composite && !shade)
         .then(|| PostTable::new(tables, &classifier))
         .flatten();
@@ -287,6 +281,25 @@ pub fn render_slabs<T: Scalar>(
         Preintegrate::On => true,
         Preintegrate::Auto => risk > RING_RISK,
     };
+    // Empty space: composite classified by a density table, one point per slab, skips the
+    // bricks whose samples read only entries without opacity from that very table (exact,
+    // `BrickGrid::active_in_table`); pre-integrated segments reach into the brick before, and
+    // the per-sample classifier resamples the opacity table, so they keep the slack test.
+    let table_active = match (&post, &shade_table) {
+        (Some(t), _) if !preint => Some(bricks.active_in_table(&t.nonzero(), |x| t.pos(x))),
+        (None, Some(t)) if !preint || voxel_shading.is_none() => {
+            Some(bricks.active_in_table(&t.nonzero(), |x| t.pos(x)))
+        }
+        _ => None,
+    };
+    let active = table_active.unwrap_or_else(|| {
+        bricks.active(
+            &tables.opacity,
+            (tables.opacity.hi - tables.opacity.lo) / 4095.0,
+            false,
+        )
+    });
+    let all_active = active.iter().all(|&a| a);
     let ctx = Ctx {
         data: volume.data(),
         dims: grid.dims,
@@ -1897,6 +1910,16 @@ impl PostTable {
         self.lookup_in(&self.values, x)
     }
 
+    /// Per entry, whether it has opacity in either form the kernels read (`values`' α > 0, or
+    /// `persp`'s `log2(1 − α)` < 0; NaN counts), for [`BrickGrid::active_in_table`].
+    fn nonzero(&self) -> Vec<bool> {
+        self.values
+            .iter()
+            .zip(&self.persp)
+            .map(|(v, p)| !(v[3] <= 0.0 && p[3] >= 0.0))
+            .collect()
+    }
+
     /// Linear interpolation in `values` (either table) at density `x`.
     #[inline(always)]
     fn lookup_in(&self, values: &[Rgba], x: f32) -> Rgba {
@@ -2041,6 +2064,15 @@ impl ShadeTable {
             },
             to_world: grad_to_world.map(|g| g.to_array()),
         })
+    }
+
+    /// Per entry of `rows`, whether it has opacity in either form the kernels read (α > 0, or
+    /// `log2(1 − α)` < 0; NaN counts), for [`BrickGrid::active_in_table`].
+    fn nonzero(&self) -> Vec<bool> {
+        self.rows
+            .iter()
+            .map(|r| !(r[0] <= 0.0 && r[7] >= 0.0))
+            .collect()
     }
 
     /// The entry at density `x`, linearly interpolated.
