@@ -42,7 +42,7 @@ pub use renderer::{
 pub use request::{
     AntialiasChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice, DisplayChoice,
     DisplayOptions, KernelChoice, Mode, OrderChoice, PreintegrateChoice, Quality, RenderRequest,
-    RendererChoice, ShadeAtChoice, VisibilityChoice,
+    RendererChoice, ShadeAtChoice, VisibilityChoice, VolumeLevel,
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,
