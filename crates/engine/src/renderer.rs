@@ -113,8 +113,8 @@ pub struct Stats {
     /// level drawn, 0 for the full volume (decision 0025). Absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub level: Option<usize>,
-    /// With `level`: the smallest spacing of the level drawn (world units) and the pixel at the
-    /// focal point (world units), whose ratio `auto` keeps at most √2.
+    /// With `level`: the smallest spacing of the level drawn, world units (`auto` keeps it at
+    /// most √2 × `focal_pixel`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub level_spacing: Option<f64>,
     /// With `level`: the size of a pixel at the focal point, world units.
