@@ -49,6 +49,9 @@ use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
 use volsplat_core::{AnyVolume, CoreError, Grid, Volume};
 
+mod write;
+pub use write::{float32_rounding, write_nifti};
+
 const SUPPORTED_TYPES: &str = "2 (uint8), 256 (int8), 512 (uint16), 4 (int16), 16 (float32); \
      converted to float32: 8 (int32), 768 (uint32), 64 (float64)";
 
