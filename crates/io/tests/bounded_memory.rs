@@ -90,7 +90,10 @@ fn vti_declared_block_sizes_do_not_allocate() {
         std::fs::write(&p, huge_vti(compressor, block_size, payload)).unwrap();
         let (e, largest) = read_err(&p);
         assert!(e.contains(name) && e.contains("block 0"), "{e}");
-        assert!(largest < 4 * MIB, "{name}: an allocation of {largest} bytes ({e})");
+        assert!(
+            largest < 4 * MIB,
+            "{name}: an allocation of {largest} bytes ({e})"
+        );
     }
 }
 
@@ -131,6 +134,9 @@ fn raw_payloads_shorter_than_declared_do_not_allocate() {
         std::fs::write(&p, bytes).unwrap();
         let (e, largest) = read_err(&p);
         assert!(e.contains(name) && e.contains("truncated"), "{e}");
-        assert!(largest < 4 * MIB, "{name}: an allocation of {largest} bytes ({e})");
+        assert!(
+            largest < 4 * MIB,
+            "{name}: an allocation of {largest} bytes ({e})"
+        );
     }
 }

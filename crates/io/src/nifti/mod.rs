@@ -32,6 +32,12 @@
 //! - The samples start at `vox_offset` bytes into the `.nii` (after decompression for `.nii.gz`)
 //!   or the `.img`; frame `f` starts `f · (frame bytes)` later.
 //!
+//! # Writing
+//!
+//! [`write_nifti`] writes single-file NIfTI-1 (`.nii`, `.nii.gz`): sform and qform (code 1) in
+//! RAS converted from volsplat's LPS, samples in their own type, geometry rounded to float32.
+//! See [`write_nifti`].
+//!
 //! # Limits
 //!
 //! The voxel count of one frame is checked against [`crate::Limits`] before anything is

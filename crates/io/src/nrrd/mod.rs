@@ -20,7 +20,8 @@
 //!   (decision 0008, as ITK): `space: right-anterior-superior` (`RAS`) and
 //!   `left-anterior-superior` (`LAS`) are converted by negating x and y (RAS) or y (LAS) of the
 //!   directions and origin; `LPS`, non-anatomical spaces (`scanner-xyz`, `3D-right-handed`, …)
-//!   and files without `space` are kept as written (VTK's NRRD reader never converts). The
+//!   and files without `space` are kept as written (VTK's NRRD reader never converts); a file
+//!   without `space` draws a note that its axes are taken as LPS. The
 //!   directions must be orthogonal (sheared grids are rejected). Only 3-D spaces are accepted
 //!   (`space` such as `RAS`, `LPS`, `scanner-xyz`, `3D-right-handed`, or `space dimension: 3`).
 //! - Data: attached after the blank line ending the header, or in `data file` (`datafile`),

@@ -25,6 +25,13 @@
 //!
 //! The file is read whole (at most [`crate::Limits::max_xml_bytes`]); the voxel count is checked
 //! against the limit before decoding; decompressed blocks never grow past the needed size.
+//! Every size a block header declares is checked before anything is allocated (module
+//! `blocks`): the byte count and the compressed sizes against the bytes the array's block
+//! holds in the file (inline: the decoded text; appended: up to the next appended array's
+//! offset, or `</AppendedData>`), and each compressed block's share of the samples against the
+//! most its compressed bytes decode to (zlib 1032:1, LZ4 256:1). Counts written with the other
+//! word width than `header_type` says (a `UInt64` file with 4-byte counts, which VTK 9.7.2 reads
+//! shifted by one sample) are an error saying so, as is a count larger than the block.
 
 use crate::error::{IoError, Result, clip};
 use crate::limits::checked_dims;
