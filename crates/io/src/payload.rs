@@ -614,6 +614,37 @@ pub(crate) fn decode(
     v.map_err(|e| IoError::core(path, e))
 }
 
+/// Writes the samples little-endian, i fastest.
+pub(crate) fn write_samples_le<W: std::io::Write + ?Sized>(
+    w: &mut W,
+    volume: &AnyVolume,
+) -> std::io::Result<()> {
+    trait LeBytes: Copy {
+        fn put(self, out: &mut Vec<u8>);
+    }
+    macro_rules! le {
+        ($($t:ty),*) => {$(impl LeBytes for $t {
+            fn put(self, out: &mut Vec<u8>) { out.extend_from_slice(&self.to_le_bytes()); }
+        })*};
+    }
+    le!(u8, i8, u16, i16, f32);
+    fn write_all<T: LeBytes, W: std::io::Write + ?Sized>(
+        w: &mut W,
+        data: &[T],
+    ) -> std::io::Result<()> {
+        let mut buf = Vec::with_capacity(64 * 1024);
+        for chunk in data.chunks(16 * 1024) {
+            buf.clear();
+            for &v in chunk {
+                v.put(&mut buf);
+            }
+            w.write_all(&buf)?;
+        }
+        Ok(())
+    }
+    volsplat_core::with_volume!(volume, v => write_all(w, v.data()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
