@@ -664,10 +664,10 @@ fn convert_cmd(a: ConvertArgs) -> Result<()> {
         .with_context(|| format!("writing {}", a.output.display()))?;
     if !a.quiet {
         for n in loaded.notes.iter().chain(&written.notes) {
-            eprintln!("note: {n}");
+            say!("note: {n}");
         }
         let g = loaded.volume.grid();
-        eprintln!(
+        say!(
             "wrote {} ({} {}×{}×{} {}, from {label})",
             a.output.display(),
             loaded.format,
