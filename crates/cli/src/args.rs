@@ -26,8 +26,9 @@ pub enum Command {
     Info(InfoArgs),
     /// List the built-in transfer-function presets, one line each.
     Presets,
-    /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, keeping
-    /// its geometry (world frame LPS), or to .npy (samples only, shape z, y, x).
+    /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, NIfTI or
+    /// MetaImage, keeping its geometry (world frame LPS; NIfTI in its own RAS frame), or to .npy
+    /// (samples only, shape z, y, x).
     Convert(ConvertArgs),
     /// Write a built-in phantom as an NRRD file.
     Phantom(PhantomArgs),
@@ -565,11 +566,14 @@ pub struct InfoArgs {
 pub struct ConvertArgs {
     #[command(flatten)]
     pub input: InputArgs,
-    /// Output: .nrrd (attached header, geometry kept; --gzip compresses the payload) or .npy
-    /// (the samples in their own type, shape (z, y, x), no geometry).
+    /// Output, by its extension: .nrrd (attached header, space left-posterior-superior), .nii or
+    /// .nii.gz (NIfTI-1, sform and qform; geometry rounded to float32), .mha or .mhd (MetaImage
+    /// as ITK writes it; .mhd with a .raw/.zraw data file beside it), or .npy (the samples in
+    /// their own type, shape (z, y, x), no geometry).
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
-    /// Gzip the payload.
+    /// Compress the samples: NRRD gzip encoding, MetaImage zlib (.mhd: a .zraw data file). For
+    /// NIfTI name the output .nii.gz; .npy is never compressed.
     #[arg(long)]
     pub gzip: bool,
     /// Don't print what was written.
