@@ -195,11 +195,13 @@ def peer_read(p: Path):
         return ("refuse", f"pixel array of shape {arr.shape}")
     params = frame_params(ds, arr.shape[0])
     vals = np.empty(arr.shape, dtype=np.float64)
+    # RT Dose: volsplat applies DoseGridScaling (PS3.3 C.8.8.3); pydicom's array does not.
+    dose = float(ds.DoseGridScaling) if "DoseGridScaling" in ds else 1.0
     for k in range(arr.shape[0]):
         _, _, _, slope, icpt = params[k]
         if pi == "PALETTE COLOR":
             slope, icpt = 1.0, 0.0
-        vals[k] = arr[k].astype(np.float64) * slope + icpt
+        vals[k] = arr[k].astype(np.float64) * slope * dose + icpt
     have = all(q[0] is not None and q[1] is not None for q in params)
     origin = spacing = None
     positions = None

@@ -1,6 +1,6 @@
 //! DICOM series (PS3.3 image objects stored as PS3.10 files), read with dicom-rs
 //! (`dicom-object` parses; pixel data is decoded here): a folder of slices, a list of files, or
-//! one file standing for its series. Decision 0012.
+//! one file standing for its series. Decisions 0013 and 0021.
 //!
 //! # Which files
 //!
@@ -14,7 +14,15 @@
 //!   several series with none chosen is an [`IoError::DicomSeries`] error listing each series
 //!   with its description and slice count. [`list_dicom_series`] lists them.
 //! - **One file** (`.dcm`, or any file with the DICOM magic) stands for its series: the series
-//!   is read from the file's folder (not its sub-folders).
+//!   is read from the file's folder (not its sub-folders). A file without SeriesInstanceUID is
+//!   read alone.
+//! - **One bad file never stops a scan** (issue 28). A file whose header cannot be read, or
+//!   without SeriesInstanceUID, is skipped with a note naming it and why (five are named, then
+//!   a count). A file of a known series that cannot be read (pixel data shorter than its image,
+//!   a malformed attribute, frames without positions) fails that series only, with its own
+//!   error, and not even that when a good file holds the same SOPInstanceUID. Copies of one
+//!   instance (same SOPInstanceUID and geometry) are read once, the file given first; a
+//!   `DICOMDIR` is recognised by its meta group and not parsed.
 //!
 //! # Geometry (PS3.3 §C.7.6.2.1.1, Image Plane Module; world frame LPS)
 //!
@@ -52,15 +60,23 @@
 //! PixelMeasuresSequence (0028,9110) and PixelValueTransformationSequence (0028,9145) come from
 //! the PerFrameFunctionalGroupsSequence (5200,9230) item, else the
 //! SharedFunctionalGroupsSequence (5200,9229), else the top-level attributes; frames are then
-//! sorted and checked like single-frame slices. Multi-frame images without per-frame positions
-//! (cine, ultrasound, nuclear medicine) are an error. Frames at repeated positions (several
-//! stacks or time points) are the error above.
+//! sorted and checked like single-frame slices. A sequence with more items than frames uses the
+//! first ones (a note says so). Classic multi-frame images placed by GridFrameOffsetVector
+//! (3004,000C) (RT Dose, PS3.3 §C.8.8.3.2) are volumes too: frame k lies at
+//! ImagePositionPatient + offset_k along the normal when the first offset is 0, else at z =
+//! offset_k (axial frames only); DoseGridScaling (3004,000E) multiplies the values (into
+//! DoseUnits). Multi-frame images without per-frame positions (cine, ultrasound, nuclear
+//! medicine) are refused when scanned. Frames at repeated positions (several stacks or time
+//! points) are the error above.
 //!
 //! # Samples (PS3.3 §C.7.6.3, Image Pixel Module; PS3.3 §C.11.1.1, Modality LUT)
 //!
 //! - One sample per pixel, MONOCHROME1 or MONOCHROME2 (MONOCHROME1 is kept as stored, with a
-//!   note: low values display bright); Bits Allocated 8, 16 or 32; the stored value is bits
-//!   `HighBit − BitsStored + 1 ..= HighBit`, two's complement when PixelRepresentation is 1.
+//!   note: low values display bright), or PALETTE COLOR with a grey palette (red, green and
+//!   blue tables equal; values are mapped through it, PS3.3 §C.7.6.3.1.5). Colour images (RGB,
+//!   YBR, colour palettes) are an error. Bits Allocated 1 (native syntaxes), 8, 16 or 32; the
+//!   stored value is bits `HighBit − BitsStored + 1 ..= HighBit`, two's complement when
+//!   PixelRepresentation is 1.
 //! - RescaleSlope (0028,1053) and RescaleIntercept (0028,1052) are applied per slice:
 //!   `value = stored · slope + intercept`. When every slope is 1, every intercept an integer and
 //!   every slice at most 16 bits, values stay integers and the volume takes the first type that
@@ -70,18 +86,25 @@
 //! # Transfer syntaxes (PS3.5 §10, Annex A)
 //!
 //! Implicit VR little endian, explicit VR little and big endian, deflated explicit VR little
-//! endian, encapsulated uncompressed, deflated image frames, RLE lossless (PS3.5 Annex G), and
-//! JPEG baseline (process 1), extended (processes 2 & 4, 8-bit samples only) and lossless
-//! (process 14, also selection value 1) through the pure-Rust `jpeg-decoder`. Others (JPEG-LS,
-//! JPEG 2000, HTJ2K, JPEG XL, MPEG, 12-bit lossy JPEG) are an error naming the syntax.
+//! endian, encapsulated uncompressed, deflated image frames, RLE lossless (PS3.5 Annex G), JPEG
+//! baseline (process 1), extended (processes 2 & 4, 8- and 12-bit samples), progressive 8-bit
+//! and lossless (process 14, also selection value 1), JPEG-LS lossless and near-lossless,
+//! JPEG 2000 lossless and lossy — all decoded by pure-Rust crates (`codecs.rs`, decision 0021).
+//! HTJ2K, JPEG XL and video are an error naming the syntax. Attributes stored with VR UN are
+//! read by their dictionary VR; a data set written in the other VR encoding than its meta
+//! group declares is read as written (a note says so).
 //!
 //! # Limits and malformed files
 //!
 //! Each file is read whole into memory, at most 4 bytes per voxel of the voxel limit plus 64
 //! MiB, and its structure is checked before parsing (see `walk.rs`): every declared length
-//! must lie within the file, sequences nest at most 32 deep. Rows × Columns × slices is checked
-//! against [`crate::Limits`] before the volume is allocated; decoders never produce more than
-//! one frame's samples. A truncated or corrupt file is an error naming the file.
+//! must lie within the file, sequences nest at most 32 deep; a deflated data set inflates at
+//! most to the image it declares plus 64 MiB. Pixel data shorter than the frames it must hold
+//! is refused from the header. Rows × Columns × slices is checked against [`crate::Limits`];
+//! the volume is allocated (fallibly) once the first frame has decoded; each codestream's own
+//! header must match Rows, Columns and Samples per Pixel before its decoder runs, so decoders
+//! never produce more than one frame's samples, and a panic inside a third-party decoder
+//! becomes an error. A truncated or corrupt file is an error naming the file.
 
 mod codecs;
 mod header;
@@ -614,9 +637,10 @@ fn unreadable_list(scan: &Scan, except: Option<&str>) -> String {
 }
 
 /// One file per SOPInstanceUID (copies of an instance in several transfer syntaxes are one
-/// image, not two slices at one position): the file given wins, else the first by path. Only
-/// copies (same size, frames and geometry) are merged; files that share a UID but differ are
-/// all kept (and then checked as slices).
+/// image, not two slices at one position): the file given wins, else the first by path. A
+/// file sharing the given file's UID is that instance (UIDs are unique, PS3.5 §9); others are
+/// merged only when they are copies (same size, frames and geometry), else all kept (and
+/// then checked as slices).
 fn distinct_instances<'a>(
     members: &[&'a FileHeader],
     given: Option<&Path>,
@@ -632,7 +656,10 @@ fn distinct_instances<'a>(
         }
         let copy = |k: usize| {
             let o: &FileHeader = out[k];
-            (o.rows, o.cols, o.frames, &o.geom) == (h.rows, h.cols, h.frames, &h.geom)
+            let is_given = |f: &FileHeader| given.is_some_and(|g| g == f.path);
+            is_given(o)
+                || is_given(h)
+                || (o.rows, o.cols, o.frames, &o.geom) == (h.rows, h.cols, h.frames, &h.geom)
         };
         match by_sop.get(h.sop_uid.as_str()).copied().filter(|&k| copy(k)) {
             None => {

@@ -204,11 +204,13 @@ fn sample_plan<'a>(
 /// (instead of aborting the process).
 fn zeroed<T: Clone + Default>(path: &Path, n: usize) -> Result<Vec<T>> {
     let mut v = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| IoError::TooLarge {
+    v.try_reserve_exact(n).map_err(|_| IoError::Dicom {
         path: path.to_path_buf(),
-        what: format!("memory for the volume's samples (bytes; {n} voxels; the allocation failed)"),
-        value: (n as u128) * std::mem::size_of::<T>() as u128,
-        limit: 0,
+        message: format!(
+            "cannot allocate {} bytes for the volume's {n} samples (lower the voxel limit or \
+             free memory)",
+            (n as u128) * std::mem::size_of::<T>() as u128
+        ),
     })?;
     v.resize(n, T::default());
     Ok(v)

@@ -340,6 +340,15 @@ fn copies_of_an_instance_are_read_once() {
     let notes = l.notes.join("\n");
     assert!(notes.contains("a.dcm (as b_rle.dcm)"), "{notes}");
     assert!(notes.contains("RLE"), "{notes}");
+    // Same UID, another position: the given file's instance all the same; from the folder
+    // (no file given) it is not a copy and stays a slice.
+    s.ipp = Some([-10.0, -20.0, 5.0]);
+    s.write(&dir.path().join("c.dcm"));
+    let l = read_dicom_with(dir.path().join("b_rle.dcm"), &opts()).unwrap();
+    assert_eq!(l.volume.grid().dims, [4, 3, 1]);
+    assert!(l.notes.join("\n").contains("c.dcm (as b_rle.dcm)"));
+    let l = read_dicom_with(dir.path(), &opts()).unwrap();
+    assert_eq!(l.volume.grid().dims, [4, 3, 2]);
 }
 
 /// An enhanced multi-frame object with `n` frames of `rows` × `cols` u16 at z = 2k (stored in
@@ -619,4 +628,89 @@ fn one_bit_samples_are_unpacked() {
         let want = if b % 3 == 0 || b == 35 { 1.0 } else { 0.0 };
         assert_eq!(v.data()[b], want, "bit {b}");
     }
+}
+
+/// Seeds for the `dicom` fuzz target (`fuzz/seeds/dicom/`), one per kind of file this module
+/// reads since issue 28: `VOLSPLAT_FUZZ_SEEDS=fuzz/seeds cargo test -p volsplat-io
+/// write_dicom_fuzz_seeds -- --ignored`.
+#[test]
+#[ignore]
+fn write_dicom_fuzz_seeds() {
+    let Some(root) = std::env::var_os("VOLSPLAT_FUZZ_SEEDS") else {
+        return;
+    };
+    let d = PathBuf::from(root).join("dicom");
+    std::fs::create_dir_all(&d).unwrap();
+    for (name, ts, bits, signed, _) in FIXTURES {
+        let (stream, _) = fixture(name);
+        let s = fixture_slice(ts, bits, signed);
+        std::fs::write(
+            d.join(format!("{name}.dcm")),
+            encapsulated(&s, vec![stream]),
+        )
+        .unwrap();
+    }
+    std::fs::write(d.join("enhanced.dcm"), enhanced(3, 4, 3)).unwrap();
+    let mut s = Slice::ct(0.0, 0);
+    s.ts = RLE;
+    std::fs::write(d.join("rle16.dcm"), s.bytes("1.2.3.20")).unwrap();
+    s.ts = DEFLATED_FRAMES;
+    std::fs::write(d.join("deflated_frames.dcm"), s.bytes("1.2.3.21")).unwrap();
+    // RT dose with GridFrameOffsetVector.
+    let s = Slice::ct(10.0, 0);
+    let mut o = s.object("1.2.3.22");
+    put(&mut o, FRAMES, VR::IS, "2".into());
+    put(&mut o, GRID_FRAME_OFFSETS, VR::DS, Slice::ds(&[0.0, 2.5]));
+    put(&mut o, DOSE_GRID_SCALING, VR::DS, Slice::ds(&[0.5]));
+    let words: Vec<u16> = (0..24).collect();
+    o.put(DataElement::new(
+        PIXEL_DATA.tag(),
+        VR::OW,
+        PrimitiveValue::U16(words.into()),
+    ));
+    std::fs::write(d.join("dose.dcm"), file_bytes(o, IMPLICIT_LE)).unwrap();
+    // Grey palette, 8-bit indices.
+    let mut s = Slice::ct(0.0, 0);
+    (s.bits, s.intercept) = (8, 0.0);
+    let mut o = s.object("1.2.3.23");
+    put(&mut o, PHOTOMETRIC, VR::CS, "PALETTE COLOR".into());
+    for k in 0..3 {
+        o.put(DataElement::new(
+            PALETTE_DESCRIPTORS[k].tag(),
+            VR::US,
+            PrimitiveValue::U16(vec![4u16, 0, 16].into()),
+        ));
+        o.put(DataElement::new(
+            PALETTE_DATA[k].tag(),
+            VR::OW,
+            PrimitiveValue::U16(vec![0u16, 10, 20, 30].into()),
+        ));
+    }
+    o.put(s.pixel_element());
+    std::fs::write(d.join("palette.dcm"), file_bytes(o, EXPLICIT_LE)).unwrap();
+    // Issue 28's crafted files: 65535² with a few bytes; 65536 frames without positions.
+    let mut s = Slice::ct(0.0, 0);
+    (s.rows, s.cols) = (65535, 65535);
+    s.values = vec![7; 6];
+    std::fs::write(d.join("huge.dcm"), s.bytes("1.2.3.24")).unwrap();
+    let s = Slice::ct(0.0, 0);
+    let mut o = s.object("1.2.3.25");
+    put(&mut o, FRAMES, VR::IS, "65536".into());
+    o.put(s.pixel_element());
+    std::fs::write(d.join("frames.dcm"), file_bytes(o, EXPLICIT_LE)).unwrap();
+}
+
+/// Fuzzing found (cargo-fuzz `dicom`): an item delimiter (FFFE,E00D) at the top level, before a
+/// header declaring 2.4 GB. The structure walk took the delimiter for an element past Pixel
+/// Data and stopped, while dicom-object's `read_until` read on and allocated the 2.4 GB.
+#[test]
+fn fuzz_top_level_item_delimiter_before_a_huge_length() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("x.dcm");
+    std::fs::write(&p, include_bytes!("testdata/fuzz-top-level-item-end.dcm")).unwrap();
+    let e = err_of(crate::read_volume_with(&p, &opts()));
+    assert!(
+        e.contains("x.dcm") && e.contains("declares 2433941536 bytes"),
+        "{e}"
+    );
 }

@@ -791,7 +791,11 @@ fn walk_dataset_into(
             if stack.is_empty() && tag == PIXEL_DATA {
                 found.pixel = Some((len, w.at()));
             }
-            if until_pixel && stack.is_empty() && tag >= PIXEL_DATA {
+            // Item and delimitation tags (group FFFE) sort after Pixel Data but are not data
+            // elements: the parser's `read_until` never stops at them (found by fuzzing: a
+            // stray item delimiter at the top level ended this walk while the parser read on
+            // into a 2.4 GB value).
+            if until_pixel && stack.is_empty() && tag >= PIXEL_DATA && tag.0 != 0xFFFE {
                 return Ok(());
             }
             if vr == VR::SQ || (len == UNDEFINED && !(tag == PIXEL_DATA || tag == ITEM_END)) {
