@@ -282,14 +282,12 @@ fn parse_walked(
         opts = opts.read_until(dicom_dictionary_std::tags::PIXEL_DATA);
     }
     let written = match &walked.vr_mismatch {
-        Some(declared) if !walked.deflated => {
-            TransferSyntaxRegistry
-                .get(&walked.ts_uid)
-                .map(|written| AsWritten {
-                    declared: declared.clone(),
-                    written,
-                })
-        }
+        Some(declared) => TransferSyntaxRegistry
+            .get(&walked.ts_uid)
+            .map(|written| AsWritten {
+                declared: declared.clone(),
+                written,
+            }),
         _ => None,
     };
     match written {

@@ -163,20 +163,22 @@ pub(super) fn walk(
         let mut enc = enc;
         let mut ts_uid = declared_ts.clone();
         let mut vr_mismatch = None;
-        if !enc.big_endian
+        // Read as written, as the parser will (`header::parse_walked` maps the declared UID to
+        // the written encoding). Only for the two native little-endian syntaxes: inside a
+        // deflated stream the parser has no such mapping (and the walk must follow the
+        // parser), and an encapsulated syntax's UID must stay to choose the pixel decoder.
+        if matches!(declared_ts.as_str(), IMPLICIT_VR_LE | EXPLICIT_VR_LE)
             && let Some(explicit) = looks_explicit(data)
             && explicit != enc.explicit
         {
             enc.explicit = explicit;
             vr_mismatch = Some(declared_ts.clone());
-            if !deflated {
-                ts_uid = if explicit {
-                    EXPLICIT_VR_LE
-                } else {
-                    IMPLICIT_VR_LE
-                }
-                .to_string();
+            ts_uid = if explicit {
+                EXPLICIT_VR_LE
+            } else {
+                IMPLICIT_VR_LE
             }
+            .to_string();
         }
         let found = walk_dataset(path, data, base, enc, until_pixel_data)?;
         let ts_name = TransferSyntaxRegistry
@@ -295,9 +297,8 @@ fn too_large(path: &Path, value: u64, limit: u64, d: Declared) -> IoError {
 /// only deflated syntax, PS3.5 §A.5), read until the walk stops (at Pixel Data, or where the
 /// prefix ends).
 fn declared_in_prefix(path: &Path, data: &[u8]) -> Declared {
-    let explicit = looks_explicit(data).unwrap_or(true);
     let enc = Enc {
-        explicit,
+        explicit: true,
         big_endian: false,
     };
     let mut found = Found::default();
