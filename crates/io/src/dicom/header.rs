@@ -650,14 +650,17 @@ fn image_header(
             ));
         }
     };
-    let mut notes = Vec::new();
-    let geom = frames_geometry(cx, top, frames, &mut notes)?;
     let photometric = text_or_empty(cx, top, PHOTOMETRIC);
     let grey_palette = if photometric == "PALETTE COLOR" {
         Some(palette_is_grey(cx, top))
     } else {
         None
     };
+    let samples = u16_attr(cx, top, SAMPLES)?;
+    // Colour first: it is the reason such a file is refused, whatever else it holds.
+    colour_check(path, samples, &photometric, grey_palette)?;
+    let mut notes = Vec::new();
+    let geom = frames_geometry(cx, top, frames, &mut notes)?;
     let mut h = FileHeader {
         path: path.to_path_buf(),
         series_uid: String::new(),
@@ -669,7 +672,7 @@ fn image_header(
         ts_name: walked.ts_name.clone(),
         rows,
         cols,
-        samples: u16_attr(cx, top, SAMPLES)?,
+        samples,
         photometric,
         bits_allocated: u16_attr(cx, top, BITS_ALLOCATED)?,
         bits_stored: u16_attr(cx, top, BITS_STORED)?,
@@ -855,6 +858,41 @@ fn check_pixel_length(h: &FileHeader, walked: &walk::Walked, file_len: u64) -> R
     Ok(())
 }
 
+/// Refuses colour images (PS3.3 §C.7.6.3.1.2): more than one sample per pixel, a colour
+/// palette, or a photometric interpretation other than MONOCHROME1/2 and grey PALETTE COLOR.
+fn colour_check(
+    p: &Path,
+    samples: Option<u16>,
+    pi: &str,
+    grey_palette: Option<bool>,
+) -> Result<()> {
+    let spp = samples.unwrap_or(1);
+    if spp != 1 {
+        return Err(IoError::unsupported(
+            p,
+            SAMPLES.label(),
+            &format!("{spp} ({pi}: a colour image)"),
+            "1 (grey-scale; volsplat reads scalar volumes)",
+        ));
+    }
+    match (pi, grey_palette) {
+        ("" | "MONOCHROME1" | "MONOCHROME2", _) | ("PALETTE COLOR", Some(true)) => Ok(()),
+        ("PALETTE COLOR", _) => Err(IoError::unsupported(
+            p,
+            PHOTOMETRIC.label(),
+            "PALETTE COLOR with a colour palette (red, green and blue tables differ): a colour \
+             image",
+            "MONOCHROME1, MONOCHROME2, PALETTE COLOR with a grey palette",
+        )),
+        _ => Err(IoError::unsupported(
+            p,
+            PHOTOMETRIC.label(),
+            pi,
+            "MONOCHROME1, MONOCHROME2, PALETTE COLOR with a grey palette",
+        )),
+    }
+}
+
 impl FileHeader {
     /// The validated pixel layout (PS3.3 §C.7.6.3.1).
     pub(super) fn pixel_format(&self) -> Result<PixelFormat> {
@@ -867,37 +905,8 @@ impl FileHeader {
                 "integer PixelData (7FE0,0010)",
             ));
         }
-        let spp = self.samples.unwrap_or(1);
-        if spp != 1 {
-            return Err(IoError::unsupported(
-                p,
-                SAMPLES.label(),
-                &format!("{spp} ({}: a colour image)", self.photometric),
-                "1 (grey-scale; volsplat reads scalar volumes)",
-            ));
-        }
-        let pi = self.photometric.as_str();
-        let palette = match (pi, self.grey_palette) {
-            ("" | "MONOCHROME1" | "MONOCHROME2", _) => false,
-            ("PALETTE COLOR", Some(true)) => true,
-            ("PALETTE COLOR", _) => {
-                return Err(IoError::unsupported(
-                    p,
-                    PHOTOMETRIC.label(),
-                    "PALETTE COLOR with a colour palette (red, green and blue tables differ): \
-                     a colour image",
-                    "MONOCHROME1, MONOCHROME2, PALETTE COLOR with a grey palette",
-                ));
-            }
-            _ => {
-                return Err(IoError::unsupported(
-                    p,
-                    PHOTOMETRIC.label(),
-                    pi,
-                    "MONOCHROME1, MONOCHROME2, PALETTE COLOR with a grey palette",
-                ));
-            }
-        };
+        colour_check(p, self.samples, &self.photometric, self.grey_palette)?;
+        let palette = self.photometric == "PALETTE COLOR";
         let ba = self
             .bits_allocated
             .ok_or_else(|| IoError::missing(p, BITS_ALLOCATED.label()))?;

@@ -714,3 +714,22 @@ fn fuzz_top_level_item_delimiter_before_a_huge_length() {
         "{e}"
     );
 }
+
+/// A colour image is refused as colour, whatever else it holds (here two frames without
+/// positions and pixel data sized for subsampled chroma).
+#[test]
+fn colour_is_the_reason_given_for_colour_images() {
+    let s = Slice::ct(0.0, 0);
+    let mut o = s.object("1.2.3.13");
+    put(&mut o, SAMPLES, VR::US, PrimitiveValue::from(3u16));
+    put(&mut o, PHOTOMETRIC, VR::CS, "YBR_FULL_422".into());
+    put(&mut o, FRAMES, VR::IS, "2".into());
+    o.put(s.pixel_element());
+    let dir = tempfile::tempdir().unwrap();
+    let p = write_file(dir.path(), "rgb.dcm", &file_bytes(o, EXPLICIT_LE));
+    let e = err_of(crate::read_volume_with(&p, &opts()));
+    assert!(
+        e.contains("colour image") && e.contains("YBR_FULL_422"),
+        "{e}"
+    );
+}
