@@ -231,7 +231,7 @@ struct AsWritten {
 
 impl TransferSyntaxIndex for AsWritten {
     fn get(&self, uid: &str) -> Option<&TransferSyntax> {
-        if uid.trim_end_matches(['\0', ' ']) == self.declared {
+        if uid.trim_end_matches(|c: char| c.is_whitespace() || c == '\0') == self.declared {
             Some(self.written)
         } else {
             TransferSyntaxRegistry.get(uid)

@@ -733,3 +733,18 @@ fn colour_is_the_reason_given_for_colour_images() {
         "{e}"
     );
 }
+
+/// Fuzzing found (cargo-fuzz `dicom`): a TransferSyntaxUID ending in a tab. dicom-object trims
+/// it (implicit VR); the structure walk compared it untrimmed, walked explicit VR, and let a
+/// 1.1 GB value length through to the parser.
+#[test]
+fn fuzz_transfer_syntax_uid_with_a_trailing_tab() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("x.dcm");
+    std::fs::write(&p, include_bytes!("testdata/fuzz-ts-uid-trailing-tab.dcm")).unwrap();
+    let e = err_of(crate::read_volume_with(&p, &opts()));
+    assert!(
+        e.contains("x.dcm") && e.contains("declares 1128875008 bytes"),
+        "{e}"
+    );
+}

@@ -133,15 +133,16 @@ pub(super) fn walk(
         });
     }
     let meta = walk_meta(path, bytes, offset)?;
-    let declared_ts = meta.ts_uid.clone();
-    let ts = TransferSyntaxRegistry.get(&declared_ts).ok_or_else(|| {
+    let ts = TransferSyntaxRegistry.get(&meta.ts_uid).ok_or_else(|| {
         IoError::unsupported(
             path,
             "TransferSyntaxUID (0002,0010)",
-            &declared_ts,
+            &meta.ts_uid,
             "the transfer syntaxes known to dicom-rs",
         )
     })?;
+    // The registry's spelling, which the parser uses.
+    let declared_ts = ts.uid().to_string();
     let enc = Enc {
         explicit: declared_ts != IMPLICIT_VR_LE,
         big_endian: ts.endianness() == Endianness::Big,
@@ -492,7 +493,10 @@ fn walk_meta(path: &Path, bytes: &[u8], base: u64) -> Result<Meta> {
         skip_value(&mut c, len, tag, path, base)?;
         let text = || {
             String::from_utf8_lossy(&bytes[start..c.pos])
-                .trim_end_matches(['\0', ' '])
+                // As dicom-object's `FileMetaTable::transfer_syntax` trims (a trailing tab
+                // too: found by fuzzing, the walk read explicit VR where the parser read
+                // implicit).
+                .trim_end_matches(|c: char| c.is_whitespace() || c == '\0')
                 .to_string()
         };
         if tag == Tag(0x0002, 0x0010) {
