@@ -1,4 +1,4 @@
-//! Compressed frames (decision 0021): JPEG (ISO 10918-1) by `jpeg-decoder` (baseline,
+//! Compressed frames (decision 0026): JPEG (ISO 10918-1) by `jpeg-decoder` (baseline,
 //! extended 8-bit, progressive, lossless) and `openreadout-codecs` (extended 12-bit), JPEG-LS
 //! (ISO 14495-1) by `openreadout-codecs` over `pure_jpegls`, JPEG 2000 (ISO 15444-1) by
 //! `hayro-jpeg2000`. All pure Rust.

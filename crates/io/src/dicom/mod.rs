@@ -1,6 +1,6 @@
 //! DICOM series (PS3.3 image objects stored as PS3.10 files), read with dicom-rs
 //! (`dicom-object` parses; pixel data is decoded here): a folder of slices, a list of files, or
-//! one file standing for its series. Decisions 0013 and 0021.
+//! one file standing for its series. Decisions 0013 and 0026.
 //!
 //! # Which files
 //!
@@ -89,7 +89,7 @@
 //! endian, encapsulated uncompressed, deflated image frames, RLE lossless (PS3.5 Annex G), JPEG
 //! baseline (process 1), extended (processes 2 & 4, 8- and 12-bit samples), progressive 8-bit
 //! and lossless (process 14, also selection value 1), JPEG-LS lossless and near-lossless,
-//! JPEG 2000 lossless and lossy — all decoded by pure-Rust crates (`codecs.rs`, decision 0021).
+//! JPEG 2000 lossless and lossy — all decoded by pure-Rust crates (`codecs.rs`, decision 0026).
 //! HTJ2K, JPEG XL and video are an error naming the syntax. Attributes stored with VR UN are
 //! read by their dictionary VR; a data set written in the other VR encoding than its meta
 //! group declares is read as written (a note says so).
