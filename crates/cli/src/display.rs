@@ -74,8 +74,20 @@ pub struct DisplayArgs {
     /// memory; a volume whose map would not fit is averaged down until it does (a note says so).
     #[arg(long, default_value_t = 0, hide_short_help = true)]
     pub max_map_values: usize,
-    /// Grey output for Sabella (default: red = intensity, green = maximum density).
-    #[arg(long, hide_short_help = true)]
+    /// Sabella's colours: grey (the default: the intensity in every channel, as the NIL
+    /// displays write theirs, so that the two compare channel for channel), or with
+    /// `--grey=false` the thesis's Plate 6.1 colouring (red = intensity, green = maximum
+    /// density).
+    #[arg(
+        long,
+        value_name = "true|false",
+        default_value_t = true,
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "true",
+        action = clap::ArgAction::Set,
+        hide_short_help = true
+    )]
     pub grey: bool,
 }
 

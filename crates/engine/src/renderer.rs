@@ -562,7 +562,7 @@ impl Renderer {
                                 map_size(need(&dv)),
                             ));
                         }
-                        Some(build_map(&dv, d.patch_order, None, budget)?)
+                        Some(pool.install(|| build_map(&dv, d.patch_order, None, budget))?)
                     } else {
                         None
                     };

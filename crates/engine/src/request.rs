@@ -263,7 +263,10 @@ impl Default for Quality {
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum DisplayChoice {
-    /// Linearised display, eq 6.1.
+    /// Sabella's display as a filter: the screen-filtered line integral `X` (through NIL maps,
+    /// or by quadrature with `direct`), shown as `1 − e^{−τX}` (decision 0021). The thesis's
+    /// eq 6.1 (unit density from the box's entry) is the filter library's
+    /// `Attenuation::UnitDensity`.
     #[default]
     Linearised,
     /// Gaussian slice (§6-2).
@@ -349,7 +352,9 @@ pub struct DisplayOptions {
     /// whose map would not fit is averaged down 2×, 3×, … per axis until it does, and the
     /// output notes say so ([`crate::Output::notes`]); raise the budget to keep full resolution.
     pub max_map_values: usize,
-    /// Grey output for Sabella (default: red = intensity, green = maximum density).
+    /// Grey output for Sabella (the default, `true`): the intensity in all three channels, as
+    /// the NIL displays write theirs, so that the two compare channel for channel. `false`: the
+    /// thesis's colouring of Plate 6.1 (red = intensity, green = maximum density).
     pub grey: bool,
 }
 
@@ -376,7 +381,7 @@ impl Default for DisplayOptions {
             dog_sigma: [0.01, 0.02],
             dog_gain: 8.0,
             max_map_values: 0,
-            grey: false,
+            grey: true,
         }
     }
 }
