@@ -548,7 +548,7 @@ pub enum RendererArg {
     Splat,
     /// Sabella's density-emitter display integrated along each ray (Buchanan eq. 3.1).
     Sabella,
-    /// Sabella's display evaluated with NIL maps (Buchanan ch. 6; decision 0021), or another
+    /// Sabella's display evaluated with NIL maps (Buchanan ch. 6; decision 0027), or another
     /// Chapter 6 display (--display).
     Nil,
 }

@@ -349,7 +349,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "20",
         ],
         "npy",
-        // Re-recorded for decision 0021: Sabella's display is grey by default (was red =
+        // Re-recorded for decision 0027: Sabella's display is grey by default (was red =
         // intensity, green = maximum density; `--grey=false` keeps that).
         0xfcbc25545f400a00,
     ),
@@ -372,7 +372,7 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "20",
         ],
         "npy",
-        // Re-recorded for decision 0021: Sabella's attenuation instead of eq 6.1's unit
+        // Re-recorded for decision 0027: Sabella's attenuation instead of eq 6.1's unit
         // density, continuous patches, cells at most 1.5 filter widths, 4 × 4 lines.
         0x3a6e54d0f43090bb,
     ),

@@ -264,7 +264,7 @@ impl Default for Quality {
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum DisplayChoice {
     /// Sabella's display as a filter: the screen-filtered line integral `X` (through NIL maps,
-    /// or by quadrature with `direct`), shown as `1 − e^{−τX}` (decision 0021). The thesis's
+    /// or by quadrature with `direct`), shown as `1 − e^{−τX}` (decision 0027). The thesis's
     /// eq 6.1 (unit density from the box's entry) is the filter library's
     /// `Attenuation::UnitDensity`.
     #[default]

@@ -40,7 +40,7 @@ fn camera(parallel: bool) -> Camera {
     c
 }
 
-/// The linearised display as decision 0007 measured it (before decision 0021): eq 6.1's
+/// The linearised display as decision 0007 measured it (before decision 0027): eq 6.1's
 /// unit-density attenuation, each cell's own projection, no cap on cell size, 8 × 8 lines.
 fn decision_0007() -> DisplaySettings {
     DisplaySettings {

@@ -1,5 +1,5 @@
 //! The NIL display at its default settings against Sabella's display, and its seams and signs
-//! (issue 28, decision 0021): on a 197×233×189 MRI the NIL display was 19 dB from Sabella's,
+//! (issue 28, decision 0027): on a 197×233×189 MRI the NIL display was 19 dB from Sabella's,
 //! with seams along NIL cell boundaries and negative values.
 //!
 //! Three causes, each with a test that fails on the former defaults:
@@ -22,7 +22,7 @@ use volsplat_filter::display::{
 use volsplat_filter::texture::Reconstruction;
 use volsplat_testkit::metrics::psnr;
 
-/// The display settings before decision 0021: eq 6.1's unit-density attenuation, each cell's
+/// The display settings before decision 0027: eq 6.1's unit-density attenuation, each cell's
 /// own projection, no cap on cell size, 8 × 8 cross-section lines.
 fn former() -> DisplaySettings {
     DisplaySettings {

@@ -72,7 +72,7 @@ fn downsample2(v: &volsplat_core::Volume<f32>) -> Result<volsplat_core::Volume<f
 
 /// The displays as the thesis defines them, for its plates and tables: eq 6.1's unit-density
 /// attenuation, each NIL cell's own fit, cells chosen by the triggers alone, 8 × 8 lines across
-/// the screen filter (the library defaults before decision 0021).
+/// the screen filter (the library defaults before decision 0027).
 fn thesis_settings() -> DisplaySettings {
     let d = DisplaySettings::default();
     DisplaySettings {
@@ -91,7 +91,7 @@ fn thesis_settings() -> DisplaySettings {
 }
 
 /// The report's section on the default NIL display against Sabella's (issue 28, decision
-/// 0021), with the displays of the fix's steps; returns the section and the images of the
+/// 0027), with the displays of the fix's steps; returns the section and the images of the
 /// plate `default_nil_vs_sabella.png` (Sabella, the default, the former default).
 fn default_display_section(
     render: &dyn Fn(
@@ -104,7 +104,7 @@ fn default_display_section(
     let mut md = String::new();
     writeln!(
         md,
-        "\n## The default NIL display against Sabella's (issue 28, decision 0021)\n\n`volsplat render --renderer nil` at its defaults (M = 2, tol 2, 32 trigger slices per unit) on the same view, against the Sabella plate above. The former default, eq 6.1 as printed (unit density from the box's entry), was 19 dB from Sabella's display on a 197×233×189 MRI, with seams along the NIL cells' faces and negative values. Each row adds one step of the fix. PSNR with peak 1 on the display values (Sabella's range is [0, 1)). *Lowest integral*: the smallest NIL filter value before the display clamps it at zero (eq 6.1's value, or the line integral `X` under Sabella's attenuation); negative where the patches overshoot. Plate `default_nil_vs_sabella.png`: Sabella, the default, the former default (windowed as Plate 6.1).\n\n| display | PSNR vs Sabella dB | lowest integral | lowest value | image s |\n|---|---|---|---|---|"
+        "\n## The default NIL display against Sabella's (issue 28, decision 0027)\n\n`volsplat render --renderer nil` at its defaults (M = 2, tol 2, 32 trigger slices per unit) on the same view, against the Sabella plate above. The former default, eq 6.1 as printed (unit density from the box's entry), was 19 dB from Sabella's display on a 197×233×189 MRI, with seams along the NIL cells' faces and negative values. Each row adds one step of the fix. PSNR with peak 1 on the display values (Sabella's range is [0, 1)). *Lowest integral*: the smallest NIL filter value before the display clamps it at zero (eq 6.1's value, or the line integral `X` under Sabella's attenuation); negative where the patches overshoot. Plate `default_nil_vs_sabella.png`: Sabella, the default, the former default (windowed as Plate 6.1).\n\n| display | PSNR vs Sabella dB | lowest integral | lowest value | image s |\n|---|---|---|---|---|"
     )?;
     let map = build()?;
     let former = DisplaySettings {

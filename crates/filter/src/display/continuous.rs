@@ -1,5 +1,5 @@
 //! Continuous (C⁰) NIL patches: the data's per-cell projections averaged at shared nodes
-//! (decision 0021).
+//! (decision 0027).
 //!
 //! With control points by projection (decision 0007) the NIL value of a filter `F` is
 //! `Σ_cells Σ b·C = Σ_c ⟨F, P_c T⟩`: the filter integrated against `P_c T`, the L² projection of

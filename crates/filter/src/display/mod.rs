@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | `Sabella` | `τ·I`, `I = ∫ e^{−τ∫ρ} ρ dt` (eq 3.1), `n × n` rays per pixel; green = mean of the per-ray maximum density (Plate 6.1) | §6-1 |
 //! | `Maximum` | maximum density along the ray, `n × n` rays per pixel | §6-3 |
-//! | `Linearised` | default ([`Attenuation::OpticalDepth`]): `1 − e^{−τX}`, `X = ∭Fρ` with `F = G_screen` along the whole ray (Sabella's value, decision 0021); [`Attenuation::UnitDensity`]: `τ·∭Fρ` with `F = G_screen · e^{−τ(t−t_a)}`, `t ≥ t_a`, `∬G_screen = 1` (eq 3.3 = 6.1) | §6-1 |
+//! | `Linearised` | default ([`Attenuation::OpticalDepth`]): `1 − e^{−τX}`, `X = ∭Fρ` with `F = G_screen` along the whole ray (Sabella's value, decision 0027); [`Attenuation::UnitDensity`]: `τ·∭Fρ` with `F = G_screen · e^{−τ(t−t_a)}`, `t ≥ t_a`, `∬G_screen = 1` (eq 3.3 = 6.1) | §6-1 |
 //! | `Slice` | `∭Fρ/∭F`, `F = G_screen · G(t − t_c; w)` (thick `w = 0.1`, thin `0.01`) | §6-2 |
 //! | `Search` | density at the point the ray search picks (Plate 6.10) | §6-3 |
 //! | `SampleFilter` | `½ + gain · (ρ̄_{σ₁} − ρ̄_{σ₂})`, a difference of Gaussians at the searched point | §6-3 |
@@ -29,12 +29,12 @@
 //! under perspective). Rays come from [`volsplat_core::Projection::ray`] through pixel centres
 //! `(x + ½, y + ½)`, so orthographic and perspective cameras both work. Images: row 0 at the top.
 //!
-//! ## Decisions (digest §7, A-15 …; decisions 0007, 0021; `docs/nil-display/report.md`)
-//! - **Sabella's attenuation by default** (decision 0021, [`Attenuation`]): eq 3.1's integrand is
+//! ## Decisions (digest §7, A-15 …; decisions 0007, 0027; `docs/nil-display/report.md`)
+//! - **Sabella's attenuation by default** (decision 0027, [`Attenuation`]): eq 3.1's integrand is
 //!   an exact derivative, so Sabella's display is `1 − e^{−τX}` of the line integral `X`, a
 //!   linear filter the NIL map evaluates without linearising. eq 6.1's unit density from the
 //!   box's entry was 19 dB from Sabella's display on a 197×233×189 MRI.
-//! - **Continuous patches** (decision 0021, [`NilDisplaySettings::continuous`]): the cells'
+//! - **Continuous patches** (decision 0027, [`NilDisplaySettings::continuous`]): the cells'
 //!   projections of the data are averaged at shared nodes, so the tube of a pixel sees no jump
 //!   at a cell face (no seams); crossed cells are at most
 //!   [`NilDisplaySettings::max_cell_width`] filter widths wide; display values are clamped at
@@ -163,7 +163,7 @@ pub struct NilDisplaySettings {
     /// split down to the coarsest level holding triggers. Off reproduces Fig 4.19 as printed,
     /// whose trigger-less cells next to a ray stay large and blur its fringe.
     pub refine_support: bool,
-    /// Continuous patches (decision 0021; projected control points, `M ≥ 2`): the data's
+    /// Continuous patches (decision 0027; projected control points, `M ≥ 2`): the data's
     /// per-cell projections are averaged at the nodes that cells of one level share, so the
     /// approximated density has no jumps at cell faces and the image no seams along projected
     /// cell boundaries. For the tube filters (linearised display, slices); the balls of the
@@ -172,7 +172,7 @@ pub struct NilDisplaySettings {
     /// first written).
     pub continuous: bool,
     /// Largest cell a filter crosses, in multiples of the filter's narrowest cross-section
-    /// (`6σ`: the screen Gaussian's or the ball's truncated width; decision 0021): crossed
+    /// (`6σ`: the screen Gaussian's or the ball's truncated width; decision 0027): crossed
     /// cells wider than that are split, like the support refinement, whatever their triggers.
     /// A patch much wider than the filter cannot follow it, and the tube then samples a fit
     /// of the data over the whole cell (blur, and seams along cell faces). `0`: no cap (the
@@ -200,7 +200,7 @@ impl Default for NilDisplaySettings {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Attenuation {
     /// Sabella's own attenuation `e^{−τ∫ρ}` (eq 3.1), without linearisation (default,
-    /// decision 0021): the emission density is the absorption density, so the integrand of
+    /// decision 0027): the emission density is the absorption density, so the integrand of
     /// eq 3.1 is `d/dt(−e^{−τ∫ρ}/τ)` and `τI = 1 − e^{−τX}` with `X = ∫ρ dt` along the ray. The
     /// display evaluates the linear filter `X = ∬G ∫ρ dt` (screen Gaussian × line integral)
     /// with NIL maps or quadrature and shows `1 − e^{−τX}`: Sabella's display up to the screen
@@ -220,7 +220,7 @@ pub struct QuadratureSettings {
     pub step: f64,
     /// Gauss–Legendre nodes per axis across the ray over `±3σ` (a multiple of 4): the filter's
     /// cross-section lines, shared by the direct evaluation and the NIL control points, so that
-    /// their difference is the patch approximation alone. Default 4 (16 lines; decision 0021:
+    /// their difference is the patch approximation alone. Default 4 (16 lines; decision 0027:
     /// 0.1 dB from 8 per axis on an MRI's NIL display, at a quarter of the cost).
     pub cross_nodes: usize,
 }

@@ -36,7 +36,7 @@ struct Scratch {
     bs: Vec<Option<[f64; 64]>>,
     /// Cross-section nodes of the NIL line quadrature.
     cross: Vec<(f64, f64)>,
-    /// A cell's raw moments (continuous patches, decision 0021).
+    /// A cell's raw moments (continuous patches, decision 0027).
     raw: Vec<f64>,
 }
 
@@ -132,7 +132,7 @@ pub(crate) fn render(
     let step = s.quadrature.step * vol.min_spacing();
     let cross = composite_nodes(-TRUNC, TRUNC, s.quadrature.cross_nodes / 4, 4);
     let projector = map.map(|m| Projector::new(*m.basis()));
-    // Continuous patches (decision 0021): shared node values per level, built on first use.
+    // Continuous patches (decision 0027): shared node values per level, built on first use.
     let grids = match (map, &projector) {
         (Some(m), Some(p)) if s.nil.continuous && s.nil.control == ControlPoints::Project => {
             let exact0 = m.transfer().is_none()
@@ -499,7 +499,7 @@ fn nil_eval(
                 // Continuous patches need the filter's moments, discontinuous ones its control
                 // points (`b = G⁻¹ m`); constant patches (M = 1) share no nodes.
                 // Balls (the difference of Gaussians) keep each cell's own fit: they measure
-                // the data's edges, which the shared node values blur (decision 0021).
+                // the data's edges, which the shared node values blur (decision 0027).
                 let tube = !matches!(shape, PixelFilter::Ball { .. });
                 let continuous = grids.filter(|_| tube && map.basis().order() > 1);
                 sc.bs.clear();
@@ -557,7 +557,7 @@ fn nil_eval(
 
 /// The cells of one NIL evaluation into `sc.cells`: Fig 4.19's hierarchy of `sc.triggers` under
 /// the smallest cell enclosing `sc.bound`, with the support refinement (decision 0007) and the
-/// size cap (decision 0021). Returns the root (`None`: no cell within `γ_max` encloses them).
+/// size cap (decision 0027). Returns the root (`None`: no cell within `γ_max` encloses them).
 fn hierarchy(
     vol: &DisplayVolume,
     map: &DiscreteNilMap,
@@ -584,7 +584,7 @@ fn hierarchy(
         .filter(|c| c.1 > 0)
         .map(|c| c.0.gamma)
         .max();
-    // Size cap (decision 0021): no crossed cell wider than `max_cell_width` times the
+    // Size cap (decision 0027): no crossed cell wider than `max_cell_width` times the
     // narrowest filter's cross-section (index units along the coarsest axis), and none
     // finer than a voxel for the cap's sake: a cell of level ≤ 0 lies in one voxel cell,
     // where the data is already in the patch space.
