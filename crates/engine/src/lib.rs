@@ -40,9 +40,9 @@ pub use renderer::{
     renderer_name,
 };
 pub use request::{
-    AntialiasChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice, DisplayChoice,
-    DisplayOptions, KernelChoice, Mode, OrderChoice, PreintegrateChoice, Quality, RenderRequest,
-    RendererChoice, ShadeAtChoice, VisibilityChoice,
+    AntialiasChoice, AttenuationChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice,
+    DisplayChoice, DisplayOptions, KernelChoice, Mode, OrderChoice, PreintegrateChoice, Quality,
+    RenderRequest, RendererChoice, ShadeAtChoice, VisibilityChoice,
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,

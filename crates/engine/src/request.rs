@@ -6,7 +6,8 @@ use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use volsplat_filter::display::{
-    ControlPoints, DisplayKind, DisplaySettings, Evaluator, NilDisplaySettings, SearchRule,
+    Attenuation, ControlPoints, DisplayKind, DisplaySettings, Evaluator, NilDisplaySettings,
+    SearchRule,
 };
 use volsplat_splat::{Antialias, Order, RenderMode, RenderSettings, Visibility};
 
@@ -291,6 +292,20 @@ pub enum DensityChoice {
     Data,
 }
 
+/// How the linearised display attenuates (decision 0027).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum AttenuationChoice {
+    /// Sabella's own attenuation: `1 − e^{−τX}` of the screen-filtered line integral `X`.
+    #[default]
+    OpticalDepth,
+    /// Buchanan's eq 6.1 as printed: unit density from the ray's entry into the volume's box
+    /// (the thesis's Plates 6.3–6.6; far darker than Sabella's display where the box holds
+    /// empty space).
+    UnitDensity,
+}
+
 /// NIL control-point rule (decision 0007).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -356,6 +371,14 @@ pub struct DisplayOptions {
     /// the NIL displays write theirs, so that the two compare channel for channel. `false`: the
     /// thesis's colouring of Plate 6.1 (red = intensity, green = maximum density).
     pub grey: bool,
+    /// The linearised display's attenuation (decision 0027).
+    pub attenuation: AttenuationChoice,
+    /// NIL continuous patches (decision 0027): neighbouring cells' fits averaged at their shared
+    /// nodes, so the image has no seams along cell faces. `false`: each cell's own fit.
+    pub continuous_patches: bool,
+    /// Largest NIL cell a filter crosses, in multiples of the filter's narrowest cross-section
+    /// (`6σ`; decision 0027); `0`: no cap (the trigger hierarchy alone, as the thesis).
+    pub max_cell_width: f64,
 }
 
 impl Default for DisplayOptions {
@@ -382,6 +405,9 @@ impl Default for DisplayOptions {
             dog_gain: 8.0,
             max_map_values: 0,
             grey: true,
+            attenuation: AttenuationChoice::OpticalDepth,
+            continuous_patches: true,
+            max_cell_width: NilDisplaySettings::default().max_cell_width,
         }
     }
 }
@@ -434,7 +460,13 @@ impl DisplayOptions {
                 }),
                 trigger_steps: self.trigger_steps,
                 gamma_min: self.gamma_min,
+                continuous: self.continuous_patches,
+                max_cell_width: self.max_cell_width,
                 ..Default::default()
+            },
+            attenuation: match self.attenuation {
+                AttenuationChoice::OpticalDepth => Attenuation::OpticalDepth,
+                AttenuationChoice::UnitDensity => Attenuation::UnitDensity,
             },
             transfer: None,
             ..Default::default()
