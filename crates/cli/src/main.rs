@@ -10,6 +10,7 @@ mod display;
 mod movie;
 mod progress;
 mod request;
+mod view;
 
 use clap::{CommandFactory, FromArgMatches};
 
@@ -31,6 +32,11 @@ fn main() -> std::process::ExitCode {
     if let (args::Command::Movie(b), Some(("movie", m))) = (&mut cli.command, matches.subcommand())
     {
         b.given = given(m);
+    }
+    match (&mut cli.command, matches.subcommand()) {
+        (args::Command::View(v), Some(("view", m))) => v.given = given(m),
+        (args::Command::BenchView(v), Some(("bench-view", m))) => v.given = given(m),
+        _ => {}
     }
     if let (args::Command::Render(r), Some(("render", m))) =
         (&mut cli.command, matches.subcommand())
