@@ -108,7 +108,9 @@ fn view_drag_save_render_and_stop() {
         let path = dir.path().join("scene.json");
         scene.save(&path).unwrap();
         let rendered = render_scene(&path, &dir.path().join("r.png"), &image);
-        assert_eq!(png, rendered, "{flags:?} {image:?}");
+        let decode = |b: &[u8]| volsplat_view::replay::decode_rgb("png", b).unwrap();
+        assert_eq!(decode(&png), decode(&rendered), "{flags:?} {image:?}");
+        assert_eq!(c.screenshot(WAIT).unwrap(), rendered, "{flags:?} {image:?}");
         let err = interrupt(&mut child);
         assert!(err.contains("stopped"), "{err}");
     }

@@ -2,7 +2,7 @@
 //! the volume's histogram for the transfer-function editor.
 
 use crate::error::{Result, ViewError};
-use volsplat::core::{AnyVolume, Histogram, Image};
+use volsplat::core::{AnyVolume, Histogram};
 use volsplat::io::{PngBitDepth, PngSettings};
 use volsplat::{Mode, Output, WriteOptions};
 
@@ -10,35 +10,46 @@ use volsplat::{Mode, Output, WriteOptions};
 /// a few milliseconds and lose less to JPEG than the preview loses to its size).
 pub const DEFAULT_PREVIEW_QUALITY: u8 = 85;
 
-/// The picture a frame shows as 8-bit RGB, row 0 at the top: composite over the background,
-/// or MIP, MinIP and X-ray values through the grey window (X-ray without one: 0 to its
-/// brightest value), as `write_image` writes them.
+/// The picture a frame shows as 8-bit RGB, row 0 at the top: exactly the code values of the
+/// 8-bit PNG `volsplat render` writes for it (composite over the background, encoded linear or
+/// sRGB; MIP, MinIP and X-ray values through the grey window, X-ray without one from 0 to its
+/// brightest value), whatever the bit depth of the file the screenshot button saves.
 pub fn display_rgb(out: &Output, mode: Mode, display: &WriteOptions) -> (usize, usize, Vec<u8>) {
+    let (w, h) = (out.image.width(), out.image.height());
     let grey = volsplat::writes_values(out.values.is_some(), mode, display.window);
-    let image: Image = match (&out.values, grey) {
-        (Some(values), true) => {
-            let (lo, hi) = display.window.unwrap_or_else(|| {
-                let max = values
-                    .values()
-                    .iter()
-                    .filter(|v| v.is_finite())
-                    .fold(0.0f32, |m, &v| m.max(v));
-                (0.0, max.max(f32::MIN_POSITIVE))
-            });
-            volsplat::windowed_image(values, lo, hi)
-        }
-        _ => out.image.clone(),
-    };
+    if let (Some(values), true) = (&out.values, grey) {
+        let (lo, hi) = display.window.unwrap_or_else(|| {
+            let max = values
+                .values()
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold(0.0f32, |m, &v| m.max(v));
+            (0.0, max.max(f32::MIN_POSITIVE))
+        });
+        // volsplat_io::write_png_gray's code values, computed as it computes them.
+        let (lo, hi) = (lo as f64, hi as f64);
+        let rgb = values
+            .values()
+            .iter()
+            .flat_map(|&v| {
+                let t = (v as f64 - lo) / (hi - lo);
+                let t = if t > 0.0 { t.min(1.0) } else { 0.0 };
+                let c = (t * 255.0).round().clamp(0.0, 255.0) as u8;
+                [c, c, c]
+            })
+            .collect();
+        return (w, h, rgb);
+    }
     let settings = PngSettings {
         bits: PngBitDepth::Eight,
-        srgb: display.png.srgb && !grey,
+        srgb: display.png.srgb,
         background: display.png.background,
     };
-    let rgb = volsplat::io::rgb_codes(&image, &settings)
+    let rgb = volsplat::io::rgb_codes(&out.image, &settings)
         .into_iter()
         .map(|c| c.min(255) as u8)
         .collect();
-    (image.width(), image.height(), rgb)
+    (w, h, rgb)
 }
 
 /// A preview as JPEG at `quality` (1..=100).
@@ -61,9 +72,28 @@ pub fn preview_jpeg(
     Ok(bytes)
 }
 
-/// The final frame: exactly the bytes `volsplat render -o FILE.png` writes for the same scene
+/// The final frame as the page receives it: [`display_rgb`]'s code values, lossless, in a PNG
+/// compressed for speed (fdeflate) rather than size: the pixels of `render`'s file, a few
+/// times faster to encode than its bytes (docs/viewer.md, "Frames").
+pub fn final_frame(out: &Output, mode: Mode, display: &WriteOptions) -> Result<Vec<u8>> {
+    let (w, h, rgb) = display_rgb(out, mode, display);
+    let mut bytes = Vec::with_capacity(rgb.len() / 2 + 1024);
+    {
+        let mut enc = png::Encoder::new(&mut bytes, w as u32, h as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
+        let enc_err = |e: png::EncodingError| ViewError::Encode(e.to_string());
+        let mut writer = enc.write_header().map_err(enc_err)?;
+        writer.write_image_data(&rgb).map_err(enc_err)?;
+        writer.finish().map_err(enc_err)?;
+    }
+    Ok(bytes)
+}
+
+/// The screenshot: exactly the bytes `volsplat render -o FILE.png` writes for the same scene
 /// and image options ([`volsplat::encode_png`]).
-pub fn final_png(out: &Output, mode: Mode, display: &WriteOptions) -> Result<Vec<u8>> {
+pub fn screenshot_png(out: &Output, mode: Mode, display: &WriteOptions) -> Result<Vec<u8>> {
     Ok(volsplat::encode_png(
         &out.image,
         out.values.as_ref(),
@@ -112,6 +142,59 @@ pub fn histogram(vol: &AnyVolume, bins: usize) -> (Vec<u64>, [f64; 2]) {
 mod tests {
     use super::*;
     use volsplat::core::{Grid, Volume};
+
+    /// The frame the page shows holds the code values of render's 8-bit PNG, for composite
+    /// (linear and sRGB, over a background), MIP through a window and X-ray scaled to its
+    /// brightest value; and the screenshot is render's file.
+    #[test]
+    fn the_final_frame_shows_the_pixels_of_renders_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = volsplat::Scene {
+            volume: volsplat::VolumeSource::Phantom {
+                phantom: volsplat::PhantomKind::Head,
+                grid: Some(vec![24, 28, 26]),
+            },
+            ..volsplat::Scene::default()
+        };
+        let mut renderer = volsplat::Renderer::new();
+        let mut srgb = WriteOptions::default();
+        srgb.png.srgb = true;
+        srgb.png.background = [0.2, 0.3, 0.4];
+        let window = WriteOptions {
+            window: Some((-200.0, 900.0)),
+            ..WriteOptions::default()
+        };
+        for (mode, display) in [
+            (Mode::Composite, WriteOptions::default()),
+            (Mode::Composite, srgb),
+            (Mode::Mip, window),
+            (Mode::Xray, WriteOptions::default()),
+        ] {
+            let mut req = volsplat::RenderRequest::new(scene.clone(), 40, 30);
+            req.mode = mode;
+            if mode == Mode::Xray {
+                // Line integrals of Hounsfield units are mostly negative: X-ray a density.
+                req.scene.volume = volsplat::VolumeSource::Phantom {
+                    phantom: volsplat::PhantomKind::Blobs,
+                    grid: Some(vec![24]),
+                };
+            }
+            let out = renderer.render(&req, &mut |_| true).unwrap();
+            let path = dir.path().join("r.png");
+            volsplat::write_image(&path, &out.image, out.values.as_ref(), mode, &display).unwrap();
+            let file = std::fs::read(&path).unwrap();
+            assert_eq!(screenshot_png(&out, mode, &display).unwrap(), file);
+            let (_, _, expect) = crate::replay::decode_rgb("png", &file).unwrap();
+            let frame = final_frame(&out, mode, &display).unwrap();
+            let (w, h, shown) = crate::replay::decode_rgb("png", &frame).unwrap();
+            assert_eq!((w, h), (40, 30));
+            assert_eq!(shown, expect, "{mode:?}");
+            assert!(
+                expect.iter().any(|&v| v > 30),
+                "{mode:?}: an empty frame proves nothing"
+            );
+        }
+    }
 
     #[test]
     fn histogram_counts_every_sample_in_the_right_bin() {

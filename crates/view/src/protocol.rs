@@ -33,6 +33,8 @@ pub enum ClientMessage {
     },
     /// Ask for the current scene (the JSON `volsplat render --scene` reads).
     SaveScene {},
+    /// Ask for the PNG file of the latest final frame: the bytes `volsplat render` writes.
+    Screenshot {},
     /// Render a turntable GIF of the current scene on the server.
     Turntable {
         /// Frames, 1..=[`MAX_TURNTABLE_FRAMES`].
@@ -192,6 +194,9 @@ pub struct Hello {
     pub dims: [usize; 3],
     /// Spacing per axis, world units.
     pub spacing: [f64; 3],
+    /// World bounds of the voxel centres, lower and upper corner (world units, LPS for
+    /// medical volumes).
+    pub bounds: [[f64; 3]; 2],
     /// Smallest and largest value, data units.
     pub value_range: [f64; 2],
     /// Sample counts over `value_range` in equal bins (the transfer-function editor draws

@@ -149,6 +149,15 @@ impl Client {
         }
     }
 
+    /// Asks for the screenshot (the PNG file of the latest final frame) and waits for it.
+    pub fn screenshot(&mut self, timeout: Duration) -> Result<Vec<u8>, String> {
+        self.send(&ClientMessage::Screenshot {})?;
+        self.wait_for(timeout, |m| match m {
+            Incoming::Frame(h, b) if h.kind == "file" && h.format == "png" => Some(b.clone()),
+            _ => None,
+        })
+    }
+
     /// Waits for the final frame showing event `seq` or later; returns its header and PNG.
     pub fn wait_final(
         &mut self,

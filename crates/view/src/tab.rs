@@ -34,6 +34,14 @@ enum Command {
         max_size: usize,
     },
     Open(Box<RenderRequest>),
+    Screenshot,
+}
+
+/// The latest final frame of a tab, for the screenshot button.
+struct LastFinal {
+    out: volsplat::Output,
+    mode: volsplat::Mode,
+    display: volsplat::WriteOptions,
 }
 
 #[derive(Default)]
@@ -45,6 +53,7 @@ struct TabState {
     unacked: Option<u64>,
     closed: bool,
     commands: Vec<Command>,
+    last_final: Option<Arc<LastFinal>>,
 }
 
 /// One tab's shared state.
@@ -206,6 +215,10 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
             tab.wake.notify_all();
         }
         ClientMessage::Cancel {} => tab.cancel_turntable.store(true, Ordering::Release),
+        ClientMessage::Screenshot {} => {
+            tab.lock().commands.push(Command::Screenshot);
+            tab.wake.notify_all();
+        }
         ClientMessage::Open { name } => match tab.shared.open_request(&name) {
             Ok(request) => {
                 tab.lock().commands.push(Command::Open(Box::new(request)));
@@ -271,6 +284,7 @@ fn worker(tab: &Tab, request: RenderRequest) {
                 }
                 last_tf = None;
             }
+            Next::Command(Command::Screenshot) => screenshot(tab),
             Next::Command(Command::Turntable {
                 frames,
                 degrees,
@@ -342,6 +356,10 @@ fn start_session(tab: &Tab, request: RenderRequest) -> bool {
         volume: display_label(&session.request().scene.volume),
         dims: g.dims,
         spacing: g.spacing,
+        bounds: {
+            let (lo, hi) = g.bounds_world();
+            [lo.to_array(), hi.to_array()]
+        },
         value_range: range,
         histogram,
         presets: std::iter::once("auto".to_string())
@@ -360,6 +378,7 @@ fn start_session(tab: &Tab, request: RenderRequest) -> bool {
     let state = state_of(&session, seq, None);
     st.session = Some(session);
     st.unacked = None;
+    st.last_final = None;
     drop(st);
     tab.send(&ServerMessage::State(Box::new(state)));
     tab.wake.notify_all();
@@ -417,7 +436,7 @@ fn render_and_send(
     let t1 = Instant::now();
     let mode = job.request.mode;
     let encoded = match job.kind {
-        JobKind::Final => frames::final_png(&out, mode, &job.display),
+        JobKind::Final => frames::final_frame(&out, mode, &job.display),
         JobKind::Preview(_) => frames::preview_jpeg(
             &out,
             mode,
@@ -482,6 +501,48 @@ fn render_and_send(
             message: note.clone(),
         });
     }
+    if is_final {
+        tab.lock().last_final = Some(Arc::new(LastFinal {
+            out,
+            mode,
+            display: job.display.clone(),
+        }));
+    }
+}
+
+/// Sends the PNG file of the latest final frame (the page's screenshot button).
+fn screenshot(tab: &Tab) {
+    let Some(last) = tab.lock().last_final.clone() else {
+        return tab.error(None, "no full-quality frame yet".into());
+    };
+    match frames::screenshot_png(&last.out, last.mode, &last.display) {
+        Ok(bytes) => {
+            let header = file_header("screenshot.png", "png");
+            let _ = tab.out.binary(binary_message(&header, &bytes));
+        }
+        Err(e) => tab.error(None, format!("screenshot: {e}")),
+    }
+}
+
+/// The header of a file message.
+fn file_header(name: &str, format: &str) -> FrameHeader {
+    FrameHeader {
+        kind: "file".into(),
+        id: 0,
+        seq: 0,
+        quality: "final".into(),
+        format: format.into(),
+        width: 0,
+        height: 0,
+        view: [0, 0],
+        render_ms: 0.0,
+        encode_ms: 0.0,
+        scale: 1.0,
+        slab_factor: 1.0,
+        volume_level: 0,
+        values_range: None,
+        name: Some(name.into()),
+    }
 }
 
 /// Waits until no frame is in flight, then marks frame `id` as in flight; `false` if the tab
@@ -526,23 +587,7 @@ fn turntable(tab: &Tab, frames: usize, degrees: f64, fps: f64, max_size: usize) 
         tab, &request, &display, &camera, frames, degrees, fps, max_size,
     ) {
         Ok(Some(bytes)) => {
-            let header = FrameHeader {
-                kind: "file".into(),
-                id: 0,
-                seq: 0,
-                quality: "final".into(),
-                format: "gif".into(),
-                width: 0,
-                height: 0,
-                view: [0, 0],
-                render_ms: 0.0,
-                encode_ms: 0.0,
-                scale: 1.0,
-                slab_factor: 1.0,
-                volume_level: 0,
-                values_range: None,
-                name: Some("turntable.gif".into()),
-            };
+            let header = file_header("turntable.gif", "gif");
             let _ = tab.out.binary(binary_message(&header, &bytes));
         }
         Ok(None) => tab.send(&ServerMessage::Progress {

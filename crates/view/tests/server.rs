@@ -181,7 +181,14 @@ fn events_give_previews_then_the_final_frame_of_render() {
         &volsplat::WriteOptions::default(),
     )
     .unwrap();
-    assert_eq!(png, expect, "the final frame is not render's PNG");
+    let decode = |b: &[u8]| volsplat_view::replay::decode_rgb("png", b).unwrap();
+    assert_eq!(
+        decode(&png),
+        decode(&expect),
+        "the final frame shows other pixels than render"
+    );
+    let shot = c.screenshot(WAIT).unwrap();
+    assert_eq!(shot, expect, "the screenshot is not render's PNG file");
 }
 
 #[test]
