@@ -63,6 +63,10 @@ pub struct ServerArgs {
     /// 1/FPS s on this machine (measured, not guessed).
     #[arg(long, value_name = "FPS", default_value_t = 30.0)]
     pub target_fps: f64,
+    /// Input-to-frame latency to keep while dragging, ms: previews also aim at a fifth of it
+    /// less than half (frames of T ms give a 95th-percentile latency of about 2T).
+    #[arg(long, value_name = "MS", default_value_t = 50.0)]
+    pub target_latency: f64,
     /// JPEG quality of previews, 1..=100 (the final frame is always the lossless PNG).
     #[arg(long, value_name = "Q", default_value_t = volsplat_view::frames::DEFAULT_PREVIEW_QUALITY)]
     pub preview_quality: u8,
@@ -121,6 +125,7 @@ fn viewer_settings(s: &ServerArgs, image: &ImageOptions) -> Result<ViewerSetting
         ..ViewerSettings::default()
     };
     settings.session.target_fps = s.target_fps;
+    settings.session.target_latency_ms = s.target_latency;
     Ok(settings)
 }
 
@@ -237,6 +242,7 @@ pub fn bench_view_cmd(a: BenchViewArgs) -> Result<()> {
     let (width, height) = (req.width, req.height);
     let settings = viewer_settings(&a.server, &a.image)?;
     let budget_ms = settings.session.budget_ms();
+    let aim_ms = settings.session.aim_ms();
     let handle = Viewer::bind(
         req,
         Renderer::with_limits(reader_limits(&a.input)?),
@@ -267,6 +273,7 @@ pub fn bench_view_cmd(a: BenchViewArgs) -> Result<()> {
             "width": width,
             "height": height,
             "budget_ms": budget_ms,
+        "preview_aim_ms": aim_ms,
             "cores": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
             "replays": reports,
         })

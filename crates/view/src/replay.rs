@@ -496,6 +496,8 @@ fn preview_psnr(client: &mut Client, samples: &[RenderRequest]) -> Result<Vec<f6
             }
         };
         client.event(Event::Interaction { active: true })?;
+        // A change first, so that a frame follows even where the sample is the scene already.
+        client.event(Event::Zoom { factor: 1.001 })?;
         client.event(Event::SetTransferFunction {
             transfer_function: req.scene.transfer_function.clone(),
         })?;

@@ -425,9 +425,9 @@ impl Session {
             .plan(self.request.width, self.request.height, &self.settings)
     }
 
-    /// What previews aim at, ms: the budget less the headroom.
+    /// What previews aim at, ms ([`SessionSettings::aim_ms`]).
     fn aim_ms(&self) -> f64 {
-        self.settings.budget_ms() * self.settings.headroom
+        self.settings.aim_ms()
     }
 
     /// Hands a job back with what became of it. A rendered frame's measured time sizes the

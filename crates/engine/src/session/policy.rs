@@ -78,9 +78,15 @@ pub struct SessionSettings {
     /// Frames per second to keep while input arrives (default 30): the frame budget is
     /// `1000 / target_fps` ms of render and encoding.
     pub target_fps: f64,
-    /// Share of the budget previews aim at (default 0.8), leaving the rest for transport and
-    /// jitter.
+    /// Share of the frame interval previews aim at (default 0.8), leaving the rest for
+    /// transport and jitter.
     pub headroom: f64,
+    /// Input-to-frame latency to keep while dragging, ms (default 50). Input arrives at any
+    /// moment of the render in flight, waits for it, then for its own frame: the latency is
+    /// about `T + U(0, T)` plus transport for frames of `T` ms, 1.95 T at the 95th
+    /// percentile; previews aim at `T ≤ latency / 2.5`, which leaves a fifth of it for
+    /// encoding, transport, decoding and a busy machine.
+    pub target_latency_ms: f64,
     /// After a continuous event (a drag step, a wheel step) with no pointer held, wait this long
     /// for more before refining (default 120 ms). Discrete events (a button) refine at once.
     pub rest_delay_ms: f64,
@@ -102,6 +108,7 @@ impl Default for SessionSettings {
         SessionSettings {
             target_fps: 30.0,
             headroom: 0.8,
+            target_latency_ms: 50.0,
             rest_delay_ms: 120.0,
             min_scale: 0.125,
             max_slab_factor: 4.0,
@@ -112,9 +119,16 @@ impl Default for SessionSettings {
 }
 
 impl SessionSettings {
-    /// The frame budget, ms.
+    /// The frame budget, ms: one frame interval at [`SessionSettings::target_fps`].
     pub fn budget_ms(&self) -> f64 {
         1000.0 / self.target_fps
+    }
+
+    /// What a preview's render and encoding aim at, ms: the smaller of
+    /// [`SessionSettings::headroom`] × the budget and [`SessionSettings::target_latency_ms`]
+    /// / 2.5.
+    pub fn aim_ms(&self) -> f64 {
+        (self.headroom * self.budget_ms()).min(self.target_latency_ms / 2.5)
     }
 
     /// Checks the numbers; errors name the field.
@@ -124,6 +138,12 @@ impl SessionSettings {
             return bad(
                 "target_fps",
                 format!("must be in [0.1, 1000], got {}", self.target_fps),
+            );
+        }
+        if !(self.target_latency_ms.is_finite() && self.target_latency_ms >= 1.0) {
+            return bad(
+                "target_latency_ms",
+                format!("must be ≥ 1, got {}", self.target_latency_ms),
             );
         }
         if !(self.headroom > 0.0 && self.headroom <= 1.0) {

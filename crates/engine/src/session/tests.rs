@@ -243,7 +243,7 @@ fn a_cheap_final_frame_needs_no_preview() {
 /// from below, on fast and slow machines (the slowest needs thicker slabs).
 #[test]
 fn previews_settle_on_the_budget_from_measured_times() {
-    let aim = SessionSettings::default().budget_ms() * SessionSettings::default().headroom;
+    let aim = SessionSettings::default().aim_ms();
     // ms for a full-size, full-thickness frame of one ray per pixel: fast and slow machines.
     for full_ms in [40.0, 300.0, 3000.0] {
         let (mut s, _) = policy_session();
