@@ -69,6 +69,9 @@ pub(crate) struct Shared {
     next_conn: AtomicUsize,
     histograms: Mutex<HashMap<String, Histogram>>,
     pub(crate) clock: Arc<dyn Clock>,
+    /// The scene and display options of the tab that changed last (the start request before
+    /// any), for library callers ([`ViewerHandle::scene`]).
+    latest: Mutex<(RenderRequest, WriteOptions)>,
 }
 
 impl Shared {
@@ -141,6 +144,11 @@ impl Shared {
         req.scene.transfer_function = TransferSpec::Auto;
         req.scene.clipping = Default::default();
         Ok(req)
+    }
+
+    /// Records the scene a tab has just changed to.
+    pub(crate) fn set_latest(&self, request: &RenderRequest, display: &WriteOptions) {
+        *self.latest.lock().unwrap_or_else(|e| e.into_inner()) = (request.clone(), display.clone());
     }
 
     fn register(&self, out: &Arc<Outgoing>) -> u64 {
@@ -264,6 +272,7 @@ impl Viewer {
             IpAddr::V4(v4) => v4.to_string(),
         };
         let url = format!("http://{url_host}:{}/?token={}", addr.port(), token.hex());
+        let latest = Mutex::new((probe.request().clone(), probe.display().clone()));
         Ok(Viewer {
             listener,
             shared: Arc::new(Shared {
@@ -278,6 +287,7 @@ impl Viewer {
                 next_conn: AtomicUsize::new(1),
                 histograms: Mutex::new(HashMap::new()),
                 clock,
+                latest,
             }),
             url,
             addr,
@@ -414,6 +424,17 @@ impl ViewerHandle {
     /// The token's hex form.
     pub fn token(&self) -> String {
         self.shared.token.hex()
+    }
+
+    /// The scene of the tab that changed last (the starting scene before any tab did): its
+    /// request, camera explicit, as `volsplat render --scene` reads it, and its display options
+    /// (grey window, PNG settings).
+    pub fn scene(&self) -> (RenderRequest, WriteOptions) {
+        self.shared
+            .latest
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     /// Number of tabs connected now.

@@ -168,6 +168,7 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
             );
             match session.apply(event) {
                 Ok(()) => {
+                    tab.shared.set_latest(session.request(), session.display());
                     st.seq = st.seq.max(seq);
                     let state = (!camera_only).then(|| state_of(session, st.seq, None));
                     drop(guard);
@@ -373,6 +374,7 @@ fn start_session(tab: &Tab, request: RenderRequest) -> bool {
         budget_ms: session.settings().budget_ms(),
     };
     tab.send(&ServerMessage::Hello(Box::new(hello)));
+    tab.shared.set_latest(session.request(), session.display());
     let mut st = tab.lock();
     let seq = st.seq;
     let state = state_of(&session, seq, None);

@@ -272,6 +272,11 @@ fn two_tabs_watch_one_volume_with_their_own_cameras() {
     b.wait_final(sb, WAIT).unwrap();
     let (ra, rb) = (a.scene(WAIT).unwrap(), b.scene(WAIT).unwrap());
     assert_ne!(ra.scene.camera, rb.scene.camera);
+    assert_eq!(
+        h.scene().0,
+        rb,
+        "the handle's scene is the tab that changed last"
+    );
     assert_eq!(ra.scene.volume, rb.scene.volume);
 }
 
