@@ -1,16 +1,23 @@
 #!/usr/bin/env python3
 """Render a volume with VTK's CPU ray caster (vtkFixedPointVolumeRayCastMapper) using a volsplat
-camera file and transfer-function file (DESIGN.md §3), and compare with volsplat's image.
+camera file and transfer-function file (formats: README.md, section "Files"; conventions:
+docs/architecture.md, "Frames and units"), and compare with volsplat's image.
 
-Development tool; needs `pip install vtk numpy` and an X server (run under `xvfb-run -a`).
+Development tool; needs `pip install vtk numpy` (a virtual environment: tools/vtk_parity.sh keeps
+one in target/vtk-venv). VTK draws offscreen: without an X display the script asks the `vtk`
+wheel for its EGL window (`VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow`, Mesa's libEGL), so no
+X server is needed; set VTK_DEFAULT_OPENGL_WINDOW yourself to choose another (the wheel's
+`vtkOSOpenGLRenderWindow` needs libOSMesa), or run under `xvfb-run -a` where EGL is missing.
 
-    xvfb-run -a python3 tools/vtk_compare.py VOLUME.nrrd CAMERA.json TF.json OUT_PREFIX [--size 512] [--frames 8]
+    python3 tools/vtk_compare.py VOLUME.nrrd CAMERA.json TF.json OUT_PREFIX [--size 512] [--frames 8]
 
-Writes OUT_PREFIX.vtk.png (VTK) and prints the median VTK render time. Compare with a volsplat
-render made with `--linear` (VTK writes its framebuffer values unencoded) using `--ssim A B`;
-`--montage OUT.png PREFIX...` puts PREFIX.vtk.png beside PREFIX.vs.png, one row per prefix.
+Writes OUT_PREFIX.vtk.png (VTK) and prints the median VTK render time and the render window
+class used. Compare with a volsplat render (its PNGs hold linear values, as VTK writes its
+framebuffer; decision 0012) using `--ssim A B`; `--montage OUT.png PREFIX...` puts
+PREFIX.vtk.png beside PREFIX.vs.png, one row per prefix.
 """
 import json
+import os
 import sys
 import time
 
@@ -78,7 +85,15 @@ def montage(out, prefixes):
                 + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
 
 
+def offscreen():
+    """Chooses VTK's EGL window when there is no X display and the user chose none; must run
+    before the first render window is made."""
+    if not os.environ.get("DISPLAY"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+
 def main():
+    offscreen()
     if sys.argv[1] == "--montage":
         montage(sys.argv[2], sys.argv[3:])
         return
@@ -159,7 +174,7 @@ def main():
         rw.Render()
         times.append((time.perf_counter() - t) * 1e3)
     print(json.dumps({"vtk_median_ms": float(np.median(times)), "vtk_frames_ms": times,
-                      "threads": mapper.GetNumberOfThreads()}))
+                      "threads": mapper.GetNumberOfThreads(), "window": rw.GetClassName()}))
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 //! `volsplat aa-figures`: the anti-aliasing study of Swan et al. 1997 (Fig. 7 and §5), written
 //! by `volsplat_studies::antialias::write_figures`. Flags only.
 
+use crate::say::say;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -35,6 +36,6 @@ pub fn aa_figures_cmd(a: AaFiguresArgs) -> Result<()> {
     let written = pool.install(|| volsplat_studies::write_figures(&settings));
     bar.clear();
     let written = written?;
-    eprintln!("wrote {}", written.report.display());
+    say!("wrote {}", written.report.display());
     Ok(())
 }

@@ -7,9 +7,10 @@ pub use volsplat::{
     ShadeAtChoice, VisibilityChoice,
 };
 
-/// Volume rendering by splatting (Westover 1991).
+/// Direct volume rendering on the CPU by splatting (Westover 1991; Swan et al. 1997), image-aligned
+/// slabs and Buchanan's NIL-map displays.
 #[derive(Debug, Parser)]
-#[command(name = "volsplat", version, about, long_about = None)]
+#[command(name = "volsplat", version, long_about = None)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -17,7 +18,7 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Render a volume (or the built-in demo phantom) to a PNG or .npy image.
+    /// Render a volume (or the built-in MRI head) to a PNG or .npy image.
     Render(Box<RenderArgs>),
     /// Render a turntable or a keyframed camera flight to PNG frames, GIF, APNG or video.
     Movie(Box<crate::movie::MovieArgs>),
@@ -25,8 +26,9 @@ pub enum Command {
     Info(InfoArgs),
     /// List the built-in transfer-function presets, one line each.
     Presets,
-    /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, keeping
-    /// its geometry (world frame LPS), or to .npy (samples only, shape z, y, x).
+    /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, NIfTI or
+    /// MetaImage, keeping its geometry (world frame LPS; NIfTI in its own RAS frame), or to .npy
+    /// (samples only, shape z, y, x).
     Convert(ConvertArgs),
     /// Write a built-in phantom as an NRRD file.
     Phantom(PhantomArgs),
@@ -146,8 +148,9 @@ pub struct ViewArgs {
     #[arg(long, value_name = "FACTOR")]
     pub zoom: Option<f64>,
     /// Perspective projection (VTK's default camera) instead of orthographic; switches a
-    /// --camera file's camera to perspective too. Implies the splat-list renderer (Swan et al.
-    /// 1997).
+    /// --camera file's camera to perspective too. Drawn with image-aligned slabs where
+    /// `--visibility auto` picks them (composite, MIP, MinIP), else with the splat list (Swan et
+    /// al. 1997), which takes the radial kernels only.
     #[arg(long, conflicts_with = "orthographic")]
     pub perspective: bool,
     /// Switch a --camera file's perspective camera to orthographic (VTK's ParallelProjectionOn);
@@ -180,9 +183,23 @@ pub struct RenderOptions {
     )]
     pub size: String,
     /// Ray function. xray: the line integral ∫ρ ds; its PNG is scaled so that the brightest
-    /// pixel is white, its .npy holds the unscaled values (data units × world units).
+    /// pixel is white, its .npy holds the unscaled values (data units × world units). X-ray
+    /// ignores the transfer function, MIP, MinIP and X-ray the lights, shading switches, surface
+    /// enhancement and depth cueing (a warning names what is ignored).
     #[arg(long, value_enum, default_value = "composite", help_heading = "Output")]
     pub mode: Mode,
+    /// X-ray: integrate max(ρ + VALUE, 0) instead of ρ. auto (default): 1000 where the values
+    /// look like CT in Hounsfield units (−900 or below and 300 or above: attenuation relative
+    /// to air, a radiograph), none otherwise; none: the raw values.
+    #[arg(
+        long,
+        value_name = "VALUE|auto|none",
+        allow_hyphen_values = true,
+        value_parser = |s: &str| s.parse::<volsplat::XrayDensity>(),
+        help_heading = "Output",
+        hide_short_help = true
+    )]
+    pub xray_offset: Option<volsplat::XrayDensity>,
     /// Transfer-function JSON file (VTK's volume property; format in README.md, section
     /// "Files").
     #[arg(
@@ -195,7 +212,9 @@ pub struct RenderOptions {
     /// Built-in transfer function: 3D Slicer's presets (CT-Bone, CT-AAA, MR-Default, …; in
     /// absolute data units, e.g. Hounsfield) and volsplat's ct-skin and ramp; `volsplat presets`
     /// lists them. `auto` (the default): a function from the volume's histogram that makes the
-    /// background transparent (ct-skin for the demo head; an opaque grey window for MIP/MinIP).
+    /// background transparent (ct-skin for the synthetic CT `head` phantom; an opaque grey
+    /// window for MIP/MinIP). With --scene, a --mode other than the scene's takes the new mode's
+    /// default unless --tf or --preset is given.
     #[arg(
         long,
         value_name = "NAME",
@@ -230,7 +249,8 @@ pub struct RenderOptions {
     )]
     pub crop_mm: Option<String>,
     /// A clipping plane NX,NY,NZ,D (world frame): keeps the points with N·x + D ≥ 0, the side
-    /// the normal points to, as VTK. Repeat for several; the cut is smooth, not voxel-stepped.
+    /// the normal points to, as VTK. Repeat for several (at most 64); the cut is smooth, not
+    /// voxel-stepped.
     #[arg(
         long,
         value_name = "NX,NY,NZ,D",
@@ -247,8 +267,8 @@ pub struct RenderOptions {
     )]
     pub depth_cue: Option<String>,
     /// A directional light: direction X,Y,Z towards the light in the camera frame (x right, y up,
-    /// z towards the viewer), optionally followed by colour R,G,B. Repeat for several lights.
-    /// Default: one white headlight (0,0,1), as VTK.
+    /// z towards the viewer), optionally followed by colour R,G,B. Repeat for several lights
+    /// (at most 16). Default: one white headlight (0,0,1), as VTK.
     #[arg(
         long,
         value_name = "X,Y,Z[,R,G,B]",
@@ -351,7 +371,8 @@ pub struct RenderOptions {
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
     /// Render from a sparse splat list (Swan et al. §5): the visible voxels are extracted once
-    /// and reused for every frame. Always on for perspective views.
+    /// and reused for every frame. Perspective views use it where image-aligned slabs are not
+    /// chosen (X-ray, sheet-only options, --visibility sheet or every).
     #[arg(long, help_heading = "Performance", hide_short_help = true)]
     pub splat_list: bool,
     /// Splat list: keep voxels whose opacity (scalar × gradient opacity) exceeds this, in
@@ -385,7 +406,7 @@ pub struct ImageOptions {
     /// Linear PNG values: the default now; kept so that older command lines still work.
     #[arg(long, hide = true, conflicts_with = "srgb")]
     pub linear: bool,
-    /// Background colour R,G,B in [0, 1] (linear), composited under the image.
+    /// Background colour R,G,B, each a linear value in [0, 1], composited under the image.
     #[arg(
         long,
         value_name = "R,G,B",
@@ -415,21 +436,10 @@ pub struct ImageOptions {
     pub wl: Option<String>,
 }
 
-/// A `--view` value (also A, P, L, R, S, I).
+/// A `--view` value (also A, P, L, R, S, I): the engine's names, as Python's `view=`.
 fn parse_view(s: &str) -> Result<volsplat::core::AnatomicalView, String> {
-    use volsplat::core::AnatomicalView as V;
-    Ok(match s.to_ascii_lowercase().as_str() {
-        "anterior" | "a" | "front" => V::Anterior,
-        "posterior" | "p" | "back" => V::Posterior,
-        "left" | "l" => V::Left,
-        "right" | "r" => V::Right,
-        "superior" | "s" | "top" => V::Superior,
-        "inferior" | "i" | "bottom" => V::Inferior,
-        _ => {
-            return Err(format!(
-                "`{s}`: expected anterior, posterior, left, right, superior or inferior"
-            ));
-        }
+    volsplat::core::AnatomicalView::from_name(s).map_err(|_| {
+        format!("`{s}`: expected anterior, posterior, left, right, superior or inferior")
     })
 }
 
@@ -462,7 +472,7 @@ pub struct RenderArgs {
     /// Print per-stage timings and counters as one JSON object on stdout.
     #[arg(long, help_heading = "Output")]
     pub stats: bool,
-    /// Don't print what was written (warnings and errors are still printed).
+    /// Don't print notes or what was written (warnings and errors are still printed).
     #[arg(short, long, help_heading = "Output")]
     pub quiet: bool,
     /// Render the request of a scene file (as written by --save-scene) instead of starting from
@@ -562,11 +572,14 @@ pub struct InfoArgs {
 pub struct ConvertArgs {
     #[command(flatten)]
     pub input: InputArgs,
-    /// Output: .nrrd (attached header, geometry kept; --gzip compresses the payload) or .npy
-    /// (the samples in their own type, shape (z, y, x), no geometry).
+    /// Output, by its extension: .nrrd (attached header, space left-posterior-superior), .nii or
+    /// .nii.gz (NIfTI-1, sform and qform; geometry rounded to float32), .mha or .mhd (MetaImage
+    /// as ITK writes it; .mhd with a .raw/.zraw data file beside it), or .npy (the samples in
+    /// their own type, shape (z, y, x), no geometry).
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
-    /// Gzip the payload.
+    /// Compress the samples: NRRD gzip encoding, MetaImage zlib (.mhd: a .zraw data file). For
+    /// NIfTI name the output .nii.gz; .npy is never compressed.
     #[arg(long)]
     pub gzip: bool,
     /// Don't print what was written.
@@ -583,8 +596,8 @@ pub struct PhantomArgs {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Grid size: N (cube) or X,Y,Z (checkerboard: X,Y[,SQUARE]), as `render --phantom-size`.
-    /// Default: the phantom's own size, the one `render --phantom KIND` uses (head
-    /// 128×160×144; shepp-logan, blobs, marschner-lobb 128³).
+    /// Default: the phantom's own size, the one `render --phantom KIND` uses (brain: fixed,
+    /// 84×128×128; head 128×160×144; shepp-logan, blobs, marschner-lobb 128³).
     #[arg(long, value_name = "N|X,Y,Z")]
     pub grid: Option<String>,
     /// Renamed: `--size` means the image size in `render` and `bench`; use --grid here.
@@ -603,7 +616,7 @@ pub struct BenchArgs {
     pub view: ViewArgs,
     #[command(flatten)]
     pub options: RenderOptions,
-    /// Frames to time, after one warm-up frame.
+    /// Frames to time, after one warm-up frame (at most 100000).
     #[arg(long, default_value_t = 8)]
     pub frames: usize,
     /// Degrees of azimuth between frames (default 360/frames; 0 keeps the view fixed).

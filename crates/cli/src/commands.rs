@@ -2,6 +2,8 @@
 
 use crate::args::*;
 use crate::request::*;
+use crate::say::say;
+use crate::signals::Stop;
 use anyhow::{Context, Result, anyhow, bail};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -206,10 +208,18 @@ pub(crate) fn write_options(o: &ImageOptions) -> Result<volsplat::WriteOptions> 
         png: PngSettings {
             bits: png_bits(o)?,
             srgb: o.srgb,
-            background: triple::<f32>(&o.background, "--background")?,
+            background: background(o)?,
         },
         window: grey_window(o)?,
     })
+}
+
+/// The `--background` colour: three linear values in [0, 1].
+pub(crate) fn background(o: &ImageOptions) -> Result<[f32; 3]> {
+    let bg = triple::<f32>(&o.background, "--background")?;
+    volsplat::write::check_background(bg)
+        .map_err(|m| anyhow!("--background {}: {m}", o.background))?;
+    Ok(bg)
 }
 
 pub(crate) fn png_bits(o: &ImageOptions) -> Result<PngBitDepth> {
@@ -220,7 +230,7 @@ pub(crate) fn png_bits(o: &ImageOptions) -> Result<PngBitDepth> {
 /// The checks of the image options that need no volume.
 pub(crate) fn check_image_options(o: &ImageOptions, mode: Mode) -> Result<()> {
     png_bits(o)?;
-    triple::<f32>(&o.background, "--background")?;
+    background(o)?;
     if grey_window(o)?.is_some() && mode == Mode::Composite {
         bail!(
             "{}: a grey window applies to --mode mip, minip and xray; composite images take their \
@@ -251,7 +261,7 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
         triple::<f32>(c, "--draw-k")?;
     }
     if !a.given_display_flags.is_empty() && a.renderer == RendererArg::Splat {
-        eprintln!(
+        say!(
             "warning: {} only apply to --renderer sabella|nil; the splatting renderer ignores them",
             a.given_display_flags.join(", ")
         );
@@ -265,7 +275,7 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
             );
         }
         if !a.given_splat_flags.is_empty() {
-            eprintln!(
+            say!(
                 "warning: {} only apply to --renderer splat; the {:?} display ignores them",
                 a.given_splat_flags.join(", "),
                 a.renderer
@@ -282,7 +292,7 @@ pub(crate) fn load_scene(path: Option<&Path>) -> Result<Option<RenderRequest>> {
     };
     let (req, warnings) = RenderRequest::load(p)?;
     for w in warnings {
-        eprintln!("warning: {w}");
+        say!("warning: {w}");
     }
     Ok(Some(req))
 }
@@ -290,7 +300,7 @@ pub(crate) fn load_scene(path: Option<&Path>) -> Result<Option<RenderRequest>> {
 /// The `given` ids of `a` plus the `--scene` request, translated into the engine's request.
 fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
     let base = load_scene(a.scene.as_deref())?;
-    build_request(
+    let (req, notes) = build_request_noted(
         &a.input,
         &a.view,
         &a.options,
@@ -299,7 +309,22 @@ fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
         a.draw_k.as_deref(),
         &a.given.iter().cloned().collect(),
         base,
-    )
+    )?;
+    if !a.quiet {
+        for n in notes {
+            say!("note: {n}");
+        }
+    }
+    Ok(req)
+}
+
+/// An engine error of a render worded for the command line, with `rendering LABEL` in front
+/// unless the error names its file already (a volume that cannot be read).
+pub(crate) fn render_error(e: volsplat::EngineError, label: &str) -> anyhow::Error {
+    match e {
+        volsplat::EngineError::Io(_) | volsplat::EngineError::SceneFile { .. } => explain(e),
+        e => explain(e).context(format!("rendering {label}")),
+    }
 }
 
 /// Writes one line to standard output. A closed pipe (`volsplat info f | head -1`) ends the
@@ -307,9 +332,9 @@ fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
 pub(crate) fn emit(line: &str) -> Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
-    match writeln!(out, "{line}") {
+    match writeln!(out, "{line}").and_then(|()| out.flush()) {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        r => Ok(r?),
+        r => r.context("writing to standard output"),
     }
 }
 
@@ -328,9 +353,32 @@ fn flag_of(field: &str) -> Option<&'static str> {
         "volume.grid" => "--phantom-size",
         "display.dog_sigma" => "--dog-sigma",
         "scene.surface_enhance" => "--surface-enhance",
+        "scene.depth_cue" => "--depth-cue",
+        "scene.transfer_function" => "--tf/--preset",
+        "scene.shading" => "--no-emission/--no-diffuse/--no-specular",
+        "scene.clipping.crop" => "--crop/--crop-mm",
+        "background" => "--background",
+        "frames" => "--frames",
+        "fps" => "--fps",
+        "degrees" => "--degrees",
+        "axis" => "--axis",
+        f if f.starts_with("scene.clipping.planes") => "--clip-plane",
+        f if f.starts_with("keyframes") || f.starts_with("frame ") => "--keyframes",
         f if f.starts_with("scene.lights") => "--light",
         _ => return None,
     })
+}
+
+/// An engine warning worded for the command line: an ignored option
+/// ([`RenderRequest::ignored_options`], `scene.lights is ignored by mode xray: …`) names its flag
+/// too (`--light (scene.lights) is ignored by --mode xray: …`).
+pub(crate) fn cli_warning(w: &str) -> String {
+    if let Some((field, rest)) = w.split_once(" is ignored by mode ")
+        && let Some(flag) = flag_of(field)
+    {
+        return format!("{flag} ({field}) is ignored by --mode {rest}");
+    }
+    w.to_string()
 }
 
 /// An engine error worded for the command line: request fields name their flag too.
@@ -351,10 +399,11 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     let mut renderer = Renderer::with_limits(reader_limits(&a.input)?);
     let label = req.scene.volume.label();
     let mut written: Vec<PathBuf> = Vec::new();
+    let stop = Stop::install()?;
     let out = if a.ladder {
         let ladder = default_ladder(req.quality.kernel.kernel());
         let quiet = a.quiet;
-        let (output, args) = (&a.output, &a);
+        let (output, args, stop) = (&a.output, &a, &stop);
         let written = &mut written;
         renderer.render_refined(&req, &ladder, &mut |p| {
             let path = preview_path(output, p.subsample);
@@ -375,21 +424,39 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             .map_err(|e| volsplat::EngineError::request("preview", format!("{e:#}")))?;
             written.push(path.clone());
             if !quiet {
-                eprintln!(
+                say!(
                     "preview {}: {} ({:.1} ms)",
                     p.index + 1,
                     path.display(),
                     out.stats.total_ms
                 );
             }
-            Ok(true)
+            Ok(stop.signal().is_none())
         })
     } else {
         let bar = crate::progress::Bar::fraction("render", a.quiet);
-        let out = renderer.render(&req, &mut bar.callback());
+        let out = renderer.render(&req, &mut |p| {
+            bar.set_fraction(p.fraction, p.stage);
+            stop.signal().is_none()
+        });
         bar.clear();
         out
     };
+    if stop.signal().is_some() {
+        // Nothing of an interrupted render is kept: not even its whole previews.
+        for p in &written {
+            let _ = std::fs::remove_file(p);
+        }
+        stop.check(&format!(
+            "stopped before writing {}{}",
+            a.output.display(),
+            if written.is_empty() {
+                ""
+            } else {
+                " (its previews were removed)"
+            }
+        ))?;
+    }
     let out = match out {
         Err(volsplat::EngineError::NonFinite { stage, count }) => {
             return Err(NonFiniteOutput {
@@ -400,26 +467,24 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             }
             .into());
         }
-        r => r
-            .map_err(explain)
-            .with_context(|| format!("rendering {label}"))?,
+        r => r.map_err(|e| render_error(e, &label))?,
     };
     if !a.quiet {
         for n in &out.notes {
-            eprintln!("note: {n}");
+            say!("note: {n}");
         }
     }
     for w in &out.warnings {
         if w.starts_with("k = ") {
             if !a.quiet {
-                eprintln!("{w}");
+                say!("{w}");
             }
         } else {
-            eprintln!("warning: {w}");
+            say!("warning: {}", cli_warning(w));
         }
     }
     if out.camera.parallel_projection && a.view.view_angle.is_some() {
-        eprintln!(
+        say!(
             "warning: --view-angle has no effect on an orthographic camera{} (add --perspective)",
             match &a.view.camera {
                 Some(p) => format!(" ({} has parallel_projection: true)", p.display()),
@@ -438,7 +503,11 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             camera: out.camera.clone(),
             orbit: volsplat::core::Orbit::default(),
         };
-        saved.scene.transfer_function = TransferSpec::Function(out.transfer_function.clone());
+        // X-ray ignores the transfer function: the scene keeps `auto` rather than a function
+        // that would draw an "ignored" warning when rendered again.
+        if req.mode != Mode::Xray {
+            saved.scene.transfer_function = TransferSpec::Function(out.transfer_function.clone());
+        }
         saved.save(p)?;
     }
     let stage = renderer_name(out.stats.renderer.unwrap_or(UsedRenderer::Dense));
@@ -452,7 +521,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         &written,
     )?;
     if !a.quiet {
-        eprintln!(
+        say!(
             "wrote {} ({}×{}, {:.0} ms)",
             a.output.display(),
             req.width,
@@ -460,6 +529,11 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             t0.elapsed().as_secs_f64() * 1e3
         );
     }
+    // A signal during the last writes: what was written is whole and kept.
+    stop.check(&format!(
+        "stopped after {} was written whole (kept)",
+        a.output.display()
+    ))?;
     if a.stats {
         emit(&serde_json::to_string(&out.stats)?)?;
     }
@@ -516,9 +590,6 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
     let info = volsplat::io::VolumeInfo::new(Path::new(&label), &loaded);
     if a.json {
         return emit(&info.to_json_pretty());
-    }
-    for n in &info.notes {
-        emit(&format!("note:      {n}"))?;
     }
     let d = info.direction;
     emit(&format!("source:    {label}"))?;
@@ -577,38 +648,28 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
             emit(&format!("  {here} {s}"))?;
         }
     }
+    // The reader's notes after what they are about.
+    for n in &info.notes {
+        emit(&format!("note:      {n}"))?;
+    }
     Ok(())
 }
 
-/// `convert`: any readable volume to an attached-header NRRD, geometry kept.
+/// `convert`: any readable volume to the format the output's name gives
+/// (`volsplat::io::write_volume`: NRRD, NIfTI, MetaImage or .npy), geometry kept.
 fn convert_cmd(a: ConvertArgs) -> Result<()> {
-    check_output_path(&a.output, "-o", &["nrrd", "npy"])?;
-    let npy = a
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
-    if npy && a.gzip {
-        bail!("--gzip applies to NRRD output; .npy files are not compressed");
-    }
+    check_output_path(&a.output, "-o", &[])?;
+    let options = volsplat::io::VolumeWriteOptions { compress: a.gzip };
+    volsplat::io::volume_write_format(&a.output, &options)?;
     let (label, loaded) = load_info(&a.input)?;
-    if npy {
-        volsplat::io::write_npy_volume(&a.output, &loaded.volume)
-    } else {
-        volsplat::io::write_nrrd(&a.output, &loaded.volume, a.gzip)
-    }
-    .with_context(|| format!("writing {}", a.output.display()))?;
-    if npy && !a.quiet {
-        eprintln!(
-            "note: .npy keeps the samples, shape (z, y, x), but not the geometry (spacing, origin, \
-             direction); NRRD keeps both"
-        );
-    }
+    let written = volsplat::io::write_volume(&a.output, &loaded.volume, &options)
+        .with_context(|| format!("writing {}", a.output.display()))?;
     if !a.quiet {
-        for n in &loaded.notes {
-            eprintln!("note: {n}");
+        for n in loaded.notes.iter().chain(&written.notes) {
+            say!("note: {n}");
         }
         let g = loaded.volume.grid();
-        eprintln!(
+        say!(
             "wrote {} ({} {}×{}×{} {}, from {label})",
             a.output.display(),
             loaded.format,
@@ -668,7 +729,7 @@ fn phantom_cmd(a: PhantomArgs) -> Result<()> {
     let vol = volsplat::make_phantom(a.kind, grid.as_deref(), "--grid")?;
     volsplat::io::write_nrrd(&a.output, &vol, a.gzip)?;
     let g = vol.grid();
-    eprintln!(
+    say!(
         "wrote {} ({:?}, {} {:?})",
         a.output.display(),
         g.dims,
@@ -694,8 +755,12 @@ fn peak_rss_kb() -> Option<u64> {
 /// `bench`: the same request path as `render`, one [`Renderer`] for every frame, the camera
 /// turned by `--orbit` degrees of azimuth between frames.
 fn bench_cmd(a: BenchArgs) -> Result<()> {
-    if a.frames == 0 {
-        bail!("--frames must be ≥ 1");
+    if !(1..=volsplat::movie::MAX_MOVIE_FRAMES).contains(&a.frames) {
+        bail!(
+            "--frames {}: bench times 1 to {} frames",
+            a.frames,
+            volsplat::movie::MAX_MOVIE_FRAMES
+        );
     }
     let base = load_scene(a.scene.as_deref())?;
     let mut req = build_request(
@@ -764,7 +829,7 @@ fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
     bar.clear();
     let written = written?;
     emit(&written.markdown)?;
-    eprintln!(
+    say!(
         "wrote {} and {} images to {}",
         written.report.display(),
         written.images,

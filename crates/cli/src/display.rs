@@ -139,6 +139,5 @@ pub fn display_bench_cmd(a: DisplayBenchArgs) -> Result<()> {
     let written = pool.install(|| volsplat_studies::display_bench::run(&settings));
     bar.clear();
     let written = written?;
-    println!("{}", written.markdown);
-    Ok(())
+    crate::commands::emit(&written.markdown)
 }

@@ -1,7 +1,8 @@
 //! `volsplat`: command-line volume rendering by splatting.
 //!
 //! Thin by design: parse, validate, call the libraries, map errors to exit codes
-//! (0 success, 1 failure, 2 usage error from clap).
+//! (0 success, 1 failure, 2 usage error from clap, 128 + N stopped by signal N: 130 for SIGINT,
+//! 143 for SIGTERM).
 
 mod aa_figures;
 mod args;
@@ -10,6 +11,8 @@ mod display;
 mod movie;
 mod progress;
 mod request;
+mod say;
+mod signals;
 mod view;
 
 use clap::{CommandFactory, FromArgMatches};
@@ -52,11 +55,15 @@ fn main() -> std::process::ExitCode {
     match commands::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
+            if let Some(stopped) = e.downcast_ref::<signals::Interrupted>() {
+                say::line(&stopped.to_string());
+                return std::process::ExitCode::from(stopped.status());
+            }
             if let Some(internal) = e.downcast_ref::<commands::NonFiniteOutput>() {
                 // Already worded as "internal error: …".
-                eprintln!("{internal}");
+                say::line(&internal.to_string());
             } else {
-                eprintln!("error: {e:#}");
+                say::line(&format!("error: {e:#}"));
             }
             std::process::ExitCode::FAILURE
         }

@@ -3,24 +3,33 @@
 //! files). Flags only.
 
 use crate::args::{ImageOptions, InputArgs, RenderOptions, RendererArg, ViewArgs};
-use crate::commands::{check_image_options, emit, explain, load_scene};
-use crate::request::{build_request, parse_image_size};
+use crate::commands::{
+    background, check_image_options, emit, explain, grey_window, load_scene, png_bits,
+};
+use crate::request::{build_request_noted, parse_image_size};
+use crate::say::say;
+use crate::signals::Stop;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use serde_json::json;
 use std::path::PathBuf;
 use std::time::Instant;
 use volsplat::core::glam::DVec3;
-use volsplat::io::{MovieSettings, MovieWriter, PngBitDepth, PngSettings};
-use volsplat::movie::{KeyframeFile, TurnAxis, flight, turntable};
+use volsplat::io::{MovieSettings, MovieWriter, PngSettings};
+use volsplat::movie::{
+    Flight, FlightFrame, KeyframeFile, MAX_MOVIE_FRAMES, TurnAxis, scene_up, turntable,
+};
 use volsplat::{CameraSpec, Renderer, TransferSpec};
 
 #[derive(Debug, Args)]
 pub struct MovieArgs {
     #[command(flatten)]
     pub input: InputArgs,
-    /// Output: a folder or a pattern with %04d (PNG frames), .gif, .png or .apng (animated
-    /// PNG), or .mp4/.webm/.mkv/.mov/.avi (frames piped to ffmpeg, which must be on PATH).
+    /// Output: a folder (frame_0000.png …) or a file name with a zero-padded %04d (PNG frames),
+    /// .gif, .png or .apng (animated PNG), or .mp4/.webm/.mkv/.mov/.avi (frames piped to
+    /// ffmpeg, which must be on PATH). The movie replaces the last one whole at the end: a
+    /// folder ends up holding exactly this movie's frames (earlier frames that the pattern
+    /// names are removed), and an interrupted or failed movie leaves the last one as it was.
     #[arg(short, long, value_name = "OUT", help_heading = "Output")]
     pub output: PathBuf,
     #[command(flatten)]
@@ -29,7 +38,7 @@ pub struct MovieArgs {
     pub options: RenderOptions,
     #[command(flatten)]
     pub image: ImageOptions,
-    /// Turntable: number of frames.
+    /// Turntable: number of frames (at most 100000).
     #[arg(long, default_value_t = 72, help_heading = "Movie")]
     pub frames: usize,
     /// Turntable: degrees turned over the movie. A whole number of turns closes the loop
@@ -41,9 +50,10 @@ pub struct MovieArgs {
         help_heading = "Movie"
     )]
     pub degrees: f64,
-    /// Turntable axis through the focal point: `up` (the camera's view-up: VTK's azimuth),
-    /// world `x`, `y`, `z` (or `-x` …), or patient `L`, `R`, `P`, `A`, `S`, `I` (volsplat's
-    /// world frame is LPS: L = +x, P = +y, S = +z).
+    /// Turntable axis through the focal point: `up` (the scene's up: the view-up before
+    /// --elevation and --roll, so every frame keeps the elevation), `view-up` (the tilted
+    /// camera's own view-up, VTK's Azimuth), world `x`, `y`, `z` (or `-x` …), or patient `L`,
+    /// `R`, `P`, `A`, `S`, `I` (volsplat's world frame is LPS: L = +x, P = +y, S = +z).
     #[arg(
         long,
         default_value = "up",
@@ -51,8 +61,9 @@ pub struct MovieArgs {
         help_heading = "Movie"
     )]
     pub axis: String,
-    /// A camera flight instead of a turntable: a JSON file of timed keyframes (camera, orbit
-    /// and transfer function; format in README.md, "Movies").
+    /// A camera flight instead of a turntable: a JSON file of timed keyframes (camera, orbit,
+    /// transfer function and clipping; format in README.md, section "Files"). The whole flight
+    /// is checked before the first frame (at most 100000 frames).
     #[arg(
         long,
         value_name = "FILE",
@@ -60,7 +71,9 @@ pub struct MovieArgs {
         help_heading = "Movie"
     )]
     pub keyframes: Option<PathBuf>,
-    /// Frames per second of the output (and of the keyframe timeline, unless the file sets it).
+    /// Frames per second of the output (and of the keyframe timeline, unless the file sets it),
+    /// in (0, 1000]. GIF stores delays in hundredths of a second (at most 100 fps; a warning
+    /// says when the rate cannot be kept).
     #[arg(long, default_value_t = 24.0, help_heading = "Movie")]
     pub fps: f64,
     /// Start from the request of a scene file (as written by `render --save-scene`); flags given
@@ -70,7 +83,7 @@ pub struct MovieArgs {
     /// Print frame timings and counters as one JSON object on stdout.
     #[arg(long, help_heading = "Output")]
     pub stats: bool,
-    /// Don't print progress or what was written (warnings and errors are still printed).
+    /// Don't print progress, notes or what was written (warnings and errors are still printed).
     #[arg(short, long, help_heading = "Output")]
     pub quiet: bool,
     /// Every flag given on the command line (filled in by `main`).
@@ -78,14 +91,15 @@ pub struct MovieArgs {
     pub given: Vec<String>,
 }
 
-/// The turntable axis of `--axis`.
-fn turn_axis(s: &str) -> Result<TurnAxis> {
+/// The turntable axis of `--axis`: `None` for the scene's up ([`volsplat::movie::scene_up`]).
+fn turn_axis(s: &str) -> Result<Option<TurnAxis>> {
     let (sign, name) = match s.strip_prefix('-') {
         Some(rest) => (-1.0, rest),
         None => (1.0, s.strip_prefix('+').unwrap_or(s)),
     };
     let axis = match name {
-        "up" | "view-up" if sign > 0.0 => return Ok(TurnAxis::ViewUp),
+        "up" if sign > 0.0 => return Ok(None),
+        "view-up" if sign > 0.0 => return Ok(Some(TurnAxis::ViewUp)),
         "x" | "L" => DVec3::X,
         "y" | "P" => DVec3::Y,
         "z" | "S" => DVec3::Z,
@@ -93,27 +107,138 @@ fn turn_axis(s: &str) -> Result<TurnAxis> {
         "A" => -DVec3::Y,
         "I" => -DVec3::Z,
         _ => bail!(
-            "--axis {s}: expected up, x, y, z, -x, -y, -z, or a patient direction L, R, P, A, S, I"
+            "--axis {s}: expected up, view-up, x, y, z, -x, -y, -z, or a patient direction L, R, \
+             P, A, S, I"
         ),
     };
-    Ok(TurnAxis::World(axis * sign))
+    Ok(Some(TurnAxis::World(axis * sign)))
+}
+
+/// The frames of a movie, made one at a time.
+enum Frames {
+    /// A turntable's cameras (a few dozen bytes each).
+    Turntable(Vec<volsplat::core::Camera>),
+    /// A keyframed flight, interpolated per frame.
+    Flight(Flight),
+}
+
+impl Frames {
+    fn len(&self) -> usize {
+        match self {
+            Frames::Turntable(c) => c.len(),
+            Frames::Flight(f) => f.len(),
+        }
+    }
+
+    fn frame(&self, n: usize) -> FlightFrame {
+        match self {
+            Frames::Turntable(c) => FlightFrame {
+                time: 0.0,
+                camera: c[n].clone(),
+                transfer_function: None,
+                clipping: None,
+            },
+            Frames::Flight(f) => f.frame(n),
+        }
+    }
+}
+
+/// Every frame's camera, transfer function and clipping, checked whole before the first frame
+/// is rendered: a keyframed flight, or a turntable about `axis` (`None`: the scene's up).
+fn plan_frames(
+    a: &MovieArgs,
+    req: &volsplat::RenderRequest,
+    renderer: &mut Renderer,
+    keyframes: Option<&KeyframeFile>,
+    axis: Option<TurnAxis>,
+) -> Result<Frames> {
+    let camera = renderer.camera(req).map_err(explain)?;
+    Ok(match keyframes {
+        Some(k) => {
+            let tf = renderer.transfer_function(req).map_err(explain)?;
+            Frames::Flight(
+                Flight::new(k, &camera, &tf, &req.scene.clipping, a.fps).map_err(explain)?,
+            )
+        }
+        None => {
+            let axis = match axis {
+                Some(axis) => axis,
+                None => {
+                    let bounds = renderer.volume(&req.scene.volume)?.grid().bounds_world();
+                    TurnAxis::World(scene_up(&req.scene.camera, bounds).map_err(explain)?)
+                }
+            };
+            Frames::Turntable(turntable(&camera, axis, a.degrees, a.frames).map_err(explain)?)
+        }
+    })
+}
+
+/// Says what a movie wrote (and removed), unless quiet.
+fn say_written(
+    files: &volsplat::io::movie::MovieFiles,
+    frames: usize,
+    w: usize,
+    h: usize,
+    t0: Instant,
+) {
+    let written = &files.written;
+    let what = match written.as_slice() {
+        [one] => one.display().to_string(),
+        many => format!(
+            "{} frames {} … {}",
+            many.len(),
+            many.first()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default(),
+            many.last()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default()
+        ),
+    };
+    say!(
+        "wrote {what} ({frames} frames, {w}×{h}, {:.1} s)",
+        t0.elapsed().as_secs_f64()
+    );
+    if let Some(first) = files.removed.first() {
+        let n = files.removed.len();
+        say!(
+            "removed {n} frame{} of an earlier, longer movie ({} …)",
+            if n == 1 { "" } else { "s" },
+            first.display()
+        );
+    }
+}
+
+/// The checks of `movie` that need no volume.
+fn check_movie_args(a: &MovieArgs) -> Result<(usize, usize)> {
+    let size = parse_image_size(&a.options.size, "--size")?;
+    check_image_options(&a.image, a.options.mode)?;
+    if a.keyframes.is_none() && !(1..=MAX_MOVIE_FRAMES).contains(&a.frames) {
+        bail!(
+            "--frames {}: a movie has 1 to {MAX_MOVIE_FRAMES} frames",
+            a.frames
+        );
+    }
+    if !(a.fps.is_finite() && a.fps > 0.0 && a.fps <= 1000.0) {
+        bail!(
+            "--fps {}: give a rate in (0, 1000] frames per second",
+            a.fps
+        );
+    }
+    Ok(size)
 }
 
 pub fn movie_cmd(a: MovieArgs) -> Result<()> {
     let t0 = Instant::now();
-    let (w, h) = parse_image_size(&a.options.size, "--size")?;
-    check_image_options(&a.image, a.options.mode)?;
+    let (w, h) = check_movie_args(&a)?;
     let axis = turn_axis(&a.axis)?;
     let keyframes = a
         .keyframes
         .as_ref()
         .map(|p| KeyframeFile::load(p).map_err(explain))
         .transpose()?;
-    if keyframes.is_none() && a.frames == 0 {
-        bail!("--frames must be ≥ 1");
-    }
     let base = load_scene(a.scene.as_deref())?;
-    let mut req = build_request(
+    let (mut req, notes) = build_request_noted(
         &a.input,
         &a.view,
         &a.options,
@@ -123,105 +248,102 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
         &a.given.iter().cloned().collect(),
         base,
     )?;
+    if !a.quiet {
+        for n in notes {
+            say!("note: {n}");
+        }
+    }
+    req.validate().map_err(explain)?;
     let mut renderer = Renderer::with_limits(crate::request::reader_limits(&a.input)?);
     let label = req.scene.volume.label();
-    let camera = renderer.camera(&req).map_err(explain)?;
-    let tf = renderer.transfer_function(&req).map_err(explain)?;
-    // Every frame: its camera, and its transfer function and clipping if the keyframes change
-    // them.
-    let frames: Vec<volsplat::movie::FlightFrame> = match &keyframes {
-        Some(k) => flight(k, &camera, &tf, &req.scene.clipping, a.fps).map_err(explain)?,
-        None => turntable(&camera, axis, a.degrees, a.frames)
-            .map_err(explain)?
-            .into_iter()
-            .map(|camera| volsplat::movie::FlightFrame {
-                time: 0.0,
-                camera,
-                transfer_function: None,
-                clipping: None,
-            })
-            .collect(),
-    };
+    let frames = plan_frames(&a, &req, &mut renderer, keyframes.as_ref(), axis)?;
     let fps = keyframes.as_ref().and_then(|k| k.fps).unwrap_or(a.fps);
     let settings = MovieSettings {
         fps,
         png: PngSettings {
-            bits: PngBitDepth::from_bits(a.image.bits as u32).unwrap_or(PngBitDepth::Eight),
+            bits: png_bits(&a.image)?,
             srgb: a.image.srgb,
-            background: crate::request::triple::<f32>(&a.image.background, "--background")?,
+            background: background(&a.image)?,
         },
         ..MovieSettings::default()
     };
-    let mut writer = MovieWriter::create(&a.output, w, h, frames.len(), &settings)
-        .with_context(|| format!("writing {}", a.output.display()))?;
-    let bar = crate::progress::Bar::items(frames.len() as u64, "movie", a.quiet);
-    let mut times = Vec::with_capacity(frames.len());
+    let window = grey_window(&a.image)?;
+    let stop = Stop::install()?;
+    // The writer's errors name the output.
+    let mut writer = MovieWriter::create(&a.output, w, h, frames.len(), &settings)?;
+    for warning in writer.warnings() {
+        say!("warning: {warning}");
+    }
+    let count = frames.len();
+    let bar = crate::progress::Bar::items(count as u64, "movie", a.quiet);
+    let stopped = |n: usize| {
+        format!(
+            "stopped at frame {n} of {count} and removed what it had written; {} is as it was \
+             before",
+            a.output.display()
+        )
+    };
+    let mut times = Vec::with_capacity(count);
     let mut last_stats = None;
     let mut first_ms = 0.0;
-    for (n, frame) in frames.into_iter().enumerate() {
-        let (cam, frame_tf) = (frame.camera, frame.transfer_function);
+    for n in 0..count {
+        stop.check(&stopped(n))?;
+        let frame = frames.frame(n);
         if let Some(c) = frame.clipping {
             req.scene.clipping = c;
         }
         req.scene.camera = CameraSpec::Explicit {
-            camera: cam,
+            camera: frame.camera,
             orbit: volsplat::core::Orbit::default(),
         };
-        if let Some(tf) = frame_tf {
+        if let Some(tf) = frame.transfer_function {
             req.scene.transfer_function = TransferSpec::Function(tf);
         }
-        let out = renderer
-            .render(&req, &mut |_| true)
-            .map_err(explain)
-            .with_context(|| format!("rendering frame {n} of {label}"))?;
+        let out = match renderer.render(&req, &mut |_| stop.signal().is_none()) {
+            Ok(out) => out,
+            Err(e) => {
+                // A signal first: ffmpeg may have died of the same Ctrl-C.
+                stop.check(&stopped(n))?;
+                return Err(explain(e)).with_context(|| format!("rendering frame {n} of {label}"));
+            }
+        };
         if n == 0 {
             first_ms = out.stats.total_ms;
-            for note in &out.notes {
-                if !a.quiet {
+            if !a.quiet {
+                for note in &out.notes {
                     bar.println(&format!("note: {note}"));
                 }
             }
-        }
-        for warning in &out.warnings {
-            if n == 0 {
-                bar.println(&format!("warning: {warning}"));
+            for warning in &out.warnings {
+                bar.println(&format!(
+                    "warning: {}",
+                    crate::commands::cli_warning(warning)
+                ));
             }
         }
         times.push(out.stats.render_ms);
-        let image = match (&out.values, crate::commands::grey_window(&a.image)?) {
+        let image = match (&out.values, window) {
             (Some(values), Some((lo, hi))) => volsplat::windowed_image(values, lo, hi),
             _ => out.image.clone(),
         };
-        writer
-            .push(&image)
-            .with_context(|| format!("writing frame {n} to {}", a.output.display()))?;
+        if let Err(e) = writer.push(&image) {
+            stop.check(&stopped(n))?;
+            return Err(e).with_context(|| format!("frame {n}"));
+        }
         last_stats = Some(out.stats);
         bar.inc();
     }
-    let written = writer
-        .finish()
-        .with_context(|| format!("writing {}", a.output.display()))?;
+    stop.check(&stopped(count))?;
+    let files = writer.finish()?;
     bar.clear();
     if !a.quiet {
-        let what = match written.as_slice() {
-            [one] => one.display().to_string(),
-            many => format!(
-                "{} frames {} … {}",
-                many.len(),
-                many.first()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_default(),
-                many.last()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_default()
-            ),
-        };
-        eprintln!(
-            "wrote {what} ({} frames, {w}×{h}, {:.1} s)",
-            times.len(),
-            t0.elapsed().as_secs_f64()
-        );
+        say_written(&files, times.len(), w, h, t0);
     }
+    // A signal during the last writes: what was written is whole and kept.
+    stop.check(&format!(
+        "stopped after {} was written whole (kept)",
+        a.output.display()
+    ))?;
     if a.stats {
         let mut sorted = times.clone();
         sorted.sort_by(f64::total_cmp);

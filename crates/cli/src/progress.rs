@@ -1,7 +1,7 @@
 //! Progress bars on stderr (`indicatif`): drawn only when stderr is a terminal and `--quiet`
 //! was not given, so pipes, logs and tests see nothing.
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use std::io::IsTerminal;
 
 /// Steps of a bar that shows a fraction.
@@ -17,6 +17,9 @@ impl Bar {
         }
         let style = ProgressStyle::with_template(template)
             .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .with_key("rate", |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = w.write_str(&rate(s.per_sec()));
+            })
             .progress_chars("=> ");
         let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
         bar.set_style(style);
@@ -34,11 +37,11 @@ impl Bar {
         b
     }
 
-    /// A bar of `n` items (frames), with rate and ETA.
+    /// A bar of `n` items (frames), with rate ([`rate`]) and ETA.
     pub fn items(n: u64, label: &str, quiet: bool) -> Self {
         let b = Bar::make(
             n,
-            "{prefix} [{bar:32}] {pos}/{len} {per_sec} {elapsed} (ETA {eta})",
+            "{prefix} [{bar:32}] {pos}/{len} {rate} {elapsed} (ETA {eta})",
             quiet,
         );
         b.set_prefix(label);
@@ -83,8 +86,8 @@ impl Bar {
     /// Prints `line` on stderr above the bar.
     pub fn println(&self, line: &str) {
         match &self.0 {
-            Some(b) => b.suspend(|| eprintln!("{line}")),
-            None => eprintln!("{line}"),
+            Some(b) => b.suspend(|| crate::say::line(line)),
+            None => crate::say::line(line),
         }
     }
 
@@ -94,18 +97,49 @@ impl Bar {
             b.finish_and_clear();
         }
     }
+}
 
-    /// A render progress callback that moves the bar; never cancels.
-    pub fn callback(&self) -> impl FnMut(&volsplat::Progress) -> bool + Send + '_ {
-        move |p| {
-            self.set_fraction(p.fraction, p.stage);
-            true
-        }
+/// A rate of items per second for the bar, with three significant digits (`7.10/s`, `24.0/s`,
+/// `312/s`), or the seconds per item when below one (`4.2 s each`); indicatif's own `per_sec`
+/// prints four decimals (`7.1024/s`).
+pub fn rate(per_sec: f64) -> String {
+    if !(per_sec.is_finite() && per_sec > 0.0) {
+        return "-/s".into();
+    }
+    if per_sec < 1.0 {
+        let each = 1.0 / per_sec;
+        return if each < 10.0 {
+            format!("{each:.1} s each")
+        } else {
+            format!("{each:.0} s each")
+        };
+    }
+    match per_sec {
+        r if r < 10.0 => format!("{r:.2}/s"),
+        r if r < 100.0 => format!("{r:.1}/s"),
+        r => format!("{r:.0}/s"),
     }
 }
 
 impl Drop for Bar {
     fn drop(&mut self) {
         self.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rate;
+
+    /// Issue 28: the movie bar printed `7.1024/s`.
+    #[test]
+    fn rates_have_three_significant_digits() {
+        assert_eq!(rate(7.1024), "7.10/s");
+        assert_eq!(rate(24.04), "24.0/s");
+        assert_eq!(rate(312.4), "312/s");
+        assert_eq!(rate(0.24), "4.2 s each");
+        assert_eq!(rate(0.02), "50 s each");
+        assert_eq!(rate(0.0), "-/s");
+        assert_eq!(rate(f64::NAN), "-/s");
     }
 }

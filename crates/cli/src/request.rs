@@ -6,6 +6,7 @@
 //! override its fields.
 
 use crate::args::*;
+use crate::say::say;
 use anyhow::{Context, Result, anyhow, bail};
 use std::collections::HashSet;
 use volsplat::core::{Orbit, ProjectionKind, ScalarType};
@@ -219,6 +220,7 @@ fn parse_light(s: &str) -> Result<LightSpec> {
 }
 
 /// Builds the request of `render` / `bench` from their flags; `base` is a `--scene` request.
+/// Notes for the user ([`build_request_noted`]) are printed on stderr.
 #[allow(clippy::too_many_arguments)]
 pub fn build_request(
     input: &InputArgs,
@@ -230,6 +232,28 @@ pub fn build_request(
     given: &Given,
     base: Option<RenderRequest>,
 ) -> Result<RenderRequest> {
+    let (req, notes) = build_request_noted(input, view, o, renderer, display, draw_k, given, base)?;
+    for n in notes {
+        say!("note: {n}");
+    }
+    Ok(req)
+}
+
+/// [`build_request`], returning its notes for the user instead of printing them (a caller
+/// with `--quiet` leaves them out): today, that a `--mode` given over a scene file's other mode
+/// replaced the scene's transfer function by the new mode's default.
+#[allow(clippy::too_many_arguments)]
+pub fn build_request_noted(
+    input: &InputArgs,
+    view: &ViewArgs,
+    o: &RenderOptions,
+    renderer: RendererArg,
+    display: Option<&crate::display::DisplayArgs>,
+    draw_k: Option<&str>,
+    given: &Given,
+    base: Option<RenderRequest>,
+) -> Result<(RenderRequest, Vec<String>)> {
+    let mut notes = Vec::new();
     let fresh = base.is_none();
     let set = |id: &str| fresh || given.contains(id);
     let mut req = base.unwrap_or_else(|| RenderRequest::new(Scene::default(), 512, 512));
@@ -251,7 +275,7 @@ pub fn build_request(
     if let Some(path) = &view.camera {
         let (camera, warnings) = volsplat::io::load_camera(path)?;
         for w in warnings {
-            eprintln!("warning: {w}");
+            say!("warning: {w}");
         }
         s.camera = CameraSpec::Explicit {
             camera,
@@ -295,7 +319,7 @@ pub fn build_request(
     if let Some(path) = &o.tf {
         let (tf, warnings) = volsplat::io::load_transfer_function(path)?;
         for w in warnings {
-            eprintln!("warning: {w}");
+            say!("warning: {w}");
         }
         s.transfer_function = TransferSpec::Function(tf);
     } else if let Some(name) = &o.preset {
@@ -342,6 +366,9 @@ pub fn build_request(
             .map(|p| parse_plane(p))
             .collect::<Result<_>>()?;
     }
+    if let Some(x) = o.xray_offset {
+        s.xray_density = x;
+    }
     if set("depth_cue") {
         s.depth_cue = o
             .depth_cue
@@ -353,6 +380,23 @@ pub fn build_request(
         (req.width, req.height) = parse_image_size(&o.size, "--size")?;
     }
     if set("mode") {
+        // A scene's transfer function was made for its mode (a MIP's grey ramp looks flat in
+        // composite): another mode without --tf or --preset takes that mode's default.
+        if !fresh
+            && o.mode != req.mode
+            && o.tf.is_none()
+            && o.preset.is_none()
+            && req.scene.transfer_function != TransferSpec::Auto
+        {
+            notes.push(format!(
+                "--mode {}: the scene's transfer function was made for mode {}; using {}'s \
+                 default (auto) instead (give --tf or --preset to choose one)",
+                mode_name(o.mode),
+                mode_name(req.mode),
+                mode_name(o.mode)
+            ));
+            req.scene.transfer_function = TransferSpec::Auto;
+        }
         req.mode = o.mode;
     }
     if set("renderer") || set("splat_list") {
@@ -426,5 +470,13 @@ pub fn build_request(
             grey
         );
     }
-    Ok(req)
+    Ok((req, notes))
+}
+
+/// A mode's name as `--mode` takes it.
+pub fn mode_name(mode: volsplat::Mode) -> String {
+    use clap::ValueEnum;
+    mode.to_possible_value()
+        .map(|v| v.get_name().to_string())
+        .unwrap_or_else(|| format!("{mode:?}"))
 }

@@ -5,6 +5,8 @@
 use crate::args::{ImageOptions, InputArgs, RenderOptions, RendererArg, ViewArgs};
 use crate::commands::{check_image_options, emit, explain, load_scene, write_options};
 use crate::request::{build_request, reader_limits};
+use crate::say::say;
+use crate::signals::Stop;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use serde_json::json;
@@ -153,15 +155,26 @@ pub fn view_cmd(a: ViewCmdArgs) -> Result<()> {
             e => e.into(),
         })
         .with_context(|| format!("starting the viewer on {label}"))?;
+    // Ctrl-C (SIGINT, SIGTERM, SIGHUP) is how a server ends: it stops cleanly, status 0; a
+    // second signal ends the process at once (crate::signals).
+    let signals = Stop::install()?;
     let stop = viewer.stop_handle();
-    ctrlc::set_handler(move || stop.stop()).context("installing the Ctrl-C handler")?;
+    std::thread::Builder::new()
+        .name("volsplat-view-signals".into())
+        .spawn(move || {
+            while signals.signal().is_none() {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            stop.stop();
+        })
+        .context("starting the signal watcher")?;
     emit(&format!("open {}", viewer.url()))?;
-    eprintln!("viewing {label}; Ctrl-C stops the server");
+    say!("viewing {label}; Ctrl-C stops the server");
     if !a.no_browser && !open_browser(viewer.url()) {
-        eprintln!("(no browser found to open; open the URL above, or use --no-browser)");
+        say!("(no browser found to open; open the URL above, or use --no-browser)");
     }
     viewer.serve();
-    eprintln!("stopped");
+    say!("stopped");
     Ok(())
 }
 
@@ -260,7 +273,7 @@ pub fn bench_view_cmd(a: BenchViewArgs) -> Result<()> {
     };
     let mut reports = Vec::new();
     for r in recordings {
-        eprintln!("replaying {} s of {r:?} input…", r.seconds());
+        say!("replaying {} s of {r:?} input…", r.seconds());
         let mut client = Client::connect(handle.local_addr(), &handle.token(), None)
             .map_err(anyhow::Error::msg)?;
         let tf = first_frame(&mut client).map_err(anyhow::Error::msg)?;

@@ -289,6 +289,42 @@ impl AnatomicalView {
         AnatomicalView::Inferior,
     ];
 
+    /// The name, as scene files spell it: `anterior`, `posterior`, `left`, `right`, `superior`,
+    /// `inferior`.
+    pub fn name(self) -> &'static str {
+        match self {
+            AnatomicalView::Anterior => "anterior",
+            AnatomicalView::Posterior => "posterior",
+            AnatomicalView::Left => "left",
+            AnatomicalView::Right => "right",
+            AnatomicalView::Superior => "superior",
+            AnatomicalView::Inferior => "inferior",
+        }
+    }
+
+    /// A view by name, as the command line's `--view` and Python's `view=` take it (any case):
+    /// the names of [`AnatomicalView::name`], their initials `A`, `P`, `L`, `R`, `S`, `I`, and
+    /// `front`, `back`, `top`, `bottom`. An unknown name is an error listing the known ones.
+    pub fn from_name(name: &str) -> Result<Self> {
+        use AnatomicalView as V;
+        Ok(match name.trim().to_ascii_lowercase().as_str() {
+            "anterior" | "a" | "front" => V::Anterior,
+            "posterior" | "p" | "back" => V::Posterior,
+            "left" | "l" => V::Left,
+            "right" | "r" => V::Right,
+            "superior" | "s" | "top" => V::Superior,
+            "inferior" | "i" | "bottom" => V::Inferior,
+            _ => {
+                return Err(CoreError::invalid(
+                    "view",
+                    name,
+                    "expected anterior, posterior, left, right, superior or inferior (or A, P, \
+                     L, R, S, I)",
+                ));
+            }
+        })
+    }
+
     /// The direction from the focal point to the eye and the view-up, world (LPS) unit vectors.
     pub fn eye_and_up(self) -> (DVec3, DVec3) {
         match self {
@@ -308,6 +344,15 @@ impl AnatomicalView {
         let (eye, up) = self.eye_and_up();
         camera.position = (fp + eye * dist).to_array();
         camera.view_up = up.to_array();
+    }
+}
+
+impl std::str::FromStr for AnatomicalView {
+    type Err = CoreError;
+
+    /// [`AnatomicalView::from_name`].
+    fn from_str(s: &str) -> Result<Self> {
+        AnatomicalView::from_name(s)
     }
 }
 
@@ -835,5 +880,31 @@ mod tests {
         .reset_camera(lo, hi)
         .unwrap();
         assert!((turned.frame().forward - left.frame().forward).length() < 1e-9);
+    }
+
+    /// View names (the command line's `--view`, Python's `view=`): every name, initial and
+    /// alias, in any case; the canonical name is the scene file's spelling.
+    #[test]
+    fn anatomical_views_by_name() {
+        for v in AnatomicalView::ALL {
+            let name = v.name();
+            assert_eq!(AnatomicalView::from_name(name).unwrap(), v);
+            assert_eq!(name.to_uppercase().parse::<AnatomicalView>().unwrap(), v);
+            assert_eq!(AnatomicalView::from_name(&name[..1]).unwrap(), v);
+            let json = serde_json::to_string(&v).unwrap();
+            assert_eq!(json, format!("\"{name}\""));
+        }
+        for (alias, v) in [
+            ("Front", AnatomicalView::Anterior),
+            ("back", AnatomicalView::Posterior),
+            ("TOP", AnatomicalView::Superior),
+            ("bottom", AnatomicalView::Inferior),
+        ] {
+            assert_eq!(AnatomicalView::from_name(alias).unwrap(), v);
+        }
+        let e = AnatomicalView::from_name("sideways")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sideways") && e.contains("anterior"), "{e}");
     }
 }

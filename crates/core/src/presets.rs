@@ -763,6 +763,15 @@ pub enum BackgroundRule {
 ///    specular 0). Opacities are per `scalar_opacity_unit_distance`, which
 ///    [`AutoTransfer::from_volume`] sets to the smallest voxel spacing (so they are per voxel
 ///    step, whatever the world unit) and [`AutoTransfer::from_histogram`] leaves at 1.
+/// 4. **Few values** (a binary mask, a label image: at most [`AutoTransfer::FEW_VALUES`]
+///    distinct values above `t`, at bin resolution) replace step 3: every foreground value is
+///    opaque, [`AutoTransfer::FEW_OPACITY`] per unit distance from halfway between `t` and the
+///    lowest foreground value on, each in its own colour of [`AutoTransfer::LABEL_COLORS`]
+///    (ivory for the first). The percentile ramp would give such data a dim, dark shell of
+///    partial-volume values around an interior whose zero gradient reflects no light: a nearly
+///    black picture. With the opacity reached at the boundary, the lit surface hides it.
+/// 5. **One value** (constant data): the unshaded grey ramp of [`Preset::Ramp`], ending at the
+///    value, so that it shows (opacity 0.5, white) rather than nothing.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AutoTransfer {
     /// The transfer function (values in data units).
@@ -776,6 +785,10 @@ pub struct AutoTransfer {
     /// The foreground percentiles [`AutoTransfer::PERCENTILES`] of the samples above
     /// `threshold`, data units (at bin resolution).
     pub foreground: [f64; 3],
+    /// The distinct foreground values (bin centres, data units) where there are at most
+    /// [`AutoTransfer::FEW_VALUES`] of them (rule step 4: each opaque in its own colour);
+    /// empty otherwise.
+    pub labels: Vec<f64>,
 }
 
 impl AutoTransfer {
@@ -791,15 +804,41 @@ impl AutoTransfer {
     /// skull-stripped version of it) and a real background (6.2 for Colin27's, 11 for
     /// brainsmall's, about 60 for CT air).
     pub const SEPARATION: f64 = 4.5;
+    /// At most this many distinct foreground values make a label image (rule step 4): a binary
+    /// mask has one, a small segmentation a few.
+    pub const FEW_VALUES: usize = 8;
+    /// Opacity per unit distance (per voxel step from [`AutoTransfer::from_volume`]) of every
+    /// value of a label image: the boundary between background and label is opaque within a
+    /// voxel, so its surface, which has a gradient, is what is seen and lit.
+    pub const FEW_OPACITY: f64 = 0.8;
+    /// The colours of a label image's foreground values, lowest first (cycled beyond eight):
+    /// ivory (`MR-Default`'s tissue colour at its 99th percentile), then well-separated hues.
+    pub const LABEL_COLORS: [[f64; 3]; 8] = [
+        [0.847059, 0.835294, 0.788235],
+        [0.87, 0.45, 0.35],
+        [0.45, 0.68, 0.88],
+        [0.55, 0.80, 0.45],
+        [0.95, 0.80, 0.35],
+        [0.72, 0.55, 0.88],
+        [0.95, 0.60, 0.25],
+        [0.45, 0.85, 0.80],
+    ];
 
     /// The automatic transfer function of `vol`, with `scalar_opacity_unit_distance` the
     /// smallest voxel spacing (world units), so that opacities hold per voxel step.
+    ///
+    /// A volume of one sample along an axis (a 2-D image, a single slice) is drawn unshaded:
+    /// its gradients lie in its plane (zero along the one-sample axis, and zero wherever the
+    /// image is flat), so lights would leave it black but for its edges.
     pub fn from_volume(vol: &AnyVolume) -> Self {
         let mut auto = Self::from_histogram(&Histogram::from_volume(vol));
         let spacing = vol.grid().spacing;
         let unit = spacing.iter().copied().fold(f64::INFINITY, f64::min);
         if unit.is_finite() && unit > 0.0 {
             auto.transfer_function.scalar_opacity_unit_distance = unit;
+        }
+        if vol.grid().dims.contains(&1) {
+            auto.transfer_function.shade = false;
         }
         auto
     }
@@ -836,6 +875,14 @@ impl AutoTransfer {
             _ => (BackgroundRule::None, first, lo),
         };
         let q = |p: f64| h.quantile_from(start, p).unwrap_or(hi);
+        let labels: Vec<f64> = (start..=last)
+            .filter(|&n| counts[n] > 0)
+            .map(|n| h.bin_center(n))
+            .collect();
+        if !labels.is_empty() && labels.len() <= Self::FEW_VALUES {
+            let foreground = [q(0.05), q(0.5), q(0.99)];
+            return Self::label_image(rule, fill_value, threshold, lo, labels, foreground);
+        }
         let p = Self::PERCENTILES;
         let p_lo = q(p[0]).max(threshold);
         let p_mid = q(p[1]).max(p_lo);
@@ -874,16 +921,66 @@ impl AutoTransfer {
             fill_value,
             threshold,
             foreground: [p_lo, p_mid, p_hi],
+            labels: Vec::new(),
         }
     }
 
-    fn degenerate(lo: f64, hi: f64) -> Self {
+    /// Rule step 4: the foreground is the few values `labels` (ascending, above `threshold`),
+    /// each opaque in its own colour; `lo` is the lowest value of the data.
+    fn label_image(
+        rule: BackgroundRule,
+        fill_value: Option<f64>,
+        threshold: f64,
+        lo: f64,
+        labels: Vec<f64>,
+        foreground: [f64; 3],
+    ) -> Self {
+        let color = |n: usize| Self::LABEL_COLORS[n % Self::LABEL_COLORS.len()];
+        let first = labels[0];
+        let top = labels[labels.len() - 1];
+        let bottom = lo.min(threshold);
+        let rgb = |x: f64, c: [f64; 3]| [x, c[0], c[1], c[2]];
+        let mut colors = vec![rgb(bottom, color(0)), rgb(threshold, color(0))];
+        colors.extend(labels.iter().enumerate().map(|(n, &v)| rgb(v, color(n))));
+        // Opaque from halfway to the first label: the background–label boundary's middle.
+        let a = Self::FEW_OPACITY;
+        let tf = TransferFunction {
+            color: colors,
+            scalar_opacity: vec![
+                [bottom, 0.0],
+                [threshold, 0.0],
+                [0.5 * (threshold + first), a],
+                [top, a],
+            ],
+            gradient_opacity: None,
+            scalar_opacity_unit_distance: 1.0,
+            shade: true,
+            ambient: 0.2,
+            diffuse: 1.0,
+            specular: 0.0,
+            specular_power: 1.0,
+        };
         AutoTransfer {
-            transfer_function: Preset::Ramp.transfer_function((lo, hi)),
+            transfer_function: tf,
+            rule,
+            fill_value,
+            threshold,
+            foreground,
+            labels,
+        }
+    }
+
+    /// Rule step 5 (and an empty histogram): the grey ramp of [`Preset::Ramp`] over
+    /// `[lo, hi]`, or, for one value, over the unit below it, which the value ends.
+    fn degenerate(lo: f64, hi: f64) -> Self {
+        let range = if hi > lo { (lo, hi) } else { (lo - 1.0, lo) };
+        AutoTransfer {
+            transfer_function: Preset::Ramp.transfer_function(range),
             rule: BackgroundRule::Degenerate,
             fill_value: None,
-            threshold: lo,
+            threshold: range.0,
             foreground: [lo, lo, hi],
+            labels: Vec::new(),
         }
     }
 
@@ -897,8 +994,18 @@ impl AutoTransfer {
             .unwrap_or_default();
         match self.rule {
             BackgroundRule::Degenerate => {
+                format!("automatic transfer function: constant or empty data, grey ramp up to {c}")
+            }
+            _ if !self.labels.is_empty() => {
+                let values: Vec<String> = self.labels.iter().map(|v| v.to_string()).collect();
                 format!(
-                    "automatic transfer function: constant or empty data, grey ramp over [{a}, {c}]"
+                    "automatic transfer function: {fill}background <= {t} transparent; {} \
+                     foreground value{} ({}) opaque, {} per voxel, one colour each (a mask or \
+                     label image)",
+                    values.len(),
+                    if values.len() == 1 { "" } else { "s" },
+                    values.join(", "),
+                    Self::FEW_OPACITY
                 )
             }
             BackgroundRule::None => format!(
@@ -1548,6 +1655,69 @@ mod tests {
         }
         // Deterministic.
         assert_eq!(AutoTransfer::from_histogram(&hist(&padded)), b);
+    }
+
+    /// Rule step 4 (issue 28 §6): a binary mask's one foreground value and a label image's few
+    /// are opaque from halfway across the background–label step, each in its own colour; nine
+    /// distinct foreground values take the percentile ramp. Step 5: one value shows.
+    #[test]
+    fn masks_and_label_images_are_opaque_and_constant_data_shows() {
+        let mask = AutoTransfer::from_histogram(&hist(&[(0, 50_000), (1, 4_000)]));
+        assert_eq!(mask.rule, BackgroundRule::FillValue);
+        assert_eq!(mask.labels, vec![1.0]);
+        let tf = &mask.transfer_function;
+        assert_eq!(tf.opacity_at(0.0), 0.0);
+        assert_eq!(tf.opacity_at(0.5), 0.0);
+        assert_eq!(tf.opacity_at(0.75), AutoTransfer::FEW_OPACITY);
+        assert_eq!(tf.opacity_at(1.0), AutoTransfer::FEW_OPACITY);
+        assert!(tf.opacity_at(0.6) > 0.2 && tf.opacity_at(0.6) < 0.5);
+        let ivory = AutoTransfer::LABEL_COLORS[0];
+        assert_eq!(tf.color_at(1.0), ivory);
+        // The colour does not darken towards the background where the opacity rises.
+        assert_eq!(tf.color_at(0.6), ivory);
+        assert!(mask.describe().contains("1 foreground value (1) opaque"));
+        // A label image: background 0 and labels 3, 5, 9 of different sizes.
+        let labels =
+            AutoTransfer::from_histogram(&hist(&[(0, 90_000), (3, 500), (5, 9_000), (9, 40)]));
+        assert_eq!(labels.labels, vec![3.0, 5.0, 9.0]);
+        let tf = &labels.transfer_function;
+        for (n, v) in [3.0, 5.0, 9.0].into_iter().enumerate() {
+            assert_eq!(tf.opacity_at(v), AutoTransfer::FEW_OPACITY);
+            assert_eq!(tf.color_at(v), AutoTransfer::LABEL_COLORS[n]);
+        }
+        assert_eq!(tf.opacity_at(0.0), 0.0);
+        // Nine foreground values: the percentile ramp, as before.
+        let nine: Vec<(i32, u64)> = (0..10)
+            .map(|v| (v * 10, if v == 0 { 9_000 } else { 100 }))
+            .collect();
+        let ramp = AutoTransfer::from_histogram(&hist(&nine));
+        assert!(ramp.labels.is_empty());
+        assert!(ramp.transfer_function.opacity_at(10.0) <= 0.15 + 1e-12);
+        // Float masks: 4096 bins over [0, 1]; the value 1 lies beyond the last bin's centre.
+        let mut h = Histogram::for_scalar_type(ScalarType::F32, (0.0, 1.0)).unwrap();
+        for n in 0..10_000 {
+            h.add(if n % 5 == 0 { 1.0 } else { 0.0 });
+        }
+        let f = AutoTransfer::from_histogram(&h);
+        assert_eq!(f.labels.len(), 1);
+        assert_eq!(
+            f.transfer_function.opacity_at(1.0),
+            AutoTransfer::FEW_OPACITY
+        );
+        assert_eq!(f.transfer_function.opacity_at(0.0), 0.0);
+        // One value (constant data): opacity 0.5 at it, white; the empty histogram as before.
+        let one = AutoTransfer::from_histogram(&hist(&[(40, 1000)]));
+        assert_eq!(one.rule, BackgroundRule::Degenerate);
+        assert_eq!(one.transfer_function.opacity_at(40.0), 0.5);
+        assert_eq!(one.transfer_function.color_at(40.0), [1.0; 3]);
+        let empty = AutoTransfer::from_histogram(&Histogram::new(0.0, 1.0, 8).unwrap());
+        assert_eq!(
+            empty.transfer_function,
+            Preset::Ramp.transfer_function((0.0, 1.0))
+        );
+        for x in [&mask, &labels, &ramp, &f, &one, &empty] {
+            x.transfer_function.clone().validate().unwrap();
+        }
     }
 
     #[test]

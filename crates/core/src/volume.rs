@@ -162,6 +162,40 @@ impl Grid {
         (lo, hi)
     }
 
+    /// The index-space box `(lo, hi)` that the renderers draw (voxel units; integers are voxel
+    /// centres; `docs/decisions/0023-thin-volumes.md`): per axis the box of voxel centres
+    /// `[0, n − 1]`, except that an axis of one sample spans that sample's voxel, `[−½, ½]`, so
+    /// a single slice is one spacing thick, as a slice of two samples is. Along such an axis
+    /// the reconstruction is the one sample's value.
+    pub fn drawn_box_index(&self) -> (DVec3, DVec3) {
+        let lo = self.dims.map(|n| if n == 1 { -0.5 } else { 0.0 });
+        let hi = self.dims.map(|n| if n == 1 { 0.5 } else { (n - 1) as f64 });
+        (DVec3::from(lo), DVec3::from(hi))
+    }
+
+    /// The eight world-space corners of [`Grid::drawn_box_index`]; [`Grid::corners_world`] on
+    /// every grid with at least two samples per axis.
+    pub fn drawn_corners_world(&self) -> [DVec3; 8] {
+        let (lo, hi) = self.drawn_box_index();
+        std::array::from_fn(|n| {
+            self.world_from_index(DVec3::new(
+                if n & 1 != 0 { hi.x } else { lo.x },
+                if n & 2 != 0 { hi.y } else { lo.y },
+                if n & 4 != 0 { hi.z } else { lo.z },
+            ))
+        })
+    }
+
+    /// Axis-aligned world bounds `(min, max)` of [`Grid::drawn_corners_world`]: the bounds the
+    /// front ends' reset view frames. Equal to [`Grid::bounds_world`] unless an axis has one
+    /// sample, which then spans one spacing centred on it.
+    pub fn drawn_bounds_world(&self) -> (DVec3, DVec3) {
+        let c = self.drawn_corners_world();
+        c[1..]
+            .iter()
+            .fold((c[0], c[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+    }
+
     /// World-space centre of the grid (midpoint of the first and last voxel centres).
     pub fn center_world(&self) -> DVec3 {
         let (lo, hi) = self.bounds_world();
@@ -457,6 +491,28 @@ mod tests {
         let (lo, hi) = g.bounds_world();
         assert_eq!(lo, DVec3::new(1.0, 1.0, 1.0));
         assert_eq!(hi, DVec3::new(5.0, 2.0, 3.0));
+    }
+
+    #[test]
+    fn a_one_sample_axis_is_drawn_one_voxel_thick() {
+        let rot = DMat3::from_rotation_z(0.4);
+        let g = Grid::new([3, 1, 2], [2.0, 0.5, 1.5], [1.0, 2.0, 3.0], rot).unwrap();
+        let (lo, hi) = g.drawn_box_index();
+        assert_eq!(lo, DVec3::new(0.0, -0.5, 0.0));
+        assert_eq!(hi, DVec3::new(2.0, 0.5, 1.0));
+        // One spacing along j, centred on the sample; the other axes as the voxel centres.
+        let c = g.drawn_corners_world();
+        let j = (c[2] - c[0]).length();
+        assert!((j - 0.5).abs() < 1e-12, "{j}");
+        assert!(((c[1] - c[0]).length() - 4.0).abs() < 1e-12);
+        let mid = (c[0] + c[7]) * 0.5;
+        assert!((mid - g.center_world()).length() < 1e-12);
+        let (blo, bhi) = g.drawn_bounds_world();
+        assert!(bhi.z - blo.z == 1.5 && bhi.x - blo.x > 0.0);
+        // Grids with two or more samples per axis: the box of voxel centres, bit for bit.
+        let g = Grid::new([3, 2, 5], [2.0, 1.0, 0.5], [1.0, 1.0, 1.0], rot).unwrap();
+        assert_eq!(g.drawn_corners_world(), g.corners_world());
+        assert_eq!(g.drawn_bounds_world(), g.bounds_world());
     }
 
     #[test]

@@ -36,6 +36,7 @@ pub mod request;
 pub mod scene;
 pub mod session;
 pub mod write;
+pub mod xray;
 
 pub use error::{EngineError, Result};
 pub use renderer::{
@@ -55,6 +56,7 @@ pub use scene::{
 pub use write::{
     OUTPUT_EXTENSIONS, WriteOptions, encode_png, windowed_image, write_image, writes_values,
 };
+pub use xray::XrayDensity;
 
 /// The libraries underneath, for callers that need their types (cameras, volumes, images).
 pub use volsplat_core as core;

@@ -18,16 +18,22 @@
 //! World frame and units as everywhere in volsplat (VTK's: world units, degrees).
 
 use crate::error::{EngineError, Result};
-use crate::scene::{Clipping, CropBox, PlaneSpec};
+use crate::scene::{CameraSpec, Clipping, CropBox, PlaneSpec};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use volsplat_core::glam::{DMat3, DQuat, DVec3};
 use volsplat_core::{Camera, Orbit, TransferFunction};
 
+/// Most frames of one movie: 100 000 frames are 69 minutes at 24 frames per second, 100 s at
+/// the largest frame rate, 1000. Checked before anything is allocated per frame.
+pub const MAX_MOVIE_FRAMES: usize = 100_000;
+
 /// The axis of a turntable.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum TurnAxis {
-    /// The camera's view-up vector (a turntable in VTK's azimuth sense).
+    /// The camera's own view-up vector (VTK's `Azimuth`). After an elevation this axis is
+    /// tilted with the camera, so the view wobbles against the scene; [`scene_up`] gives the
+    /// axis a turntable usually wants.
     ViewUp,
     /// A direction in world coordinates (LPS for medical volumes: +x left, +y posterior,
     /// +z superior); need not be unit length, must not be zero.
@@ -64,6 +70,12 @@ pub fn turntable(
             "a movie needs at least one frame",
         ));
     }
+    if frames > MAX_MOVIE_FRAMES {
+        return Err(EngineError::request(
+            "frames",
+            format!("{frames} frames; a movie holds at most {MAX_MOVIE_FRAMES}"),
+        ));
+    }
     if !degrees.is_finite() {
         return Err(EngineError::request(
             "degrees",
@@ -90,6 +102,22 @@ pub fn turntable(
     Ok((0..frames)
         .map(|i| rotate_camera(base, axis, step * i as f64))
         .collect())
+}
+
+/// The scene's up direction for a turntable: the view-up of `spec` resolved without its orbit's
+/// elevation and roll (the reset view's up, an anatomical view's up, or a camera file's, after
+/// any azimuth), for a volume whose world bounds are `bounds`. A turntable about it keeps the
+/// camera's elevation: every frame sees the axis at the same angle, and frame 0 is the camera of
+/// `spec` itself.
+pub fn scene_up(spec: &CameraSpec, bounds: (DVec3, DVec3)) -> Result<DVec3> {
+    let mut level = spec.clone();
+    let orbit = match &mut level {
+        CameraSpec::Orbit(o) => o,
+        CameraSpec::Explicit { orbit, .. } => orbit,
+    };
+    orbit.elevation = None;
+    orbit.roll = None;
+    Ok(DVec3::from(level.resolve(bounds)?.view_up).normalize())
 }
 
 /// One keyframe of a camera flight.
@@ -289,7 +317,11 @@ impl CameraPath {
         } else if t >= k[n - 1].time {
             (n - 2, 1.0)
         } else {
-            let i = k.windows(2).position(|w| t < w[1].time).unwrap_or(n - 2);
+            // The last key at or before t (binary search; t is inside the span here).
+            let i = k
+                .partition_point(|key| key.time <= t)
+                .saturating_sub(1)
+                .min(n - 2);
             (i, (t - k[i].time) / (k[i + 1].time - k[i].time))
         };
         let j = (i + 1).min(n - 1);
@@ -458,108 +490,240 @@ pub fn lerp_clipping(a: &Clipping, b: &Clipping, u: f64, field: &str) -> Result<
     Ok(Clipping { crop, planes })
 }
 
-/// The frames of a keyframe file at `fps` frames per second: frame `n` at time
-/// `t₀ + n/fps`, up to the last keyframe; keyframe cameras default to `base` (then their orbit is
-/// applied), keyframe transfer functions to `base_tf`.
-pub fn flight(
-    file: &KeyframeFile,
-    base: &Camera,
-    base_tf: &TransferFunction,
-    base_clipping: &Clipping,
+/// A nested error's text without the outer "invalid request: " (`scene.clipping.crop: axis 0: …`).
+fn inner(e: EngineError) -> String {
+    match e {
+        EngineError::Request { field, message } => format!("{field}: {message}"),
+        e => e.to_string(),
+    }
+}
+
+/// `x` for a message: as is up to 1e12, in scientific notation above (`1e300`, not 301 digits).
+fn short(x: f64) -> String {
+    if x.abs() < 1e12 {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// A keyframed flight, frame by frame: [`Flight::new`] checks the whole flight before anything
+/// is rendered, and [`Flight::frame`] interpolates one frame when it is needed, so memory does
+/// not grow with the number of frames (two 1000-point transfer functions over 100 000 frames
+/// would otherwise hold gigabytes).
+///
+/// Frame `n` is at time `t₀ + n/fps`, up to the last keyframe. Keyframe cameras default to the
+/// movie's base camera (then their orbit is applied), keyframe transfer functions and clipping
+/// to the movie's.
+#[derive(Debug, Clone)]
+pub struct Flight {
+    times: Vec<f64>,
+    cameras: Vec<Camera>,
+    path: CameraPath,
+    /// Every keyframe's transfer function, when any keyframe sets one.
+    tfs: Option<Vec<TransferFunction>>,
+    /// Every keyframe's clipping, when any keyframe sets one.
+    clips: Option<Vec<Clipping>>,
     fps: f64,
-) -> Result<Vec<FlightFrame>> {
-    file.check()?;
-    let fps = file.fps.unwrap_or(fps);
-    if !(fps.is_finite() && fps > 0.0 && fps <= 1000.0) {
-        return Err(EngineError::request(
-            "fps",
-            format!("must be in (0, 1000], got {fps}"),
-        ));
-    }
-    let mut cameras = Vec::with_capacity(file.keyframes.len());
-    for (i, k) in file.keyframes.iter().enumerate() {
-        let mut c = k.camera.clone().unwrap_or_else(|| base.clone());
-        if let Some(o) = &k.orbit {
-            o.apply(&mut c).map_err(|e| {
-                EngineError::request(format!("keyframes[{i}].orbit"), e.to_string())
-            })?;
+    count: usize,
+}
+
+impl Flight {
+    /// The flight of `file` from the base camera, transfer function and clipping, at the file's
+    /// frame rate or else `fps` (in (0, 1000]). Errors (naming the keyframe or the frame and its
+    /// time) if the file is invalid, the flight has more than [`MAX_MOVIE_FRAMES`] frames, two
+    /// consecutive keyframes' clippings differ in kind, or any frame's camera or clipping is
+    /// invalid (a crop box turned inside out, a plane whose normal passes through zero): the
+    /// whole flight is checked before the first frame is rendered.
+    pub fn new(
+        file: &KeyframeFile,
+        base: &Camera,
+        base_tf: &TransferFunction,
+        base_clipping: &Clipping,
+        fps: f64,
+    ) -> Result<Flight> {
+        file.check()?;
+        let fps = file.fps.unwrap_or(fps);
+        if !(fps.is_finite() && fps > 0.0 && fps <= 1000.0) {
+            return Err(EngineError::request(
+                "fps",
+                format!("must be in (0, 1000], got {fps}"),
+            ));
         }
-        cameras.push(c);
-    }
-    let times: Vec<f64> = file.keyframes.iter().map(|k| k.time).collect();
-    let path = CameraPath::new(&times, &cameras)?;
-    let any_tf = file.keyframes.iter().any(|k| k.transfer_function.is_some());
-    let tfs: Vec<&TransferFunction> = file
-        .keyframes
-        .iter()
-        .map(|k| k.transfer_function.as_ref().unwrap_or(base_tf))
-        .collect();
-    let any_clip = file.keyframes.iter().any(|k| k.clipping.is_some());
-    let clips: Vec<&Clipping> = file
-        .keyframes
-        .iter()
-        .map(|k| k.clipping.as_ref().unwrap_or(base_clipping))
-        .collect();
-    if any_clip {
-        // Check every segment once, before rendering anything.
-        for i in 0..clips.len() - 1 {
-            lerp_clipping(
-                clips[i],
-                clips[i + 1],
-                0.5,
-                &format!("keyframes[{}].clipping", i + 1),
-            )?;
+        // Counted in floating point, so that a duration of 1e300 s is refused rather than
+        // wrapping to zero frames.
+        let frames = (file.duration() * fps + 1e-9).floor() + 1.0;
+        if frames.is_nan() || frames > MAX_MOVIE_FRAMES as f64 {
+            return Err(EngineError::request(
+                "keyframes",
+                format!(
+                    "the flight lasts {} s, {} frames at {fps} fps; a movie holds at most \
+                     {MAX_MOVIE_FRAMES} frames (shorten it or lower the frame rate)",
+                    short(file.duration()),
+                    short(frames)
+                ),
+            ));
         }
-    }
-    let t0 = times[0];
-    let count = ((file.duration() * fps) + 1e-9).floor() as usize + 1;
-    if count > 1_000_000 {
-        return Err(EngineError::request(
-            "keyframes",
-            format!("{count} frames at {fps} fps; at most 1 000 000"),
-        ));
-    }
-    Ok((0..count)
-        .map(|n| {
-            let t = t0 + n as f64 / fps;
-            // Keyframe times land exactly on their keyframe camera.
-            let camera = match times.iter().position(|&kt| kt == t) {
-                Some(i) => cameras[i].clone(),
-                None => path.sample(t),
-            };
-            let transfer_function = any_tf.then(|| {
-                let i = times
-                    .windows(2)
-                    .position(|w| t < w[1])
-                    .unwrap_or(times.len() - 2);
-                let u = ((t - times[i]) / (times[i + 1] - times[i])).clamp(0.0, 1.0);
-                if u == 0.0 {
-                    tfs[i].clone()
-                } else {
-                    lerp_transfer_function(tfs[i], tfs[i + 1], u)
-                }
-            });
-            let clipping = if any_clip {
-                let i = times
-                    .windows(2)
-                    .position(|w| t < w[1])
-                    .unwrap_or(times.len() - 2);
-                let u = ((t - times[i]) / (times[i + 1] - times[i])).clamp(0.0, 1.0);
-                // Checked above: consecutive clippings are of one kind.
-                lerp_clipping(clips[i], clips[i + 1], u, "keyframes")
-                    .ok()
-                    .or_else(|| Some(clips[i].clone()))
-            } else {
-                None
-            };
-            FlightFrame {
-                time: t - t0,
-                camera,
-                transfer_function,
-                clipping,
+        let mut cameras = Vec::with_capacity(file.keyframes.len());
+        for (i, k) in file.keyframes.iter().enumerate() {
+            let mut c = k.camera.clone().unwrap_or_else(|| base.clone());
+            if let Some(o) = &k.orbit {
+                o.apply(&mut c).map_err(|e| {
+                    EngineError::request(format!("keyframes[{i}].orbit"), e.to_string())
+                })?;
             }
-        })
-        .collect())
+            cameras.push(c);
+        }
+        let times: Vec<f64> = file.keyframes.iter().map(|k| k.time).collect();
+        let path = CameraPath::new(&times, &cameras)?;
+        let tfs = file
+            .keyframes
+            .iter()
+            .any(|k| k.transfer_function.is_some())
+            .then(|| {
+                file.keyframes
+                    .iter()
+                    .map(|k| {
+                        k.transfer_function
+                            .clone()
+                            .unwrap_or_else(|| base_tf.clone())
+                    })
+                    .collect::<Vec<_>>()
+            });
+        let clips = file
+            .keyframes
+            .iter()
+            .any(|k| k.clipping.is_some())
+            .then(|| {
+                file.keyframes
+                    .iter()
+                    .map(|k| k.clipping.clone().unwrap_or_else(|| base_clipping.clone()))
+                    .collect::<Vec<_>>()
+            });
+        if let Some(clips) = &clips {
+            for (i, c) in clips.iter().enumerate() {
+                c.validate().map_err(|e| {
+                    EngineError::request(format!("keyframes[{i}].clipping"), inner(e))
+                })?;
+            }
+            for i in 0..clips.len() - 1 {
+                lerp_clipping(
+                    &clips[i],
+                    &clips[i + 1],
+                    0.5,
+                    &format!("keyframes[{}].clipping", i + 1),
+                )?;
+            }
+        }
+        let flight = Flight {
+            times,
+            cameras,
+            path,
+            tfs,
+            clips,
+            fps,
+            count: frames as usize,
+        };
+        flight.check_frames()?;
+        Ok(flight)
+    }
+
+    /// Checks every frame's camera and clipping. Transfer functions need no check: a blend of
+    /// two valid functions is valid (positions are the union of theirs, every value a convex
+    /// combination of values in range).
+    fn check_frames(&self) -> Result<()> {
+        for n in 0..self.count {
+            let t = self.time(n);
+            let at = |what: &str| format!("frame {n} (t = {t:.3} s) {what}");
+            self.camera(t)
+                .validate()
+                .map_err(|e| EngineError::request(at("camera"), e.to_string()))?;
+            if let Some(c) = self.clipping(t)? {
+                c.validate().map_err(|e| {
+                    EngineError::request(
+                        at("clipping"),
+                        format!("{} (the keyframes' clippings move linearly)", inner(e)),
+                    )
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of frames (1..=[`MAX_MOVIE_FRAMES`]).
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// Whether the flight has no frames (never: it has at least one).
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Frames per second.
+    pub fn fps(&self) -> f64 {
+        self.fps
+    }
+
+    /// The absolute time of frame `n`, seconds.
+    fn time(&self, n: usize) -> f64 {
+        self.times[0] + n as f64 / self.fps
+    }
+
+    /// The keyframe segment `i` holding time `t` and the fraction `u` ∈ [0, 1] of the way
+    /// through it.
+    fn segment(&self, t: f64) -> (usize, f64) {
+        let times = &self.times;
+        // Binary search: a flight may have many keyframes and many frames.
+        let i = times
+            .partition_point(|&kt| kt <= t)
+            .saturating_sub(1)
+            .min(times.len() - 2);
+        let u = ((t - times[i]) / (times[i + 1] - times[i])).clamp(0.0, 1.0);
+        (i, u)
+    }
+
+    fn camera(&self, t: f64) -> Camera {
+        // Keyframe times land exactly on their keyframe camera.
+        match self
+            .times
+            .binary_search_by(|kt| kt.partial_cmp(&t).unwrap_or(std::cmp::Ordering::Less))
+        {
+            Ok(i) => self.cameras[i].clone(),
+            Err(_) => self.path.sample(t),
+        }
+    }
+
+    fn clipping(&self, t: f64) -> Result<Option<Clipping>> {
+        let Some(clips) = &self.clips else {
+            return Ok(None);
+        };
+        let (i, u) = self.segment(t);
+        lerp_clipping(&clips[i], &clips[i + 1], u, "keyframes").map(Some)
+    }
+
+    /// Frame `n` (clamped to the last frame): its time, camera, and transfer function and
+    /// clipping when the keyframes set them.
+    pub fn frame(&self, n: usize) -> FlightFrame {
+        let n = n.min(self.count - 1);
+        let t = self.time(n);
+        let transfer_function = self.tfs.as_ref().map(|tfs| {
+            let (i, u) = self.segment(t);
+            if u == 0.0 {
+                tfs[i].clone()
+            } else {
+                lerp_transfer_function(&tfs[i], &tfs[i + 1], u)
+            }
+        });
+        // Consecutive clippings were checked to be of one kind in `new`.
+        let clipping = self.clipping(t).ok().flatten();
+        FlightFrame {
+            time: t - self.times[0],
+            camera: self.camera(t),
+            transfer_function,
+            clipping,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -708,7 +872,7 @@ mod tests {
             ],
         };
         let base = cam();
-        let frames = flight(
+        let flight = Flight::new(
             &ok,
             &base,
             &TransferFunction::ramp(0.0, 100.0, 1.0),
@@ -716,12 +880,188 @@ mod tests {
             24.0,
         )
         .unwrap();
-        assert_eq!(frames.len(), 21);
-        assert_eq!(frames[0].camera, base);
+        assert_eq!(flight.len(), 21);
+        assert_eq!(flight.frame(0).camera, base);
         let mut end = base.clone();
         end.azimuth(90.0);
-        let last = &frames[20].camera;
+        let last = &flight.frame(20).camera;
         assert!((DVec3::from(last.position) - DVec3::from(end.position)).length() < 1e-9);
-        assert!(frames.iter().all(|f| f.transfer_function.is_none()));
+        assert!((0..21).all(|n| flight.frame(n).transfer_function.is_none()));
+    }
+
+    fn key(time: f64) -> Keyframe {
+        Keyframe {
+            time,
+            camera: None,
+            orbit: None,
+            transfer_function: None,
+            clipping: None,
+        }
+    }
+
+    fn fly(keys: Vec<Keyframe>, fps: f64) -> Result<Flight> {
+        let file = KeyframeFile {
+            fps: None,
+            keyframes: keys,
+        };
+        Flight::new(
+            &file,
+            &cam(),
+            &TransferFunction::ramp(0.0, 100.0, 1.0),
+            &Clipping::default(),
+            fps,
+        )
+    }
+
+    /// Issue 28: a last keyframe at 1e300 s wrapped the frame count to 0; now the count is
+    /// compared in floating point and refused with the cap named.
+    #[test]
+    fn an_endless_flight_is_refused_not_wrapped() {
+        for (end, fps) in [
+            (1e300, 24.0),
+            (f64::MAX / 2.0, 1000.0),
+            (100_000.0 / 24.0, 24.0),
+        ] {
+            let e = fly(vec![key(0.0), key(end)], fps).unwrap_err().to_string();
+            assert!(e.contains("at most 100000 frames"), "{end}: {e}");
+        }
+        // Just under the cap is fine and reports its length.
+        let f = fly(vec![key(0.0), key(99_999.0 / 1000.0)], 1000.0).unwrap();
+        assert_eq!(f.len(), MAX_MOVIE_FRAMES);
+        assert!(turntable(&cam(), TurnAxis::ViewUp, 360.0, MAX_MOVIE_FRAMES + 1).is_err());
+    }
+
+    /// Issue 28: two 1000-point transfer functions over many frames were blended for every
+    /// frame up front (3.6 GB at 1000 fps over 999 s). The flight keeps the keyframes' functions
+    /// only and blends one frame when asked; each blend equals the pointwise mix.
+    #[test]
+    fn transfer_functions_are_blended_per_frame_not_stored() {
+        let big = |shift: f64| {
+            let mut tf = TransferFunction::ramp(0.0, 1000.0, 1.0);
+            tf.scalar_opacity = (0..1000)
+                .map(|i| [i as f64 + shift, ((i as f64 * 0.37).sin() * 0.5 + 0.5)])
+                .collect();
+            tf
+        };
+        let (a, b) = (big(0.0), big(0.5));
+        let mut k0 = key(0.0);
+        k0.transfer_function = Some(a.clone());
+        let mut k1 = key(99.0);
+        k1.transfer_function = Some(b.clone());
+        let e = fly(
+            vec![k0.clone(), {
+                let mut k = k1.clone();
+                k.time = 999.0;
+                k
+            }],
+            1000.0,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("at most 100000 frames"), "{e}");
+        let f = fly(vec![k0, k1], 1000.0).unwrap();
+        assert_eq!(f.len(), 99_001);
+        assert_eq!(f.tfs.as_ref().map(Vec::len), Some(2));
+        let mid = f.frame(49_500).transfer_function.unwrap();
+        for x in [0.0, 10.25, 499.5, 998.0] {
+            let want = 0.5 * (a.opacity_at(x) + b.opacity_at(x));
+            assert!((mid.opacity_at(x) - want).abs() < 1e-9, "{x}");
+        }
+        assert_eq!(f.frame(0).transfer_function.unwrap(), a);
+    }
+
+    /// Issue 28: a crop box inverted at a later keyframe, or planes whose normals pass through
+    /// zero between two keyframes, used to fail at that frame after the earlier ones were
+    /// written; the whole flight is checked first, naming the keyframe or the frame.
+    #[test]
+    fn a_flight_is_checked_whole_before_the_first_frame() {
+        let boxed = |min: f64, max: f64| Clipping {
+            crop: Some(CropBox {
+                min: [min; 3],
+                max: [max; 3],
+                units: crate::scene::CropUnits::Voxels,
+            }),
+            planes: Vec::new(),
+        };
+        let mut keys = vec![key(0.0), key(1.0), key(2.0)];
+        keys[0].clipping = Some(boxed(0.0, 10.0));
+        keys[1].clipping = Some(boxed(2.0, 8.0));
+        keys[2].clipping = Some(boxed(9.0, 1.0));
+        let e = fly(keys, 24.0).unwrap_err().to_string();
+        assert!(
+            e.contains("keyframes[2].clipping") && e.contains("min ≤ max"),
+            "{e}"
+        );
+        let plane = |nx: f64| Clipping {
+            crop: None,
+            planes: vec![PlaneSpec {
+                normal: [nx, 0.0, 0.0],
+                offset: 0.0,
+            }],
+        };
+        let mut keys = vec![key(0.0), key(2.0)];
+        keys[0].clipping = Some(plane(1.0));
+        keys[1].clipping = Some(plane(-1.0));
+        let e = fly(keys, 24.0).unwrap_err().to_string();
+        // Halfway, at frame 24 (t = 1 s), the normal is zero.
+        assert!(e.contains("frame 24 (t = 1.000 s) clipping"), "{e}");
+        assert!(e.contains("non-zero normal"), "{e}");
+        // Too many planes in a keyframe.
+        let mut keys = vec![key(0.0), key(1.0)];
+        keys[1].clipping = Some(Clipping {
+            crop: None,
+            planes: vec![
+                PlaneSpec {
+                    normal: [1.0, 0.0, 0.0],
+                    offset: 0.0
+                };
+                crate::scene::MAX_CLIP_PLANES + 1
+            ],
+        });
+        keys[0].clipping = keys[1].clipping.clone();
+        let e = fly(keys, 24.0).unwrap_err().to_string();
+        assert!(
+            e.contains("keyframes[0].clipping") && e.contains("at most 64"),
+            "{e}"
+        );
+    }
+
+    /// Issue 28: the README's turntable (`--elevation 20`) turned about the tilted camera's
+    /// view-up and wobbled. About the scene's up, every frame keeps the elevation, and frame k
+    /// is the camera that `azimuth(k·step)` then `elevation(20)` gives.
+    #[test]
+    fn a_turntable_about_the_scene_up_keeps_the_elevation() {
+        let bounds = (DVec3::new(-1.0, -2.0, -3.0), DVec3::new(2.0, 1.0, 0.5));
+        let orbit = |az: f64| Orbit {
+            azimuth: Some(az),
+            elevation: Some(20.0),
+            ..Orbit::default()
+        };
+        let spec = CameraSpec::Orbit(orbit(10.0));
+        let base = spec.resolve(bounds).unwrap();
+        let up = scene_up(&spec, bounds).unwrap();
+        assert!((up - DVec3::Y).length() < 1e-12, "{up:?}");
+        let frames = turntable(&base, TurnAxis::World(up), 360.0, 8).unwrap();
+        assert_eq!(frames[0], base);
+        let elevation = |c: &Camera| {
+            let f = c.frame();
+            (-f.forward).dot(up).asin().to_degrees()
+        };
+        for (k, f) in frames.iter().enumerate() {
+            assert!((elevation(f) - 20.0).abs() < 1e-9, "{k}: {}", elevation(f));
+            let want = CameraSpec::Orbit(orbit(10.0 + 45.0 * k as f64))
+                .resolve(bounds)
+                .unwrap();
+            let d = DVec3::from(f.position) - DVec3::from(want.position);
+            let u = DVec3::from(f.view_up) - DVec3::from(want.view_up);
+            assert!(d.length() < 1e-9 && u.length() < 1e-9, "{k}: {d:?} {u:?}");
+        }
+        // About the camera's own (tilted) view-up the elevation wobbles: what the fix removed.
+        let wobbly = turntable(&base, TurnAxis::ViewUp, 360.0, 8).unwrap();
+        let spread = wobbly
+            .iter()
+            .map(elevation)
+            .fold((f64::MAX, f64::MIN), |(lo, hi), e| (lo.min(e), hi.max(e)));
+        assert!(spread.1 - spread.0 > 10.0, "{spread:?}");
     }
 }

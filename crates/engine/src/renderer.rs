@@ -176,8 +176,10 @@ pub struct Output {
     /// Premultiplied linear RGBA, row 0 at the top. MIP/MinIP: the projected value through the
     /// transfer function; X-ray: grey scaled so the brightest pixel is 1.
     pub image: Image,
-    /// X-ray line integrals (data units × world units) or MIP/MinIP values (data units; NaN
-    /// where no sample covers the pixel); `None` in composite mode.
+    /// X-ray line integrals (data units × world units; of `max(v + o, 0)` where
+    /// `Scene::xray_density` gives an offset `o`, for CT `1000 × μ/μ_water × world units`:
+    /// [`crate::xray`]) or MIP/MinIP values (data units; NaN where no sample covers the
+    /// pixel); `None` in composite mode.
     pub values: Option<ScalarImage>,
     /// Timings and counters.
     pub stats: Stats,
@@ -323,7 +325,10 @@ impl Renderer {
     /// The camera `request` resolves to (loads the volume for its bounds if needed).
     pub fn camera(&mut self, request: &RenderRequest) -> Result<Camera> {
         let vol = self.volume(&request.scene.volume)?;
-        request.scene.camera.resolve(vol.grid().bounds_world())
+        request
+            .scene
+            .camera
+            .resolve(vol.grid().drawn_bounds_world())
     }
 
     /// The transfer function `request` resolves to for its volume and mode.
@@ -379,13 +384,27 @@ impl Renderer {
             (Some(c), false) => c.value.1.clone(),
             _ => Vec::new(),
         };
-        let camera = request.scene.camera.resolve(vol.grid().bounds_world())?;
+        // The reset view frames the box the renderers draw: an axis of one sample is one
+        // spacing thick (decision 0023), so a single slice or voxel is framed, not a plane or
+        // a point.
+        let camera = request
+            .scene
+            .camera
+            .resolve(vol.grid().drawn_bounds_world())?;
         let range = *cached(&mut self.range, request.scene.volume.clone(), || {
             Ok(vol.value_range())
         })?
         .0;
         let (tf, tf_warning, tf_note) = resolve_tf(request, &vol, range, &mut self.auto_tf)?;
         notes.extend(tf_note);
+        // X-ray: what is integrated (CT in Hounsfield units relative to air; `crate::xray`).
+        let (xray_offset, xray_note) = match request.mode {
+            Mode::Xray => request.scene.xray_density.resolve(range),
+            _ => (None, None),
+        };
+        if !vol_was_cached {
+            notes.extend(xray_note);
+        }
         let threads = request.threads;
         let pool = Arc::clone(
             cached(&mut self.pool, threads, || {
@@ -401,6 +420,7 @@ impl Renderer {
             .0,
         );
         let mut warnings: Vec<String> = tf_warning.into_iter().collect();
+        warnings.extend(request.ignored_options());
         let t_prep = Instant::now();
         report(progress, 0.05, "classify")?;
         // Decision 0016: `auto` draws unshaded composite, MIP and MinIP with image-aligned slabs
@@ -681,20 +701,27 @@ impl Renderer {
                 (rendered.image, rendered.values)
             }
             UsedRenderer::Dense | UsedRenderer::SplatList => {
+                // X-ray ignores the transfer function; its tables only tell the splat list which
+                // voxels to keep: those whose X-ray weight is not zero.
+                let table_tf = match request.mode {
+                    Mode::Xray => xray_weight_tf(xray_offset),
+                    _ => tf.clone(),
+                };
                 let (tables, fresh_tables) =
-                    cached(&mut self.tables, tables_key(request, &tf), || {
-                        Ok(Arc::new(build_tables(request, &tf)?))
+                    cached(&mut self.tables, tables_key(request, &table_tf), || {
+                        Ok(Arc::new(build_tables(request, &table_tf)?))
                     })?;
                 let fresh_tables = fresh_tables || early_fresh;
                 let tables = Arc::clone(tables);
                 let mut settings = request.splat_settings();
                 settings.clip = request.scene.clipping.world_planes(vol.grid())?;
+                settings.xray_offset = xray_offset.map(|o| o as f32);
                 let mut fresh = fresh_tables;
                 let rendered = if renderer == UsedRenderer::SplatList {
                     let q = &request.quality;
                     let key = (
                         request.scene.volume.clone(),
-                        tables_key(request, &tf),
+                        tables_key(request, &table_tf),
                         q.list_threshold.to_bits(),
                         q.subsample,
                     );
@@ -943,9 +970,16 @@ fn resolve_tf(
         }
         TransferSpec::Auto => match scene {
             Some(tf) => tf,
-            None if matches!(request.mode, Mode::Mip | Mode::Minip) => {
-                // Projections without a transfer function: an opaque grey window over the data.
-                TransferFunction::ramp(range.0, range.1, 1.0)
+            None if matches!(request.mode, Mode::Mip | Mode::Minip | Mode::Xray) => {
+                // Projections without a transfer function: an opaque grey window over the data
+                // (constant data: the unit below the value, which then shows white). X-ray does
+                // not use it (`xray_weight_tf`): it is what `--save-scene` records.
+                let (lo, hi) = if range.1 > range.0 {
+                    range
+                } else {
+                    (range.0 - 1.0, range.0)
+                };
+                TransferFunction::ramp(lo, hi, 1.0)
             }
             None if request.scene.volume.is_demo_head() => Preset::CtSkin.transfer_function(range),
             None => {
@@ -966,6 +1000,28 @@ fn resolve_tf(
     };
     tf.validate()?;
     Ok((tf, warning, note))
+}
+
+/// The tables of an X-ray (which ignores the transfer function): opacity 1 wherever the X-ray
+/// weight (`volsplat_splat::xray_weight`) is not zero, 0 where it is, so that the splat list
+/// keeps exactly the voxels that add to the integral (a transfer function made the list drop
+/// the voxels it hid, air and soft tissue alike). With an offset `o`: 0 up to `−o`, 1 from
+/// `−o + δ` on; raw: 0 at 0 only. `δ` is far below any data step (10⁻³ of the offset, 10⁻⁶
+/// raw); a value inside it keeps its voxel, which adds (almost) nothing.
+fn xray_weight_tf(offset: Option<f64>) -> TransferFunction {
+    let points = match offset {
+        Some(o) => {
+            let d = 1e-3 * o.abs().max(1.0);
+            vec![[-o, 0.0], [-o + d, 1.0]]
+        }
+        None => vec![[-1e-6, 1.0], [0.0, 0.0], [1e-6, 1.0]],
+    };
+    let (lo, hi) = (points[0][0], points[points.len() - 1][0]);
+    TransferFunction {
+        color: vec![[lo, 1.0, 1.0, 1.0], [hi, 1.0, 1.0, 1.0]],
+        scalar_opacity: points,
+        ..TransferFunction::ramp(lo, hi, 1.0)
+    }
 }
 
 /// The key of the classification tables: everything they are built from.

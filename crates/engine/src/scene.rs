@@ -18,8 +18,8 @@ use volsplat_core::{
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum PhantomKind {
-    /// An MRI of a head built into the binary (VolPack's `brainsmall`, 84 × 128 × 128 u8, BSD-3;
-    /// [`crate::demo`]), face towards +z, top towards +y: the demo. Its grid is fixed.
+    /// An MRI of a head built into the binary (VolPack's `brainsmall`, 84 × 128 × 128 u8,
+    /// BSD-3), face towards +z, top towards +y: the demo. Its grid is fixed.
     Brain,
     /// CT-like head in Hounsfield units (i16), face towards +z, top towards +y.
     Head,
@@ -308,7 +308,8 @@ impl VolumeSource {
         }
     }
 
-    /// Whether this is the built-in demo head (whose default transfer function is `ct-skin`).
+    /// Whether this is the synthetic CT head phantom ([`PhantomKind::Head`], the demo before the
+    /// built-in MRI), whose default transfer function is `ct-skin`.
     pub fn is_demo_head(&self) -> bool {
         matches!(
             self,
@@ -365,7 +366,8 @@ impl CameraSpec {
 #[serde(rename_all = "snake_case")]
 pub enum TransferSpec {
     /// Chosen from the data and mode: a built-in scene's own function; for MIP and MinIP an
-    /// opaque grey window over the data range; `ct-skin` for the demo head; otherwise the
+    /// opaque grey window over the data range; `ct-skin` for the synthetic CT head phantom
+    /// ([`PhantomKind::Head`]); otherwise the
     /// automatic function from the volume's histogram (background made transparent, opacity
     /// ramped over robust percentiles of the foreground; [`volsplat_core::AutoTransfer`],
     /// docs/presets.md).
@@ -448,7 +450,8 @@ impl Default for ShadingTerms {
 /// In a scene file `volume` is required; every other field has the default given.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Scene {
-    /// The volume (default: the demo head phantom; required in a scene file).
+    /// The volume (default: the built-in MRI head, [`PhantomKind::Brain`]; required in a scene
+    /// file).
     pub volume: VolumeSource,
     /// The camera (default: VTK's reset view, orthographic).
     #[serde(default)]
@@ -456,7 +459,8 @@ pub struct Scene {
     /// The transfer function (default: chosen from the data and mode).
     #[serde(default)]
     pub transfer_function: TransferSpec,
-    /// Directional lights in the camera frame; empty means VTK's white headlight.
+    /// Directional lights in the camera frame; empty means VTK's white headlight. At most
+    /// [`MAX_LIGHTS`].
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lights: Vec<LightSpec>,
     /// Shading terms kept.
@@ -472,7 +476,23 @@ pub struct Scene {
     /// Cropping and clipping planes (splatting renderers), cut smoothly.
     #[serde(default, skip_serializing_if = "Clipping::is_empty")]
     pub clipping: Clipping,
+    /// X-ray mode: what is integrated (default `auto`: CT in Hounsfield units relative to air,
+    /// `max(HU + 1000, 0)`; other data as they are). See [`crate::xray`].
+    #[serde(default, skip_serializing_if = "crate::xray::XrayDensity::is_auto")]
+    pub xray_density: crate::xray::XrayDensity,
 }
+
+/// Most lights a scene may hold. Each light is evaluated for every shaded voxel or sample, so
+/// the cost grows with their number (10 000 lights took 10–14 s for a 16 × 16 image, issue 28);
+/// OpenGL's fixed-function pipeline, from which VTK's lighting model comes, guarantees 8
+/// (`GL_MAX_LIGHTS`), and VTK scenes rarely use more. 16 leaves room for key, fill, rim and
+/// coloured lights.
+pub const MAX_LIGHTS: usize = 16;
+
+/// Most clipping planes a scene may hold (besides a crop box's six). Every plane is tested
+/// for every voxel and sample (100 000 planes took 15 s, issue 28); a convex region needs a
+/// handful, and 64 leaves room for polyhedral cuts.
+pub const MAX_CLIP_PLANES: usize = 64;
 
 /// A clipping plane: keeps the world points `x` with `normal·x + offset ≥ 0` (the side the
 /// normal points to, as VTK's clipping planes).
@@ -517,7 +537,7 @@ pub struct Clipping {
     /// A crop box.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub crop: Option<CropBox>,
-    /// Clipping planes; a point is kept when every plane keeps it.
+    /// Clipping planes; a point is kept when every plane keeps it. At most [`MAX_CLIP_PLANES`].
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub planes: Vec<PlaneSpec>,
 }
@@ -528,15 +548,19 @@ impl Clipping {
         self.crop.is_none() && self.planes.is_empty()
     }
 
-    /// The world-space planes of the crop box and the clipping planes for a volume on `grid`;
-    /// errors name the field (`scene.clipping.crop`, `scene.clipping.planes[i]`).
-    pub fn world_planes(
-        &self,
-        grid: &volsplat_core::Grid,
-    ) -> Result<Vec<volsplat_splat::ClipPlane>> {
-        use volsplat_core::glam::DVec3;
-        use volsplat_splat::ClipPlane;
-        let mut out = Vec::new();
+    /// Checks what needs no volume: at most [`MAX_CLIP_PLANES`] planes, each with a finite,
+    /// non-zero normal and a finite offset; a crop box with finite corners, `min ≤ max` on every
+    /// axis. Errors name the field (`scene.clipping.crop`, `scene.clipping.planes[i]`).
+    pub fn validate(&self) -> Result<()> {
+        if self.planes.len() > MAX_CLIP_PLANES {
+            return Err(EngineError::request(
+                "scene.clipping.planes",
+                format!(
+                    "{} clipping planes; at most {MAX_CLIP_PLANES} (each plane is tested for                      every voxel and sample)",
+                    self.planes.len()
+                ),
+            ));
+        }
         if let Some(c) = &self.crop {
             for k in 0..3 {
                 if !(c.min[k].is_finite() && c.max[k].is_finite() && c.min[k] <= c.max[k]) {
@@ -549,6 +573,37 @@ impl Clipping {
                     ));
                 }
             }
+        }
+        for (i, p) in self.planes.iter().enumerate() {
+            let plane = volsplat_splat::ClipPlane {
+                normal: p.normal,
+                offset: p.offset,
+            };
+            if !plane.is_valid() {
+                return Err(EngineError::request(
+                    format!("scene.clipping.planes[{i}]"),
+                    format!(
+                        "normal {:?}, offset {}: needs a finite, non-zero normal and a finite \
+                         offset",
+                        p.normal, p.offset
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The world-space planes of the crop box and the clipping planes for a volume on `grid`,
+    /// checked as [`Clipping::validate`].
+    pub fn world_planes(
+        &self,
+        grid: &volsplat_core::Grid,
+    ) -> Result<Vec<volsplat_splat::ClipPlane>> {
+        use volsplat_core::glam::DVec3;
+        use volsplat_splat::ClipPlane;
+        self.validate()?;
+        let mut out = Vec::new();
+        if let Some(c) = &self.crop {
             let origin = DVec3::from(grid.origin);
             for k in 0..3 {
                 let (normal, lo, hi) = match c.units {
@@ -575,23 +630,10 @@ impl Clipping {
                 });
             }
         }
-        for (i, p) in self.planes.iter().enumerate() {
-            let plane = ClipPlane {
-                normal: p.normal,
-                offset: p.offset,
-            };
-            if !plane.is_valid() {
-                return Err(EngineError::request(
-                    format!("scene.clipping.planes[{i}]"),
-                    format!(
-                        "normal {:?}, offset {}: needs a finite, non-zero normal and a finite \
-                         offset",
-                        p.normal, p.offset
-                    ),
-                ));
-            }
-            out.push(plane);
-        }
+        out.extend(self.planes.iter().map(|p| ClipPlane {
+            normal: p.normal,
+            offset: p.offset,
+        }));
         Ok(out)
     }
 }

@@ -26,6 +26,36 @@ pub struct WriteOptions {
     pub window: Option<(f32, f32)>,
 }
 
+/// Checks a PNG background colour: three finite linear values in [0, 1]. The message names the
+/// offending component and value (`red is NaN; …`).
+pub fn check_background(background: [f32; 3]) -> std::result::Result<(), String> {
+    for (name, v) in ["red", "green", "blue"].iter().zip(background) {
+        if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+            return Err(format!(
+                "{name} is {v}; each component must be a linear value in [0, 1]"
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl WriteOptions {
+    /// Checks the options that need no image: the background ([`check_background`]) and the
+    /// grey window (finite, `lo < hi`). Errors name the field (`background`, `window`).
+    pub fn validate(&self) -> Result<()> {
+        check_background(self.png.background).map_err(|m| EngineError::request("background", m))?;
+        if let Some((lo, hi)) = self.window
+            && !(lo.is_finite() && hi.is_finite() && lo < hi)
+        {
+            return Err(EngineError::request(
+                "window",
+                format!("needs finite values with lo < hi, got {lo}:{hi}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Whether a render in `mode` is written as its scalar values (when it has them) rather than
 /// its RGBA image: X-ray always, MIP and MinIP when `window` is given.
 pub fn writes_values(has_values: bool, mode: Mode, window: Option<(f32, f32)>) -> bool {
@@ -45,8 +75,9 @@ impl Output {
 }
 
 /// Writes `image` (or `values`, see [`writes_values`]) of a render in `mode` to `path`,
-/// atomically; see the module docs. Errors name the file: an unknown extension, a window that is
-/// not finite with `lo < hi`, a window on a composite image, or the writer's own errors.
+/// atomically; see the module docs. Errors name the file: a background outside [0, 1] or not
+/// finite, a window that is not finite with `lo < hi`, a window on a composite image, an unknown
+/// extension, or the writer's own errors.
 pub fn write_image(
     path: &Path,
     image: &Image,
@@ -55,7 +86,7 @@ pub fn write_image(
     options: &WriteOptions,
 ) -> Result<()> {
     let bad = |message: String| EngineError::request("output", message);
-    check_window(&path.display().to_string(), mode, options.window)?;
+    check_options(&path.display().to_string(), mode, options)?;
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -87,29 +118,26 @@ pub fn encode_png(
     mode: Mode,
     options: &WriteOptions,
 ) -> Result<Vec<u8>> {
-    check_window("image", mode, options.window)?;
+    check_options("image", mode, options)?;
     Ok(match grey_window(values, mode, options.window) {
         Some((values, lo, hi)) => volsplat_io::encode_png_gray(values, lo, hi, options.png.bits)?,
         None => volsplat_io::encode_png(image, &options.png)?,
     })
 }
 
-/// A grey window must be finite with `lo < hi` and applies to MIP, MinIP and X-ray; `what` names
-/// the output in the error.
-fn check_window(what: &str, mode: Mode, window: Option<(f32, f32)>) -> Result<()> {
+/// The options [`WriteOptions::validate`] checks, and a grey window only for MIP, MinIP and
+/// X-ray; `what` names the output in the error.
+fn check_options(what: &str, mode: Mode, options: &WriteOptions) -> Result<()> {
     let bad = |message: String| EngineError::request("output", message);
-    if let Some((lo, hi)) = window {
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return Err(bad(format!(
-                "{what}: a grey window needs finite values with lo < hi, got {lo}:{hi}"
-            )));
-        }
-        if mode == Mode::Composite {
-            return Err(bad(format!(
-                "{what}: a grey window applies to MIP, MinIP and X-ray; composite images take \
-                 their colours from the transfer function"
-            )));
-        }
+    options.validate().map_err(|e| match e {
+        EngineError::Request { field, message } => bad(format!("{what}: {field} {message}")),
+        e => e,
+    })?;
+    if options.window.is_some() && mode == Mode::Composite {
+        return Err(bad(format!(
+            "{what}: a grey window applies to MIP, MinIP and X-ray; composite images take their \
+             colours from the transfer function"
+        )));
     }
     Ok(())
 }
@@ -197,6 +225,43 @@ mod tests {
             ..WriteOptions::default()
         };
         assert!(encode_png(&image, Some(&values), Mode::Mip, &backwards).is_err());
+    }
+
+    /// Issue 28: `--background nan,0,0` wrote red as 0 and `2,2,2` was accepted; both are
+    /// errors naming the component, and nothing is written.
+    #[test]
+    fn backgrounds_outside_zero_to_one_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        let image = Image::new(2, 2);
+        for (bg, word) in [
+            ([f32::NAN, 0.0, 0.0], "red is NaN"),
+            ([2.0, 2.0, 2.0], "red is 2"),
+            ([0.0, -0.5, 0.0], "green is -0.5"),
+            ([0.0, 0.0, f32::INFINITY], "blue is inf"),
+        ] {
+            let options = WriteOptions {
+                png: PngSettings {
+                    background: bg,
+                    ..PngSettings::default()
+                },
+                window: None,
+            };
+            let e = write_image(&path, &image, None, Mode::Composite, &options)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(word) && e.contains("[0, 1]"), "{e}");
+            assert!(!path.exists());
+        }
+        let ok = WriteOptions {
+            png: PngSettings {
+                background: [0.0, 0.5, 1.0],
+                ..PngSettings::default()
+            },
+            window: None,
+        };
+        write_image(&path, &image, None, Mode::Composite, &ok).unwrap();
+        assert!(path.exists());
     }
 
     #[test]

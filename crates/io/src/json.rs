@@ -7,6 +7,10 @@
 //! for a step).
 //! `//` line comments (outside strings) are removed before parsing, so the annotated examples of
 //! DESIGN.md load as written. Files larger than [`MAX_JSON_BYTES`] are rejected.
+//!
+//! A transfer-function file may also be a ParaView / VTK colour-map preset, as ParaView's
+//! "Choose Preset → Export" writes it (see [`load_transfer_function_named`]); the command line's
+//! `--tf` and Python's `TransferFunction.load` read both through this one reader.
 
 use crate::atomic::{write_atomic, write_err};
 use crate::error::{IoError, Result};
@@ -65,13 +69,15 @@ pub fn load_camera_with(path: impl AsRef<Path>, limits: &Limits) -> Result<(Came
 }
 
 /// Loads a transfer-function file (fields [`TRANSFER_FUNCTION_FIELDS`]; point values in the
-/// data's own units, `scalar_opacity_unit_distance` in world units).
+/// data's own units, `scalar_opacity_unit_distance` in world units), or a ParaView colour-map
+/// preset file (see [`load_transfer_function_named`]; the first preset of the file).
 ///
 /// Every point list (`color`, `scalar_opacity`, `gradient_opacity`) must be in non-decreasing
 /// order of value; equal consecutive values (a step) are allowed. An out-of-order point is an
 /// error naming the file, the field, the point's index and its value.
 ///
-/// Returns the validated transfer function and one warning per unknown top-level field.
+/// Returns the validated transfer function and its warnings: one per unknown top-level field
+/// (volsplat's format), or what a ParaView preset loses (see [`load_transfer_function_named`]).
 pub fn load_transfer_function(path: impl AsRef<Path>) -> Result<(TransferFunction, Vec<String>)> {
     load_transfer_function_with(path, &Limits::default())
 }
@@ -81,12 +87,257 @@ pub fn load_transfer_function_with(
     path: impl AsRef<Path>,
     limits: &Limits,
 ) -> Result<(TransferFunction, Vec<String>)> {
+    load_transfer_function_named(path, None, limits)
+}
+
+/// Loads a transfer function from volsplat's transfer-function file or from a ParaView / VTK
+/// colour-map preset file, told apart by their content.
+///
+/// A ParaView preset file (ParaView's "Choose Preset → Export") is a JSON list of preset objects,
+/// or one object, each with `RGBPoints` = `[x, r, g, b, …]` (values in data units, colours in
+/// [0, 1]) and optionally `Name`, `ColorSpace` and `Points` = `[x, opacity, midpoint, sharpness,
+/// …]` (VTK's `vtkPiecewiseFunction` nodes). It becomes:
+///
+/// - `color`: the `RGBPoints`, interpolated in RGB (another `ColorSpace` draws a warning);
+/// - `scalar_opacity`: `[x, opacity]` of the `Points` (midpoints and sharpnesses other than VTK's
+///   0.5 and 0 draw a warning: they are approximated by straight lines); without `Points`, a ramp
+///   from 0 at the first colour point to 1 at the last (ParaView's default opacity; a warning
+///   says so), or opacity 1 when the colour range is a single value;
+/// - `Shade`, `Ambient`, `Diffuse`, `Specular`, `SpecularPower` and
+///   `ScalarOpacityUnitDistance`, if present, the fields of the same meaning; everything else
+///   (`Name`, `Creator`, `NanColor`, …) is ignored.
+///
+/// `name` picks the preset whose `Name` it is (an error lists the names the file holds);
+/// without it the first preset is used, with a warning when the file holds several. `name` is
+/// an error for volsplat's own format. Errors name the file and the field (`RGBPoints[5]`).
+pub fn load_transfer_function_named(
+    path: impl AsRef<Path>,
+    name: Option<&str>,
+    limits: &Limits,
+) -> Result<(TransferFunction, Vec<String>)> {
     let path = path.as_ref();
-    let (object, warnings) = load_object(path, TRANSFER_FUNCTION_FIELDS, limits.max_json_bytes)?;
+    let value = load_value(path, limits.max_json_bytes)?;
+    if is_paraview(&value) {
+        return from_paraview(path, &value, name);
+    }
+    if let Some(name) = name {
+        return Err(IoError::Json {
+            path: path.to_path_buf(),
+            message: format!(
+                "a preset name ({name:?}) applies to ParaView colour-map preset files only \
+                 (a list of objects with `RGBPoints`); this is volsplat's transfer-function \
+                 format"
+            ),
+        });
+    }
+    let (object, warnings) = into_object(path, value, TRANSFER_FUNCTION_FIELDS)?;
+    tf_from_object(path, object, warnings)
+}
+
+/// The transfer function of a volsplat transfer-function object, validated.
+fn tf_from_object(
+    path: &Path,
+    object: Map<String, Value>,
+    warnings: Vec<String>,
+) -> Result<(TransferFunction, Vec<String>)> {
     let template = serde_json::to_value(TransferFunction::ramp(0.0, 1.0, 1.0)).ok();
     let mut tf: TransferFunction = from_object(path, object, template)?;
     tf.validate().map_err(|e| IoError::core(path, e))?;
     Ok((tf, warnings))
+}
+
+/// Whether `value` is a ParaView colour-map preset file: an object with `RGBPoints`, or a list
+/// holding one.
+fn is_paraview(value: &Value) -> bool {
+    let has_points = |v: &Value| v.as_object().is_some_and(|o| o.contains_key("RGBPoints"));
+    match value {
+        Value::Object(_) => has_points(value),
+        Value::Array(items) => items.iter().any(has_points),
+        _ => false,
+    }
+}
+
+/// The ParaView preset fields copied as they are: (ParaView's key, volsplat's field, a bool?).
+const PARAVIEW_SCALARS: [(&str, &str, bool); 6] = [
+    ("Shade", "shade", true),
+    ("Ambient", "ambient", false),
+    ("Diffuse", "diffuse", false),
+    ("Specular", "specular", false),
+    ("SpecularPower", "specular_power", false),
+    (
+        "ScalarOpacityUnitDistance",
+        "scalar_opacity_unit_distance",
+        false,
+    ),
+];
+
+/// A ParaView colour-map preset file as a transfer function (rules: [`load_transfer_function_named`]).
+fn from_paraview(
+    path: &Path,
+    value: &Value,
+    name: Option<&str>,
+) -> Result<(TransferFunction, Vec<String>)> {
+    let presets: Vec<&Map<String, Value>> = match value {
+        Value::Object(o) => vec![o],
+        Value::Array(items) => items
+            .iter()
+            .filter_map(Value::as_object)
+            .filter(|o| o.contains_key("RGBPoints"))
+            .collect(),
+        _ => Vec::new(),
+    };
+    let label = |p: &Map<String, Value>| match p.get("Name") {
+        Some(Value::String(s)) => format!("{s:?}"),
+        Some(v) => v.to_string(),
+        None => "(no Name)".into(),
+    };
+    let mut warnings = Vec::new();
+    let preset = match name {
+        Some(name) => presets
+            .iter()
+            .find(|p| p.get("Name").and_then(Value::as_str) == Some(name))
+            .ok_or_else(|| IoError::Json {
+                path: path.to_path_buf(),
+                message: format!(
+                    "no preset named {name:?}; the file holds {}",
+                    presets
+                        .iter()
+                        .map(|p| label(p))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            })?,
+        None => {
+            let first = presets.first().ok_or_else(|| IoError::Json {
+                path: path.to_path_buf(),
+                message: "no ParaView preset with `RGBPoints` in the file".into(),
+            })?;
+            if presets.len() > 1 {
+                warnings.push(format!(
+                    "{}: holds {} presets; using the first, {} (choose with a name)",
+                    path.display(),
+                    presets.len(),
+                    label(first)
+                ));
+            }
+            first
+        }
+    };
+    let rgb = flat_numbers(path, preset, "RGBPoints", "[x, r, g, b, …]")?;
+    let color: Vec<Value> = rgb.chunks_exact(4).map(|q| serde_json::json!(q)).collect();
+    if let Some(Value::String(space)) = preset.get("ColorSpace")
+        && !space.eq_ignore_ascii_case("rgb")
+    {
+        warnings.push(format!(
+            "{}: ColorSpace {space:?} is interpolated in RGB here",
+            path.display()
+        ));
+    }
+    let opacity: Vec<Value> = match preset.get("Points") {
+        None | Some(Value::Null) => {
+            let (lo, hi) = (rgb[0], rgb[rgb.len() - 4]);
+            warnings.push(format!(
+                "{}: no opacity Points; opacity ramps 0 → 1 over the colour range",
+                path.display()
+            ));
+            if hi > lo {
+                vec![serde_json::json!([lo, 0.0]), serde_json::json!([hi, 1.0])]
+            } else {
+                vec![serde_json::json!([lo, 1.0])]
+            }
+        }
+        Some(_) => {
+            let pts = flat_numbers(
+                path,
+                preset,
+                "Points",
+                "[x, opacity, midpoint, sharpness, …]",
+            )?;
+            if pts.chunks_exact(4).any(|q| q[2] != 0.5 || q[3] != 0.0) {
+                warnings.push(format!(
+                    "{}: opacity midpoint/sharpness other than 0.5/0 are approximated by \
+                     straight lines",
+                    path.display()
+                ));
+            }
+            pts.chunks_exact(4)
+                .map(|q| serde_json::json!([q[0], q[1]]))
+                .collect()
+        }
+    };
+    let mut object = Map::new();
+    object.insert("color".into(), Value::Array(color));
+    object.insert("scalar_opacity".into(), Value::Array(opacity));
+    for (key, field, boolean) in PARAVIEW_SCALARS {
+        let Some(v) = preset.get(key) else { continue };
+        if (boolean && !v.is_boolean()) || (!boolean && !v.is_number()) {
+            return Err(IoError::field(
+                path,
+                key,
+                &v.to_string(),
+                if boolean {
+                    "expected true or false"
+                } else {
+                    "expected a number"
+                },
+            ));
+        }
+        object.insert(field.into(), v.clone());
+    }
+    let (tf, _) = tf_from_object(path, object, Vec::new()).map_err(|e| match e {
+        IoError::Core { error, .. } => IoError::Json {
+            path: path.to_path_buf(),
+            message: format!(
+                "ParaView preset {} (RGBPoints → color, Points → scalar_opacity): {error}",
+                label(preset)
+            ),
+        },
+        e => e,
+    })?;
+    Ok((tf, warnings))
+}
+
+/// `preset[key]` as a flat list of numbers, a non-empty multiple of 4 long.
+fn flat_numbers(
+    path: &Path,
+    preset: &Map<String, Value>,
+    key: &str,
+    layout: &str,
+) -> Result<Vec<f64>> {
+    let value = preset.get(key).unwrap_or(&Value::Null);
+    let Value::Array(items) = value else {
+        return Err(IoError::field(
+            path,
+            key,
+            &value.to_string(),
+            format!("expected a flat list {layout} of 4·N numbers"),
+        ));
+    };
+    if items.is_empty() || items.len() % 4 != 0 {
+        return Err(IoError::field(
+            path,
+            key,
+            &value.to_string(),
+            format!(
+                "expected a flat list {layout} of 4·N numbers (N ≥ 1), got {} numbers",
+                items.len()
+            ),
+        ));
+    }
+    items
+        .iter()
+        .enumerate()
+        .map(|(n, v)| {
+            v.as_f64().ok_or_else(|| {
+                IoError::field(
+                    path,
+                    format!("{key}[{n}]"),
+                    &v.to_string(),
+                    "expected a number",
+                )
+            })
+        })
+        .collect()
 }
 
 /// Saves a camera as pretty-printed JSON with the fields of [`CAMERA_FIELDS`] (world units,
@@ -113,13 +364,17 @@ fn save_pretty<T: Serialize>(path: &Path, value: &T) -> Result<()> {
 }
 
 /// Reads `path` as a JSON object; returns it and warnings for fields not in `known`.
-/// Files may be pipes (`--camera <(…)`): reading is bounded by `max_bytes`, not by a size
-/// found beforehand.
 fn load_object(
     path: &Path,
     known: &[&str],
     max_bytes: u64,
 ) -> Result<(Map<String, Value>, Vec<String>)> {
+    into_object(path, load_value(path, max_bytes)?, known)
+}
+
+/// Reads `path` as JSON (`//` comments removed). Files may be pipes (`--camera <(…)`): reading
+/// is bounded by `max_bytes`, not by a size found beforehand.
+fn load_value(path: &Path, max_bytes: u64) -> Result<Value> {
     let file = std::fs::File::open(path).map_err(|e| IoError::os(path, "open", e))?;
     let mut bytes = Vec::new();
     file.take(max_bytes.saturating_add(1))
@@ -138,10 +393,18 @@ fn load_object(
         message: format!("not valid UTF-8: {e}"),
     })?;
     let text = strip_line_comments(&text);
-    let value: Value = serde_json::from_str(&text).map_err(|e| IoError::Json {
+    serde_json::from_str(&text).map_err(|e| IoError::Json {
         path: path.to_path_buf(),
         message: e.to_string(),
-    })?;
+    })
+}
+
+/// `value` as a JSON object, with warnings for fields not in `known`.
+fn into_object(
+    path: &Path,
+    value: Value,
+    known: &[&str],
+) -> Result<(Map<String, Value>, Vec<String>)> {
     let Value::Object(object) = value else {
         return Err(IoError::Json {
             path: path.to_path_buf(),
@@ -493,6 +756,123 @@ mod tests {
         }
         let e = load_camera(dir.path().join("missing.json")).unwrap_err();
         assert!(e.to_string().contains("missing.json"), "{e}");
+    }
+
+    /// ParaView colour-map presets (issue 28 §6): the rules of `load_transfer_function_named`,
+    /// which the command line's `--tf` and Python's `TransferFunction.load` share.
+    #[test]
+    fn paraview_presets_load_as_transfer_functions() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = r#"[{"Name": "other", "RGBPoints": [0, 0, 0, 0, 1, 1, 1, 1]},
+            {"Name": "bone", "ColorSpace": "Diverging", "Creator": "ParaView",
+             "RGBPoints": [0, 0, 0, 0, 1500, 1, 0.8, 0.6, 3000, 1, 1, 1],
+             "Points": [0, 0, 0.5, 0, 800, 0.1, 0.5, 0, 3000, 0.9, 0.5, 0],
+             "Shade": true, "Specular": 0.4}]"#;
+        let p = write(dir.path(), "pv.json", text);
+        let l = Limits::default();
+        let (tf, w) = load_transfer_function_named(&p, Some("bone"), &l).unwrap();
+        assert_eq!(
+            tf.color,
+            vec![
+                [0.0, 0.0, 0.0, 0.0],
+                [1500.0, 1.0, 0.8, 0.6],
+                [3000.0, 1.0, 1.0, 1.0]
+            ]
+        );
+        assert_eq!(
+            tf.scalar_opacity,
+            vec![[0.0, 0.0], [800.0, 0.1], [3000.0, 0.9]]
+        );
+        assert!(
+            tf.shade && tf.specular == 0.4 && tf.diffuse == 0.7,
+            "{tf:?}"
+        );
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("ColorSpace \"Diverging\""), "{w:?}");
+        // Without a name: the first preset, a warning that there are two, and the default
+        // opacity ramp over the colour range (no `Points`).
+        let (first, w) = load_transfer_function(&p).unwrap();
+        assert_eq!(
+            first.color,
+            vec![[0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0]]
+        );
+        assert_eq!(first.scalar_opacity, vec![[0.0, 0.0], [1.0, 1.0]]);
+        let all = w.join(" | ");
+        assert!(
+            all.contains("2 presets") && all.contains("\"other\"") && all.contains("no opacity"),
+            "{all}"
+        );
+        // One object; a single colour value gets opacity 1; non-default midpoints warn.
+        let p = write(dir.path(), "one.json", r#"{"RGBPoints": [5, 1, 0, 0]}"#);
+        let (tf, _) = load_transfer_function(&p).unwrap();
+        assert_eq!(tf.scalar_opacity, vec![[5.0, 1.0]]);
+        let p = write(
+            dir.path(),
+            "mid.json",
+            r#"[{"RGBPoints": [0, 0, 0, 0, 1, 1, 1, 1], "Points": [0, 0, 0.3, 0, 1, 1, 0.5, 0]}]"#,
+        );
+        let (tf, w) = load_transfer_function(&p).unwrap();
+        assert_eq!(tf.scalar_opacity, vec![[0.0, 0.0], [1.0, 1.0]]);
+        assert!(w.len() == 1 && w[0].contains("midpoint"), "{w:?}");
+        // A volsplat file is not a preset list.
+        let p = write(dir.path(), "tf.json", DESIGN_TF);
+        let e = load_transfer_function_named(&p, Some("bone"), &l)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("ParaView") && e.contains("tf.json"), "{e}");
+    }
+
+    #[test]
+    fn paraview_errors_name_file_and_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let cases: &[(&str, &str)] = &[
+            (r#"[{"RGBPoints": [0, 0, 0]}]"#, "`RGBPoints`"),
+            (r#"[{"RGBPoints": []}]"#, "`RGBPoints`"),
+            (r#"[{"RGBPoints": "jet"}]"#, "`RGBPoints`"),
+            (r#"[{"RGBPoints": [0, 0, 0, "red"]}]"#, "`RGBPoints[3]`"),
+            (
+                r#"[{"RGBPoints": [0, 0, 0, 0], "Points": [0, 1, 0.5]}]"#,
+                "`Points`",
+            ),
+            (
+                r#"[{"RGBPoints": [0, 0, 0, 0], "Points": [0, "x", 0.5, 0]}]"#,
+                "`Points[1]`",
+            ),
+            (r#"[{"RGBPoints": [0, 0, 0, 0], "Shade": 1}]"#, "`Shade`"),
+            (
+                r#"[{"Name": "up-down", "RGBPoints": [10, 0, 0, 0, 5, 1, 1, 1]}]"#,
+                "color[1]",
+            ),
+            (r#"[{"RGBPoints": [0, 2, 0, 0]}]"#, "color[0]"),
+            (
+                r#"[{"RGBPoints": [0, 0, 0, 0], "Points": [0, 1.5, 0.5, 0]}]"#,
+                "scalar_opacity[0]",
+            ),
+        ];
+        for (text, field) in cases {
+            let p = write(dir.path(), "bad_pv.json", text);
+            let e = load_transfer_function(&p).unwrap_err().to_string();
+            assert!(
+                e.contains(field) && e.contains("bad_pv.json"),
+                "{text}: {e}"
+            );
+        }
+        let p = write(
+            dir.path(),
+            "pv.json",
+            r#"[{"Name": "a", "RGBPoints": [0, 0, 0, 0]}, {"Name": "b", "RGBPoints": [0, 0, 0, 0]}]"#,
+        );
+        let e = load_transfer_function_named(&p, Some("c"), &Limits::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no preset named \"c\"") && e.contains("\"a\", \"b\""),
+            "{e}"
+        );
+        // A list without presets stays an error of volsplat's format.
+        let p = write(dir.path(), "list.json", r#"[{"Name": "a"}]"#);
+        let e = load_transfer_function(&p).unwrap_err().to_string();
+        assert!(e.contains("object"), "{e}");
     }
 
     #[test]

@@ -1,8 +1,12 @@
 //! Movie output: a numbered PNG sequence, an animated GIF (one palette for the whole movie), an
 //! animated PNG (APNG), or MP4/WebM/MKV/MOV by piping raw frames to `ffmpeg`. The format follows
-//! the output path ([`MovieFormat::from_path`]). Every file appears whole or not at all: frames
-//! of a sequence are written atomically one by one; GIF, APNG and video go to a temporary file
-//! renamed at [`MovieWriter::finish`], and a writer dropped before that leaves nothing behind.
+//! the output path ([`MovieFormat::from_path`]). Every file appears whole or not at all, and a
+//! movie appears whole or not at all: the frames of a sequence are written to hidden temporary
+//! files (`.frame_0000.png.tmp-PID`) and renamed into place at [`MovieWriter::finish`], which then
+//! removes the frames of an earlier, longer run that the pattern names (so the folder holds
+//! exactly this movie's frames); GIF, APNG and video go to a temporary file renamed at `finish`.
+//! A writer dropped before `finish` (an error, a signal) leaves nothing behind and the previous
+//! movie untouched.
 //!
 //! Pixel values are those of [`crate::write_png`]: premultiplied linear RGBA composited over the
 //! background, then linear (default) or sRGB-encoded code values.
@@ -24,8 +28,8 @@ pub const VIDEO_EXTENSIONS: &[&str] = &["mp4", "webm", "mkv", "mov", "avi"];
 /// How a movie is stored.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum MovieFormat {
-    /// One PNG per frame; `pattern` holds one printf-style `%d` / `%0Nd` for the frame number
-    /// (from 0).
+    /// One PNG per frame; `pattern`'s file name holds one printf-style `%0Nd` for the frame
+    /// number (from 0).
     PngSequence {
         /// Path pattern, e.g. `frames/frame_%04d.png`.
         pattern: String,
@@ -38,22 +42,54 @@ pub enum MovieFormat {
     Video,
 }
 
+/// Widest frame number a pattern may ask for: `%020d` holds any `u64`.
+pub const MAX_PATTERN_WIDTH: usize = 20;
+
 impl MovieFormat {
-    /// The format of an output path: a path with `%d` or `%0Nd` is a PNG sequence; an existing
-    /// folder, a path ending in `/`, or one without extension is a folder of
-    /// `frame_0000.png` …; `.gif`, `.png`/`.apng`, and [`VIDEO_EXTENSIONS`] otherwise.
+    /// The format of an output path. A file name holding `%0Nd` (N = 1 to
+    /// [`MAX_PATTERN_WIDTH`], zero-padded: `%04d`) is a PNG sequence; only the file name is read,
+    /// so a folder may hold `%` (`pct%dir/`). An existing folder, a path ending in `/`, or one
+    /// without extension is a folder of `frame_0000.png` …; `.gif`, `.png`/`.apng`, and
+    /// [`VIDEO_EXTENSIONS`] otherwise, where a `%` is only a character (`100%done.gif`). A `.png`
+    /// name with `%d` or `%Nd` (not zero-padded) is refused as ambiguous: frames (`%04d`) or one
+    /// animated PNG?
     pub fn from_path(path: &Path) -> Result<MovieFormat> {
         let text = path.to_string_lossy();
-        if frame_pattern_width(&text).is_some() {
-            return Ok(MovieFormat::PngSequence {
-                pattern: text.into_owned(),
-            });
-        }
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let bad = |reason: String| IoError::invalid_argument(path, "movie output", reason);
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
-        if path.is_dir() || text.ends_with('/') || ext.is_none() {
+        let is_folder = path.is_dir() || text.ends_with('/') || ext.is_none();
+        if !is_folder {
+            match find_pattern(&name).map_err(bad)? {
+                Some(Pattern::Padded { .. }) if ext.as_deref() != Some("png") => {
+                    return Err(bad(format!(
+                        "a `%0Nd` frame pattern writes PNG frames; end the name in .png \
+                         (frame_%04d.png), or leave the `%` out for one .{} file",
+                        ext.as_deref().unwrap_or_default()
+                    )));
+                }
+                Some(Pattern::Padded { .. }) => {
+                    return Ok(MovieFormat::PngSequence {
+                        pattern: text.into_owned(),
+                    });
+                }
+                Some(Pattern::Loose(p)) if matches!(ext.as_deref(), Some("png" | "apng")) => {
+                    return Err(bad(format!(
+                        "`{p}` in the file name: write a zero-padded `%04d` for numbered PNG \
+                         frames (frame_%04d.png), or choose a name without `%…d` for one \
+                         animated PNG"
+                    )));
+                }
+                _ => {}
+            }
+        }
+        if is_folder {
             return Ok(MovieFormat::PngSequence {
                 pattern: path.join("frame_%04d.png").to_string_lossy().into_owned(),
             });
@@ -62,37 +98,99 @@ impl MovieFormat {
             Some("gif") => Ok(MovieFormat::Gif),
             Some("png" | "apng") => Ok(MovieFormat::Apng),
             Some(e) if VIDEO_EXTENSIONS.contains(&e) => Ok(MovieFormat::Video),
-            _ => Err(IoError::invalid_argument(
-                path,
-                "movie output",
+            _ => Err(bad(
                 "unsupported extension; use a folder or a %04d pattern (PNG frames), .gif, \
-                 .png/.apng, or .mp4/.webm/.mkv/.mov/.avi (with ffmpeg)",
+                 .png/.apng, or .mp4/.webm/.mkv/.mov/.avi (with ffmpeg)"
+                    .into(),
             )),
         }
     }
 }
 
-/// The zero-padding width of the first `%d` / `%0Nd` in `text`, if it has one.
-fn frame_pattern_width(text: &str) -> Option<(usize, usize, usize)> {
-    let start = text.find('%')?;
-    let rest = &text[start + 1..];
-    let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
-    if rest[digits.len()..].starts_with('d') {
-        let width = digits.parse().unwrap_or(0);
-        Some((start, start + 1 + digits.len() + 1, width))
-    } else {
-        None
+/// A `%…d` in a file name.
+#[derive(Debug, PartialEq)]
+enum Pattern {
+    /// `%0Nd`: bytes `start..end` of the name, frame numbers `width` digits wide.
+    Padded {
+        start: usize,
+        end: usize,
+        width: usize,
+    },
+    /// `%d` or `%Nd` without the zero: printf would pad with spaces, or not at all.
+    Loose(String),
+}
+
+/// The frame pattern of a file name: the first `%0Nd` (at most one), else the first `%d` /
+/// `%Nd`. Errors for two `%0Nd` or a width outside 1..=[`MAX_PATTERN_WIDTH`].
+fn find_pattern(name: &str) -> std::result::Result<Option<Pattern>, String> {
+    let mut padded = None;
+    let mut loose = None;
+    for (start, _) in name.match_indices('%') {
+        let rest = &name[start + 1..];
+        let digits = rest.bytes().take_while(u8::is_ascii_digit).count();
+        if !rest[digits..].starts_with('d') {
+            continue;
+        }
+        let end = start + 1 + digits + 1;
+        let spec = &name[start..end];
+        if digits >= 2 && rest.starts_with('0') {
+            let width = rest[..digits]
+                .parse::<usize>()
+                .ok()
+                .filter(|w| (1..=MAX_PATTERN_WIDTH).contains(w))
+                .ok_or_else(|| {
+                    format!(
+                        "`{}`: a frame number is 1 to {MAX_PATTERN_WIDTH} digits wide",
+                        spec.chars().take(24).collect::<String>()
+                    )
+                })?;
+            if padded.is_some() {
+                return Err(format!(
+                    "`{name}` holds two frame patterns; give one `%0Nd`"
+                ));
+            }
+            padded = Some(Pattern::Padded { start, end, width });
+        } else if loose.is_none() {
+            loose = Some(Pattern::Loose(spec.chars().take(24).collect()));
+        }
+    }
+    Ok(padded.or(loose))
+}
+
+/// The folder, file-name prefix, width and suffix of a sequence pattern (its `%0Nd` in the file
+/// name), if it has one.
+fn split_pattern(pattern: &str) -> Option<(PathBuf, String, usize, String)> {
+    let path = Path::new(pattern);
+    let name = path.file_name()?.to_str()?;
+    match find_pattern(name) {
+        Ok(Some(Pattern::Padded { start, end, width })) => Some((
+            path.parent().map(Path::to_path_buf).unwrap_or_default(),
+            name[..start].to_string(),
+            width,
+            name[end..].to_string(),
+        )),
+        _ => None,
     }
 }
 
-/// The path of frame `n` of a sequence pattern.
+/// The path of frame `n` of a sequence pattern (`frames/frame_%04d.png` → `frames/frame_0007.png`);
+/// the pattern itself if its file name holds no `%0Nd`.
 pub fn sequence_path(pattern: &str, n: usize) -> PathBuf {
-    match frame_pattern_width(pattern) {
-        Some((a, b, width)) => {
-            PathBuf::from(format!("{}{:0width$}{}", &pattern[..a], n, &pattern[b..]))
-        }
+    match split_pattern(pattern) {
+        Some((dir, prefix, width, suffix)) => dir.join(format!("{prefix}{n:0width$}{suffix}")),
         None => PathBuf::from(pattern),
     }
+}
+
+/// The frame number of `name` if `pattern` would name it so (same prefix and suffix, and the
+/// number written exactly as the pattern writes it).
+fn frame_number(prefix: &str, width: usize, suffix: &str, name: &str) -> Option<usize> {
+    let digits = name.strip_prefix(prefix)?.strip_suffix(suffix)?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let n: usize = digits.parse().ok()?;
+    (format!("{n:0width$}") == digits).then_some(n)
 }
 
 /// Settings of a movie.
@@ -118,9 +216,21 @@ impl Default for MovieSettings {
 }
 
 enum Sink {
-    Sequence { pattern: String },
-    Buffered { gif: bool, frames: Vec<Vec<u8>> },
-    Video { child: Child, tmp: PathBuf },
+    Sequence {
+        pattern: String,
+        /// Frames written so far, each to a hidden temporary file: (temporary, final).
+        staged: Vec<(PathBuf, PathBuf)>,
+        /// The frames folder, when this writer created it (removed again if left empty).
+        created: Option<PathBuf>,
+    },
+    Buffered {
+        gif: bool,
+        frames: Vec<Vec<u8>>,
+    },
+    Video {
+        child: Child,
+        tmp: PathBuf,
+    },
 }
 
 /// Writes the frames of one movie; see the module docs.
@@ -131,16 +241,27 @@ pub struct MovieWriter {
     frames_expected: usize,
     frames_written: usize,
     settings: MovieSettings,
-    written: Vec<PathBuf>,
+    warnings: Vec<String>,
     sink: Option<Sink>,
+}
+
+/// The files of a finished movie.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MovieFiles {
+    /// The files written: the frames of a sequence in order, or the one movie file.
+    pub written: Vec<PathBuf>,
+    /// Frames of an earlier run, named by the same pattern beyond this movie's last frame, that
+    /// were removed so that the folder holds exactly this movie.
+    pub removed: Vec<PathBuf>,
 }
 
 impl MovieWriter {
     /// Starts a movie of `frames` frames of `width × height` pixels at `path` (format by
     /// [`MovieFormat::from_path`]). Checks everything that can be checked before rendering:
     /// the folder exists (a sequence's folder is created if its parent exists), the size and
-    /// frame count fit, and `ffmpeg` starts for a video (a clear error names the missing
-    /// program otherwise).
+    /// frame count fit, the background is in [0, 1], and `ffmpeg` starts for a video (a clear
+    /// error names the missing program otherwise). A frame rate that the format cannot store
+    /// exactly is kept as the nearest it can, and said in [`MovieWriter::warnings`].
     pub fn create(
         path: impl AsRef<Path>,
         width: usize,
@@ -173,17 +294,33 @@ impl MovieWriter {
                 ),
             ));
         }
+        for (name, v) in ["red", "green", "blue"].iter().zip(settings.png.background) {
+            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                return Err(IoError::invalid_argument(
+                    path,
+                    "background",
+                    format!("{name} is {v}; each component must be a linear value in [0, 1]"),
+                ));
+            }
+        }
         let format = MovieFormat::from_path(path)?;
+        let warnings = rate_warnings(&format, settings.fps);
         let sink = match format {
             MovieFormat::PngSequence { pattern } => {
                 let first = sequence_path(&pattern, 0);
+                let mut created = None;
                 if let Some(dir) = first.parent().filter(|d| !d.as_os_str().is_empty())
                     && !dir.is_dir()
                 {
                     std::fs::create_dir(dir)
                         .map_err(|e| IoError::os(dir, "create the frames folder", e))?;
+                    created = Some(dir.to_path_buf());
                 }
-                Sink::Sequence { pattern }
+                Sink::Sequence {
+                    pattern,
+                    staged: Vec::new(),
+                    created,
+                }
             }
             MovieFormat::Gif | MovieFormat::Apng => {
                 check_parent(path)?;
@@ -252,9 +389,15 @@ impl MovieWriter {
             frames_expected: frames,
             frames_written: 0,
             settings: settings.clone(),
-            written: Vec::new(),
+            warnings,
             sink: Some(sink),
         })
+    }
+
+    /// What the format changes in the movie that the caller asked for (a GIF's frame rate
+    /// clamped to 100 fps, say), one sentence each, for the user.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// Adds the next frame (premultiplied linear RGBA, the movie's size).
@@ -283,10 +426,13 @@ impl MovieWriter {
         let n = self.frames_written;
         let png = self.settings.png.clone();
         match self.sink.as_mut() {
-            Some(Sink::Sequence { pattern }) => {
+            Some(Sink::Sequence {
+                pattern, staged, ..
+            }) => {
                 let p = sequence_path(pattern, n);
-                write_png(&p, image, &png)?;
-                self.written.push(p);
+                let tmp = staging_path(&p);
+                write_png(&tmp, image, &png)?;
+                staged.push((tmp, p));
             }
             Some(Sink::Buffered { gif, frames }) => {
                 let bits = if *gif { PngBitDepth::Eight } else { png.bits };
@@ -333,9 +479,11 @@ impl MovieWriter {
         Ok(())
     }
 
-    /// Finishes the movie and returns the files written (the frames of a sequence, or the one
-    /// movie file). Errors if fewer frames were pushed than announced.
-    pub fn finish(mut self) -> Result<Vec<PathBuf>> {
+    /// Finishes the movie: moves a sequence's frames into place and removes the frames of an
+    /// earlier run beyond this movie's last one, or encodes the GIF/APNG, or waits for
+    /// `ffmpeg`; returns the files written and removed. Errors if fewer frames were pushed than
+    /// announced (and then nothing is left behind).
+    pub fn finish(mut self) -> Result<MovieFiles> {
         if self.frames_written != self.frames_expected {
             return Err(IoError::invalid_argument(
                 &self.path,
@@ -346,12 +494,19 @@ impl MovieWriter {
                 ),
             ));
         }
-        let delay_s = 1.0 / self.settings.fps;
+        let one = |p: &Path| MovieFiles {
+            written: vec![p.to_path_buf()],
+            removed: Vec::new(),
+        };
         match self.sink.take() {
-            Some(Sink::Sequence { .. }) | None => Ok(std::mem::take(&mut self.written)),
+            None => Ok(MovieFiles::default()),
+            Some(Sink::Sequence {
+                pattern, staged, ..
+            }) => finish_sequence(&pattern, staged),
             Some(Sink::Buffered { gif: true, frames }) => {
-                write_gif(&self.path, self.width, self.height, &frames, delay_s)?;
-                Ok(vec![self.path.clone()])
+                let delay = gif_delay(self.settings.fps);
+                write_gif(&self.path, self.width, self.height, &frames, delay)?;
+                Ok(one(&self.path))
             }
             Some(Sink::Buffered { gif: false, frames }) => {
                 write_apng(
@@ -362,7 +517,7 @@ impl MovieWriter {
                     self.settings.fps,
                     &self.settings.png,
                 )?;
-                Ok(vec![self.path.clone()])
+                Ok(one(&self.path))
             }
             Some(Sink::Video { mut child, tmp }) => {
                 drop(child.stdin.take());
@@ -382,7 +537,7 @@ impl MovieWriter {
                     let _ = std::fs::remove_file(&tmp);
                     IoError::os(&self.path, "rename temporary file", e)
                 })?;
-                Ok(vec![self.path.clone()])
+                Ok(one(&self.path))
             }
         }
     }
@@ -390,12 +545,133 @@ impl MovieWriter {
 
 impl Drop for MovieWriter {
     fn drop(&mut self) {
-        // A movie abandoned before `finish` leaves no partial video behind.
-        if let Some(Sink::Video { mut child, tmp }) = self.sink.take() {
-            let _ = child.kill();
-            let _ = child.wait();
-            let _ = std::fs::remove_file(tmp);
+        // A movie abandoned before `finish` leaves no partial video and no frames behind.
+        match self.sink.take() {
+            Some(Sink::Video { mut child, tmp }) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                let _ = std::fs::remove_file(tmp);
+            }
+            Some(Sink::Sequence {
+                staged, created, ..
+            }) => {
+                for (tmp, _) in staged {
+                    let _ = std::fs::remove_file(tmp);
+                }
+                if let Some(dir) = created {
+                    // Only if empty: never anything the user put there meanwhile.
+                    let _ = std::fs::remove_dir(dir);
+                }
+            }
+            _ => {}
         }
+    }
+}
+
+/// The hidden temporary file a sequence frame is written to until [`MovieWriter::finish`].
+fn staging_path(frame: &Path) -> PathBuf {
+    let name = frame
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    frame.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+/// Moves the staged frames of a sequence into place, then removes the frames of an earlier run
+/// that the pattern names beyond the last one.
+fn finish_sequence(pattern: &str, staged: Vec<(PathBuf, PathBuf)>) -> Result<MovieFiles> {
+    let mut written = Vec::with_capacity(staged.len());
+    let mut rest = staged.into_iter();
+    for (tmp, path) in rest.by_ref() {
+        if let Err(e) = std::fs::rename(&tmp, &path) {
+            let _ = std::fs::remove_file(&tmp);
+            for (tmp, _) in rest {
+                let _ = std::fs::remove_file(tmp);
+            }
+            return Err(IoError::os(&path, "move the frame into place", e));
+        }
+        written.push(path);
+    }
+    let mut removed = Vec::new();
+    if let Some((dir, prefix, width, suffix)) = split_pattern(pattern) {
+        let count = written.len();
+        let folder = if dir.as_os_str().is_empty() {
+            PathBuf::from(".")
+        } else {
+            dir.clone()
+        };
+        let entries =
+            std::fs::read_dir(&folder).map_err(|e| IoError::os(&folder, "list the frames", e))?;
+        let mut stale: Vec<(usize, PathBuf)> = entries
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+            .filter_map(|e| {
+                let name = e.file_name().into_string().ok()?;
+                let n = frame_number(&prefix, width, &suffix, &name)?;
+                (n >= count).then(|| (n, dir.join(&name)))
+            })
+            .collect();
+        stale.sort();
+        for (_, p) in stale {
+            std::fs::remove_file(&p).map_err(|e| IoError::os(&p, "remove an earlier frame", e))?;
+            removed.push(p);
+        }
+    }
+    Ok(MovieFiles { written, removed })
+}
+
+/// A GIF frame delay: whole hundredths of a second, 1 to 65535.
+fn gif_delay(fps: f64) -> u16 {
+    (100.0 / fps).round().clamp(1.0, u16::MAX as f64) as u16
+}
+
+/// An APNG frame delay `num/den` seconds (both u16, den > 0) as close to `1/fps` as they
+/// hold: hundredths from 1 fps up to 655.35, thousandths of a frame above (exact for whole
+/// rates up to 1000), whole seconds below 0.0015 fps (clamped at 65535 s).
+fn apng_delay(fps: f64) -> (u16, u16) {
+    let max = u16::MAX as f64;
+    if fps >= 1.0 {
+        if fps * 100.0 <= max {
+            (100, (fps * 100.0).round() as u16)
+        } else {
+            (1, fps.round().min(max) as u16)
+        }
+    } else if 100.0 / fps <= max {
+        ((100.0 / fps).round() as u16, 100)
+    } else {
+        ((1.0 / fps).round().clamp(1.0, max) as u16, 1)
+    }
+}
+
+/// The warnings of a movie at `fps` in `format`: a frame rate the format cannot store.
+fn rate_warnings(format: &MovieFormat, fps: f64) -> Vec<String> {
+    let (played, what) = match format {
+        MovieFormat::Gif => (
+            100.0 / gif_delay(fps) as f64,
+            "GIF frame delays are whole hundredths of a second from 0.01 to 655.35 s",
+        ),
+        MovieFormat::Apng => {
+            let (num, den) = apng_delay(fps);
+            (
+                den as f64 / num as f64,
+                "APNG frame delays are at most 65535 s",
+            )
+        }
+        _ => return Vec::new(),
+    };
+    // Clamped, not merely rounded: off by more than a rounding of the delay can explain.
+    let clamped = match format {
+        MovieFormat::Gif => !(100.0 / u16::MAX as f64..=100.0).contains(&fps),
+        _ => fps < 1.0 / u16::MAX as f64,
+    };
+    if clamped {
+        vec![format!(
+            "{what}: {fps} fps plays at {} fps (use an animated .png or a video for the rate \
+             asked)",
+            (played * 1e4).round() / 1e4
+        )]
+    } else {
+        Vec::new()
     }
 }
 
@@ -435,7 +711,7 @@ fn ffmpeg_stderr(child: &mut Child) -> String {
 
 /// Encodes RGB8 frames as a looping GIF with one NeuQuant palette (Dekker 1994) trained on
 /// pixels from every frame, so colours do not flicker between frames.
-fn write_gif(path: &Path, w: usize, h: usize, frames: &[Vec<u8>], delay_s: f64) -> Result<()> {
+fn write_gif(path: &Path, w: usize, h: usize, frames: &[Vec<u8>], delay: u16) -> Result<()> {
     // Train on at most ~2 M pixels spread over all frames.
     let total = frames.len() * w * h;
     let stride = total.div_ceil(2_000_000).max(1);
@@ -451,7 +727,6 @@ fn write_gif(path: &Path, w: usize, h: usize, frames: &[Vec<u8>], delay_s: f64) 
     }
     let nq = color_quant::NeuQuant::new(10, 256, &sample);
     let palette = nq.color_map_rgb();
-    let delay = (delay_s * 100.0).round().clamp(1.0, u16::MAX as f64) as u16;
     let gif_err = |e: gif::EncodingError| match e {
         gif::EncodingError::Io(e) => IoError::os(path, "write", e),
         other => IoError::invalid_argument(path, "GIF", other.to_string()),
@@ -493,12 +768,7 @@ fn write_apng(
             message: other.to_string(),
         },
     };
-    // Frame delay num/den seconds with den ≤ 65535.
-    let (num, den) = if fps >= 1.0 {
-        (100u16, (fps * 100.0).round().min(u16::MAX as f64) as u16)
-    } else {
-        ((100.0 / fps).round().min(u16::MAX as f64) as u16, 100u16)
-    };
+    let (num, den) = apng_delay(fps);
     write_atomic(path, |out| {
         let mut enc = png::Encoder::new(out, w as u32, h as u32);
         enc.set_color(png::ColorType::Rgb);
@@ -560,7 +830,174 @@ mod tests {
             sequence_path("x/f_%04d.png", 7),
             PathBuf::from("x/f_0007.png")
         );
-        assert_eq!(sequence_path("f%d.png", 12), PathBuf::from("f12.png"));
+        assert_eq!(sequence_path("f%02d.png", 12), PathBuf::from("f12.png"));
+        assert_eq!(sequence_path("f%02d.png", 123), PathBuf::from("f123.png"));
+    }
+
+    /// Issue 28: a `%` followed by `d` anywhere in the path made a PNG sequence (`100%done.gif`,
+    /// `pct%dir/`), and `%100000d` panicked (format width out of range). Only a `%0Nd` in the
+    /// file name is a pattern; ambiguous or impossible ones are errors naming the path.
+    #[test]
+    fn only_a_zero_padded_pattern_in_the_file_name_numbers_frames() {
+        let f = |p: &str| MovieFormat::from_path(Path::new(p));
+        assert_eq!(f("100%done.gif").unwrap(), MovieFormat::Gif);
+        assert_eq!(f("out/50%d.mp4").unwrap(), MovieFormat::Video);
+        assert_eq!(f("pct%dir/movie.gif").unwrap(), MovieFormat::Gif);
+        assert_eq!(
+            f("pct%dir/").unwrap(),
+            MovieFormat::PngSequence {
+                pattern: "pct%dir/frame_%04d.png".into()
+            }
+        );
+        assert_eq!(
+            sequence_path("pct%dir/frame_%04d.png", 7),
+            PathBuf::from("pct%dir/frame_0007.png")
+        );
+        assert_eq!(
+            sequence_path("a%05d/f_%03d.png", 7),
+            PathBuf::from("a%05d/f_007.png")
+        );
+        assert_eq!(
+            f("x/f_%020d.png").unwrap(),
+            MovieFormat::PngSequence {
+                pattern: "x/f_%020d.png".into()
+            }
+        );
+        for (bad, words) in [
+            ("f_%100000d.png", "zero-padded `%04d`"),
+            ("f_%d.png", "zero-padded `%04d`"),
+            ("100%done.png", "zero-padded `%04d`"),
+            ("f_%0100000d.png", "1 to 20 digits"),
+            ("f_%021d.png", "1 to 20 digits"),
+            ("f_%04d.gif", "end the name in .png"),
+            ("f_%04d_%03d.png", "two frame patterns"),
+        ] {
+            let e = f(bad).unwrap_err().to_string();
+            assert!(e.contains(bad) && e.contains(words), "{bad}: {e}");
+        }
+    }
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    /// Issue 28: re-running a shorter movie into a folder left the last run's later frames;
+    /// the folder now holds exactly this movie's frames (other files are kept), and a movie
+    /// abandoned half-way leaves the previous one whole and no temporary files.
+    #[test]
+    fn a_sequence_replaces_the_last_run_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("frames");
+        let s = MovieSettings::default();
+        let run = |n: usize, v: f32| {
+            let mut m = MovieWriter::create(&out, 4, 3, n, &s).unwrap();
+            for _ in 0..n {
+                m.push(&frame(4, 3, v)).unwrap();
+            }
+            m.finish().unwrap()
+        };
+        let first = run(5, 0.2);
+        assert_eq!(first.written.len(), 5);
+        assert!(first.removed.is_empty());
+        std::fs::write(out.join("notes.txt"), b"mine").unwrap();
+        std::fs::write(out.join("frame_00012.png"), b"not this pattern's").unwrap();
+        let second = run(3, 0.9);
+        assert_eq!(
+            second.removed,
+            vec![out.join("frame_0003.png"), out.join("frame_0004.png")]
+        );
+        assert_eq!(
+            names(&out),
+            [
+                "frame_0000.png",
+                "frame_0001.png",
+                "frame_00012.png",
+                "frame_0002.png",
+                "notes.txt"
+            ]
+        );
+        let want = std::fs::read(&second.written[0]).unwrap();
+        // Abandoned after two of four frames: the previous movie is untouched, nothing staged
+        // is left.
+        let mut m = MovieWriter::create(&out, 4, 3, 4, &s).unwrap();
+        m.push(&frame(4, 3, 0.5)).unwrap();
+        m.push(&frame(4, 3, 0.5)).unwrap();
+        assert!(names(&out).iter().any(|n| n.contains(".tmp-")));
+        drop(m);
+        assert_eq!(names(&out).len(), 5);
+        assert!(names(&out).iter().all(|n| !n.contains("tmp")));
+        assert_eq!(std::fs::read(out.join("frame_0000.png")).unwrap(), want);
+        // A folder this writer created is removed again when the movie is abandoned.
+        let fresh = dir.path().join("fresh");
+        let mut m = MovieWriter::create(&fresh, 4, 3, 2, &s).unwrap();
+        m.push(&frame(4, 3, 0.5)).unwrap();
+        assert!(m.finish().is_err());
+        assert!(!fresh.exists());
+    }
+
+    /// Issue 28: GIF and APNG frame delays clamped silently above 100 and 655 fps and below
+    /// 1/655 fps. APNG now stores every rate in (1/65535, 1000] (whole rates exactly); what
+    /// still clamps draws a warning.
+    #[test]
+    fn frame_rates_a_format_cannot_store_are_warned() {
+        let dir = tempfile::tempdir().unwrap();
+        let warn = |name: &str, fps: f64| {
+            let s = MovieSettings {
+                fps,
+                ..MovieSettings::default()
+            };
+            MovieWriter::create(dir.path().join(name), 4, 4, 1, &s)
+                .unwrap()
+                .warnings()
+                .to_vec()
+        };
+        for fps in [24.0, 100.0, 0.0016, 1.0] {
+            assert!(warn("a.gif", fps).is_empty(), "{fps}");
+        }
+        let w = warn("a.gif", 240.0);
+        assert!(
+            w.len() == 1 && w[0].contains("240 fps plays at 100 fps"),
+            "{w:?}"
+        );
+        let w = warn("a.gif", 0.001);
+        assert!(
+            w.len() == 1 && w[0].contains("0.001 fps plays at 0.0015 fps"),
+            "{w:?}"
+        );
+        for fps in [1000.0, 655.0, 700.0, 1.0 / 655.0, 0.001, 1.0 / 60000.0] {
+            assert!(warn("a.png", fps).is_empty(), "{fps}");
+        }
+        assert_eq!(apng_delay(1000.0), (1, 1000));
+        assert_eq!(apng_delay(24.0), (100, 2400));
+        assert_eq!(apng_delay(0.001), (1000, 1));
+        let w = warn("a.apng", 1e-5);
+        assert!(w.len() == 1 && w[0].contains("at most 65535 s"), "{w:?}");
+        assert!(warn("frames/", 1000.0).is_empty());
+    }
+
+    #[test]
+    fn a_background_outside_zero_to_one_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        for bg in [[f32::NAN, 0.0, 0.0], [2.0; 3]] {
+            let s = MovieSettings {
+                png: PngSettings {
+                    background: bg,
+                    ..PngSettings::default()
+                },
+                ..MovieSettings::default()
+            };
+            let out = dir.path().join("m.gif");
+            let e = MovieWriter::create(&out, 4, 4, 1, &s)
+                .err()
+                .unwrap()
+                .to_string();
+            assert!(e.contains("red is") && e.contains("[0, 1]"), "{e}");
+        }
     }
 
     #[test]
@@ -572,7 +1009,7 @@ mod tests {
         for n in 0..3 {
             m.push(&frame(8, 6, 0.3 * n as f32)).unwrap();
         }
-        let files = m.finish().unwrap();
+        let files = m.finish().unwrap().written;
         assert_eq!(files.len(), 3);
         let still = dir.path().join("still.png");
         write_png(&still, &frame(8, 6, 0.3), &s.png).unwrap();

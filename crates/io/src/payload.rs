@@ -199,9 +199,26 @@ pub(crate) fn read_payload(spec: &PayloadSpec<'_>, grid: Grid) -> Result<AnyVolu
             file.seek(SeekFrom::Start(offset))
                 .map_err(|e| IoError::os(path, "seek", e))?;
             // `needed` fits in usize (checked above) and the file holds at least that much.
-            let mut bytes = vec![0u8; needed as usize];
-            file.read_exact(&mut bytes)
+            // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
+            let mut bytes = Vec::new();
+            bytes.try_reserve_exact(needed as usize).map_err(|_| {
+                let oom = std::io::ErrorKind::OutOfMemory.into();
+                IoError::os(path, "allocate the raw payload", oom)
+            })?;
+            // Into the reserved capacity (no zero-filling pass; `take` keeps it from growing).
+            let got = (&mut file)
+                .take(needed)
+                .read_to_end(&mut bytes)
                 .map_err(|e| IoError::os(path, "read raw payload", e))?;
+            if (got as u64) < needed {
+                return Err(IoError::Truncated {
+                    path: path.to_path_buf(),
+                    what: format!("raw payload starting at byte {offset}"),
+                    expected: needed,
+                    actual: got as u64,
+                    unit: "bytes",
+                });
+            }
             decode(bytes, spec.file_type, spec.big_endian, grid, path)
         }
         Encoding::Gzip | Encoding::ZlibOrGzip => {
@@ -326,7 +343,10 @@ impl std::io::Write for BoundedVec {
             let target = want
                 .max(self.vec.capacity().saturating_mul(2))
                 .min(self.limit);
-            self.vec.reserve_exact(target - self.vec.len());
+            // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
+            self.vec
+                .try_reserve_exact(target - self.vec.len())
+                .map_err(|_| std::io::Error::from(std::io::ErrorKind::OutOfMemory))?;
         }
         self.vec.extend_from_slice(buf);
         Ok(buf.len())
@@ -592,6 +612,37 @@ pub(crate) fn decode(
         }
     };
     v.map_err(|e| IoError::core(path, e))
+}
+
+/// Writes the samples little-endian, i fastest.
+pub(crate) fn write_samples_le<W: std::io::Write + ?Sized>(
+    w: &mut W,
+    volume: &AnyVolume,
+) -> std::io::Result<()> {
+    trait LeBytes: Copy {
+        fn put(self, out: &mut Vec<u8>);
+    }
+    macro_rules! le {
+        ($($t:ty),*) => {$(impl LeBytes for $t {
+            fn put(self, out: &mut Vec<u8>) { out.extend_from_slice(&self.to_le_bytes()); }
+        })*};
+    }
+    le!(u8, i8, u16, i16, f32);
+    fn write_all<T: LeBytes, W: std::io::Write + ?Sized>(
+        w: &mut W,
+        data: &[T],
+    ) -> std::io::Result<()> {
+        let mut buf = Vec::with_capacity(64 * 1024);
+        for chunk in data.chunks(16 * 1024) {
+            buf.clear();
+            for &v in chunk {
+                v.put(&mut buf);
+            }
+            w.write_all(&buf)?;
+        }
+        Ok(())
+    }
+    volsplat_core::with_volume!(volume, v => write_all(w, v.data()))
 }
 
 #[cfg(test)]

@@ -14,8 +14,8 @@ pub const VOLUME_EXTENSIONS: &[&str] = &[
 ];
 
 const SUPPORTED: &str = ".nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr (+ .img), .vti, \
-     .tif, .tiff, .dcm or any DICOM file, a folder of DICOM or TIFF files (headerless raw: use \
-     read_raw with a RawSpec)";
+     .tif, .tiff, .dcm or any DICOM file, a folder of DICOM or TIFF files (a headerless raw file: \
+     give its layout with --raw-dims X,Y,Z, --raw-type and --raw-spacing)";
 
 /// The volume file formats, as told by the file name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -6,8 +6,16 @@
 //! | bad arguments, arrays, request fields, camera or transfer-function values, file contents | `InvalidInputError` (`ValueError`) |
 //! | the progress callback returned `False` | `CancelledError` |
 //! | non-finite output, a thread pool that could not start, a crash inside the renderer | `RenderError` (`RuntimeError`) |
+//! | the memory for a copy of the caller's data, or for a file's samples, could not be allocated | Python's own `MemoryError` |
 //!
-//! All four derive from `VolsplatError`. Ctrl-C raises Python's own `KeyboardInterrupt`.
+//! The first four derive from `VolsplatError`. Ctrl-C raises Python's own `KeyboardInterrupt`.
+//!
+//! Allocation failures. Every copy of user data in this module is allocated fallibly
+//! (`Vec::try_reserve_exact`, [`try_copy`]) and fails as `MemoryError` naming the size, so that a
+//! volume too big for the address space (`ulimit -v`, a container's limit) leaves the interpreter
+//! running. Readers and the engine report one as an [`IoError::Os`] whose error kind is
+//! [`std::io::ErrorKind::OutOfMemory`] (how `std` reports it), or with a message saying that
+//! memory could not be allocated; both become `MemoryError` too (see [`is_out_of_memory`]).
 
 use pyo3::prelude::*;
 use pyo3::types::PyType;
@@ -82,9 +90,76 @@ fn file_error(errno: Option<i32>, message: String) -> PyErr {
     }
 }
 
+/// `MemoryError`: `bytes` bytes for `what` could not be allocated.
+pub fn out_of_memory(what: &str, bytes: usize) -> PyErr {
+    pyo3::exceptions::PyMemoryError::new_err(format!(
+        "cannot allocate {bytes} bytes ({:.2} GiB) for {what}: not enough memory or address \
+         space (check `ulimit -v` and the container's memory limit)",
+        bytes as f64 / (1u64 << 30) as f64
+    ))
+}
+
+/// A copy of `src` in a new vector allocated fallibly (`MemoryError` naming `what` when the
+/// memory cannot be had).
+pub fn try_copy<T: Copy>(src: &[T], what: &str) -> PyResult<Vec<T>> {
+    let mut v = try_with_capacity(src.len(), what)?;
+    v.extend_from_slice(src);
+    Ok(v)
+}
+
+/// An empty vector with room for `n` elements, allocated fallibly.
+pub fn try_with_capacity<T>(n: usize, what: &str) -> PyResult<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n)
+        .map_err(|_| out_of_memory(what, n.saturating_mul(std::mem::size_of::<T>())))?;
+    Ok(v)
+}
+
+/// Whether a reader or engine error reports an allocation failure: an OS-style error of kind
+/// `OutOfMemory`, or a message saying memory could not be allocated.
+pub fn is_out_of_memory(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(err) = cur {
+        if let Some(io) = err.downcast_ref::<std::io::Error>()
+            && io.kind() == std::io::ErrorKind::OutOfMemory
+        {
+            return true;
+        }
+        if let Some(IoError::Os { error, .. }) = err.downcast_ref::<IoError>()
+            && error.kind() == std::io::ErrorKind::OutOfMemory
+        {
+            return true;
+        }
+        if err
+            .downcast_ref::<std::collections::TryReserveError>()
+            .is_some()
+        {
+            return true;
+        }
+        cur = err.source();
+    }
+    let m = e.to_string().to_ascii_lowercase();
+    [
+        "out of memory",
+        "memory allocation",
+        "cannot allocate",
+        "could not allocate",
+    ]
+    .iter()
+    .any(|p| m.contains(p))
+}
+
+/// `MemoryError` with the reader's or engine's own message.
+fn memory_error(message: String) -> PyErr {
+    pyo3::exceptions::PyMemoryError::new_err(message)
+}
+
 /// A reader or writer error.
 pub fn from_io(e: IoError) -> PyErr {
     let message = e.to_string();
+    if is_out_of_memory(&e) {
+        return memory_error(message);
+    }
     match &e {
         IoError::Os { error, .. } => file_error(error.raw_os_error(), message),
         IoError::NotAFile { .. } => error(Kind::File, message),
@@ -94,6 +169,9 @@ pub fn from_io(e: IoError) -> PyErr {
 
 /// An engine error.
 pub fn from_engine(e: EngineError) -> PyErr {
+    if is_out_of_memory(&e) {
+        return memory_error(e.to_string());
+    }
     match e {
         EngineError::Io(e) => from_io(e),
         EngineError::Cancelled => error(Kind::Cancelled, "render cancelled"),
@@ -125,5 +203,8 @@ pub fn from_engine(e: EngineError) -> PyErr {
 
 /// A core error (grid, camera, transfer function).
 pub fn from_core(e: volsplat::core::CoreError) -> PyErr {
+    if is_out_of_memory(&e) {
+        return memory_error(e.to_string());
+    }
     error(Kind::Invalid, e.to_string())
 }

@@ -53,6 +53,15 @@ pub fn save_camera(py: Python<'_>, path: PathBuf, camera_json: &str) -> PyResult
         .map_err(errors::from_io)
 }
 
+/// The scene-file name of an anatomical view given as the command line's `--view` takes it
+/// (`"A"`, `"front"`, `"Anterior"` → `"anterior"`).
+#[pyfunction]
+pub fn anatomical_view(name: &str) -> PyResult<&'static str> {
+    volsplat::core::AnatomicalView::from_name(name)
+        .map(|v| v.name())
+        .map_err(errors::from_core)
+}
+
 /// Checks a camera specification (the scene file's `camera` object) and returns it normalised.
 #[pyfunction]
 pub fn check_camera_spec(spec_json: &str) -> PyResult<String> {
@@ -67,11 +76,18 @@ pub fn check_camera_spec(spec_json: &str) -> PyResult<String> {
     to_json(&spec)
 }
 
-/// Reads a transfer-function file: `(function JSON, warnings)`.
+/// Reads a transfer-function file, volsplat's or a ParaView colour-map preset file (`name`
+/// picks a preset), with the command line's reader: `(function JSON, warnings)`.
 #[pyfunction]
-pub fn load_transfer_function(py: Python<'_>, path: PathBuf) -> PyResult<(String, Vec<String>)> {
+#[pyo3(signature = (path, name=None))]
+pub fn load_transfer_function(
+    py: Python<'_>,
+    path: PathBuf,
+    name: Option<String>,
+) -> PyResult<(String, Vec<String>)> {
+    let limits = volsplat::io::Limits::default();
     let (tf, warnings) = py
-        .detach(|| volsplat::io::load_transfer_function(&path))
+        .detach(|| volsplat::io::load_transfer_function_named(&path, name.as_deref(), &limits))
         .map_err(errors::from_io)?;
     Ok((to_json(&tf)?, warnings))
 }

@@ -31,6 +31,7 @@ fn _volsplat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(files::load_camera, m)?)?;
     m.add_function(wrap_pyfunction!(files::save_camera, m)?)?;
     m.add_function(wrap_pyfunction!(files::check_camera_spec, m)?)?;
+    m.add_function(wrap_pyfunction!(files::anatomical_view, m)?)?;
     m.add_function(wrap_pyfunction!(files::load_transfer_function, m)?)?;
     m.add_function(wrap_pyfunction!(files::save_transfer_function, m)?)?;
     m.add_function(wrap_pyfunction!(files::check_transfer_function, m)?)?;

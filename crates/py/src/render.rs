@@ -570,7 +570,7 @@ impl Output {
         let (channels, data) = match background {
             Some(bg) => {
                 let bg = check_background(bg)?;
-                let mut out = Vec::with_capacity(px.len() * 3);
+                let mut out = errors::try_with_capacity(px.len() * 3, "the 8-bit pixels")?;
                 for p in px {
                     let t = 1.0 - p[3] as f64;
                     for (c, b) in p.iter().zip(bg) {
@@ -580,7 +580,7 @@ impl Output {
                 (3, out)
             }
             None => {
-                let mut out = Vec::with_capacity(px.len() * 4);
+                let mut out = errors::try_with_capacity(px.len() * 4, "the 8-bit pixels")?;
                 for p in px {
                     let a = p[3] as f64;
                     for c in &p[..3] {

@@ -7,8 +7,10 @@
 //! Fortran-ordered `(x, y, z)` array (what nibabel usually returns) is the same memory layout
 //! and is copied with one `memcpy` too. Per-axis values (spacing, the columns of `direction`
 //! and of `affine`) are given in the array's axis order; world coordinates (`origin`, the rows
-//! of `direction` and `affine`) are world x, y, z (LPS for medical data; `space="RAS"` converts
-//! nibabel's RAS as the NIfTI reader does).
+//! of `direction` and `affine`) are world x, y, z. volsplat's world is LPS (DESIGN.md §3,
+//! decision 0008). An `affine` follows nibabel: it maps to RAS unless `space="LPS"` is given
+//! (converted to LPS as the NIfTI reader does), and its array is `(x, y, z)` unless `axes=` says
+//! otherwise; `origin`/`direction` follow ITK: LPS unless `space="RAS"`.
 //!
 //! Copies. The engine's volume owns its samples (`Vec<T>`), so a numpy array is copied once into
 //! it: a `memcpy` when the array is contiguous in the declared order and of a native type
@@ -80,22 +82,26 @@ pub fn numpy_name(t: ScalarType) -> &'static str {
 
 /// A scalar volume: samples on a rectilinear grid with spacing, origin and orientation.
 ///
-/// ``Volume(array, spacing=None, origin=None, direction=None, *, axes="zyx", affine=None,
-/// space="LPS", dtype=None)`` builds one from a 3-D numpy array (or anything
+/// ``Volume(array, spacing=None, origin=None, direction=None, *, axes=None, affine=None,
+/// space=None, dtype=None)`` builds one from a 3-D numpy array (or anything
 /// ``numpy.asarray`` accepts):
 ///
-/// - ``axes``: ``"zyx"`` (default; C order as SimpleITK's ``GetArrayFromImage``, napari,
-///   tifffile) or ``"xyz"`` (nibabel's order).
+/// - ``axes``: ``"zyx"`` (C order as SimpleITK's ``GetArrayFromImage``, napari, tifffile; the
+///   default without ``affine``) or ``"xyz"`` (nibabel's order; the default with ``affine``).
 /// - ``spacing``: voxel size in world units, one number or three **in the array's axis order**
 ///   (for ``"zyx"``: ``(dz, dy, dx)``; default 1).
 /// - ``origin``: world position (x, y, z) of the centre of element ``[0, 0, 0]`` (default 0).
 /// - ``direction``: 3×3 matrix whose **columns** are the world directions of the array's axes,
 ///   in the array's axis order (default: the identity for the grid axes).
 /// - ``affine``: instead of the three above, a 4×4 (or 3×4) matrix mapping array indices (in
-///   array order) to world coordinates, as nibabel's ``img.affine`` (no shear).
-/// - ``space``: the world frame of ``origin``/``direction``/``affine``: ``"LPS"`` (DICOM, ITK,
-///   volsplat; default) or ``"RAS"`` (NIfTI, nibabel), converted to LPS as the NIfTI reader
-///   does.
+///   array order) to world coordinates (no shear), with nibabel's meaning: ``Volume(
+///   img.get_fdata(), affine=img.affine)`` gives the geometry ``volsplat.load`` reads from the
+///   same NIfTI file (the affine maps to RAS).
+/// - ``space``: the world frame of ``origin``/``direction``/``affine``: ``"RAS"`` (NIfTI,
+///   nibabel; the default for ``affine``) or ``"LPS"`` (DICOM, ITK, SimpleITK, volsplat's own
+///   world; the default for ``origin``/``direction``). RAS is converted to LPS (x and y
+///   negated) as the NIfTI reader does; ``.affine`` gives the RAS map back and ``.affine_lps``
+///   the LPS one.
 /// - ``dtype``: convert to ``"uint8"``, ``"int8"``, ``"uint16"``, ``"int16"`` or
 ///   ``"float32"`` (an integer type must hold every value exactly).
 ///
@@ -107,7 +113,8 @@ pub fn numpy_name(t: ScalarType) -> &'static str {
 /// transposes; about the cost of ``np.ascontiguousarray``). ``.array`` is then a read-only,
 /// zero-copy view of the engine's samples. Float samples must be finite (NaN is an error
 /// naming the index). Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
-/// shapes, dtypes and geometry.
+/// shapes, dtypes and geometry, and ``MemoryError`` when the copy cannot be allocated (the
+/// interpreter keeps running).
 #[pyclass(frozen, module = "volsplat")]
 pub struct Volume {
     /// The samples and grid, shared with renders (never copied again).
@@ -153,6 +160,28 @@ impl Volume {
     fn shape(&self) -> [usize; 3] {
         let d = self.data.grid().dims;
         [0, 1, 2].map(|a| d[self.axes.grid_axis(a)])
+    }
+
+    /// The index-to-world affine (array order) with world row `r` multiplied by `flip[r]`
+    /// (`[-1, -1, 1]`: LPS → RAS).
+    fn affine_in<'py>(&self, py: Python<'py>, flip: [f64; 3]) -> PyResult<Bound<'py, PyAny>> {
+        let d = self.direction_array_order();
+        let s = self.spacing_array_order();
+        let o = self.data.grid().origin;
+        let rows: Vec<Vec<f64>> = (0..3)
+            .map(|r| {
+                // `+ 0.0` turns the −0.0 of a flipped zero into 0.0, as nibabel prints it.
+                let f = |x: f64| flip[r] * x + 0.0;
+                vec![
+                    f(d[r][0] * s[0]),
+                    f(d[r][1] * s[1]),
+                    f(d[r][2] * s[2]),
+                    f(o[r]),
+                ]
+            })
+            .chain(std::iter::once(vec![0.0, 0.0, 0.0, 1.0]))
+            .collect();
+        py.import("numpy")?.call_method1("array", (rows,))
     }
 }
 
@@ -201,6 +230,13 @@ fn floats(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<u
         .cast_into::<PyUntypedArray>()
         .map_err(|_| invalid(format!("{name}: expected numbers")))?;
     let shape = arr.shape().to_vec();
+    // Geometry has at most 16 numbers (a 4×4 affine); anything bigger is a mistake, reported
+    // before it is copied.
+    if arr.len() > 16 {
+        return Err(invalid(format!(
+            "{name}: expected at most a 4×4 matrix of numbers, got shape {shape:?}"
+        )));
+    }
     let flat = arr.call_method0("ravel")?.call_method0("tolist")?;
     let values: Vec<f64> = flat
         .extract()
@@ -235,15 +271,20 @@ fn grid_for(
     origin: Option<&Bound<'_, PyAny>>,
     direction: Option<&Bound<'_, PyAny>>,
     affine: Option<&Bound<'_, PyAny>>,
-    space: &str,
+    space: Option<&str>,
 ) -> PyResult<Grid> {
-    let ras = match space.to_ascii_uppercase().as_str() {
-        "LPS" => false,
-        "RAS" => true,
-        _ => {
+    let ras = match space.map(str::to_ascii_uppercase).as_deref() {
+        Some("LPS") => false,
+        Some("RAS") => true,
+        // nibabel's convention for an affine (`img.affine` is RAS); ITK's (LPS) for
+        // origin/direction.
+        None => affine.is_some(),
+        Some(_) => {
             return Err(invalid(format!(
-                "space={space:?}: expected \"LPS\" (DICOM, ITK, SimpleITK, volsplat's world: the \
-                 default) or \"RAS\" (NIfTI, nibabel)"
+                "space={:?}: expected \"LPS\" (DICOM, ITK, SimpleITK, volsplat's world: the \
+                 default for origin/direction) or \"RAS\" (NIfTI, nibabel: the default for \
+                 affine)",
+                space.unwrap_or_default()
             )));
         }
     };
@@ -378,10 +419,37 @@ fn samples<T: Element + Copy>(arr: &Bound<'_, PyAny>, axes: Axes) -> PyResult<Ve
         Axes::Zyx => v,
         Axes::Xyz => v.reversed_axes(),
     };
+    // Fallible allocation: an array too big to copy is a `MemoryError`, not an abort.
+    const WHAT: &str = "the volume's copy of the array";
     Ok(match v.as_slice() {
-        Some(s) => s.to_vec(),
-        None => v.iter().copied().collect(),
+        Some(s) => errors::try_copy(s, WHAT)?,
+        None => {
+            let mut out = errors::try_with_capacity(v.len(), WHAT)?;
+            out.extend(v.iter().copied());
+            out
+        }
     })
+}
+
+/// A copy of `v` allocated fallibly (`MemoryError` when it does not fit).
+fn try_clone(v: &AnyVolume) -> PyResult<AnyVolume> {
+    const WHAT: &str = "a copy of the volume";
+    fn typed<T: Scalar>(v: &CoreVolume<T>) -> PyResult<AnyVolume>
+    where
+        AnyVolume: From<CoreVolume<T>>,
+    {
+        let data = errors::try_copy(v.data(), WHAT)?;
+        Ok(CoreVolume::new(v.grid().clone(), data)
+            .map_err(errors::from_core)?
+            .into())
+    }
+    match v {
+        AnyVolume::U8(v) => typed(v),
+        AnyVolume::I8(v) => typed(v),
+        AnyVolume::U16(v) => typed(v),
+        AnyVolume::I16(v) => typed(v),
+        AnyVolume::F32(v) => typed(v),
+    }
 }
 
 fn parse_scalar_type(name: &str) -> PyResult<ScalarType> {
@@ -424,8 +492,8 @@ fn target_type(kind: u8, itemsize: usize, native: bool) -> Option<(ScalarType, b
 impl Volume {
     /// A volume from a 3-D numpy array (see the class documentation).
     #[new]
-    #[pyo3(signature = (array, spacing=None, origin=None, direction=None, *, axes="zyx",
-        affine=None, space="LPS", dtype=None))]
+    #[pyo3(signature = (array, spacing=None, origin=None, direction=None, *, axes=None,
+        affine=None, space=None, dtype=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -433,12 +501,17 @@ impl Volume {
         spacing: Option<&Bound<'_, PyAny>>,
         origin: Option<&Bound<'_, PyAny>>,
         direction: Option<&Bound<'_, PyAny>>,
-        axes: &str,
+        axes: Option<&str>,
         affine: Option<&Bound<'_, PyAny>>,
-        space: &str,
+        space: Option<&str>,
         dtype: Option<&str>,
     ) -> PyResult<Self> {
-        let axes = Axes::parse(axes)?;
+        // nibabel's (x, y, z) with its affine; SimpleITK's and napari's (z, y, x) otherwise.
+        let axes = match axes {
+            Some(a) => Axes::parse(a)?,
+            None if affine.is_some() => Axes::Xyz,
+            None => Axes::Zyx,
+        };
         let np = py.import("numpy")?;
         let mut arr = match array.cast::<PyUntypedArray>() {
             Ok(a) => a.clone().into_any(),
@@ -655,18 +728,21 @@ impl Volume {
             .call_method1("array", (d.map(|r| r.to_vec()).to_vec(),))
     }
 
-    /// 4×4 numpy array mapping array indices (in `.axes` order) to world coordinates (LPS):
-    /// `world = affine @ [a0, a1, a2, 1]`.
+    /// 4×4 numpy array mapping array indices (in `.axes` order) to RAS world coordinates, as
+    /// nibabel's `img.affine`: `ras = affine @ [a0, a1, a2, 1]`. What `Volume(array,
+    /// affine=...)` takes without `space=`, and what `nibabel.Nifti1Image(v.array, v.affine)`
+    /// needs (with `axes="xyz"`). `.affine_lps` is the same map into volsplat's LPS world.
     #[getter]
     fn affine<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let d = self.direction_array_order();
-        let s = self.spacing_array_order();
-        let o = self.data.grid().origin;
-        let rows: Vec<Vec<f64>> = (0..3)
-            .map(|r| vec![d[r][0] * s[0], d[r][1] * s[1], d[r][2] * s[2], o[r]])
-            .chain(std::iter::once(vec![0.0, 0.0, 0.0, 1.0]))
-            .collect();
-        py.import("numpy")?.call_method1("array", (rows,))
+        self.affine_in(py, [-1.0, -1.0, 1.0])
+    }
+
+    /// 4×4 numpy array mapping array indices (in `.axes` order) to volsplat's world coordinates
+    /// (LPS, as `.origin` and `.direction`): `lps = affine_lps @ [a0, a1, a2, 1]`;
+    /// `Volume(array, affine=v.affine_lps, space="LPS")` rebuilds the volume.
+    #[getter]
+    fn affine_lps<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.affine_in(py, [1.0; 3])
     }
 
     /// Smallest and largest sample, in data units.
@@ -866,7 +942,10 @@ pub fn load(
         let (data, _) = py
             .detach(|| source.load_with_limits(&limits))
             .map_err(errors::from_engine)?;
-        let data = Arc::try_unwrap(data).unwrap_or_else(|a| (*a).clone());
+        let data = match Arc::try_unwrap(data) {
+            Ok(d) => d,
+            Err(shared) => try_clone(&shared)?,
+        };
         return Ok(Volume::from_any(data, Some(source), axes, "raw"));
     }
     let options = volsplat::io::ReadOptions {

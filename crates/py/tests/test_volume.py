@@ -197,15 +197,24 @@ def test_geometry_in_array_order_and_world_xyz():
     assert info["origin"] == [10, 20, 30]
     np.testing.assert_array_equal(np.array(info["direction_xyz"]), rot)
     np.testing.assert_array_equal(v.direction, rot[:, ::-1])
-    # The affine maps array indices to world points and rebuilds the same volume.
-    aff = v.affine
+    # The affines map array indices to world points (LPS, volsplat's world; RAS, nibabel's) and
+    # rebuild the same volume.
     k, j, i = 5, 6, 7
-    world = aff @ [k, j, i, 1]
     expect = np.array([10, 20, 30]) + rot @ (np.array([i, j, k]) * [1, 2, 3])
-    np.testing.assert_allclose(world[:3], expect)
-    w = volsplat.Volume(a, affine=aff)
-    assert w.info()["spacing_xyz"] == info["spacing_xyz"] and w.origin == v.origin
-    np.testing.assert_array_equal(render(v).rgba, render(w).rgba)
+    np.testing.assert_allclose((v.affine_lps @ [k, j, i, 1])[:3], expect)
+    np.testing.assert_allclose((v.affine @ [k, j, i, 1])[:3], expect * [-1, -1, 1])
+    for w in (
+        volsplat.Volume(a, affine=v.affine, axes="zyx"),
+        volsplat.Volume(a, affine=v.affine_lps, axes="zyx", space="LPS"),
+    ):
+        assert w.info()["spacing_xyz"] == info["spacing_xyz"] and w.origin == v.origin
+        np.testing.assert_array_equal(render(v).rgba, render(w).rgba)
+    # Without axes=, an affine takes nibabel's (x, y, z) order: the same world geometry (the
+    # affine's columns follow the array's axes either way), another memory layout.
+    w = volsplat.Volume(a, affine=v.affine)
+    assert w.axes == "xyz" and w.info()["spacing_xyz"] == [3, 2, 1]
+    np.testing.assert_allclose(w.info()["bounds"], info["bounds"])
+    np.testing.assert_array_equal(w.array, a)
 
 
 def test_ras_affine_is_converted_to_lps():
@@ -213,8 +222,13 @@ def test_ras_affine_is_converted_to_lps():
     ras = np.diag([0.5, 0.75, 2.0, 1.0])
     ras[:3, 3] = (10, 20, 30)
     v = volsplat.Volume(a, affine=ras, axes="xyz", space="RAS")
-    np.testing.assert_allclose(v.affine, np.diag([-1, -1, 1, 1]) @ ras)
+    np.testing.assert_allclose(v.affine_lps, np.diag([-1, -1, 1, 1]) @ ras)
+    np.testing.assert_allclose(v.affine, ras)
     assert v.origin == (-10.0, -20.0, 30.0)
+    # RAS is what an affine means without space= (nibabel's convention).
+    w = volsplat.Volume(a, affine=ras)
+    assert w.origin == v.origin and w.axes == "xyz"
+    np.testing.assert_array_equal(w.affine_lps, v.affine_lps)
 
 
 def test_info_and_repr():

@@ -40,6 +40,6 @@ pub use list::{ExtractSettings, SplatList, SplatRecord, render_list, render_list
 pub use normals::ShadeAt;
 pub use render::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
-    render_any, render_with_progress,
+    render_any, render_with_progress, xray_weight,
 };
 pub use slab::{force_scalar_sampling, render_slabs, render_slabs_any};

@@ -41,7 +41,7 @@ use crate::geometry::Order;
 use crate::render::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
     SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit,
-    div_band, finish, gradient_at, ms, scale_kept, validate,
+    div_band, finish, gradient_at, ms, scale_kept, validate, xray_weight,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -805,7 +805,7 @@ impl Frame<'_> {
                     }
                     v
                 }
-                RenderMode::Xray => [r.density, 0.0, 0.0, 0.0],
+                RenderMode::Xray => [xray_weight(r.density, s.xray_offset), 0.0, 0.0, 0.0],
                 RenderMode::Mip | RenderMode::Minip => [r.density, 1.0, 0.0, 0.0],
             };
             let v = if keep < 1.0 {

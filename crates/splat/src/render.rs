@@ -106,6 +106,22 @@ pub struct RenderSettings {
     /// plane's sample to this one (pre-integrated classification, Engel, Kraus & Ertl 2001)
     /// instead of by its one sample ([`Preintegrate`]; default [`Preintegrate::Off`]).
     pub preintegrate: Preintegrate,
+    /// X-ray only: what is integrated. `None` (default): the values as they are, `∫ ρ ds`.
+    /// `Some(o)`: `∫ max(ρ + o, 0) ds`, data units shifted by `o` (finite) and clamped at zero
+    /// before the kernel spreads them: with `o = 1000` on a CT in Hounsfield units, attenuation
+    /// relative to air, `μ/μ_water · 1000` (a digitally reconstructed radiograph; air and
+    /// padding below −1000 HU add nothing). See [`xray_weight`].
+    pub xray_offset: Option<f32>,
+}
+
+/// The value an X-ray integrates for a sample of value `v` ([`RenderSettings::xray_offset`]):
+/// `v`, or `max(v + o, 0)`.
+#[inline(always)]
+pub fn xray_weight(v: f32, offset: Option<f32>) -> f32 {
+    match offset {
+        Some(o) => (v + o).max(0.0),
+        None => v,
+    }
 }
 
 /// Pre-integrated classification in the image-aligned slabs ([`RenderSettings::preintegrate`];
@@ -146,6 +162,7 @@ impl Default for RenderSettings {
             slab: crate::slab::DEFAULT_SLAB,
             shade_at: crate::normals::ShadeAt::Samples,
             preintegrate: Preintegrate::Off,
+            xray_offset: None,
         }
     }
 }
@@ -481,6 +498,13 @@ pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
             "an opacity > 0 (VTK stops rays at 0.9922)",
         );
     }
+    if s.xray_offset.is_some_and(|o| !o.is_finite()) {
+        return bad(
+            "xray_offset",
+            format!("{:?}", s.xray_offset),
+            "a finite offset in data units (1000 for CT in Hounsfield units)",
+        );
+    }
     if s.footprint.max_entries == 0 {
         return bad("footprint.max_entries", "0".into(), "≥ 1");
     }
@@ -531,6 +555,8 @@ struct ClassifyContext<'a, T> {
     depth_scale: f64,
     /// Clipping planes in lattice terms (empty: none).
     clip: LatticeClip,
+    /// X-ray: the offset of [`RenderSettings::xray_offset`].
+    xray_offset: Option<f32>,
 }
 
 impl<'a, T: Scalar> ClassifyContext<'a, T> {
@@ -593,6 +619,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
             height: settings.height,
             depth_scale: if dhi > dlo { 1.0 / (dhi - dlo) } else { 0.0 },
             clip: LatticeClip::new(&settings.clip, grid, &settings.kernel, geom.stride),
+            xray_offset: settings.xray_offset,
         }
     }
 
@@ -665,7 +692,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                             .classifier
                             .density_opacity(density)
                             .is_some_and(|a| a.is_nan() || a <= 0.0),
-                        RenderMode::Xray => density == 0.0,
+                        RenderMode::Xray => xray_weight(density, self.xray_offset) == 0.0,
                         _ => false,
                     };
                     if zero {
@@ -749,7 +776,9 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                             None => [0.0; 4],
                         }
                     }
-                    (RenderMode::Xray, _) => [density * ds, 0.0, 0.0, 0.0],
+                    (RenderMode::Xray, _) => {
+                        [xray_weight(density, self.xray_offset) * ds, 0.0, 0.0, 0.0]
+                    }
                     (RenderMode::Mip | RenderMode::Minip, _) => [density, 1.0, 0.0, 0.0],
                 };
                 if keep < 1.0 {

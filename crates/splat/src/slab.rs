@@ -7,8 +7,10 @@
 //!
 //! The view volume is cut by planes parallel to the image plane, `Δ` world units apart, at the
 //! eye depths `d_j = Δ·j` (anchored to the eye, so they do not follow the volume as it turns:
-//! no popping when the sheet axis of Westover's sheets would switch). In each plane every pixel
-//! holds the reconstructed scalar `ρ̂ = Σ_v ρ_v·h(p − v)` summed over the voxels `v` whose
+//! no popping when the sheet axis of Westover's sheets would switch), across the box of voxel
+//! centres, an axis of one sample spanning its voxel (a single slice is one spacing thick;
+//! `docs/decisions/0023-thin-volumes.md`). In each plane every pixel holds the reconstructed
+//! scalar `ρ̂ = Σ_v ρ_v·h(p − v)` summed over the voxels `v` whose
 //! kernel `h` reaches the pixel's point `p` on the plane (the kernel's section by the plane, as
 //! in Mueller & Crawfis' slicing of each kernel by the slabs it overlaps). Then, per pixel
 //! (Mueller, Möller & Crawfis §3): the transfer function classifies `ρ̂`; where it has opacity
@@ -132,10 +134,11 @@ pub fn render_slabs_any(
 
 /// Renders `volume` seen by `camera` (orthographic or perspective) with image-aligned,
 /// post-classified slabs (module docs). `settings.slab` is the slab thickness in units of the
-/// smallest grid spacing; `settings.mode` may not be X-ray. `bricks` is the volume's brick grid
-/// if the caller keeps one across frames (built here otherwise). `progress` is called after
-/// each group of image bands, with `sheets_done`/`sheets_total` counting bands; returning
-/// `false` cancels with [`SplatError::Cancelled`].
+/// smallest grid spacing, capped at the thinnest extent of the box the rays cross (decision
+/// 0023: an axis of one sample spans its voxel); `settings.mode` may not be X-ray. `bricks`
+/// is the volume's brick grid if the caller keeps one across frames (built here otherwise).
+/// `progress` is called after each group of image bands, with `sheets_done`/`sheets_total`
+/// counting bands; returning `false` cancels with [`SplatError::Cancelled`].
 pub fn render_slabs<T: Scalar>(
     volume: &Volume<T>,
     camera: &Camera,
@@ -198,13 +201,22 @@ pub fn render_slabs<T: Scalar>(
     if ss > 1.0 {
         return render_supersampled(volume, camera, tables, settings, Some(bricks), progress, ss);
     }
-    let delta = settings.slab * min_spacing;
+    // The box the rays cross: the voxel centres', an axis of one sample spanning its voxel
+    // (decision 0023). No thicker slabs than the box's thinnest extent, so that a ray through
+    // both of its widest faces meets a plane inside (a sheet one voxel thick under `--slab 2`
+    // would otherwise fall between two planes and draw nothing); with slabs of at most one
+    // voxel this never applies (every extent is a spacing or more).
+    let geo = drawn_geometry(grid);
+    let thinnest = (0..3)
+        .map(|a| (geo.dims[a] - 1) as f64 * geo.spacing[a])
+        .fold(f64::INFINITY, f64::min);
+    let delta = (settings.slab * min_spacing).min(thinnest);
     let classifier = FrameClassifier::new(tables, &frame, delta);
     let composite = settings.mode == RenderMode::Composite;
     let shade = composite && classifier.needs_gradient;
 
-    // Depth range of the box of voxel centres, and the planes inside it.
-    let depths = grid
+    // Depth range of the box the rays cross, and the planes inside it.
+    let depths = geo
         .corners_world()
         .map(|c| (c - frame.eye).dot(frame.forward));
     let dmin = depths.iter().fold(f64::INFINITY, |m, &d| m.min(d));
@@ -224,7 +236,7 @@ pub fn render_slabs<T: Scalar>(
         });
     }
     let (w, h) = (settings.width, settings.height);
-    let view = View::new(&proj, grid, w, h);
+    let view = View::new(&proj, &geo, w, h);
     let active = bricks.active(
         &tables.opacity,
         (tables.opacity.hi - tables.opacity.lo) / 4095.0,
@@ -278,6 +290,7 @@ pub fn render_slabs<T: Scalar>(
     let ctx = Ctx {
         data: volume.data(),
         dims: grid.dims,
+        box_hi: geo.dims.map(|n| n as i64 - 1),
         max_cell: grid.dims.map(|n| n.max(2) as i64 - 2),
         simd: simd_available() && volume.data().len() < i32::MAX as usize,
         grad_to_world,
@@ -385,6 +398,25 @@ pub fn render_slabs<T: Scalar>(
         values,
         stats,
     })
+}
+
+/// The geometry the slabs' rays are set up in (`docs/decisions/0023-thin-volumes.md`): `grid`
+/// itself where every axis has two samples or more; otherwise each axis of one sample becomes
+/// two "samples" half a spacing either side of the real one (the origin moved back by half a
+/// spacing), so the box of these centres, `[0, 1]` along that axis, is the voxel's extent
+/// ([`volsplat_core::Grid::drawn_box_index`]). Only positions use it: the cells are clamped to
+/// the real grid (`Ctx::max_cell`, 0 there) and the step to the next voxel along the axis is 0
+/// (`Ctx::up`), so every position along the axis reads the one sample.
+fn drawn_geometry(grid: &volsplat_core::Grid) -> volsplat_core::Grid {
+    let mut geo = grid.clone();
+    for a in 0..3 {
+        if grid.dims[a] == 1 {
+            geo.dims[a] = 2;
+            let back = grid.direction.col(a) * (0.5 * grid.spacing[a]);
+            geo.origin = (DVec3::from(geo.origin) - back).to_array();
+        }
+    }
+    geo
 }
 
 /// Sub-pixel rays per pixel and axis for the anti-aliasing of minified views, from `r`, the
@@ -738,6 +770,10 @@ fn clip_linear(range: (i64, i64), a: f64, b: f64, lo: f64, hi: f64) -> (i64, i64
 struct Ctx<'a, T> {
     data: &'a [T],
     dims: [usize; 3],
+    /// The upper corner of the box the rays cross, in the index space of the view
+    /// ([`drawn_geometry`]): `n − 1`, or 1 along an axis of one sample (its voxel, `[0, 1]`
+    /// there, shifted by half a voxel; every position on it reads the one sample).
+    box_hi: [i64; 3],
     /// Largest cell index per axis (`max(n, 2) − 2`).
     max_cell: [i64; 3],
     /// Index strides per axis.
@@ -790,20 +826,20 @@ impl<T: Scalar> Ctx<'_, T> {
     /// Row `y` of the plane at depth `d` in 32.32 fixed-point index coordinates (VTK's ray
     /// caster steps in 15-bit fixed point): integer steps are exact, so a pixel's position is
     /// the same whichever pixels around it are skipped. The span holds the pixels whose point
-    /// lies in the box of voxel centres `[0, n − 1]³`, checked in fixed point, so no clamping is
-    /// needed below 0.
+    /// lies in the box the rays cross, `[0, box_hi]` (the voxel centres' box, decision 0023),
+    /// checked in fixed point, so no clamping is needed below 0.
     fn walk(&self, y: usize, d: f64) -> Walk {
         let (start, step) = self.view.row(y, d);
         let mut r = (0, self.width as i64 - 1);
         for a in 0..3 {
-            r = clip_linear(r, start[a], step[a], 0.0, (self.dims[a] - 1) as f64);
+            r = clip_linear(r, start[a], step[a], 0.0, self.box_hi[a] as f64);
         }
         let s = [0, 1, 2].map(|a| to_fixed(start[a]));
         let st = [0, 1, 2].map(|a| to_fixed(step[a]));
         let inside = |x: i64| {
             (0..3).all(|a| {
                 let q = s[a] + x * st[a];
-                q >= 0 && q <= ((self.dims[a] - 1) as i64) << FRAC
+                q >= 0 && q <= self.box_hi[a] << FRAC
             })
         };
         while r.0 <= r.1 && !inside(r.0) {
@@ -1417,8 +1453,8 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 
     /// The cell (lower corner) holding the fixed-point index position `q` (every component in
-    /// `[0, n − 1]`, as [`Ctx::walk`] guarantees) and the fractions in it. On the last voxel
-    /// plane the cell is the one below with fraction 1.
+    /// `[0, box_hi]`, as [`Ctx::walk`] guarantees) and the fractions in it. On the last voxel
+    /// plane the cell is the one below with fraction 1 (along an axis of one sample, cell 0).
     #[inline(always)]
     fn cell(&self, q: [i64; 3]) -> ([usize; 3], [f32; 3]) {
         let mut c = [0usize; 3];
@@ -1446,8 +1482,8 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 
     /// The eye depths `d_in` and `d_out` between which the ray of each pixel of the rows
-    /// `[y0, y0 + rows)` lies in the box of voxel centres and on the kept side of every clipping
-    /// plane (`[+∞, −∞]` where it misses).
+    /// `[y0, y0 + rows)` lies in the box the rays cross (`box_hi`) and on the kept side of
+    /// every clipping plane (`[+∞, −∞]` where it misses).
     fn ray_extents(&self, y0: usize, rows: usize) -> (Vec<f32>, Vec<f32>) {
         let v = &self.view;
         let mut din = Vec::with_capacity(rows * self.width);
@@ -1486,7 +1522,7 @@ impl<T: Scalar> Ctx<'_, T> {
                     }
                 };
                 for ax in 0..3 {
-                    cut(aq[ax], bq[ax], 0.0, (self.dims[ax] - 1) as f64);
+                    cut(aq[ax], bq[ax], 0.0, self.box_hi[ax] as f64);
                 }
                 for &(n, off) in &self.clip {
                     cut(n.dot(aw) + off, n.dot(bw), 0.0, f64::INFINITY);
@@ -1636,7 +1672,7 @@ struct Walk {
     /// The row's start and step as f32, for the samples themselves.
     s32: [f32; 3],
     st32: [f32; 3],
-    /// Pixels inside the box of voxel centres (empty when `span.0 > span.1`).
+    /// Pixels inside the box the rays cross (empty when `span.0 > span.1`).
     span: (i64, i64),
 }
 

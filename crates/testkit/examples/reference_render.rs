@@ -47,6 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         step: fraction * min_spacing,
         supersample,
         shade_at_voxels,
+        ..ReferenceSettings::default()
     };
     let image = reference_composite(&vol, &proj, &tables, &settings);
     volsplat_io::write_npy_rgba(&a[7], &image)?;

@@ -35,8 +35,9 @@ pub use metrics::{
     rms_rgb, snr_db, ssim_gray, to_8bit, total_variation,
 };
 pub use reference::{
-    ReferenceSettings, analytic_xray, ray_box_interval, reference_composite, reference_minip,
-    reference_mip, reference_xray, trilinear, voxel_gradients,
+    Extent, ReferenceSettings, analytic_xray, ray_box_interval, ray_extent_interval,
+    reference_composite, reference_minip, reference_mip, reference_xray, trilinear,
+    voxel_gradients,
 };
 pub use volsplat_core::phantom::{
     Blob, Ellipsoid, EllipsoidPhantom, GaussianBlobs, MarschnerLobb, Phantom, ct_head_volume,

@@ -10,10 +10,14 @@
 //!   [`PerspectiveProjection::ray_direction`](volsplat_core::PerspectiveProjection::ray_direction) and covers only the forward half-line `t ≥ 0`
 //!   (eye-space depth ≥ 0), so an eye inside the volume sees what lies in front of it.
 //!
-//! The ray is clipped exactly to the box of voxel centres, `[0, dims − 1]³` in index space
-//! ([`ray_box_interval`]), marched at a fixed world-space step along the ray, and the field is
-//! reconstructed by trilinear interpolation in index space ([`trilinear`]). Nothing here shares
-//! code with the renderer beyond the core types and the CRIO classifier.
+//! The ray is clipped exactly to the box of voxel centres, `[0, dims − 1]³` in index space, an
+//! axis of one sample spanning its voxel, `[−½, ½]` ([`Grid::drawn_box_index`],
+//! `docs/decisions/0023-thin-volumes.md`), or with [`Extent::Cells`] to every voxel's cell,
+//! `[−½, dims − ½]³`, the extent the splatting kernels cover ([`ray_box_interval`]); it is
+//! marched at a fixed world-space step along the ray, and the field is reconstructed by
+//! trilinear interpolation in index space ([`trilinear`]), constant beyond the outer voxel
+//! centres. Nothing here shares code with the renderer beyond the core types and the CRIO
+//! classifier.
 //!
 //! - [`reference_xray`]: `∫ f ds` (data units × world units), trapezoid rule between the exact
 //!   entry and exit points.
@@ -46,6 +50,35 @@ pub struct ReferenceSettings {
     /// blended with the trilinear weights (equal to blending the voxels' light where no
     /// channel clamps at 1). Default `false`: the gradient is interpolated, then classified.
     pub shade_at_voxels: bool,
+    /// The box the rays are clipped to. Default [`Extent::Centres`].
+    pub extent: Extent,
+}
+
+/// Which box of a grid the reference integrates over (`docs/decisions/0023-thin-volumes.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Extent {
+    /// The box of voxel centres, with an axis of one sample spanning its voxel
+    /// ([`Grid::drawn_box_index`]): what the ray casters (VTK's, the image-aligned slabs)
+    /// sample.
+    #[default]
+    Centres,
+    /// Every voxel's cell, `[−½, n − ½]` per axis: what the splatting renderers cover, each
+    /// voxel's kernel integrating to one voxel along the ray. Equal to `Centres` along an axis
+    /// of one sample.
+    Cells,
+}
+
+impl Extent {
+    /// The index-space box `(lo, hi)` of `grid` under this extent.
+    pub fn box_index(self, grid: &Grid) -> (DVec3, DVec3) {
+        match self {
+            Extent::Centres => grid.drawn_box_index(),
+            Extent::Cells => (
+                DVec3::splat(-0.5),
+                DVec3::from(grid.dims.map(|n| n as f64 - 0.5)),
+            ),
+        }
+    }
 }
 
 impl Default for ReferenceSettings {
@@ -55,6 +88,7 @@ impl Default for ReferenceSettings {
             step: 0.0,
             supersample: 1,
             shade_at_voxels: false,
+            extent: Extent::Centres,
         }
     }
 }
@@ -81,16 +115,27 @@ const BOX_SLACK: f64 = 1e-9;
 
 /// The parameter interval `[t0, t1]` (world units for a unit `dir`) over which the world line
 /// `origin + t·dir` lies inside the box of voxel centres `[0, dims − 1]³` (index space) of
-/// `grid`, or `None` if it misses. Slab method in index space; the box is widened by 1e-9
-/// voxels against rounding.
+/// `grid`, an axis of one sample spanning `[−½, ½]` ([`Grid::drawn_box_index`]), or `None` if
+/// it misses. Slab method in index space; the box is widened by 1e-9 voxels against rounding.
 pub fn ray_box_interval(grid: &Grid, origin: DVec3, dir: DVec3) -> Option<(f64, f64)> {
+    ray_extent_interval(grid, Extent::Centres, origin, dir)
+}
+
+/// [`ray_box_interval`] for the box of `extent`.
+pub fn ray_extent_interval(
+    grid: &Grid,
+    extent: Extent,
+    origin: DVec3,
+    dir: DVec3,
+) -> Option<(f64, f64)> {
     let q0 = grid.index_from_world(origin);
     let dq = grid.index_from_world(origin + dir) - q0;
+    let (box_lo, box_hi) = extent.box_index(grid);
     let mut t0 = f64::NEG_INFINITY;
     let mut t1 = f64::INFINITY;
     for a in 0..3 {
-        let lo = -BOX_SLACK;
-        let hi = (grid.dims[a] - 1) as f64 + BOX_SLACK;
+        let lo = box_lo[a] - BOX_SLACK;
+        let hi = box_hi[a] + BOX_SLACK;
         if dq[a] == 0.0 {
             if q0[a] < lo || q0[a] > hi {
                 return None;
@@ -226,6 +271,7 @@ struct Rays<'a> {
     vol: &'a Volume<f32>,
     proj: &'a Projection,
     n: usize,
+    extent: Extent,
 }
 
 impl Rays<'_> {
@@ -245,7 +291,7 @@ impl Rays<'_> {
     /// direction (index units per world unit).
     fn clip(&self, ray: &Ray) -> Option<(f64, f64, DVec3, DVec3)> {
         let grid = self.vol.grid();
-        let (t0, t1) = ray_box_interval(grid, ray.origin, ray.dir)?;
+        let (t0, t1) = ray_extent_interval(grid, self.extent, ray.origin, ray.dir)?;
         let t0 = t0.max(ray.t_min);
         if t1 < t0 {
             return None;
@@ -284,6 +330,7 @@ fn render_scalar(
         vol,
         proj,
         n: settings.rays_per_axis(),
+        extent: settings.extent,
     };
     let (width, height) = proj.size();
     let mut values = vec![0.0f32; width * height];
@@ -441,7 +488,9 @@ pub fn reference_composite(
     let classifier = FrameClassifier::new(tables, &frame, step);
     let grads = classifier.needs_gradient.then(|| voxel_gradients(vol));
     let forward = frame.forward;
-    let depths = grid.corners_world().map(|c| (c - frame.eye).dot(forward));
+    let depths = grid
+        .drawn_corners_world()
+        .map(|c| (c - frame.eye).dot(forward));
     let dmin = depths.iter().fold(f64::INFINITY, |m, &d| m.min(d));
     let dmax = depths.iter().fold(f64::NEG_INFINITY, |m, &d| m.max(d));
     let depth_scale = if dmax > dmin {
@@ -453,6 +502,7 @@ pub fn reference_composite(
         vol,
         proj,
         n: settings.rays_per_axis(),
+        extent: settings.extent,
     };
     let (width, height) = proj.size();
     let mut pixels = vec![[0.0f32; 4]; width * height];
@@ -669,6 +719,53 @@ mod tests {
                 .iter()
                 .all(|&v| v == 0.0)
         );
+    }
+
+    /// Decision 0023: a single slice is one spacing thick (it integrated to 0 before), a slice of
+    /// two samples too; under `Extent::Cells` two samples are two spacings thick.
+    #[test]
+    fn thin_volumes_have_the_extent_of_their_voxels() {
+        let theta = 30f64.to_radians();
+        for (nz, spacing, centres, cells) in [
+            (1usize, 1.5, 1.5, 1.5),
+            (2, 1.5, 1.5, 3.0),
+            (3, 0.5, 1.0, 1.5),
+        ] {
+            let grid =
+                Grid::new([41, 41, nz], [1.0, 1.0, spacing], [0.0; 3], DMat3::IDENTITY).unwrap();
+            let vol = Volume::new(grid, vec![2.0f32; 41 * 41 * nz]).unwrap();
+            let z = (nz - 1) as f64 * spacing * 0.5;
+            let proj = ortho(
+                DVec3::new(20.0, 20.0, z),
+                DVec3::new(0.0, -theta.sin(), theta.cos()) * 100.0,
+                DVec3::Y,
+                4.0,
+                8,
+                8,
+            );
+            for (extent, thick) in [(Extent::Centres, centres), (Extent::Cells, cells)] {
+                let settings = ReferenceSettings {
+                    extent,
+                    ..ReferenceSettings::default()
+                };
+                let expect = 2.0 * thick / theta.cos();
+                for v in reference_xray(&vol, &proj, &settings).values() {
+                    assert!(
+                        (*v as f64 - expect).abs() < 1e-5,
+                        "{nz} samples, {extent:?}: {v} vs {expect}"
+                    );
+                }
+                let (alpha, unit) = (0.3f32, 1.5);
+                let tables = constant_tables([1.0; 3], alpha, unit);
+                let a = 1.0 - (1.0 - alpha as f64).powf(thick / theta.cos() / unit);
+                for p in reference_composite(&vol, &proj, &tables, &settings).pixels() {
+                    assert!((p[3] as f64 - a).abs() < 2e-5, "{nz}: {} vs {a}", p[3]);
+                }
+                for v in reference_mip(&vol, &proj, &settings).values() {
+                    assert_eq!(*v, 2.0);
+                }
+            }
+        }
     }
 
     #[test]

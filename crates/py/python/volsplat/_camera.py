@@ -12,6 +12,16 @@ from ._util import dumps, floats, fspath, number, warn_all
 _ORBIT = ("azimuth", "elevation", "roll", "zoom", "dolly", "view_angle")
 
 
+def _view(value: Any) -> str:
+    """An anatomical view name as the command line's ``--view`` takes it, in the scene file's
+    spelling (``"A"``, ``"front"`` → ``"anterior"``)."""
+    if not isinstance(value, str):
+        raise InvalidInputError(
+            f"view: expected anterior, posterior, left, right, superior or inferior, got {value!r}"
+        )
+    return _core.anatomical_view(value)
+
+
 class Camera:
     """A view of the volume, with VTK's semantics (world units, degrees).
 
@@ -25,6 +35,13 @@ class Camera:
 
           Camera(azimuth=30, elevation=15, zoom=1.3)
 
+      ``view`` (``--view``) starts from an anatomical view of the patient frame (LPS) instead
+      of VTK's direction: ``"anterior"``, ``"posterior"``, ``"left"``, ``"right"`` (head up),
+      ``"superior"``, ``"inferior"`` (anterior up), as 3D Slicer's view buttons (also ``"A"``,
+      ``"P"``, ``"L"``, ``"R"``, ``"S"``, ``"I"``); the rotations then apply to it::
+
+          Camera(view="anterior", azimuth=20)
+
     - **Explicit**: a VTK camera (``position``, ``focal_point``, ``view_up`` in world units;
       ``parallel_projection``; ``parallel_scale``, half the image height in world units, for
       orthographic views; ``view_angle``, the vertical field of view in degrees, for
@@ -33,7 +50,9 @@ class Camera:
           Camera(position=(394.4, 802.9, 284.5), focal_point=(122, 122, 80.25),
                  view_up=(0, 0, 1), parallel_projection=True, parallel_scale=194.1)
 
-    The orbit is applied in VTK's order: projection switch and view angle, ``Azimuth``,
+    With an explicit camera, ``view`` turns it to that side about its focal point (keeping the
+    distance), as ``--camera file --view left`` does. The orbit is applied in VTK's order:
+    anatomical view, projection switch and view angle, ``Azimuth``,
     ``Elevation``, ``OrthogonalizeViewUp``, ``Roll``, ``Zoom``, ``Dolly``. Cameras are
     immutable; :meth:`replace` returns a changed copy. ``Image.camera`` is the explicit camera
     a render used, which :meth:`save` writes as a camera file for ``volsplat render --camera``,
@@ -57,8 +76,11 @@ class Camera:
         zoom: Optional[float] = None,
         dolly: Optional[float] = None,
         perspective: Optional[bool] = None,
+        view: Optional[str] = None,
     ) -> None:
         orbit: Dict[str, Any] = {}
+        if view is not None:
+            orbit["view"] = _view(view)
         for name, v in (
             ("azimuth", azimuth),
             ("elevation", elevation),
@@ -151,8 +173,8 @@ class Camera:
     # -- changes ---------------------------------------------------------------------------
 
     def replace(self, **changes: Any) -> "Camera":
-        """A copy with some fields replaced: the orbit's ``azimuth``, ``elevation``, ``roll``,
-        ``zoom``, ``dolly``, ``view_angle``, ``perspective`` (``None`` removes one), or an
+        """A copy with some fields replaced: the orbit's ``view``, ``azimuth``, ``elevation``,
+        ``roll``, ``zoom``, ``dolly``, ``view_angle``, ``perspective`` (``None`` removes one), or an
         explicit camera's ``position``, ``focal_point``, ``view_up``, ``parallel_projection``,
         ``parallel_scale``."""
         spec = self.to_dict()
@@ -161,6 +183,8 @@ class Camera:
         for key, value in changes.items():
             if key in ("azimuth", "elevation", "roll", "zoom", "dolly"):
                 orbit[key] = None if value is None else number(value, key)
+            elif key == "view":
+                orbit[key] = None if value is None else _view(value)
             elif key == "view_angle":
                 v = None if value is None else number(value, key)
                 if cam is not None and v is not None:
@@ -257,6 +281,11 @@ class Camera:
     def orbit(self) -> Dict[str, Any]:
         """The view changes applied to the camera (only the fields given)."""
         return self._orbit()
+
+    @property
+    def view(self) -> Optional[str]:
+        """The anatomical view the orbit starts from (``"anterior"``, …), or ``None``."""
+        return self._orbit().get("view")
 
     @property
     def azimuth(self) -> Optional[float]:

@@ -29,7 +29,7 @@ _QUALITY = (
     "preintegrate",
 )
 _SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping")
-_ORBIT = ("azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
+_ORBIT = ("view", "azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
 OPTIONS: Tuple[str, ...] = (
     ("volume", "camera", "transfer_function", "size", "quality") + _TOP + _QUALITY + _SCENE + _ORBIT
 )
@@ -80,7 +80,9 @@ class Scene:
     Keyword options (all optional; the command-line flag in brackets):
 
     - ``camera`` (:class:`Camera`, dict or camera file), or the orbit of the reset view
-      directly: ``azimuth``, ``elevation``, ``roll``, ``zoom``, ``dolly`` (``--azimuth`` …),
+      directly: ``view`` (``--view``: ``"anterior"``, ``"posterior"``, ``"left"``, ``"right"``,
+      ``"superior"``, ``"inferior"``, an anatomical side of the LPS patient frame to start
+      from), ``azimuth``, ``elevation``, ``roll``, ``zoom``, ``dolly`` (``--azimuth`` …),
       ``perspective`` (``--perspective``), ``view_angle`` (degrees). Given with a camera, these
       change its orbit, as the flags do with ``--camera``.
     - ``transfer_function``: a :class:`TransferFunction`, preset name (``--preset``), dict, file

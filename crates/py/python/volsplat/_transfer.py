@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import warnings
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from . import _volsplat as _core
@@ -12,7 +11,6 @@ from ._errors import InvalidInputError
 from ._util import dumps, fspath, number, points, warn_all
 
 PRESETS: Tuple[str, ...] = tuple(_core.PRESETS)
-_MAX_JSON_BYTES = 16 << 20
 
 
 class TransferFunction:
@@ -138,35 +136,24 @@ class TransferFunction:
     ) -> "TransferFunction":
         """Reads a transfer function file.
 
-        - volsplat's format (``color``, ``scalar_opacity``, … as in the README; the command
-          line's ``--tf``), read by the same reader: unknown fields draw a warning.
+        Both formats are read by the command line's reader (``--tf`` takes either, with the
+        same result):
+
+        - volsplat's format (``color``, ``scalar_opacity``, … as in the README): unknown fields
+          draw a warning.
         - A ParaView / VTK colour-map preset as exported by ParaView's "Choose Preset → Export"
           (a JSON list of objects, or one object, with ``RGBPoints`` = [x, r, g, b, …] and
           optionally ``Points`` = [x, opacity, midpoint, sharpness, …]); ``name`` picks one of
-          several presets. Midpoint and sharpness other than 0.5 and 0 are approximated by
-          straight lines (a warning says so); without ``Points`` the opacity ramps 0 → 1 over
-          the colour range, as ParaView's default.
+          several presets (the command line takes the first). Midpoint and sharpness other than
+          0.5 and 0 are approximated by straight lines (a warning says so); without ``Points``
+          the opacity ramps 0 → 1 over the colour range, as ParaView's default.
 
         ``data_range=(lo, hi)`` rescales the file's points to that range (ParaView's "rescale
         to data range"), useful for presets defined on [0, 1] or [-1, 1].
         """
-        p = fspath(path)
-        obj: Any = None
-        try:
-            with open(p, "rb") as fh:
-                head = fh.read(_MAX_JSON_BYTES + 1)
-            if len(head) <= _MAX_JSON_BYTES:
-                obj = json.loads(head.decode("utf-8"))
-        except (OSError, ValueError):
-            obj = None  # the reader below reports what is wrong with the file
-        if _is_paraview(obj):
-            f = _from_paraview(obj, name, p)
-        else:
-            if name is not None:
-                raise InvalidInputError(f"{p}: name= applies to ParaView preset files only")
-            ftext, warnings_ = _core.load_transfer_function(p)
-            warn_all(warnings_)
-            f = json.loads(ftext)
+        ftext, warnings_ = _core.load_transfer_function(fspath(path), name)
+        warn_all(warnings_)
+        f = json.loads(ftext)
         if data_range is not None:
             f = _rescale(f, data_range)
         return cls._from_spec({"function": f})
@@ -259,76 +246,6 @@ class TransferFunction:
             f"volsplat.TransferFunction(color=<{len(f['color'])} points>, "
             f"opacity=<{len(f['scalar_opacity'])} points>, shade={f.get('shade', False)})"
         )
-
-
-def _is_paraview(obj: Any) -> bool:
-    if isinstance(obj, dict):
-        return "RGBPoints" in obj
-    return isinstance(obj, list) and any(isinstance(p, dict) and "RGBPoints" in p for p in obj)
-
-
-def _from_paraview(obj: Any, name: Optional[str], path: str) -> Dict[str, Any]:
-    presets = (
-        [obj]
-        if isinstance(obj, dict)
-        else [p for p in obj if isinstance(p, dict) and "RGBPoints" in p]
-    )
-    if name is not None:
-        chosen = [p for p in presets if p.get("Name") == name]
-        if not chosen:
-            names = ", ".join(repr(p.get("Name")) for p in presets)
-            raise InvalidInputError(f"{path}: no preset named {name!r}; the file holds {names}")
-        preset = chosen[0]
-    else:
-        preset = presets[0]
-        if len(presets) > 1:
-            warnings.warn(
-                f"{path}: holds {len(presets)} presets; using the first, {preset.get('Name')!r} "
-                "(choose with name=)",
-                stacklevel=4,
-            )
-    rgb = preset.get("RGBPoints")
-    if not isinstance(rgb, list) or len(rgb) < 4 or len(rgb) % 4:
-        raise InvalidInputError(
-            f"{path}: RGBPoints must be a flat list [x, r, g, b, ...] of 4·N numbers"
-        )
-    color = [rgb[i : i + 4] for i in range(0, len(rgb), 4)]
-    space = preset.get("ColorSpace", "RGB")
-    if isinstance(space, str) and space.lower() not in ("rgb",):
-        warnings.warn(f"{path}: ColorSpace {space!r} is interpolated in RGB here", stacklevel=4)
-    pts = preset.get("Points")
-    if pts is None:
-        lo, hi = color[0][0], color[-1][0]
-        opacity = [[lo, 0.0], [hi, 1.0]] if hi > lo else [[lo, 1.0]]
-        warnings.warn(
-            f"{path}: no opacity Points; opacity ramps 0 → 1 over the colour range",
-            stacklevel=4,
-        )
-    else:
-        if not isinstance(pts, list) or len(pts) < 4 or len(pts) % 4:
-            raise InvalidInputError(
-                f"{path}: Points must be a flat list [x, opacity, midpoint, sharpness, ...]"
-            )
-        quads = [pts[i : i + 4] for i in range(0, len(pts), 4)]
-        opacity = [[q[0], q[1]] for q in quads]
-        if any(float(q[2]) != 0.5 or float(q[3]) != 0.0 for q in quads):
-            warnings.warn(
-                f"{path}: opacity midpoint/sharpness other than 0.5/0 are approximated by "
-                "straight lines",
-                stacklevel=4,
-            )
-    f: Dict[str, Any] = {"color": color, "scalar_opacity": opacity}
-    for key, field in (
-        ("Shade", "shade"),
-        ("Ambient", "ambient"),
-        ("Diffuse", "diffuse"),
-        ("Specular", "specular"),
-        ("SpecularPower", "specular_power"),
-        ("ScalarOpacityUnitDistance", "scalar_opacity_unit_distance"),
-    ):
-        if key in preset:
-            f[field] = preset[key]
-    return json.loads(_core.check_transfer_function(dumps(f)))
 
 
 def _rescale(f: Dict[str, Any], data_range: Any) -> Dict[str, Any]:

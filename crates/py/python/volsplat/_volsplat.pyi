@@ -20,22 +20,26 @@ VOLUME_EXTENSIONS: List[str]
 class Volume:
     """A scalar volume: samples on a rectilinear grid with spacing, origin and orientation.
 
-    ``Volume(array, spacing=None, origin=None, direction=None, *, axes="zyx", affine=None,
-    space="LPS", dtype=None)`` builds one from a 3-D numpy array (or anything
+    ``Volume(array, spacing=None, origin=None, direction=None, *, axes=None, affine=None,
+    space=None, dtype=None)`` builds one from a 3-D numpy array (or anything
     ``numpy.asarray`` accepts):
 
-    - ``axes``: ``"zyx"`` (default; C order as SimpleITK's ``GetArrayFromImage``, napari,
-      tifffile) or ``"xyz"`` (nibabel's order).
+    - ``axes``: ``"zyx"`` (C order as SimpleITK's ``GetArrayFromImage``, napari, tifffile; the
+      default without ``affine``) or ``"xyz"`` (nibabel's order; the default with ``affine``).
     - ``spacing``: voxel size in world units, one number or three **in the array's axis order**
       (for ``"zyx"``: ``(dz, dy, dx)``; default 1).
     - ``origin``: world position (x, y, z) of the centre of element ``[0, 0, 0]`` (default 0).
     - ``direction``: 3×3 matrix whose **columns** are the world directions of the array's axes,
       in the array's axis order (default: the identity for the grid axes).
     - ``affine``: instead of the three above, a 4×4 (or 3×4) matrix mapping array indices (in
-      array order) to world coordinates, as nibabel's ``img.affine`` (no shear).
-    - ``space``: the world frame of ``origin``/``direction``/``affine``: ``"LPS"`` (DICOM, ITK,
-      volsplat; default) or ``"RAS"`` (NIfTI, nibabel), converted to LPS as the NIfTI reader
-      does.
+      array order) to world coordinates (no shear), with nibabel's meaning: ``Volume(
+      img.get_fdata(), affine=img.affine)`` gives the geometry ``volsplat.load`` reads from the
+      same NIfTI file (the affine maps to RAS).
+    - ``space``: the world frame of ``origin``/``direction``/``affine``: ``"RAS"`` (NIfTI,
+      nibabel; the default for ``affine``) or ``"LPS"`` (DICOM, ITK, SimpleITK, volsplat's own
+      world; the default for ``origin``/``direction``). RAS is converted to LPS (x and y
+      negated) as the NIfTI reader does; ``.affine`` gives the RAS map back and ``.affine_lps``
+      the LPS one.
     - ``dtype``: convert to ``"uint8"``, ``"int8"``, ``"uint16"``, ``"int16"`` or
       ``"float32"`` (an integer type must hold every value exactly).
 
@@ -47,7 +51,8 @@ class Volume:
     transposes; about the cost of ``np.ascontiguousarray``). ``.array`` is then a read-only,
     zero-copy view of the engine's samples. Float samples must be finite (NaN is an error
     naming the index). Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
-    shapes, dtypes and geometry.
+    shapes, dtypes and geometry, and ``MemoryError`` when the copy cannot be allocated (the
+    interpreter keeps running).
     """
 
     def __init__(
@@ -57,9 +62,9 @@ class Volume:
         origin: Optional[_Floats] = None,
         direction: Optional[npt.ArrayLike] = None,
         *,
-        axes: str = "zyx",
+        axes: Optional[str] = None,
         affine: Optional[npt.ArrayLike] = None,
-        space: str = "LPS",
+        space: Optional[str] = None,
         dtype: Optional[str] = None,
     ) -> None: ...
     @property
@@ -87,7 +92,11 @@ class Volume:
         """3×3; columns are the world directions of the array's axes in ``.axes`` order."""
     @property
     def affine(self) -> np.ndarray:
-        """4×4 map from array indices (``.axes`` order) to world coordinates (LPS)."""
+        """4×4 map from array indices (``.axes`` order) to RAS world coordinates, as nibabel's
+        ``img.affine`` (what ``Volume(array, affine=...)`` takes without ``space=``)."""
+    @property
+    def affine_lps(self) -> np.ndarray:
+        """4×4 map from array indices (``.axes`` order) to volsplat's LPS world coordinates."""
     @property
     def value_range(self) -> Tuple[float, float]: ...
     @property
@@ -190,7 +199,8 @@ def phantom(name: Optional[str] = None, grid: Any = None, *, axes: str = "zyx") 
 def load_camera(path: _Path) -> Tuple[str, List[str]]: ...
 def save_camera(path: _Path, camera_json: str) -> None: ...
 def check_camera_spec(spec_json: str) -> str: ...
-def load_transfer_function(path: _Path) -> Tuple[str, List[str]]: ...
+def load_transfer_function(path: _Path, name: Optional[str] = None) -> Tuple[str, List[str]]: ...
+def anatomical_view(name: str) -> str: ...
 def save_transfer_function(path: _Path, tf_json: str) -> None: ...
 def check_transfer_function(tf_json: str) -> str: ...
 def preset_transfer_function(name: str, lo: float, hi: float) -> str: ...
