@@ -158,19 +158,20 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
                 drop(guard);
                 return tab.error(Some(seq), "the volume is still loading".into());
             };
-            let camera_only = matches!(
+            use volsplat::session::Event as E;
+            // The page is told the scene after changes it did not make itself step by step:
+            // not for camera moves and not during a drag (it knows), but after a button, a
+            // preset, and at the end of a drag.
+            let camera_move = matches!(
                 event,
-                volsplat::session::Event::Orbit { .. }
-                    | volsplat::session::Event::Pan { .. }
-                    | volsplat::session::Event::Zoom { .. }
-                    | volsplat::session::Event::Roll { .. }
-                    | volsplat::session::Event::Interaction { .. }
+                E::Orbit { .. } | E::Pan { .. } | E::Zoom { .. } | E::Roll { .. }
             );
             match session.apply(event) {
                 Ok(()) => {
                     tab.shared.set_latest(session.request(), session.display());
                     st.seq = st.seq.max(seq);
-                    let state = (!camera_only).then(|| state_of(session, st.seq, None));
+                    let quiet = camera_move || session.interacting();
+                    let state = (!quiet).then(|| state_of(session, st.seq, None));
                     drop(guard);
                     tab.wake.notify_all();
                     if let Some(s) = state {

@@ -129,6 +129,12 @@ pub struct Session {
     settings: SessionSettings,
     clock: Arc<dyn Clock>,
     generation: Arc<AtomicU64>,
+    /// Bumped at every release of the pointer: a preview in flight then gives way to the final
+    /// frame.
+    releases: Arc<AtomicU64>,
+    /// Set at a release after a drag: the screen shows a recent preview, so the final frame
+    /// comes next even if no preview of the very latest scene was shown.
+    refine_at_once: bool,
     interacting: bool,
     /// Clock time from which the session counts as at rest (no pointer held).
     rest_at: Duration,
@@ -187,6 +193,8 @@ impl Session {
             settings,
             clock,
             generation: Arc::new(AtomicU64::new(1)),
+            releases: Arc::new(AtomicU64::new(0)),
+            refine_at_once: false,
             interacting: false,
             rest_at: now,
             delivered: None,
@@ -258,6 +266,10 @@ impl Session {
     pub fn apply(&mut self, event: Event) -> Result<()> {
         let continuous = event.is_continuous();
         if let Event::Interaction { active } = event {
+            if self.interacting && !active {
+                self.releases.fetch_add(1, Ordering::AcqRel);
+                self.refine_at_once = true;
+            }
             self.interacting = active;
             if !active {
                 self.rest_at = self.clock.now();
@@ -286,6 +298,10 @@ impl Session {
     /// A new generation: the current frame is out of date.
     fn touch(&mut self, continuous: bool) {
         self.generation.fetch_add(1, Ordering::AcqRel);
+        if !self.interacting {
+            // A change made without a drag (a button, a wheel step) shows a preview first.
+            self.refine_at_once = false;
+        }
         let now = self.clock.now();
         self.rest_at = if continuous && !self.interacting {
             now + Duration::from_secs_f64(self.settings.rest_delay_ms / 1e3)
@@ -384,7 +400,7 @@ impl Session {
         let resting = !self.interacting && now >= self.rest_at;
         let aim = self.aim_ms();
         let final_is_cheap = self.budget.final_ms().is_some_and(|ms| ms <= aim);
-        let kind = if final_is_cheap || (resting && delivered.is_some()) {
+        let kind = if final_is_cheap || (resting && (delivered.is_some() || self.refine_at_once)) {
             JobKind::Final
         } else if delivered.is_none() {
             JobKind::Preview(self.plan())
@@ -467,11 +483,15 @@ impl Session {
     /// The progress callback of `job`: `false` (cancel) once the scene has moved on — at once
     /// for a final frame, and for a preview once it has also run for
     /// [`SessionSettings::stale_preview_budgets`] budgets (a preview that is nearly done still
-    /// shows the user something newer than the screen).
+    /// shows the user something newer than the screen) — and for a preview when the pointer is
+    /// released (the final frame follows at once and would wait for it).
     pub fn keep_going(&self, job: &Job) -> impl FnMut(&Progress) -> bool + Send + 'static {
         let generation = Arc::clone(&self.generation);
+        let releases = Arc::clone(&self.releases);
+        let released = self.releases.load(Ordering::Acquire);
         let clock = Arc::clone(&self.clock);
         let mine = job.generation;
+        let preview = !job.is_final();
         let limit = match job.kind {
             JobKind::Final => Duration::ZERO,
             JobKind::Preview(_) => Duration::from_secs_f64(
@@ -480,6 +500,9 @@ impl Session {
         };
         let started = job.started;
         move |_| {
+            if preview && releases.load(Ordering::Acquire) != released {
+                return false;
+            }
             generation.load(Ordering::Acquire) == mine
                 || clock.now().saturating_sub(started) < limit
         }

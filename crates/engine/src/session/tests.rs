@@ -335,6 +335,31 @@ fn stale_finals_cancel_at_once_and_stale_previews_after_three_budgets() {
     assert!(!s.is_current(&fin));
 }
 
+/// Releasing the pointer cancels the preview in flight: the final frame follows at once.
+#[test]
+fn a_release_cancels_the_preview_in_flight() {
+    let (mut s, _) = policy_session();
+    s.apply(Event::Interaction { active: true }).unwrap();
+    s.apply(Event::Orbit { dx: 2.0, dy: 0.0 }).unwrap();
+    let preview = s.next_job().unwrap();
+    preview_plan(&preview);
+    let mut go = s.keep_going(&preview);
+    let p = Progress {
+        fraction: 0.5,
+        stage: "render",
+    };
+    assert!(go(&p));
+    s.apply(Event::Interaction { active: false }).unwrap();
+    assert!(!go(&p), "the preview runs on after the release");
+    s.finished(&preview, JobOutcome::Cancelled);
+    let f = s.next_job().unwrap();
+    assert!(f.is_final());
+    // A release with no drag before it (a click) cancels nothing.
+    let mut go = s.keep_going(&f);
+    s.apply(Event::Interaction { active: false }).unwrap();
+    assert!(go(&p));
+}
+
 /// A failed final frame is not retried until the scene changes.
 #[test]
 fn a_failed_final_frame_settles_its_generation() {
@@ -372,6 +397,40 @@ fn the_slowest_previews_thicken_the_slabs() {
         None,
         "the final frame keeps its slab"
     );
+}
+
+/// The plan of a cost share: half the side or more with the final frame's slabs, then
+/// two-voxel slabs and a larger side than the share alone would give, then thicker slabs at an
+/// eighth of the side.
+#[test]
+fn plans_trade_slabs_for_pixels_below_half_the_side() {
+    let s = SessionSettings::default();
+    let plan = |cost: f64| {
+        let b = policy::Budget::with_cost(cost);
+        let p = b.plan(512, 512, &s);
+        (p.size.1, p.slab_factor)
+    };
+    assert_eq!(plan(1.0), (512, 1.0));
+    assert_eq!(plan(0.3), (272, 1.0)); // √0.3 = 0.548 → 17/32
+    assert_eq!(plan(0.25), (256, 1.0));
+    assert_eq!(plan(0.2), (320, 2.0)); // √0.4 = 0.632 → 20/32
+    assert_eq!(plan(1.0 / 128.0), (64, 2.0));
+    assert_eq!(plan(1.0 / 200.0), (64, 3.125));
+    assert_eq!(plan(1.0 / 1000.0), (64, 4.0));
+    for cost in [1.0, 0.5, 0.25, 0.2, 0.05, 0.01] {
+        let b = policy::Budget::with_cost(cost);
+        let p = b.plan(512, 512, &s);
+        assert!(
+            plan_cost(&p) <= cost + 1e-12,
+            "{cost}: {p:?} costs more than asked"
+        );
+        // The largest step of the side that fits: one more would cost more than asked.
+        let bigger = (p.scale + 1.0 / 32.0).powi(2) / p.slab_factor;
+        assert!(
+            p.scale == 1.0 || bigger > cost,
+            "{cost}: {p:?} wastes the budget"
+        );
+    }
 }
 
 /// A drag to the right turns the camera as VTK's trackball does: `Azimuth(−dx·200/width)`,
