@@ -267,9 +267,11 @@ def main():
                             "--save-scene", scene, "-o", os.path.join(work, name + ".png"),
                             "--quiet"], check=True)
             load = os.getloadavg()[0]
-            ours = json.loads(subprocess.run(
-                [args.bin, "bench-view", vol, *flags, "--size", str(args.size)],
-                check=True, capture_output=True).stdout)
+            r = subprocess.run([args.bin, "bench-view", vol, *flags, "--size", str(args.size)],
+                               capture_output=True)
+            if r.returncode != 0:
+                sys.exit(f"bench-view failed on {name}:\n{r.stderr.decode()[-3000:]}")
+            ours = json.loads(r.stdout)
             entry = {"case": name, "volume": os.path.basename(vol), "size": args.size,
                      "load_before": load, "volsplat": ours}
             if not args.no_vtk:

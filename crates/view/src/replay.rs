@@ -276,6 +276,11 @@ pub struct ReplayReport {
     pub final_render_ms: f64,
     /// Server PNG encode time of the final frame, ms.
     pub final_encode_ms: f64,
+    /// Time from asking for the screenshot (render's exact PNG bytes, encoded on demand from
+    /// the last final frame) to having it, ms.
+    pub screenshot_ms: f64,
+    /// The screenshot's size, bytes.
+    pub screenshot_bytes: usize,
     /// Preview PSNR against the final frame of the same scene at ten points of the drag, dB.
     pub preview_psnr_db: Vec<f64>,
 }
@@ -447,6 +452,9 @@ pub fn replay(
     decode_rgb(&final_header.format, &final_png)?;
     displayed_at.push((final_header.seq, Instant::now()));
     let release_to_final_ms = released_at.elapsed().as_secs_f64() * 1e3;
+    let asked = Instant::now();
+    let screenshot = client.screenshot(Duration::from_secs(60))?;
+    let screenshot_ms = asked.elapsed().as_secs_f64() * 1e3;
     let latencies: Vec<f64> = sent
         .iter()
         .filter_map(|(seq, t)| {
@@ -480,6 +488,8 @@ pub fn replay(
         final_bytes: final_png.len(),
         final_render_ms: final_header.render_ms,
         final_encode_ms: final_header.encode_ms,
+        screenshot_ms,
+        screenshot_bytes: screenshot.len(),
         preview_psnr_db: psnr,
     })
 }
