@@ -143,6 +143,13 @@ function onState(m) {
   S.state = m;
   const r = m.request;
   if (!S.fit) S.size = [r.width, r.height];
+  if (!S.lastFinal && window.__volsplat.previewFrames === 0 &&
+      (view.width !== r.width || view.height !== r.height)) {
+    // Before the first frame: the view's own size, black, rather than a default canvas.
+    view.width = r.width; view.height = r.height;
+    ctx.fillStyle = '#000'; ctx.fillRect(0, 0, r.width, r.height);
+    layout();
+  }
   if (m.transfer_function && !S.dragTf) { S.tf = m.transfer_function; }
   const spec = r.scene.transfer_function;
   $('preset').value = spec === 'auto' ? 'auto' : (spec.preset || '');
