@@ -34,6 +34,12 @@ pub enum Command {
     Phantom(PhantomArgs),
     /// Time repeated renders of an orbit around the volume; prints the median per frame.
     Bench(Box<BenchArgs>),
+    /// Explore a volume in the browser: previews while dragging, the exact `render` frame at
+    /// rest. Prints `open http://127.0.0.1:PORT/?token=…`; Ctrl-C stops.
+    View(Box<crate::view::ViewCmdArgs>),
+    /// The viewer's latency benchmark: replays a recorded orbit and transfer-function drag
+    /// against an in-process server; prints JSON.
+    BenchView(Box<crate::view::BenchViewArgs>),
     /// Buchanan's texture-filtering comparison (Tables 5.1–5.11, Plates 5.1–5.16): renders the
     /// test images with every technique and writes a Markdown report and PNG images.
     TextureBench(TextureBenchArgs),

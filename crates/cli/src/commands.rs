@@ -23,6 +23,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Convert(a) => convert_cmd(a),
         Command::Phantom(a) => phantom_cmd(a),
         Command::Bench(a) => bench_cmd(*a),
+        Command::View(a) => crate::view::view_cmd(*a),
+        Command::BenchView(a) => crate::view::bench_view_cmd(*a),
         Command::Movie(a) => crate::movie::movie_cmd(*a),
         Command::TextureBench(a) => texture_bench_cmd(a),
         Command::DisplayBench(a) => crate::display::display_bench_cmd(*a),

@@ -19,6 +19,9 @@
 //!   them unchanged, so a frame that only moves the camera costs only the frame.
 //! - [`Output`]: the premultiplied linear RGBA image, the X-ray or MIP values, one [`Stats`]
 //!   (milliseconds), and the camera and transfer function actually used.
+//! - [`session::Session`]: progressive rendering for interactive front ends: input events in,
+//!   previews sized to a measured frame budget while input arrives, the exact `render` frame at
+//!   rest, stale frames cancelled.
 //!
 //! World space, cameras and transfer functions follow VTK (see `docs/architecture.md`):
 //! world units (usually mm), angles in degrees, opacity per `scalar_opacity_unit_distance`.
@@ -31,6 +34,7 @@ pub mod movie;
 pub mod renderer;
 pub mod request;
 pub mod scene;
+pub mod session;
 pub mod write;
 pub mod xray;
 
@@ -49,7 +53,9 @@ pub use scene::{
     ShadingTerms, TransferSpec, VolumeSource, make_phantom,
 };
 
-pub use write::{OUTPUT_EXTENSIONS, WriteOptions, windowed_image, write_image, writes_values};
+pub use write::{
+    OUTPUT_EXTENSIONS, WriteOptions, encode_png, windowed_image, write_image, writes_values,
+};
 pub use xray::XrayDensity;
 
 /// The libraries underneath, for callers that need their types (cameras, volumes, images).

@@ -50,6 +50,7 @@
 //! - [`write_png`] with [`PngSettings`]: composited over a background, 8- or 16-bit, sRGB-encoded
 //!   (default) or linear.
 //! - [`write_png_gray`]: a [`volsplat_core::ScalarImage`] windowed to black…white.
+//! - [`encode_png`], [`encode_png_gray`]: the same files' bytes in memory (a server sends them).
 //! - [`write_npy_rgba`], [`write_npy_scalar`], [`read_npy_f32`]: float `.npy` (`'<f4'`).
 //!
 //! ## Scene files (JSON, DESIGN.md §3)
@@ -105,7 +106,10 @@ pub use dicom::{
 };
 pub use error::{IoError, Result};
 pub use header::MAX_HEADER_BYTES;
-pub use image::{PngBitDepth, PngSettings, rgb_codes, srgb_encode, write_png, write_png_gray};
+pub use image::{
+    PngBitDepth, PngSettings, encode_png, encode_png_gray, rgb_codes, srgb_encode, write_png,
+    write_png_gray,
+};
 pub use info::{VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
 pub use json::{
     CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_camera_with, load_transfer_function,

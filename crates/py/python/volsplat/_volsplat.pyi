@@ -130,6 +130,32 @@ class RendererCore:
     def transfer_function(self, request_json: str, volume: Optional[Volume] = None) -> str: ...
     def clear(self) -> None: ...
 
+class ViewerCore:
+    def __init__(
+        self,
+        request_json: str,
+        volume: Optional[Volume] = None,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        allow_remote: bool = False,
+        data_dir: Optional[str] = None,
+        target_fps: float = 30.0,
+        target_latency: float = 50.0,
+        srgb: Optional[bool] = None,
+        bits: int = 8,
+        background: Sequence[float] = ...,
+        window: Optional[Tuple[float, float]] = None,
+    ) -> None: ...
+    @property
+    def url(self) -> str: ...
+    @property
+    def running(self) -> bool: ...
+    @property
+    def tabs(self) -> int: ...
+    def scene(self) -> Tuple[str, Optional[Tuple[float, float]]]: ...
+    def close(self) -> None: ...
+
 class Output:
     @property
     def rgba(self) -> np.ndarray: ...
