@@ -700,7 +700,7 @@ fn render_inner(
         RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
         _ => [0.0; 4],
     };
-    let mut acc = vec![init; w * h];
+    let mut acc = try_filled(w * h, init, "the splat list's image buffer")?;
     let mut bands: Vec<BandState> = (0..n_bands)
         .map(|b| BandState::new(band_h.min(h - b * band_h), w))
         .collect();
