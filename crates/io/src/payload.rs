@@ -526,14 +526,11 @@ fn parse_text_value(text: &str, file_type: FileType) -> std::result::Result<f64,
         FileType::I32 => (i32::MIN as f64, i32::MAX as f64),
         FileType::U32 => (0.0, u32::MAX as f64),
         FileType::F32 | FileType::F64 => {
-            let v: f64 = text
+            // `nan` and `inf` (as teem and ITK write them) are read; `Volume::new` replaces
+            // them and says so (decision 0027).
+            return text
                 .parse()
-                .map_err(|_| format!("not a number of type {}", file_type.name()))?;
-            return if v.is_finite() {
-                Ok(v)
-            } else {
-                Err("samples must be finite".into())
-            };
+                .map_err(|_| format!("not a number of type {}", file_type.name()));
         }
     };
     let v: i64 = text
@@ -573,7 +570,7 @@ fn decode_values(values: Vec<f64>, ft: FileType, grid: Grid, path: &Path) -> Res
 /// sample (it would become an infinity, which `Volume::new` clamps to the finite range: a
 /// silently wrong value); NaN and infinities stay what they are (`Volume::new` replaces them
 /// and says so, decision 0027).
-fn doubles_to_f32(values: impl Iterator<Item = f64>, path: &Path) -> Result<Vec<f32>> {
+pub(crate) fn doubles_to_f32(values: impl Iterator<Item = f64>, path: &Path) -> Result<Vec<f32>> {
     values
         .enumerate()
         .map(|(n, x)| {

@@ -328,7 +328,13 @@ mod tests {
         let h = crate::nifti::tests::Hdr::new(&[4, 1, 1], 16);
         let nii = dir.path().join("v.nii");
         std::fs::write(&nii, h.file(&bytes)).unwrap();
-        for p in [&nrrd, &nii] {
+        let text = dir.path().join("t.nrrd");
+        std::fs::write(
+            &text,
+            "NRRD0004\ntype: float\ndimension: 3\nsizes: 4 1 1\nencoding: text\n\nnan 2 NaN 5\n",
+        )
+        .unwrap();
+        for p in [&nrrd, &nii, &text] {
             let l = read_volume_with(p, &ReadOptions::default()).unwrap();
             assert_eq!(
                 l.volume.to_f32().data(),
