@@ -370,8 +370,8 @@ pub struct RenderOptions {
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
-    /// Render from a sparse splat list (Swan et al. §5): the visible voxels are extracted once
-    /// and reused for every frame. Perspective views use it where image-aligned slabs are not
+    /// Render from a sparse splat list (Swan et al. §5): the visible voxels (every voxel for
+    /// MIP and MinIP) are extracted once and reused for every frame. Perspective views use it where image-aligned slabs are not
     /// chosen (X-ray, sheet-only options, --visibility sheet or every).
     #[arg(long, help_heading = "Performance", hide_short_help = true)]
     pub splat_list: bool,

@@ -719,9 +719,10 @@ impl Renderer {
                 let mut fresh = fresh_tables;
                 let rendered = if renderer == UsedRenderer::SplatList {
                     let q = &request.quality;
+                    let voxels = volsplat_splat::ListVoxels::for_mode(settings.mode);
                     let key = (
                         request.scene.volume.clone(),
-                        tables_key(request, &table_tf),
+                        format!("{}{:?}", tables_key(request, &table_tf), voxels),
                         q.list_threshold.to_bits(),
                         q.subsample,
                     );
@@ -733,6 +734,7 @@ impl Renderer {
                                 &ExtractSettings {
                                     threshold: q.list_threshold,
                                     subsample: q.subsample,
+                                    voxels,
                                 },
                             )?))
                         })

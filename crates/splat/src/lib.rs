@@ -36,7 +36,9 @@ pub use clip::ClipPlane;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};
-pub use list::{ExtractSettings, SplatList, SplatRecord, render_list, render_list_with_progress};
+pub use list::{
+    ExtractSettings, ListVoxels, SplatList, SplatRecord, render_list, render_list_with_progress,
+};
 pub use normals::ShadeAt;
 pub use render::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,

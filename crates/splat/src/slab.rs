@@ -257,10 +257,10 @@ pub fn render_slabs<T: Scalar>(
     let owned_normals;
     let (voxel_shading, codes): (Option<VoxelShading>, &[u16]) = match &shade_table {
         Some(t) if settings.shade_at == ShadeAt::Voxels => {
-            let field = match bricks.normals(volume) {
+            let field = match bricks.normals(volume)? {
                 Some(f) => f,
                 None => {
-                    owned_normals = NormalField::build(volume);
+                    owned_normals = NormalField::build(volume)?;
                     &owned_normals
                 }
             };

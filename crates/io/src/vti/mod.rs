@@ -558,16 +558,23 @@ fn ascii_volume(
         if n == count {
             break;
         }
+        // Float arrays may hold NaN and infinities (VTK writes `nan`, `inf`): `Volume::new`
+        // replaces them and says so (decision 0027). Integer arrays may not.
+        let float = matches!(ft, FileType::F32 | FileType::F64);
         let v = t
             .parse::<f64>()
             .ok()
-            .filter(|v| v.is_finite())
+            .filter(|v| v.is_finite() || float)
             .ok_or_else(|| {
                 IoError::field(
                     path,
                     format!("{field} (value #{n})"),
                     t,
-                    "not a finite number",
+                    if float {
+                        "not a number"
+                    } else {
+                        "not a finite number"
+                    },
                 )
             })?;
         let (lo, hi) = match ft {
@@ -605,7 +612,13 @@ fn ascii_volume(
         FileType::I16 => {
             Volume::new(grid, vals.iter().map(|&x| x as i16).collect()).map(Into::into)
         }
-        _ => Volume::new(grid, vals.iter().map(|&x| x as f32).collect()).map(Into::into),
+        // Finite doubles beyond float32 are an error naming the sample, as in the other
+        // readers (decision 0027); NaN and infinities are replaced by `Volume::new`.
+        _ => Volume::new(
+            grid,
+            crate::payload::doubles_to_f32(vals.iter().copied(), path)?,
+        )
+        .map(Into::into),
     };
     r.map_err(|e| IoError::core(path, e))
 }

@@ -555,3 +555,40 @@ fn appended_blocks_end_at_the_next_array() {
     let e = read_vti_with(&p, &o).unwrap_err().to_string();
     assert!(e.contains("more than the 12 bytes"), "{e}");
 }
+
+/// Decision 0027: NaN and infinities in a float array are read (the volume's finite extremes,
+/// with a note); a finite double beyond float32 is an error naming the sample.
+#[test]
+fn ascii_nan_is_read_and_float32_overflow_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let array = |values: &str| {
+        let a = format!(
+            "        <DataArray type=\"Float64\" Name=\"density\" format=\"ascii\">{values}</DataArray>\n"
+        );
+        String::from_utf8(doc("", IMAGE, &a, b"")).unwrap()
+    };
+    let p = write(
+        dir.path(),
+        "n.vti",
+        array("nan 2 3 4 5 6 7 8 9 10 11 inf").as_bytes(),
+    );
+    let l = crate::read_volume_with(&p, &ReadOptions::default()).unwrap();
+    let d = l.volume.to_f32();
+    assert_eq!((d.data()[0], d.data()[11]), (2.0, 11.0));
+    assert!(
+        l.notes.iter().any(|n| n.contains("1 sample was NaN")
+            && n.contains("1 sample was +inf, taken as the highest finite value 11")),
+        "{:?}",
+        l.notes
+    );
+    let p = write(
+        dir.path(),
+        "o.vti",
+        array("1 2 3 4 5 1e300 7 8 9 10 11 12").as_bytes(),
+    );
+    let e = read_vti(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("sample #5") && e.contains("float32 range"),
+        "{e}"
+    );
+}

@@ -49,8 +49,10 @@ class Volume:
     ``memcpy`` when the array is contiguous in the declared order (C-order ``"zyx"``, or
     Fortran-order ``"xyz"`` as nibabel gives it), a strided gather otherwise (views, slices,
     transposes; about the cost of ``np.ascontiguousarray``). ``.array`` is then a read-only,
-    zero-copy view of the engine's samples. Float samples must be finite (NaN is an error
-    naming the index). Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
+    zero-copy view of the engine's samples. Float samples that are NaN (a masked background)
+    become the lowest finite value, and ±inf the lowest or highest, as every reader does (a
+    ``UserWarning`` and ``.notes`` say how many); an array with no finite value is an error.
+    Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
     shapes, dtypes and geometry, and ``MemoryError`` when the copy cannot be allocated (the
     interpreter keeps running).
     """
