@@ -345,7 +345,7 @@ impl Scalar for f32 {
 }
 
 /// The float samples that were not finite when a volume was built, and what they became
-/// (`docs/decisions/0027-non-finite-samples.md`): NaN (no value: the background of SPM, FSL
+/// (`docs/decisions/0030-non-finite-samples.md`): NaN (no value: the background of SPM, FSL
 /// and resampled NIfTI files) the lowest finite value of the volume, so that it is background
 /// under the automatic transfer function and never the maximum of a MIP; −∞ the lowest and +∞
 /// the highest finite value (clamped to the finite range). Values in data units.
@@ -418,7 +418,7 @@ impl<T: Scalar> Volume<T> {
     /// Wraps `data` (length `dims.x·dims.y·dims.z`, i fastest) on `grid`.
     ///
     /// Float samples that are not finite are replaced once, here: NaN and −∞ by the lowest
-    /// finite sample, +∞ by the highest ([`NonFiniteSamples`], decision 0027); what was
+    /// finite sample, +∞ by the highest ([`NonFiniteSamples`], decision 0030); what was
     /// replaced is kept ([`Volume::non_finite`]) for the readers' notes.
     ///
     /// Errors if the length does not match, or if no float sample is finite.

@@ -1,5 +1,5 @@
 //! Issue 28 follow-ups through the engine, as the front ends render: NaN samples load and render
-//! (decision 0027), MinIP and MIP through the splat list see every voxel they need, and an orbit
+//! (decision 0030), MinIP and MIP through the splat list see every voxel they need, and an orbit
 //! over the pole is a picture, not an error.
 
 use std::sync::Arc;
@@ -181,7 +181,7 @@ fn a_nan_background_renders_and_the_notes_say_so() {
             let tag = format!("{mode:?} {renderer:?}");
             if mode == Mode::Minip {
                 // Every ray crosses the background, now the lowest value: MinIP shows it, as
-                // for the same volume with a background of 50 (decision 0027).
+                // for the same volume with a background of 50 (decision 0030).
                 let v = out.values.as_ref().unwrap();
                 let (w, h) = (v.width(), v.height());
                 assert!((v.get(w / 2, h / 2) - r.lowest).abs() < 0.5, "{tag}");

@@ -527,7 +527,7 @@ fn parse_text_value(text: &str, file_type: FileType) -> std::result::Result<f64,
         FileType::U32 => (0.0, u32::MAX as f64),
         FileType::F32 | FileType::F64 => {
             // `nan` and `inf` (as teem and ITK write them) are read; `Volume::new` replaces
-            // them and says so (decision 0027).
+            // them and says so (decision 0030).
             return text
                 .parse()
                 .map_err(|_| format!("not a number of type {}", file_type.name()));
@@ -569,7 +569,7 @@ fn decode_values(values: Vec<f64>, ft: FileType, grid: Grid, path: &Path) -> Res
 /// Doubles as float32 samples. A finite double beyond the float32 range is an error naming the
 /// sample (it would become an infinity, which `Volume::new` clamps to the finite range: a
 /// silently wrong value); NaN and infinities stay what they are (`Volume::new` replaces them
-/// and says so, decision 0027).
+/// and says so, decision 0030).
 pub(crate) fn doubles_to_f32(values: impl Iterator<Item = f64>, path: &Path) -> Result<Vec<f32>> {
     values
         .enumerate()

@@ -646,7 +646,7 @@ impl Volume {
                 .into(),
         };
         // NaN (a masked background, as nibabel gives SPM's output) and infinities were replaced
-        // once, by the engine's rule (decision 0027): say so, as a note and a warning.
+        // once, by the engine's rule (decision 0030): say so, as a note and a warning.
         if let Some(note) = data.non_finite_note() {
             warn_user(py, &format!("volsplat.Volume: {note}"), 1)?;
             notes.push(note);

@@ -233,7 +233,7 @@ def test_a_nan_background_renders_and_says_so(tmp_path):
         img = volsplat.render(vol, size=40, azimuth=30, mode=mode)
         assert np.all(np.isfinite(img.rgba)), mode
         if mode == "minip":
-            # Rays cross the background, now the lowest value: MinIP shows it (decision 0027).
+            # Rays cross the background, now the lowest value: MinIP shows it (decision 0030).
             assert img.values[20, 20] == pytest.approx(np.nanmin(a), abs=0.5)
         else:
             assert img.rgba[..., :3].max() > 0.05, f"{mode}: black"

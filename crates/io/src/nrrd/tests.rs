@@ -825,7 +825,7 @@ fn header_errors_name_the_field() {
     }
     let e = err_of(d, "", b"");
     assert!(e.contains("empty file"), "{e}");
-    // A float payload with no finite sample (a NaN sample alone is read: decision 0027).
+    // A float payload with no finite sample (a NaN sample alone is read: decision 0030).
     let h = header_with("type", Some("type: float"));
     let h = h.replace("sizes: 2 2 2", "sizes: 2 1 1");
     let mut data = f32::INFINITY.to_le_bytes().to_vec();

@@ -559,7 +559,7 @@ fn ascii_volume(
             break;
         }
         // Float arrays may hold NaN and infinities (VTK writes `nan`, `inf`): `Volume::new`
-        // replaces them and says so (decision 0027). Integer arrays may not.
+        // replaces them and says so (decision 0030). Integer arrays may not.
         let float = matches!(ft, FileType::F32 | FileType::F64);
         let v = t
             .parse::<f64>()
@@ -613,7 +613,7 @@ fn ascii_volume(
             Volume::new(grid, vals.iter().map(|&x| x as i16).collect()).map(Into::into)
         }
         // Finite doubles beyond float32 are an error naming the sample, as in the other
-        // readers (decision 0027); NaN and infinities are replaced by `Volume::new`.
+        // readers (decision 0030); NaN and infinities are replaced by `Volume::new`.
         _ => Volume::new(
             grid,
             crate::payload::doubles_to_f32(vals.iter().copied(), path)?,
