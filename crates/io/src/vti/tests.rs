@@ -556,7 +556,7 @@ fn appended_blocks_end_at_the_next_array() {
     assert!(e.contains("more than the 12 bytes"), "{e}");
 }
 
-/// Decision 0027: NaN and infinities in a float array are read (the volume's finite extremes,
+/// Decision 0030: NaN and infinities in a float array are read (the volume's finite extremes,
 /// with a note); a finite double beyond float32 is an error naming the sample.
 #[test]
 fn ascii_nan_is_read_and_float32_overflow_is_an_error() {
