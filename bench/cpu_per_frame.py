@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """CPU time per frame of `volsplat bench`, for machines too loaded for wall-clock medians
-(issue 29 item 7; docs/BENCHMARKS.md §19). Optional; never run in CI.
+(issue 29 item 7; docs/BENCHMARKS.md §21). Optional; never run in CI.
 
     python3 bench/cpu_per_frame.py [--frames 8] [--rounds 3] LABEL=BIN [LABEL=BIN ...] -- BENCH-ARGS
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""How close the pyramid's previews are to the full-quality frame (issue 29 item 7, decision 0025;
-docs/BENCHMARKS.md §19). Optional; never run in CI; needs numpy.
+"""How close the pyramid's previews are to the full-quality frame (issue 29 item 7, decision 0031;
+docs/BENCHMARKS.md §21). Optional; never run in CI; needs numpy.
 
     python3 bench/preview_psnr.py [--bin target/release/volsplat] [--out DIR] -- RENDER-ARGS
 

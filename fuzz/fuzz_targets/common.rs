@@ -16,6 +16,24 @@ pub fn limits() -> volsplat_io::Limits {
     }
 }
 
+/// The default voxel limit (2³⁴) with the small header and XML limits: a small input that
+/// declares a large grid must still never allocate more than its payload backs, so that
+/// `-malloc_limit_mb` turns any allocation sized from a header alone into a finding (issue 28
+/// §2: a `.vti` LZ4 header declaring 2⁴⁰-byte blocks allocated 32 GiB).
+pub fn wide_limits() -> volsplat_io::Limits {
+    volsplat_io::Limits {
+        max_voxels: volsplat_io::Limits::default().max_voxels,
+        ..limits()
+    }
+}
+
+pub fn wide_options() -> volsplat_io::ReadOptions {
+    volsplat_io::ReadOptions {
+        limits: wide_limits(),
+        ..Default::default()
+    }
+}
+
 pub fn options() -> volsplat_io::ReadOptions {
     volsplat_io::ReadOptions {
         limits: limits(),

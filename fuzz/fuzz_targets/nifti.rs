@@ -17,5 +17,6 @@ fuzz_target!(|data: &[u8]| {
         let _ = volsplat_io::read_nifti_with(p, &o);
         let o = volsplat_io::ReadOptions { frame: 1, ..o };
         let _ = volsplat_io::read_nifti_with(p, &o);
+        let _ = volsplat_io::read_nifti_with(p, &common::wide_options());
     });
 });

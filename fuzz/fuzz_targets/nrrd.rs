@@ -9,5 +9,6 @@ use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
     common::with_file("x.nrrd", data, |p| {
         let _ = volsplat_io::read_nrrd_with(p, &common::limits());
+        let _ = volsplat_io::read_nrrd_with(p, &common::wide_limits());
     });
 });

@@ -9,5 +9,6 @@ use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
     common::with_file("x.vti", data, |p| {
         let _ = volsplat_io::read_vti_with(p, &common::options());
+        let _ = volsplat_io::read_vti_with(p, &common::wide_options());
     });
 });

@@ -26,13 +26,20 @@ pub enum Command {
     Info(InfoArgs),
     /// List the built-in transfer-function presets, one line each.
     Presets,
-    /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, keeping
-    /// its geometry (world frame LPS), or to .npy (samples only, shape z, y, x).
+    /// Convert a volume (any format `render` reads, a DICOM series included) to NRRD, NIfTI or
+    /// MetaImage, keeping its geometry (world frame LPS; NIfTI in its own RAS frame), or to .npy
+    /// (samples only, shape z, y, x).
     Convert(ConvertArgs),
     /// Write a built-in phantom as an NRRD file.
     Phantom(PhantomArgs),
     /// Time repeated renders of an orbit around the volume; prints the median per frame.
     Bench(Box<BenchArgs>),
+    /// Explore a volume in the browser: previews while dragging, the exact `render` frame at
+    /// rest. Prints `open http://127.0.0.1:PORT/?token=…`; Ctrl-C stops.
+    View(Box<crate::view::ViewCmdArgs>),
+    /// The viewer's latency benchmark: replays a recorded orbit and transfer-function drag
+    /// against an in-process server; prints JSON.
+    BenchView(Box<crate::view::BenchViewArgs>),
     /// Buchanan's texture-filtering comparison (Tables 5.1–5.11, Plates 5.1–5.16): renders the
     /// test images with every technique and writes a Markdown report and PNG images.
     TextureBench(TextureBenchArgs),
@@ -363,7 +370,7 @@ pub struct RenderOptions {
     /// Image-aligned slabs: the level of the volume's resolution pyramid to draw: `full` (the
     /// volume itself), `auto` (the level whose voxel is about a pixel at the focal point: a
     /// preview whose cost falls with the pixel count) or a level number, each level low-pass
-    /// filtered and halved once more (docs/decisions/0025).
+    /// filtered and halved once more (docs/decisions/0031).
     #[arg(
         long,
         default_value = "full",
@@ -374,8 +381,8 @@ pub struct RenderOptions {
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
-    /// Render from a sparse splat list (Swan et al. §5): the visible voxels are extracted once
-    /// and reused for every frame. Perspective views use it where image-aligned slabs are not
+    /// Render from a sparse splat list (Swan et al. §5): the visible voxels (every voxel for
+    /// MIP and MinIP) are extracted once and reused for every frame. Perspective views use it where image-aligned slabs are not
     /// chosen (X-ray, sheet-only options, --visibility sheet or every).
     #[arg(long, help_heading = "Performance", hide_short_help = true)]
     pub splat_list: bool,
@@ -559,7 +566,8 @@ pub enum RendererArg {
     Splat,
     /// Sabella's density-emitter display integrated along each ray (Buchanan eq. 3.1).
     Sabella,
-    /// The linearised display evaluated with NIL maps (Buchanan ch. 6).
+    /// Sabella's display evaluated with NIL maps (Buchanan ch. 6; decision 0027), or another
+    /// Chapter 6 display (--display).
     Nil,
 }
 
@@ -577,11 +585,14 @@ pub struct InfoArgs {
 pub struct ConvertArgs {
     #[command(flatten)]
     pub input: InputArgs,
-    /// Output: .nrrd (attached header, geometry kept; --gzip compresses the payload) or .npy
-    /// (the samples in their own type, shape (z, y, x), no geometry).
+    /// Output, by its extension: .nrrd (attached header, space left-posterior-superior), .nii or
+    /// .nii.gz (NIfTI-1, sform and qform; geometry rounded to float32), .mha or .mhd (MetaImage
+    /// as ITK writes it; .mhd with a .raw/.zraw data file beside it), or .npy (the samples in
+    /// their own type, shape (z, y, x), no geometry).
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
-    /// Gzip the payload.
+    /// Compress the samples: NRRD gzip encoding, MetaImage zlib (.mhd: a .zraw data file). For
+    /// NIfTI name the output .nii.gz; .npy is never compressed.
     #[arg(long)]
     pub gzip: bool,
     /// Don't print what was written.

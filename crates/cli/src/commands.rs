@@ -23,6 +23,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Convert(a) => convert_cmd(a),
         Command::Phantom(a) => phantom_cmd(a),
         Command::Bench(a) => bench_cmd(*a),
+        Command::View(a) => crate::view::view_cmd(*a),
+        Command::BenchView(a) => crate::view::bench_view_cmd(*a),
         Command::Movie(a) => crate::movie::movie_cmd(*a),
         Command::TextureBench(a) => texture_bench_cmd(a),
         Command::DisplayBench(a) => crate::display::display_bench_cmd(*a),
@@ -653,35 +655,21 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
     Ok(())
 }
 
-/// `convert`: any readable volume to an attached-header NRRD, geometry kept.
+/// `convert`: any readable volume to the format the output's name gives
+/// (`volsplat::io::write_volume`: NRRD, NIfTI, MetaImage or .npy), geometry kept.
 fn convert_cmd(a: ConvertArgs) -> Result<()> {
-    check_output_path(&a.output, "-o", &["nrrd", "npy"])?;
-    let npy = a
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
-    if npy && a.gzip {
-        bail!("--gzip applies to NRRD output; .npy files are not compressed");
-    }
+    check_output_path(&a.output, "-o", &[])?;
+    let options = volsplat::io::VolumeWriteOptions { compress: a.gzip };
+    volsplat::io::volume_write_format(&a.output, &options)?;
     let (label, loaded) = load_info(&a.input)?;
-    if npy {
-        volsplat::io::write_npy_volume(&a.output, &loaded.volume)
-    } else {
-        volsplat::io::write_nrrd(&a.output, &loaded.volume, a.gzip)
-    }
-    .with_context(|| format!("writing {}", a.output.display()))?;
-    if npy && !a.quiet {
-        eprintln!(
-            "note: .npy keeps the samples, shape (z, y, x), but not the geometry (spacing, origin, \
-             direction); NRRD keeps both"
-        );
-    }
+    let written = volsplat::io::write_volume(&a.output, &loaded.volume, &options)
+        .with_context(|| format!("writing {}", a.output.display()))?;
     if !a.quiet {
-        for n in &loaded.notes {
-            eprintln!("note: {n}");
+        for n in loaded.notes.iter().chain(&written.notes) {
+            say!("note: {n}");
         }
         let g = loaded.volume.grid();
-        eprintln!(
+        say!(
             "wrote {} ({} {}×{}×{} {}, from {label})",
             a.output.display(),
             loaded.format,

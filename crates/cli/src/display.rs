@@ -4,7 +4,7 @@
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use volsplat::{ControlChoice, DensityChoice, DisplayChoice};
+use volsplat::{AttenuationChoice, ControlChoice, DensityChoice, DisplayChoice};
 
 /// Options of the Chapter 6 displays (ignored by the splatting renderer).
 #[derive(Debug, Args)]
@@ -74,9 +74,49 @@ pub struct DisplayArgs {
     /// memory; a volume whose map would not fit is averaged down until it does (a note says so).
     #[arg(long, default_value_t = 0, hide_short_help = true)]
     pub max_map_values: usize,
-    /// Grey output for Sabella (default: red = intensity, green = maximum density).
-    #[arg(long, hide_short_help = true)]
+    /// Sabella's colours: grey (the default: the intensity in every channel, as the NIL
+    /// displays write theirs, so that the two compare channel for channel), or with
+    /// `--grey=false` the thesis's Plate 6.1 colouring (red = intensity, green = maximum
+    /// density).
+    #[arg(
+        long,
+        value_name = "true|false",
+        default_value_t = true,
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "true",
+        action = clap::ArgAction::Set,
+        hide_short_help = true
+    )]
     pub grey: bool,
+    /// The linearised display's attenuation: `optical-depth` (Sabella's own, `1 − e^{−τX}` of the
+    /// line integral; decision 0027) or `unit-density` (eq 6.1 as printed: unit density from the
+    /// volume's box, the thesis's Plates 6.3–6.6).
+    #[arg(
+        long,
+        value_enum,
+        default_value = "optical-depth",
+        hide_short_help = true
+    )]
+    pub attenuation: AttenuationChoice,
+    /// NIL continuous patches (decision 0027): neighbouring cells' fits averaged where they meet,
+    /// so the image has no seams along cell faces; `--continuous-patches=false` fits each cell
+    /// alone (decision 0007 as first written).
+    #[arg(
+        long,
+        value_name = "true|false",
+        default_value_t = true,
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "true",
+        action = clap::ArgAction::Set,
+        hide_short_help = true
+    )]
+    pub continuous_patches: bool,
+    /// Largest NIL cell a filter crosses, in multiples of the filter's width (6σ); 0: no cap
+    /// (the thesis's trigger hierarchy alone).
+    #[arg(long, default_value_t = 1.5, hide_short_help = true)]
+    pub max_cell_width: f64,
 }
 
 /// The `--flags` of [`DisplayArgs`] given explicitly on the command line in `matches`.

@@ -13,6 +13,7 @@ mod progress;
 mod request;
 mod say;
 mod signals;
+mod view;
 
 use clap::{CommandFactory, FromArgMatches};
 
@@ -34,6 +35,11 @@ fn main() -> std::process::ExitCode {
     if let (args::Command::Movie(b), Some(("movie", m))) = (&mut cli.command, matches.subcommand())
     {
         b.given = given(m);
+    }
+    match (&mut cli.command, matches.subcommand()) {
+        (args::Command::View(v), Some(("view", m))) => v.given = given(m),
+        (args::Command::BenchView(v), Some(("bench-view", m))) => v.given = given(m),
+        _ => {}
     }
     if let (args::Command::Render(r), Some(("render", m))) =
         (&mut cli.command, matches.subcommand())

@@ -468,7 +468,10 @@ pub fn build_request_noted(
             closest,
             dog_gain,
             max_map_values,
-            grey
+            grey,
+            attenuation,
+            continuous_patches,
+            max_cell_width
         );
     }
     Ok((req, notes))

@@ -1372,7 +1372,8 @@ fn reader_limits_are_one_flag() {
 }
 
 /// `info --json` reports the geometry as one stable JSON object; `convert` keeps voxels and
-/// geometry, so the converted file renders to the same bytes.
+/// geometry in every format it writes (NRRD, NIfTI, MetaImage), so the converted file renders to
+/// the same bytes.
 #[test]
 fn info_json_and_convert_keep_the_geometry() {
     let dir = tempfile::tempdir().unwrap();
@@ -1396,28 +1397,6 @@ fn info_json_and_convert_keep_the_geometry() {
     assert_eq!(j["direction"][0][0], 1.0);
     assert_eq!(j["direction"][0][1], 0.0);
     assert_eq!(j["series"].as_array().unwrap().len(), 0);
-    let conv = dir.path().join("c.nrrd");
-    let o = volsplat(&[
-        "convert",
-        vol.to_str().unwrap(),
-        "--gzip",
-        "-q",
-        "-o",
-        conv.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = volsplat(&["info", conv.to_str().unwrap(), "--json"]);
-    let k: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    for field in [
-        "dims",
-        "spacing",
-        "origin",
-        "direction",
-        "value_range",
-        "scalar_type",
-    ] {
-        assert_eq!(j[field], k[field], "{field}");
-    }
     let render = |input: &Path, name: &str| {
         let out = dir.path().join(name);
         let o = volsplat(&[
@@ -1434,7 +1413,48 @@ fn info_json_and_convert_keep_the_geometry() {
         assert!(o.status.success(), "{}", stderr(&o));
         std::fs::read(out).unwrap()
     };
-    assert_eq!(render(&vol, "a.png"), render(&conv, "b.png"));
+    let original = render(&vol, "a.png");
+    // Every format `convert` writes that keeps the geometry (issue 28 §5).
+    for (name, gzip) in [
+        ("c.nrrd", true),
+        ("c.nii", false),
+        ("c.nii.gz", false),
+        ("c.mha", false),
+        ("c.mhd", true),
+    ] {
+        let conv = dir.path().join(name);
+        let mut args = vec!["convert", vol.to_str().unwrap(), "-q", "-o"];
+        args.push(conv.to_str().unwrap());
+        if gzip {
+            args.push("--gzip");
+        }
+        let o = volsplat(&args);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let o = volsplat(&["info", conv.to_str().unwrap(), "--json"]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let k: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        for field in ["dims", "value_range", "scalar_type"] {
+            assert_eq!(j[field], k[field], "{name}: {field}");
+        }
+        // NIfTI-1 stores the geometry as float32 (a note says so): equal to its rounding there,
+        // exactly equal in the other formats, which then render to the same bytes.
+        let nifti = name.contains(".nii");
+        for field in ["spacing", "origin", "direction"] {
+            let flat = |v: &serde_json::Value| -> Vec<f64> {
+                let s = v.to_string().replace(['[', ']'], "");
+                s.split(',').map(|x| x.parse().unwrap()).collect()
+            };
+            let (a, b) = (flat(&j[field]), flat(&k[field]));
+            assert_eq!(a.len(), b.len(), "{name}: {field}");
+            for (x, y) in a.iter().zip(&b) {
+                let tol = if nifti { 1e-6 * x.abs().max(1.0) } else { 0.0 };
+                assert!((x - y).abs() <= tol, "{name}: {field} {a:?} vs {b:?}");
+            }
+        }
+        if !nifti {
+            assert_eq!(original, render(&conv, &format!("{name}.png")), "{name}");
+        }
+    }
     let o = volsplat(&["convert", vol.to_str().unwrap(), "-o", "/tmp/x.png"]);
     assert_eq!(o.status.code(), Some(1));
 }

@@ -88,6 +88,8 @@ fn bad_display_options_are_errors() {
         ["--density", "foo"],
         ["--control-points", "guess"],
         ["--trigger-width", "0"],
+        ["--max-cell-width", "-1"],
+        ["--attenuation", "linear"],
     ] {
         let o = volsplat()
             .args([
@@ -110,4 +112,72 @@ fn bad_display_options_are_errors() {
             "{bad:?}"
         );
     }
+}
+
+/// The NIL display's settings of decision 0027 are flags: eq 6.1 as printed (`--attenuation
+/// unit-density`) is darker than Sabella's own attenuation on the blobs, whose box holds empty
+/// space; `--continuous-patches=false` and `--max-cell-width 0` change the picture; the defaults
+/// equal the flags spelt out.
+#[test]
+fn nil_display_settings_are_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |name: &str, extra: &[&str]| -> Vec<f32> {
+        let out = dir.path().join(format!("{name}.npy"));
+        let o = volsplat()
+            .args([
+                "render",
+                "--phantom",
+                "blobs",
+                "--phantom-size",
+                "32",
+                "--size",
+                "48",
+                "--renderer",
+                "nil",
+                "-q",
+                "-o",
+            ])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let bytes = std::fs::read(&out).unwrap();
+        // .npy: a header whose length is at bytes 8..10, then little-endian f32 RGBA.
+        let start = 10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        bytes[start..]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect()
+    };
+    let sum = |v: &[f32]| v.iter().map(|&x| x as f64).sum::<f64>();
+    let default = render("default", &[]);
+    let spelt = render(
+        "spelt",
+        &[
+            "--attenuation",
+            "optical-depth",
+            "--continuous-patches",
+            "--max-cell-width",
+            "1.5",
+        ],
+    );
+    assert_eq!(default, spelt);
+    let unit = render("unit", &["--attenuation", "unit-density"]);
+    assert!(
+        sum(&unit) < 0.97 * sum(&default),
+        "{} vs {}",
+        sum(&unit),
+        sum(&default)
+    );
+    assert_ne!(default, render("cells", &["--continuous-patches=false"]));
+    // The cap splits cells that coarse triggers leave wide.
+    assert_ne!(
+        render("coarse", &["--trigger-steps", "4"]),
+        render("nocap", &["--trigger-steps", "4", "--max-cell-width", "0"])
+    );
 }

@@ -349,7 +349,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "20",
         ],
         "npy",
-        0xcb80baa160e11f36,
+        // Re-recorded for decision 0027: Sabella's display is grey by default (was red =
+        // intensity, green = maximum density; `--grey=false` keeps that).
+        0xfcbc25545f400a00,
     ),
     (
         "NIL display",
@@ -370,7 +372,9 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "20",
         ],
         "npy",
-        0x95dce6d2432a4363,
+        // Re-recorded for decision 0027: Sabella's attenuation instead of eq 6.1's unit
+        // density, continuous patches, cells at most 1.5 filter widths, 4 × 4 lines.
+        0x3a6e54d0f43090bb,
     ),
 ];
 

@@ -168,11 +168,29 @@ impl Camera {
     }
 
     /// VTK's `Elevation`: rotates the eye about the axis `−right` centred at the focal point
-    /// (degrees; positive moves the eye up). View-up is kept, as in VTK; call
-    /// [`Camera::orthogonalize_view_up`] afterwards, as VTK users do.
+    /// (degrees; positive moves the eye up); call [`Camera::orthogonalize_view_up`] afterwards,
+    /// as VTK users do.
+    ///
+    /// VTK (`vtkCamera::Elevation`, VTK 9) computes the new view with view-up turned with the
+    /// eye, so the frame stays right-handed and unchanged in `right` at any angle, ±90° and
+    /// over the top included; only `GetViewUp` still reports the old vector until
+    /// `OrthogonalizeViewUp`. Here view-up is kept where it gives that same frame (the
+    /// pictures are VTK's either way), and turned with the eye where it would not: at ±90°,
+    /// where it lies along the new direction of projection (no frame at all), and beyond,
+    /// where it would flip the picture.
     pub fn elevation(&mut self, degrees: f64) {
-        let axis = -self.frame().right;
+        let right = self.frame().right;
+        let axis = -right;
         self.rotate_eye(axis, degrees);
+        let up = DVec3::from(self.view_up);
+        let forward = (DVec3::from(self.focal_point) - DVec3::from(self.position)).normalize();
+        // The kept view-up gives VTK's frame when it leaves `right` where it was, clearly
+        // (1e-3 of its length: away from the ±90° degeneracy, where rounding would decide).
+        let keeps_frame = forward.cross(up).dot(right) > 1e-3 * up.length();
+        if !keeps_frame {
+            let rot = DMat3::from_axis_angle(axis, degrees.to_radians());
+            self.view_up = (rot * up).to_array();
+        }
     }
 
     /// VTK's `Roll`: rotates view-up about the direction of projection (degrees).
@@ -422,7 +440,8 @@ impl Orbit {
 
     /// Applies the orbit to `camera` (a given view): projection switch, view angle, then the
     /// rotations, zoom and dolly. Errors if a number is out of range or the result is degenerate
-    /// (for example an elevation of ±90° looking along view-up).
+    /// (a view-up along the direction of projection; every elevation, ±90° included, gives a
+    /// valid camera, as VTK's `Elevation` and `OrthogonalizeViewUp` do).
     pub fn apply(&self, camera: &mut Camera) -> Result<()> {
         self.validate()?;
         match self.projection {
@@ -739,6 +758,131 @@ mod tests {
         assert!(approx(DVec3::from(c.position), DVec3::new(0.0, r, 0.0)));
         let f = c.frame();
         assert!(approx(f.forward, -DVec3::Y));
+    }
+
+    /// Issue 28 follow-up: an orbit with elevation exactly ±90 was an error (`view_up` NaN) and
+    /// beyond 90 the picture was upside down against VTK's. The numbers are VTK 9.7.2's
+    /// (`vtk` wheel): `vtkRenderer::ResetCamera((-1, 1, -2, 2, -0.5, 0.5))`, then `Azimuth(az)`
+    /// (when not 0), `Elevation(el)`, `OrthogonalizeViewUp()`; `GetPosition()`, `GetViewUp()`
+    /// printed with 17 digits (focal point the origin). By hand for (0, 90): the eye at
+    /// `d = √21/2 / sin 15° = 8.8528…` on +z turns about −x by 90° to +y, and view-up (0, 1, 0)
+    /// with it to (0, 0, −1).
+    #[test]
+    #[allow(clippy::excessive_precision, clippy::approx_constant)] // VTK's numbers as printed
+    fn elevation_matches_vtk_at_and_beyond_the_poles() {
+        let cases: [(f64, f64, [f64; 3], [f64; 3]); 8] = [
+            (0.0, 90.0, [0.0, 8.8528564293648433, 0.0], [0.0, 0.0, -1.0]),
+            (0.0, -90.0, [0.0, -8.8528564293648433, 0.0], [0.0, 0.0, 1.0]),
+            (
+                0.0,
+                120.0,
+                [0.0, 7.6667985638863536, -4.4264282146824199],
+                [0.0, -0.49999999999999978, -0.86602540378443882],
+            ),
+            (
+                30.0,
+                90.0,
+                [0.0, 8.8528564293648433, 0.0],
+                [-0.49999999999999994, 0.0, -0.86602540378443871],
+            ),
+            (
+                30.0,
+                -90.0,
+                [0.0, -8.8528564293648433, 0.0],
+                [0.49999999999999994, 0.0, 0.86602540378443871],
+            ),
+            (
+                25.0,
+                89.9999,
+                [
+                    6.5299378553262954e-06,
+                    8.8528564293513572,
+                    1.4003496921821679e-05,
+                ],
+                [
+                    -0.42261826174005579,
+                    1.7453292521984453e-06,
+                    -0.9063077870352696,
+                ],
+            ),
+            (
+                0.0,
+                45.0,
+                [0.0, 6.2599148140748069, 6.259914814074806],
+                [0.0, 0.70710678118654746, -0.70710678118654757],
+            ),
+            (
+                40.0,
+                200.0,
+                [-5.347326894349643, -3.0278552248129316, -6.3726960371168264],
+                [
+                    0.21984631039295416,
+                    -0.93969262078590854,
+                    0.26200263022938491,
+                ],
+            ),
+        ];
+        for (az, el, pos, up) in cases {
+            let orbit = Orbit {
+                azimuth: (az != 0.0).then_some(az),
+                elevation: Some(el),
+                ..Orbit::default()
+            };
+            let c = orbit
+                .reset_camera(DVec3::new(-1.0, -2.0, -0.5), DVec3::new(1.0, 2.0, 0.5))
+                .unwrap_or_else(|e| panic!("azimuth {az}, elevation {el}: {e}"));
+            let (p, u) = (DVec3::from(c.position), DVec3::from(c.view_up));
+            assert!(
+                (p - DVec3::from(pos)).length() < 1e-9,
+                "azimuth {az}, elevation {el}: position {p} vs VTK's {pos:?}"
+            );
+            assert!(
+                (u - DVec3::from(up)).length() < 1e-9,
+                "azimuth {az}, elevation {el}: view-up {u} vs VTK's {up:?}"
+            );
+        }
+    }
+
+    /// Every azimuth, then elevation ±90, on boxes of several shapes in both projections: a
+    /// valid camera looking straight down (up), its view-up the old direction of projection
+    /// (negated for −90): VTK's `Elevation(±90)` turns view-up with the eye (derivation: the
+    /// rotation by 90° about −right takes up to −right × up = forward). Before the fix about one
+    /// orbit in twenty (azimuth 36, 43, …) rounded to a view-up along the view: NaN.
+    #[test]
+    fn every_azimuth_then_the_poles_gives_a_valid_camera() {
+        let boxes = [
+            (DVec3::ZERO, DVec3::splat(31.0)),
+            (DVec3::new(-1.0, -2.0, -0.5), DVec3::new(1.0, 2.0, 0.5)),
+            (DVec3::ZERO, DVec3::new(83.0, 127.0, 127.0)),
+            (DVec3::ZERO, DVec3::new(255.0, 255.0, 99.0)),
+        ];
+        for (lo, hi) in boxes {
+            for az in 0..360 {
+                let az = az as f64;
+                let old_forward = -DVec3::new(az.to_radians().sin(), 0.0, az.to_radians().cos());
+                for el in [90.0, -90.0] {
+                    for projection in [ProjectionKind::Orthographic, ProjectionKind::Perspective] {
+                        let o = Orbit {
+                            azimuth: Some(az),
+                            elevation: Some(el),
+                            projection: Some(projection),
+                            ..Orbit::default()
+                        };
+                        let tag = format!("{lo}..{hi}, azimuth {az}, elevation {el}");
+                        let c = o
+                            .reset_camera(lo, hi)
+                            .unwrap_or_else(|e| panic!("{tag}: {e}"));
+                        let f = c.frame();
+                        assert!(
+                            (f.forward + DVec3::Y * el.signum()).length() < 1e-9,
+                            "{tag}"
+                        );
+                        let up = old_forward * el.signum();
+                        assert!((DVec3::from(c.view_up) - up).length() < 1e-9, "{tag}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

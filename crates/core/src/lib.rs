@@ -47,7 +47,7 @@ pub use image::{Image, Rgba, ScalarImage};
 pub use kernel::Kernel;
 pub use presets::{AutoTransfer, BackgroundRule, Histogram, Preset};
 pub use transfer::TransferFunction;
-pub use volume::{AnyVolume, Grid, Scalar, ScalarType, Volume};
+pub use volume::{AnyVolume, Grid, NonFiniteSamples, Scalar, ScalarType, Volume};
 
 /// Re-export of the linear-algebra crate used in public signatures.
 pub use glam;

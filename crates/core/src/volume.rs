@@ -202,7 +202,7 @@ impl Grid {
         (lo + hi) * 0.5
     }
 
-    /// The axes the next level of a resolution pyramid halves (DESIGN.md §5; decision 0025):
+    /// The axes the next level of a resolution pyramid halves (DESIGN.md §5; decision 0031):
     /// those whose spacing is at most twice the smallest spacing, so that anisotropic data
     /// become more isotropic level by level (BigDataViewer's rule, `bdv.export.ProposeMipmaps`
     /// in bigdataviewer-core), and that hold at least [`PYRAMID_MIN_SAMPLES`] samples. All
@@ -240,7 +240,7 @@ impl Grid {
 pub const PYRAMID_MIN_SAMPLES: usize = 8;
 
 /// The pyramid's low-pass filter per halved axis, applied at the fine indices `2m − 2 … 2m + 1`
-/// for coarse sample `m` (decision 0025): the binomial `[1, 3, 3, 1] / 8`, the two-sample box
+/// for coarse sample `m` (decision 0031): the binomial `[1, 3, 3, 1] / 8`, the two-sample box
 /// applied three times (Burt 1981, *Fast filter transforms for image processing*; the
 /// even-length member of the binomial family of Burt & Adelson's pyramid). Its response
 /// `cos³(πf)` (f in cycles per fine sample) is 0.35 at the coarse level's Nyquist frequency
@@ -314,6 +314,13 @@ pub trait Scalar: Copy + Send + Sync + PartialOrd + std::fmt::Debug + 'static {
     /// The sample nearest `v`: integer types round half away from zero and saturate at their
     /// range (NaN gives 0); `f32` rounds to the nearest float.
     fn from_f64(v: f64) -> Self;
+    /// Replaces the samples that are not finite (NaN, ±∞) by finite ones, as
+    /// [`NonFiniteSamples`] documents, and says what was replaced (`None`: every sample was
+    /// finite, nothing changed). Integer types are always finite. Errors if no sample is finite.
+    fn replace_non_finite(data: &mut [Self]) -> Result<Option<NonFiniteSamples>> {
+        let _ = data;
+        Ok(None)
+    }
 }
 
 macro_rules! impl_scalar {
@@ -347,6 +354,113 @@ impl Scalar for f32 {
     fn from_f64(v: f64) -> Self {
         v as f32
     }
+    fn replace_non_finite(data: &mut [f32]) -> Result<Option<NonFiniteSamples>> {
+        // The common case, every sample finite, costs one read-only pass.
+        if data.iter().all(|v| v.is_finite()) {
+            return Ok(None);
+        }
+        let mut r = NonFiniteSamples {
+            nan: 0,
+            pos_inf: 0,
+            neg_inf: 0,
+            lowest: f32::INFINITY,
+            highest: f32::NEG_INFINITY,
+        };
+        for &v in data.iter() {
+            if v.is_nan() {
+                r.nan += 1;
+            } else if v == f32::INFINITY {
+                r.pos_inf += 1;
+            } else if v == f32::NEG_INFINITY {
+                r.neg_inf += 1;
+            } else {
+                r.lowest = r.lowest.min(v);
+                r.highest = r.highest.max(v);
+            }
+        }
+        if r.count() == data.len() {
+            return Err(CoreError::invalid(
+                "samples",
+                format!(
+                    "{} NaN, {} +inf and {} -inf of {}",
+                    r.nan,
+                    r.pos_inf,
+                    r.neg_inf,
+                    data.len()
+                ),
+                "no sample is finite, so the volume holds no value to draw",
+            ));
+        }
+        for v in data.iter_mut() {
+            if v.is_nan() || *v == f32::NEG_INFINITY {
+                *v = r.lowest;
+            } else if *v == f32::INFINITY {
+                *v = r.highest;
+            }
+        }
+        Ok(Some(r))
+    }
+}
+
+/// The float samples that were not finite when a volume was built, and what they became
+/// (`docs/decisions/0030-non-finite-samples.md`): NaN (no value: the background of SPM, FSL
+/// and resampled NIfTI files) the lowest finite value of the volume, so that it is background
+/// under the automatic transfer function and never the maximum of a MIP; −∞ the lowest and +∞
+/// the highest finite value (clamped to the finite range). Values in data units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NonFiniteSamples {
+    /// Samples that were NaN.
+    pub nan: usize,
+    /// Samples that were +∞.
+    pub pos_inf: usize,
+    /// Samples that were −∞.
+    pub neg_inf: usize,
+    /// The lowest finite sample (data units): what NaN and −∞ became.
+    pub lowest: f32,
+    /// The highest finite sample (data units): what +∞ became.
+    pub highest: f32,
+}
+
+impl NonFiniteSamples {
+    /// Samples replaced in all.
+    pub fn count(&self) -> usize {
+        self.nan + self.pos_inf + self.neg_inf
+    }
+
+    /// A note for the user: `"120 samples were NaN, taken as the lowest finite value 0"`, with
+    /// the infinities after it.
+    pub fn note(&self) -> String {
+        let were = |n: usize| {
+            if n == 1 {
+                "1 sample was".to_string()
+            } else {
+                format!("{n} samples were")
+            }
+        };
+        let mut parts = Vec::new();
+        if self.nan > 0 {
+            parts.push(format!(
+                "{} NaN, taken as the lowest finite value {}",
+                were(self.nan),
+                self.lowest
+            ));
+        }
+        if self.neg_inf > 0 {
+            parts.push(format!(
+                "{} -inf, taken as the lowest finite value {}",
+                were(self.neg_inf),
+                self.lowest
+            ));
+        }
+        if self.pos_inf > 0 {
+            parts.push(format!(
+                "{} +inf, taken as the highest finite value {}",
+                were(self.pos_inf),
+                self.highest
+            ));
+        }
+        parts.join("; ")
+    }
 }
 
 /// A scalar volume: a [`Grid`] and one sample per voxel, `i` fastest.
@@ -354,13 +468,19 @@ impl Scalar for f32 {
 pub struct Volume<T> {
     grid: Grid,
     data: Vec<T>,
+    /// What [`Volume::new`] replaced (float samples that were not finite).
+    non_finite: Option<NonFiniteSamples>,
 }
 
 impl<T: Scalar> Volume<T> {
     /// Wraps `data` (length `dims.x·dims.y·dims.z`, i fastest) on `grid`.
     ///
-    /// Errors if the length does not match, or if `T` is `f32` and a sample is not finite.
-    pub fn new(grid: Grid, data: Vec<T>) -> Result<Self> {
+    /// Float samples that are not finite are replaced once, here: NaN and −∞ by the lowest
+    /// finite sample, +∞ by the highest ([`NonFiniteSamples`], decision 0030); what was
+    /// replaced is kept ([`Volume::non_finite`]) for the readers' notes.
+    ///
+    /// Errors if the length does not match, or if no float sample is finite.
+    pub fn new(grid: Grid, mut data: Vec<T>) -> Result<Self> {
         let expected = grid.voxel_count();
         if data.len() != expected {
             return Err(CoreError::DataLength {
@@ -369,16 +489,18 @@ impl<T: Scalar> Volume<T> {
                 actual: data.len(),
             });
         }
-        if T::TYPE == ScalarType::F32
-            && let Some(pos) = data.iter().position(|v| !v.to_f32().is_finite())
-        {
-            return Err(CoreError::invalid(
-                format!("sample #{pos}"),
-                data[pos],
-                "float samples must be finite",
-            ));
-        }
-        Ok(Volume { grid, data })
+        let non_finite = T::replace_non_finite(&mut data)?;
+        Ok(Volume {
+            grid,
+            data,
+            non_finite,
+        })
+    }
+
+    /// The float samples that were not finite when this volume was built and what they became
+    /// (`None` if every sample was finite).
+    pub fn non_finite(&self) -> Option<&NonFiniteSamples> {
+        self.non_finite.as_ref()
     }
 
     /// Builds a volume by evaluating `f(i, j, k)` at every voxel.
@@ -442,6 +564,7 @@ impl<T: Scalar> Volume<T> {
         Volume {
             grid: self.grid.clone(),
             data: self.data.iter().map(|v| v.to_f32()).collect(),
+            non_finite: self.non_finite,
         }
     }
 
@@ -559,6 +682,17 @@ impl AnyVolume {
     pub fn to_f32(&self) -> Volume<f32> {
         with_volume!(self, v => v.to_f32())
     }
+
+    /// The float samples that were not finite when the volume was built and what they became
+    /// ([`Volume::non_finite`]).
+    pub fn non_finite(&self) -> Option<&NonFiniteSamples> {
+        with_volume!(self, v => v.non_finite())
+    }
+
+    /// [`NonFiniteSamples::note`] of [`AnyVolume::non_finite`], for the readers' notes.
+    pub fn non_finite_note(&self) -> Option<String> {
+        self.non_finite().map(NonFiniteSamples::note)
+    }
 }
 
 fn scalar_type_of<T: Scalar>(_: &Volume<T>) -> ScalarType {
@@ -664,13 +798,67 @@ mod tests {
     }
 
     #[test]
-    fn data_length_and_non_finite_floats_are_rejected() {
+    fn data_length_is_checked() {
         let g = Grid::with_dims([2, 2, 2]).unwrap();
         assert!(Volume::<u8>::new(g.clone(), vec![0; 7]).is_err());
-        let mut d = vec![0.0f32; 8];
-        d[3] = f32::NAN;
-        let e = Volume::new(g, d).unwrap_err();
-        assert!(e.to_string().contains("sample #3"), "{e}");
+        let e = Volume::<f32>::new(g, vec![0.0; 9]).unwrap_err();
+        assert!(matches!(e, CoreError::DataLength { actual: 9, .. }), "{e}");
+    }
+
+    /// Issue 28 follow-up: NaN backgrounds (SPM, nibabel's `resampled_anat_moved.nii`) were
+    /// refused ("invalid sample #0: NaN"). NaN and −∞ become the lowest finite sample, +∞ the
+    /// highest, once, and the volume says so.
+    #[test]
+    fn non_finite_floats_become_the_finite_extremes_and_are_reported() {
+        let g = Grid::with_dims([4, 2, 1]).unwrap();
+        let nan = f32::NAN;
+        let d = vec![
+            nan,
+            -2.5,
+            7.0,
+            nan,
+            f32::INFINITY,
+            3.0,
+            f32::NEG_INFINITY,
+            nan,
+        ];
+        let v = Volume::new(g.clone(), d).unwrap();
+        assert_eq!(v.data(), &[-2.5, -2.5, 7.0, -2.5, 7.0, 3.0, -2.5, -2.5]);
+        let r = *v.non_finite().unwrap();
+        assert_eq!((r.nan, r.pos_inf, r.neg_inf, r.count()), (3, 1, 1, 5));
+        assert_eq!((r.lowest, r.highest), (-2.5, 7.0));
+        assert_eq!(
+            r.note(),
+            "3 samples were NaN, taken as the lowest finite value -2.5; 1 sample was -inf, \
+             taken as the lowest finite value -2.5; 1 sample was +inf, taken as the highest \
+             finite value 7"
+        );
+        assert_eq!(v.value_range(), (-2.5, 7.0));
+        // Carried by conversions and the run-time type.
+        let any: AnyVolume = v.clone().into();
+        assert_eq!(any.non_finite(), Some(&r));
+        assert_eq!(any.non_finite_note(), Some(r.note()));
+        assert_eq!(v.to_f32().non_finite(), Some(&r));
+        // Finite data and integer data are untouched and say nothing.
+        let fine = Volume::new(g.clone(), vec![1.0f32; 8]).unwrap();
+        assert!(fine.non_finite().is_none());
+        let ints: AnyVolume = Volume::new(g.clone(), vec![3u8; 8]).unwrap().into();
+        assert!(ints.non_finite_note().is_none());
+    }
+
+    #[test]
+    fn a_volume_with_no_finite_sample_is_an_error() {
+        let g = Grid::with_dims([3, 1, 1]).unwrap();
+        for d in [
+            vec![f32::NAN; 3],
+            vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY],
+        ] {
+            let e = Volume::new(g.clone(), d).unwrap_err().to_string();
+            assert!(
+                e.contains("samples") && e.contains("no sample is finite"),
+                "{e}"
+            );
+        }
     }
 
     /// A rotated, anisotropic grid for the pyramid's tests.

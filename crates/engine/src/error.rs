@@ -12,7 +12,9 @@ pub enum EngineError {
     /// A file could not be read or written.
     #[error(transparent)]
     Io(#[from] volsplat_io::IoError),
-    /// The splatting renderers refused the request.
+    /// The splatting renderers refused the request, or could not get the memory for a
+    /// per-volume buffer ([`volsplat_splat::SplatError::OutOfMemory`]: "not enough memory for
+    /// the normal field (N bytes)…"; see [`EngineError::is_out_of_memory`]).
     #[error(transparent)]
     Splat(#[from] volsplat_splat::SplatError),
     /// The Chapter 6 displays refused the request.
@@ -56,6 +58,15 @@ pub enum EngineError {
 }
 
 impl EngineError {
+    /// Whether a buffer of the render could not be allocated (the system or an address-space
+    /// limit refused it): front ends report it as such (Python raises `MemoryError`).
+    pub fn is_out_of_memory(&self) -> bool {
+        matches!(
+            self,
+            EngineError::Splat(volsplat_splat::SplatError::OutOfMemory { .. })
+        )
+    }
+
     /// A request error naming `field`.
     pub fn request(field: impl Into<String>, message: impl Into<String>) -> Self {
         EngineError::Request {

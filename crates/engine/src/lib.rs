@@ -19,6 +19,9 @@
 //!   them unchanged, so a frame that only moves the camera costs only the frame.
 //! - [`Output`]: the premultiplied linear RGBA image, the X-ray or MIP values, one [`Stats`]
 //!   (milliseconds), and the camera and transfer function actually used.
+//! - [`session::Session`]: progressive rendering for interactive front ends: input events in,
+//!   previews sized to a measured frame budget while input arrives, the exact `render` frame at
+//!   rest, stale frames cancelled.
 //!
 //! World space, cameras and transfer functions follow VTK (see `docs/architecture.md`):
 //! world units (usually mm), angles in degrees, opacity per `scalar_opacity_unit_distance`.
@@ -31,6 +34,7 @@ pub mod movie;
 pub mod renderer;
 pub mod request;
 pub mod scene;
+pub mod session;
 pub mod write;
 pub mod xray;
 
@@ -40,16 +44,18 @@ pub use renderer::{
     renderer_name,
 };
 pub use request::{
-    AntialiasChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice, DisplayChoice,
-    DisplayOptions, KernelChoice, Mode, OrderChoice, PreintegrateChoice, Quality, RenderRequest,
-    RendererChoice, ShadeAtChoice, VisibilityChoice, VolumeLevel,
+    AntialiasChoice, AttenuationChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice,
+    DisplayChoice, DisplayOptions, KernelChoice, Mode, OrderChoice, PreintegrateChoice, Quality,
+    RenderRequest, RendererChoice, ShadeAtChoice, VisibilityChoice, VolumeLevel,
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,
     ShadingTerms, TransferSpec, VolumeSource, make_phantom,
 };
 
-pub use write::{OUTPUT_EXTENSIONS, WriteOptions, windowed_image, write_image, writes_values};
+pub use write::{
+    OUTPUT_EXTENSIONS, WriteOptions, encode_png, windowed_image, write_image, writes_values,
+};
 pub use xray::XrayDensity;
 
 /// The libraries underneath, for callers that need their types (cameras, volumes, images).

@@ -110,7 +110,7 @@ pub struct Stats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ring_risk: Option<f64>,
     /// Image-aligned slabs asked for a pyramid level (`quality.level` other than `full`): the
-    /// level drawn, 0 for the full volume (decision 0025). Absent otherwise.
+    /// level drawn, 0 for the full volume (decision 0031). Absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub level: Option<usize>,
     /// With `level`: the smallest spacing of the level drawn, world units (`auto` keeps it at
@@ -584,7 +584,7 @@ impl Renderer {
                                 map_size(need(&dv)),
                             ));
                         }
-                        Some(build_map(&dv, d.patch_order, None, budget)?)
+                        Some(pool.install(|| build_map(&dv, d.patch_order, None, budget))?)
                     } else {
                         None
                     };
@@ -664,7 +664,7 @@ impl Renderer {
                         slab_shading(&request.quality, &tables),
                     )
                 });
-                // The pyramid level (decision 0025): the full volume unless asked; coarse levels
+                // The pyramid level (decision 0031): the full volume unless asked; coarse levels
                 // are built here, once per volume, so that their cost counts as preparation.
                 let asked = request.quality.level;
                 let (level, focal_pixel) = slab_level(asked, &vol, &camera, w, h)?;
@@ -779,9 +779,10 @@ impl Renderer {
                 let mut fresh = fresh_tables;
                 let rendered = if renderer == UsedRenderer::SplatList {
                     let q = &request.quality;
+                    let voxels = volsplat_splat::ListVoxels::for_mode(settings.mode);
                     let key = (
                         request.scene.volume.clone(),
-                        tables_key(request, &table_tf),
+                        format!("{}{:?}", tables_key(request, &table_tf), voxels),
                         q.list_threshold.to_bits(),
                         q.subsample,
                     );
@@ -793,6 +794,7 @@ impl Renderer {
                                 &ExtractSettings {
                                     threshold: q.list_threshold,
                                     subsample: q.subsample,
+                                    voxels,
                                 },
                             )?))
                         })
@@ -963,7 +965,7 @@ impl Renderer {
     }
 }
 
-/// The pyramid level the slabs draw for `asked` (decision 0025) and the pixel size at the focal
+/// The pyramid level the slabs draw for `asked` (decision 0031) and the pixel size at the focal
 /// point (world units): 0 for the full level; `auto` the level whose voxel is about a pixel
 /// ([`volsplat_splat::auto_level`], from the level grids alone: nothing is built to choose).
 fn slab_level(

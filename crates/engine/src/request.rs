@@ -6,7 +6,8 @@ use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use volsplat_filter::display::{
-    ControlPoints, DisplayKind, DisplaySettings, Evaluator, NilDisplaySettings, SearchRule,
+    Attenuation, ControlPoints, DisplayKind, DisplaySettings, Evaluator, NilDisplaySettings,
+    SearchRule,
 };
 use volsplat_splat::{Antialias, Order, RenderMode, RenderSettings, Visibility};
 
@@ -186,7 +187,7 @@ pub enum PreintegrateChoice {
 }
 
 /// Which level of the volume's resolution pyramid the image-aligned slabs draw
-/// ([`volsplat_splat::pyramid`]; `docs/decisions/0025-prefiltered-pyramid-previews.md`). In
+/// ([`volsplat_splat::pyramid`]; `docs/decisions/0031-prefiltered-pyramid-previews.md`). In
 /// request and scene files: `"full"`, `"auto"` or a level number (`0` is the full level).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum VolumeLevel {
@@ -311,7 +312,7 @@ pub struct Quality {
     pub preintegrate: PreintegrateChoice,
     /// Image-aligned visibility: which level of the volume's resolution pyramid is drawn
     /// (default [`VolumeLevel::Full`]); `auto` for previews whose cost falls with the pixel
-    /// count (decision 0025). The other renderers draw the full level (with a warning).
+    /// count (decision 0031). The other renderers draw the full level (with a warning).
     pub level: VolumeLevel,
 }
 
@@ -345,7 +346,10 @@ impl Default for Quality {
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum DisplayChoice {
-    /// Linearised display, eq 6.1.
+    /// Sabella's display as a filter: the screen-filtered line integral `X` (through NIL maps,
+    /// or by quadrature with `direct`), shown as `1 − e^{−τX}` (decision 0027). The thesis's
+    /// eq 6.1 (unit density from the box's entry) is the filter library's
+    /// `Attenuation::UnitDensity`.
     #[default]
     Linearised,
     /// Gaussian slice (§6-2).
@@ -368,6 +372,20 @@ pub enum DensityChoice {
     Tf,
     /// The data value normalised to its range (the thesis's [0, 1] densities).
     Data,
+}
+
+/// How the linearised display attenuates (decision 0027).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum AttenuationChoice {
+    /// Sabella's own attenuation: `1 − e^{−τX}` of the screen-filtered line integral `X`.
+    #[default]
+    OpticalDepth,
+    /// Buchanan's eq 6.1 as printed: unit density from the ray's entry into the volume's box
+    /// (the thesis's Plates 6.3–6.6; far darker than Sabella's display where the box holds
+    /// empty space).
+    UnitDensity,
 }
 
 /// NIL control-point rule (decision 0007).
@@ -431,8 +449,18 @@ pub struct DisplayOptions {
     /// whose map would not fit is averaged down 2×, 3×, … per axis until it does, and the
     /// output notes say so ([`crate::Output::notes`]); raise the budget to keep full resolution.
     pub max_map_values: usize,
-    /// Grey output for Sabella (default: red = intensity, green = maximum density).
+    /// Grey output for Sabella (the default, `true`): the intensity in all three channels, as
+    /// the NIL displays write theirs, so that the two compare channel for channel. `false`: the
+    /// thesis's colouring of Plate 6.1 (red = intensity, green = maximum density).
     pub grey: bool,
+    /// The linearised display's attenuation (decision 0027).
+    pub attenuation: AttenuationChoice,
+    /// NIL continuous patches (decision 0027): neighbouring cells' fits averaged at their shared
+    /// nodes, so the image has no seams along cell faces. `false`: each cell's own fit.
+    pub continuous_patches: bool,
+    /// Largest NIL cell a filter crosses, in multiples of the filter's narrowest cross-section
+    /// (`6σ`; decision 0027); `0`: no cap (the trigger hierarchy alone, as the thesis).
+    pub max_cell_width: f64,
 }
 
 impl Default for DisplayOptions {
@@ -458,7 +486,10 @@ impl Default for DisplayOptions {
             dog_sigma: [0.01, 0.02],
             dog_gain: 8.0,
             max_map_values: 0,
-            grey: false,
+            grey: true,
+            attenuation: AttenuationChoice::OpticalDepth,
+            continuous_patches: true,
+            max_cell_width: NilDisplaySettings::default().max_cell_width,
         }
     }
 }
@@ -511,7 +542,13 @@ impl DisplayOptions {
                 }),
                 trigger_steps: self.trigger_steps,
                 gamma_min: self.gamma_min,
+                continuous: self.continuous_patches,
+                max_cell_width: self.max_cell_width,
                 ..Default::default()
+            },
+            attenuation: match self.attenuation {
+                AttenuationChoice::OpticalDepth => Attenuation::OpticalDepth,
+                AttenuationChoice::UnitDensity => Attenuation::UnitDensity,
             },
             transfer: None,
             ..Default::default()

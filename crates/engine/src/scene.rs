@@ -231,7 +231,8 @@ impl VolumeSource {
     }
 
     /// Loads (or builds) the volume, with the reader's notes for the user (frames available,
-    /// spacing assumed, …), under the readers' default [`volsplat_io::Limits`].
+    /// spacing assumed, NaN samples replaced, …), under the readers' default
+    /// [`volsplat_io::Limits`].
     pub fn load_with_notes(&self) -> Result<(Arc<AnyVolume>, Vec<String>)> {
         self.load_with_limits(&volsplat_io::Limits::default())
     }
@@ -244,7 +245,7 @@ impl VolumeSource {
         limits: &volsplat_io::Limits,
     ) -> Result<(Arc<AnyVolume>, Vec<String>)> {
         Ok(match self {
-            VolumeSource::Memory(v) => (Arc::clone(v), Vec::new()),
+            VolumeSource::Memory(v) => (Arc::clone(v), v.non_finite_note().into_iter().collect()),
             VolumeSource::Phantom { phantom, grid } => (
                 Arc::new(make_phantom(*phantom, grid.as_deref(), "volume.grid")?),
                 Vec::new(),
@@ -260,10 +261,9 @@ impl VolumeSource {
                     big_endian: r.big_endian,
                     header_bytes: r.header_bytes,
                 };
-                (
-                    Arc::new(volsplat_io::read_raw_with(path, &spec, limits)?),
-                    Vec::new(),
-                )
+                let v = volsplat_io::read_raw_with(path, &spec, limits)?;
+                let notes = v.non_finite_note().into_iter().collect();
+                (Arc::new(v), notes)
             }
             VolumeSource::File {
                 path,

@@ -86,39 +86,19 @@ pub fn write_image(
     options: &WriteOptions,
 ) -> Result<()> {
     let bad = |message: String| EngineError::request("output", message);
-    options.validate().map_err(|e| match e {
-        EngineError::Request { field, message } => {
-            bad(format!("{}: {field} {message}", path.display()))
-        }
-        e => e,
-    })?;
-    if options.window.is_some() && mode == Mode::Composite {
-        return Err(bad(format!(
-            "{}: a grey window applies to MIP, MinIP and X-ray; composite images take their \
-             colours from the transfer function",
-            path.display()
-        )));
-    }
+    check_options(&path.display().to_string(), mode, options)?;
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    let grey = writes_values(values.is_some(), mode, options.window);
-    match (ext.as_deref(), grey, values) {
-        (Some("png"), true, Some(values)) => {
-            let (lo, hi) = options.window.unwrap_or_else(|| {
-                let max = values
-                    .values()
-                    .iter()
-                    .filter(|v| v.is_finite())
-                    .fold(0.0f32, |m, &v| m.max(v));
-                (0.0, max.max(f32::MIN_POSITIVE))
-            });
+    let grey = grey_window(values, mode, options.window);
+    match (ext.as_deref(), grey) {
+        (Some("png"), Some((values, lo, hi))) => {
             volsplat_io::write_png_gray(path, values, lo, hi, options.png.bits)?
         }
-        (Some("png"), _, _) => volsplat_io::write_png(path, image, &options.png)?,
-        (Some("npy"), true, Some(values)) => volsplat_io::write_npy_scalar(path, values)?,
-        (Some("npy"), _, _) => volsplat_io::write_npy_rgba(path, image)?,
+        (Some("png"), None) => volsplat_io::write_png(path, image, &options.png)?,
+        (Some("npy"), Some((values, _, _))) => volsplat_io::write_npy_scalar(path, values)?,
+        (Some("npy"), None) => volsplat_io::write_npy_rgba(path, image)?,
         _ => {
             return Err(bad(format!(
                 "{}: unsupported extension; use .png or .npy",
@@ -127,6 +107,58 @@ pub fn write_image(
         }
     }
     Ok(())
+}
+
+/// The bytes [`write_image`] writes to a `.png` file for the same arguments, in memory: what a
+/// viewer sends as its full-quality frame, so that its screenshot is the file `volsplat render`
+/// writes (the same encoder; tested byte for byte).
+pub fn encode_png(
+    image: &Image,
+    values: Option<&ScalarImage>,
+    mode: Mode,
+    options: &WriteOptions,
+) -> Result<Vec<u8>> {
+    check_options("image", mode, options)?;
+    Ok(match grey_window(values, mode, options.window) {
+        Some((values, lo, hi)) => volsplat_io::encode_png_gray(values, lo, hi, options.png.bits)?,
+        None => volsplat_io::encode_png(image, &options.png)?,
+    })
+}
+
+/// The options [`WriteOptions::validate`] checks, and a grey window only for MIP, MinIP and
+/// X-ray; `what` names the output in the error.
+fn check_options(what: &str, mode: Mode, options: &WriteOptions) -> Result<()> {
+    let bad = |message: String| EngineError::request("output", message);
+    options.validate().map_err(|e| match e {
+        EngineError::Request { field, message } => bad(format!("{what}: {field} {message}")),
+        e => e,
+    })?;
+    if options.window.is_some() && mode == Mode::Composite {
+        return Err(bad(format!(
+            "{what}: a grey window applies to MIP, MinIP and X-ray; composite images take their \
+             colours from the transfer function"
+        )));
+    }
+    Ok(())
+}
+
+/// The values and window an image is written through when it is written grey
+/// ([`writes_values`]): the given window, or for X-ray without one 0 to the brightest value.
+fn grey_window(
+    values: Option<&ScalarImage>,
+    mode: Mode,
+    window: Option<(f32, f32)>,
+) -> Option<(&ScalarImage, f32, f32)> {
+    let values = values.filter(|_| writes_values(true, mode, window))?;
+    let (lo, hi) = window.unwrap_or_else(|| {
+        let max = values
+            .values()
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold(0.0f32, |m, &v| m.max(v));
+        (0.0, max.max(f32::MIN_POSITIVE))
+    });
+    Some((values, lo, hi))
 }
 
 /// MIP, MinIP or X-ray values through a grey window as an opaque grey image: `lo` → black,
@@ -149,6 +181,51 @@ pub fn windowed_image(values: &ScalarImage, lo: f32, hi: f32) -> Image {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `encode_png` gives the bytes `write_image` writes: composite over a background, MIP
+    /// through a window, X-ray scaled to its brightest value, 16-bit sRGB; and refuses what
+    /// `write_image` refuses.
+    #[test]
+    fn encoded_png_is_the_written_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let px: Vec<[f32; 4]> = (0..12)
+            .map(|n| {
+                let v = n as f32 / 12.0;
+                [v * 0.3, v * 0.6, v * 0.9, v]
+            })
+            .collect();
+        let image = Image::from_pixels(4, 3, px).unwrap();
+        let values =
+            ScalarImage::from_values(4, 3, (0..12).map(|n| n as f32 * 1.5).collect()).unwrap();
+        let mut srgb16 = WriteOptions::default();
+        srgb16.png.srgb = true;
+        srgb16.png.bits = volsplat_io::PngBitDepth::Sixteen;
+        srgb16.png.background = [0.2, 0.1, 0.0];
+        let windowed = WriteOptions {
+            window: Some((2.0, 9.0)),
+            ..WriteOptions::default()
+        };
+        let cases = [
+            (Mode::Composite, None, WriteOptions::default()),
+            (Mode::Composite, None, srgb16),
+            (Mode::Mip, Some(&values), windowed.clone()),
+            (Mode::Mip, Some(&values), WriteOptions::default()),
+            (Mode::Xray, Some(&values), WriteOptions::default()),
+            (Mode::Xray, Some(&values), windowed.clone()),
+        ];
+        for (n, (mode, values, options)) in cases.iter().enumerate() {
+            let path = dir.path().join(format!("{n}.png"));
+            write_image(&path, &image, *values, *mode, options).unwrap();
+            let bytes = encode_png(&image, *values, *mode, options).unwrap();
+            assert_eq!(bytes, std::fs::read(&path).unwrap(), "case {n}");
+        }
+        assert!(encode_png(&image, None, Mode::Composite, &windowed).is_err());
+        let backwards = WriteOptions {
+            window: Some((3.0, 1.0)),
+            ..WriteOptions::default()
+        };
+        assert!(encode_png(&image, Some(&values), Mode::Mip, &backwards).is_err());
+    }
 
     /// Issue 28: `--background nan,0,0` wrote red as 0 and `2,2,2` was accepted; both are
     /// errors naming the component, and nothing is written.

@@ -612,7 +612,7 @@ fn preintegration_by_choice_and_by_ramp() {
     assert_eq!(run(PreintegrateChoice::On, true, Mode::Mip).0, None);
 }
 
-/// `quality.level` (issue 29 item 7, decision 0025) in request files: `"full"` (the default when
+/// `quality.level` (issue 29 item 7, decision 0031) in request files: `"full"` (the default when
 /// absent), `"auto"` or a level number; anything else names the field.
 #[test]
 fn the_volume_level_round_trips_in_request_files() {

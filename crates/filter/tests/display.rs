@@ -4,8 +4,8 @@ use volsplat_core::glam::DVec3;
 use volsplat_core::{Camera, Grid, Projection, Volume};
 use volsplat_filter::FilterError;
 use volsplat_filter::display::{
-    ControlPoints, DisplayKind, DisplaySettings, DisplayVolume, Evaluator, NilDisplaySettings,
-    build_map, render_display,
+    Attenuation, ControlPoints, DisplayKind, DisplaySettings, DisplayVolume, Evaluator,
+    NilDisplaySettings, QuadratureSettings, build_map, render_display,
 };
 use volsplat_filter::nil::TransferBasis;
 use volsplat_filter::texture::Reconstruction;
@@ -40,6 +40,25 @@ fn camera(parallel: bool) -> Camera {
     c
 }
 
+/// The linearised display as decision 0007 measured it (before decision 0027): eq 6.1's
+/// unit-density attenuation, each cell's own projection, no cap on cell size, 8 × 8 lines.
+fn decision_0007() -> DisplaySettings {
+    DisplaySettings {
+        kind: DisplayKind::Linearised,
+        attenuation: Attenuation::UnitDensity,
+        nil: NilDisplaySettings {
+            continuous: false,
+            max_cell_width: 0.0,
+            ..Default::default()
+        },
+        quadrature: QuadratureSettings {
+            cross_nodes: 8,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
 /// MSE on the 8-bit scale (255² × the MSE of values in [0, 1], not quantised).
 fn mse_8bit(a: &[f32], b: &[f32]) -> f64 {
     255.0 * 255.0 * volsplat_testkit::metrics::mse(a, b)
@@ -56,12 +75,13 @@ fn constant_density_is_analytic_for_every_display() {
     let proj = Projection::new(&cam, w, h).unwrap();
     let tau = 3.0 / vol.unit();
     let map = build_map(&vol, 2, None, 1 << 24).unwrap();
-    let run = |kind, ev, m: Option<&_>, control| {
+    let run_with = |kind, ev, m: Option<&_>, control, attenuation| {
         let s = DisplaySettings {
             kind,
             evaluator: ev,
             supersample: 1,
             screen_sigma_px: 0.3,
+            attenuation,
             nil: NilDisplaySettings {
                 control,
                 ..Default::default()
@@ -70,6 +90,8 @@ fn constant_density_is_analytic_for_every_display() {
         };
         render_display(&vol, m, &cam, w, h, &s).unwrap()
     };
+    let unit = Attenuation::UnitDensity;
+    let run = |kind, ev, m: Option<&_>, control| run_with(kind, ev, m, control, unit);
     let p = ControlPoints::Project;
     let sab = run(DisplayKind::Sabella, Evaluator::Direct, None, p);
     let lin_d = run(DisplayKind::Linearised, Evaluator::Direct, None, p);
@@ -80,6 +102,12 @@ fn constant_density_is_analytic_for_every_display() {
         Some(&map),
         ControlPoints::Interpolate,
     );
+    // Sabella's attenuation without linearisation (the default).
+    let od = Attenuation::OpticalDepth;
+    let (lin, nil) = (DisplayKind::Linearised, Evaluator::Nil);
+    let od_d = run_with(lin, Evaluator::Direct, None, p, od);
+    let od_n = run_with(lin, nil, Some(&map), p, od);
+    let od_i = run_with(lin, nil, Some(&map), ControlPoints::Interpolate, od);
     let slice = run(DisplayKind::Slice, Evaluator::Direct, None, p);
     let slice_n = run(DisplayKind::Slice, Evaluator::Nil, Some(&map), p);
     let hits = |x: f64, y: f64| {
@@ -93,12 +121,17 @@ fn constant_density_is_analytic_for_every_display() {
             // On a constant field every NIL patch sees the constant (the padding repeats the
             // edge voxel), so NIL equals the direct evaluation of the same masked filter at
             // every pixel, silhouettes included, for both control-point rules.
-            for (name, img) in [("proj", &lin_n), ("interp", &lin_i)] {
+            for (name, img, reference) in [
+                ("proj", &lin_n, &lin_d),
+                ("interp", &lin_i, &lin_d),
+                ("optical depth, proj", &od_n, &od_d),
+                ("optical depth, interp", &od_i, &od_d),
+            ] {
                 assert!(
-                    (img.value[i] - lin_d.value[i]).abs() < 1e-5,
+                    (img.value[i] - reference.value[i]).abs() < 1e-5,
                     "{name} {x},{y}: {} vs {}",
                     img.value[i],
-                    lin_d.value[i]
+                    reference.value[i]
                 );
             }
             assert!((slice_n.value[i] - slice.value[i]).abs() < 1e-5, "{x},{y}");
@@ -117,6 +150,11 @@ fn constant_density_is_analytic_for_every_display() {
                 .iter()
                 .all(|(dx, dy)| hits(cx + dx, cy + dy).is_some());
             if interior {
+                // Sabella's attenuation: exactly Sabella's value, 1 − exp(−τρL).
+                let s = 1.0 - (-tau * rho * len).exp();
+                assert!((od_d.value[i] as f64 - s).abs() < 1e-5, "od direct {x},{y}");
+                assert!((od_n.value[i] as f64 - s).abs() < 1e-5, "od nil {x},{y}");
+                // eq 6.1's unit density: ρ(1 − exp(−τL)).
                 let e = rho * (1.0 - (-tau * len).exp());
                 assert!((lin_d.value[i] as f64 - e).abs() < 1e-5, "direct {x},{y}");
                 assert!((lin_n.value[i] as f64 - e).abs() < 1e-5, "nil {x},{y}");
@@ -127,6 +165,7 @@ fn constant_density_is_analytic_for_every_display() {
     }
     assert!(checked > 50, "{checked}");
     assert_eq!(lin_n.stats.fallbacks, 0);
+    assert_eq!(od_n.stats.fallbacks, 0);
 }
 
 #[test]
@@ -138,10 +177,9 @@ fn nil_error_falls_with_order_tolerance_and_triggers() {
     let vol = DisplayVolume::new(&grid, &d, Reconstruction::Trilinear).unwrap();
     let cam = camera(true);
     let (w, h) = (24, 24);
-    let base = DisplaySettings {
-        kind: DisplayKind::Linearised,
-        ..Default::default()
-    };
+    // The trigger hierarchy alone decides the cells here (no cap), and each cell keeps its own
+    // projection: the properties decision 0007 claims.
+    let base = decision_0007();
     let direct = render_display(
         &vol,
         None,
@@ -162,7 +200,7 @@ fn nil_error_falls_with_order_tolerance_and_triggers() {
                 trigger_width: width,
                 trigger_steps: steps,
                 gamma_min: -2,
-                ..Default::default()
+                ..base.nil
             },
             ..base.clone()
         };
@@ -226,10 +264,7 @@ fn support_refinement_removes_cell_boundary_lines() {
     let vol = DisplayVolume::new(&grid, &d, Reconstruction::Trilinear).unwrap();
     let cam = Camera::reset_to_bounds(DVec3::ZERO, DVec3::splat((N - 1) as f64), true);
     let (w, h) = (24, 24);
-    let base = DisplaySettings {
-        kind: DisplayKind::Linearised,
-        ..Default::default()
-    };
+    let base = decision_0007();
     let direct = render_display(
         &vol,
         None,
@@ -247,7 +282,7 @@ fn support_refinement_removes_cell_boundary_lines() {
         let s = DisplaySettings {
             nil: NilDisplaySettings {
                 refine_support,
-                ..Default::default()
+                ..base.nil
             },
             ..base.clone()
         };

@@ -39,9 +39,9 @@ fn create_temp(path: &Path) -> Result<(PathBuf, File)> {
     ))
 }
 
-/// Writes `path` atomically: `write` fills a buffered temporary file, which is flushed, synced and
-/// renamed over `path`. On any error the temporary file is removed and `path` is unchanged.
-pub(crate) fn write_atomic<F>(path: &Path, write: F) -> Result<()>
+/// Fills a fresh temporary file next to `path` with `write`, then flushes, syncs and closes it;
+/// returns its path. On error the temporary file is removed.
+fn write_temp<F>(path: &Path, write: F) -> Result<PathBuf>
 where
     F: FnOnce(&mut BufWriter<File>) -> Result<()>,
 {
@@ -53,15 +53,63 @@ where
         let file = w
             .into_inner()
             .map_err(|e| IoError::os(path, "write", e.into_error()))?;
-        file.sync_all().map_err(|e| IoError::os(path, "sync", e))?;
-        drop(file);
-        std::fs::rename(&tmp, path).map_err(|e| IoError::os(path, "rename temporary file", e))
+        file.sync_all().map_err(|e| IoError::os(path, "sync", e))
     })();
-    if result.is_err() {
-        // Best effort: the temporary file may not exist any more if the rename half-succeeded.
-        let _ = std::fs::remove_file(&tmp);
+    match result {
+        Ok(()) => Ok(tmp),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
     }
-    result
+}
+
+/// Renames a finished temporary file over `path`, removing it if the rename fails.
+fn commit(tmp: &Path, path: &Path) -> Result<()> {
+    std::fs::rename(tmp, path).map_err(|e| {
+        // Best effort: the temporary file may not exist any more if the rename half-succeeded.
+        let _ = std::fs::remove_file(tmp);
+        IoError::os(path, "rename temporary file", e)
+    })
+}
+
+/// Writes `path` atomically: `write` fills a buffered temporary file, which is flushed, synced and
+/// renamed over `path`. On any error the temporary file is removed and `path` is unchanged.
+pub(crate) fn write_atomic<F>(path: &Path, write: F) -> Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> Result<()>,
+{
+    let tmp = write_temp(path, write)?;
+    commit(&tmp, path)
+}
+
+/// Writes a pair of files (a header and its data file) so that neither changes unless both
+/// were written whole: both are written to temporary files first; then `data` is renamed into
+/// place, then `header`, so that a reader finding the new header finds its new data. On an
+/// error before the renames both temporary files are removed and both targets are unchanged.
+pub(crate) fn write_atomic_pair<F, G>(
+    data: &Path,
+    write_data: F,
+    header: &Path,
+    write_header: G,
+) -> Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> Result<()>,
+    G: FnOnce(&mut BufWriter<File>) -> Result<()>,
+{
+    let data_tmp = write_temp(data, write_data)?;
+    let header_tmp = match write_temp(header, write_header) {
+        Ok(t) => t,
+        Err(e) => {
+            let _ = std::fs::remove_file(&data_tmp);
+            return Err(e);
+        }
+    };
+    if let Err(e) = commit(&data_tmp, data) {
+        let _ = std::fs::remove_file(&header_tmp);
+        return Err(e);
+    }
+    commit(&header_tmp, header)
 }
 
 /// Writes `bytes` to `path` atomically (a temporary file renamed over `path`): reports, Markdown,
@@ -129,5 +177,40 @@ mod tests {
         assert!(e.to_string().contains("forced failure"));
         assert_eq!(std::fs::read(&target).unwrap(), b"old");
         assert_eq!(entries(dir.path()), vec!["out.bin".to_string()]);
+    }
+
+    #[test]
+    fn pair_changes_nothing_when_the_second_file_fails() {
+        let dir = tempfile::tempdir().unwrap();
+        let (data, header) = (dir.path().join("v.raw"), dir.path().join("v.mhd"));
+        std::fs::write(&data, b"old data").unwrap();
+        std::fs::write(&header, b"old header").unwrap();
+        let e = write_atomic_pair(
+            &data,
+            |w| w.write_all(b"new data").map_err(write_err(&data)),
+            &header,
+            |_| Err(IoError::invalid_argument(&header, "test", "forced failure")),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("forced failure"));
+        assert_eq!(std::fs::read(&data).unwrap(), b"old data");
+        assert_eq!(std::fs::read(&header).unwrap(), b"old header");
+        assert_eq!(
+            entries(dir.path()),
+            vec!["v.mhd".to_string(), "v.raw".to_string()]
+        );
+        write_atomic_pair(
+            &data,
+            |w| w.write_all(b"new data").map_err(write_err(&data)),
+            &header,
+            |w| w.write_all(b"new header").map_err(write_err(&header)),
+        )
+        .unwrap();
+        assert_eq!(std::fs::read(&data).unwrap(), b"new data");
+        assert_eq!(std::fs::read(&header).unwrap(), b"new header");
+        assert_eq!(
+            entries(dir.path()),
+            vec!["v.mhd".to_string(), "v.raw".to_string()]
+        );
     }
 }

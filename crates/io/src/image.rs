@@ -113,7 +113,8 @@ fn push_code(out: &mut Vec<u8>, code: u16, bits: PngBitDepth) {
     }
 }
 
-fn write_png_data(
+/// The bytes of a PNG file; `path` only names the image in errors.
+fn encode_png_data(
     path: &Path,
     width: u32,
     height: u32,
@@ -121,7 +122,7 @@ fn write_png_data(
     bits: PngBitDepth,
     srgb_chunk: Option<bool>,
     data: &[u8],
-) -> Result<()> {
+) -> Result<Vec<u8>> {
     let png_err = |e: png::EncodingError| match e {
         png::EncodingError::IoError(e) => IoError::os(path, "write", e),
         other => IoError::Png {
@@ -129,8 +130,9 @@ fn write_png_data(
             message: other.to_string(),
         },
     };
-    write_atomic(path, |w| {
-        let mut enc = png::Encoder::new(&mut *w, width, height);
+    let mut out = Vec::with_capacity(data.len() / 2 + 1024);
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
         enc.set_color(color);
         enc.set_depth(bits.png());
         match srgb_chunk {
@@ -140,8 +142,9 @@ fn write_png_data(
         }
         let mut writer = enc.write_header().map_err(png_err)?;
         writer.write_image_data(data).map_err(png_err)?;
-        writer.finish().map_err(png_err)
-    })
+        writer.finish().map_err(png_err)?;
+    }
+    Ok(out)
 }
 
 /// The RGB code values [`write_png`] stores for `image` (row-major, three per pixel): each
@@ -168,6 +171,27 @@ pub fn rgb_codes(image: &Image, settings: &PngSettings) -> Vec<u16> {
 /// atomically. Errors if the image is empty.
 pub fn write_png(path: impl AsRef<Path>, image: &Image, settings: &PngSettings) -> Result<()> {
     let path = path.as_ref();
+    write_encoded(path, rgb_png(path, image, settings)?)
+}
+
+/// The bytes [`write_png`] writes for `image`, in memory (for a server or a notebook that sends
+/// them on): the same encoder, settings and chunks, so the bytes are identical.
+pub fn encode_png(image: &Image, settings: &PngSettings) -> Result<Vec<u8>> {
+    rgb_png(Path::new(IN_MEMORY), image, settings)
+}
+
+/// What errors of the in-memory encoders name instead of a file.
+const IN_MEMORY: &str = "(image in memory)";
+
+fn write_encoded(path: &Path, bytes: Vec<u8>) -> Result<()> {
+    write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(&bytes)
+            .map_err(|e| IoError::os(path, "write", e))
+    })
+}
+
+fn rgb_png(path: &Path, image: &Image, settings: &PngSettings) -> Result<Vec<u8>> {
     let (w, h) = check_size(path, image.width(), image.height())?;
     let codes = rgb_codes(image, settings);
     let bytes_per = if settings.bits == PngBitDepth::Sixteen {
@@ -179,7 +203,7 @@ pub fn write_png(path: impl AsRef<Path>, image: &Image, settings: &PngSettings) 
     for &c in &codes {
         push_code(&mut data, c, settings.bits);
     }
-    write_png_data(
+    encode_png_data(
         path,
         w,
         h,
@@ -202,6 +226,26 @@ pub fn write_png_gray(
     bits: PngBitDepth,
 ) -> Result<()> {
     let path = path.as_ref();
+    write_encoded(path, gray_png(path, image, lo, hi, bits)?)
+}
+
+/// The bytes [`write_png_gray`] writes, in memory (identical bytes).
+pub fn encode_png_gray(
+    image: &ScalarImage,
+    lo: f32,
+    hi: f32,
+    bits: PngBitDepth,
+) -> Result<Vec<u8>> {
+    gray_png(Path::new(IN_MEMORY), image, lo, hi, bits)
+}
+
+fn gray_png(
+    path: &Path,
+    image: &ScalarImage,
+    lo: f32,
+    hi: f32,
+    bits: PngBitDepth,
+) -> Result<Vec<u8>> {
     let (w, h) = check_size(path, image.width(), image.height())?;
     if !(lo.is_finite() && hi.is_finite() && lo < hi) {
         return Err(IoError::invalid_argument(
@@ -216,7 +260,7 @@ pub fn write_png_gray(
         let t = (v as f64 - lo) / (hi - lo);
         push_code(&mut data, quantize(t, false, bits), bits);
     }
-    write_png_data(path, w, h, png::ColorType::Grayscale, bits, None, &data)
+    encode_png_data(path, w, h, png::ColorType::Grayscale, bits, None, &data)
 }
 
 #[cfg(test)]
@@ -252,6 +296,40 @@ mod tests {
             }
         }
         Image::from_pixels(w, h, px).unwrap()
+    }
+
+    /// The in-memory encoders give exactly the bytes the writers put in a file, for every
+    /// bit depth and encoding and for grey windows.
+    #[test]
+    fn encoded_bytes_are_the_written_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = image(7, 5, |x, y| {
+            let v = (x as f32 * 0.13 + y as f32 * 0.07).min(1.0);
+            [v * 0.5, v * 0.25, v, v]
+        });
+        for bits in [PngBitDepth::Eight, PngBitDepth::Sixteen] {
+            for srgb in [false, true] {
+                let settings = PngSettings {
+                    bits,
+                    srgb,
+                    background: [0.1, 0.2, 0.3],
+                };
+                let path = dir.path().join("rgb.png");
+                write_png(&path, &img, &settings).unwrap();
+                let bytes = encode_png(&img, &settings).unwrap();
+                assert_eq!(bytes, std::fs::read(&path).unwrap(), "{bits:?} srgb {srgb}");
+            }
+            let values =
+                ScalarImage::from_values(3, 2, vec![f32::NAN, -1.0, 0.5, 2.0, 7.5, 9.0]).unwrap();
+            let path = dir.path().join("grey.png");
+            write_png_gray(&path, &values, 0.0, 8.0, bits).unwrap();
+            let bytes = encode_png_gray(&values, 0.0, 8.0, bits).unwrap();
+            assert_eq!(bytes, std::fs::read(&path).unwrap(), "grey {bits:?}");
+        }
+        let e = encode_png_gray(&ScalarImage::new(2, 2), 1.0, 1.0, PngBitDepth::Eight)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("in memory") && e.contains("lo < hi"), "{e}");
     }
 
     #[test]

@@ -29,7 +29,19 @@
 //!   slice normal, rescaled, enhanced multi-frame, uncompressed/deflate/RLE/JPEG transfer
 //!   syntaxes; [`list_dicom_series`] lists a folder's series ([`DicomSeries`]). See [`dicom`].
 //! - [`read_raw`] with a [`RawSpec`]: headerless raw files, optionally `.gz`.
-//! - [`write_nrrd`]: attached-header NRRD (raw or gzip) that round-trips the grid.
+//!
+//! Writers (each atomic; geometry in the file's own frame, converted from LPS where it differs):
+//!
+//! - [`write_volume`] with [`VolumeWriteOptions`]: dispatch by file name
+//!   ([`VolumeWriteFormat`], [`VOLUME_WRITE_EXTENSIONS`]: `.nrrd`, `.nii`, `.nii.gz`, `.mha`,
+//!   `.mhd`, `.npy`); [`volume_write_format`] checks an output name before a slow read.
+//! - [`write_nrrd`]: attached-header NRRD (raw or gzip), `space: left-posterior-superior`, that
+//!   round-trips the grid exactly.
+//! - [`write_nifti`]: single-file NIfTI-1 (`.nii`, `.nii.gz`), sform and qform (code 1) in RAS,
+//!   geometry rounded to float32.
+//! - [`write_metaimage`]: MetaImage `.mha`, or `.mhd` with a `.raw`/`.zraw` data file, as ITK
+//!   writes it (LPS, `AnatomicalOrientation`), exact.
+//! - [`write_npy_volume`]: the samples only, shape (z, y, x).
 //!
 //! Each reader has a `*_with` form taking caller-set [`Limits`] (or [`ReadOptions`]).
 //!
@@ -38,6 +50,7 @@
 //! - [`write_png`] with [`PngSettings`]: composited over a background, 8- or 16-bit, sRGB-encoded
 //!   (default) or linear.
 //! - [`write_png_gray`]: a [`volsplat_core::ScalarImage`] windowed to black…white.
+//! - [`encode_png`], [`encode_png_gray`]: the same files' bytes in memory (a server sends them).
 //! - [`write_npy_rgba`], [`write_npy_scalar`], [`read_npy_f32`]: float `.npy` (`'<f4'`).
 //!
 //! ## Scene files (JSON, DESIGN.md §3)
@@ -75,6 +88,7 @@ mod info;
 mod json;
 mod limits;
 pub mod metaimage;
+mod metaimage_write;
 pub mod movie;
 pub mod nifti;
 mod npy;
@@ -84,6 +98,7 @@ mod raw;
 mod read;
 pub mod tiff_stack;
 pub mod vti;
+mod write;
 
 pub use atomic::write_bytes_atomic;
 pub use dicom::{
@@ -91,7 +106,10 @@ pub use dicom::{
 };
 pub use error::{IoError, Result};
 pub use header::MAX_HEADER_BYTES;
-pub use image::{PngBitDepth, PngSettings, rgb_codes, srgb_encode, write_png, write_png_gray};
+pub use image::{
+    PngBitDepth, PngSettings, encode_png, encode_png_gray, rgb_codes, srgb_encode, write_png,
+    write_png_gray,
+};
 pub use info::{VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
 pub use json::{
     CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_camera_with, load_transfer_function,
@@ -99,8 +117,9 @@ pub use json::{
 };
 pub use limits::Limits;
 pub use metaimage::{read_metaimage, read_metaimage_with};
+pub use metaimage_write::write_metaimage;
 pub use movie::{MovieFormat, MovieSettings, MovieWriter};
-pub use nifti::{read_nifti, read_nifti_with};
+pub use nifti::{read_nifti, read_nifti_with, write_nifti};
 pub use npy::{
     read_npy_f32, read_npy_f32_with, write_npy_rgba, write_npy_scalar, write_npy_volume,
 };
@@ -111,6 +130,10 @@ pub use read::{
 };
 pub use tiff_stack::{read_tiff, read_tiff_dir, read_tiff_with};
 pub use vti::{read_vti, read_vti_with};
+pub use write::{
+    VOLUME_WRITE_EXTENSIONS, VolumeWriteFormat, VolumeWriteOptions, WrittenVolume,
+    volume_write_format, write_volume,
+};
 
 #[cfg(test)]
 mod tests {

@@ -20,6 +20,8 @@
 //! - `ElementDataFile`: `LOCAL` (data follow the header), or a file name relative to the header's
 //!   directory; `LIST` and numbered file patterns are rejected.
 //!
+//! [`crate::write_metaimage`] writes `.mha` and `.mhd` (+ `.raw` / `.zraw`) as ITK does.
+//!
 //! Limits as for NRRD: header at most [`crate::MAX_HEADER_BYTES`], voxel count checked against
 //! [`volsplat_core::volume::MAX_VOXELS`] before allocating, payload sizes checked.
 

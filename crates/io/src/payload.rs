@@ -526,14 +526,11 @@ fn parse_text_value(text: &str, file_type: FileType) -> std::result::Result<f64,
         FileType::I32 => (i32::MIN as f64, i32::MAX as f64),
         FileType::U32 => (0.0, u32::MAX as f64),
         FileType::F32 | FileType::F64 => {
-            let v: f64 = text
+            // `nan` and `inf` (as teem and ITK write them) are read; `Volume::new` replaces
+            // them and says so (decision 0030).
+            return text
                 .parse()
-                .map_err(|_| format!("not a number of type {}", file_type.name()))?;
-            return if v.is_finite() {
-                Ok(v)
-            } else {
-                Err("samples must be finite".into())
-            };
+                .map_err(|_| format!("not a number of type {}", file_type.name()));
         }
     };
     let v: i64 = text
@@ -562,11 +559,35 @@ fn decode_values(values: Vec<f64>, ft: FileType, grid: Grid, path: &Path) -> Res
             Volume::new(grid, values.iter().map(|&x| x as i16).collect()).map(Into::into)
         }
         FileType::F32 | FileType::F64 | FileType::I32 | FileType::U32 => {
-            Volume::new(grid, values.iter().map(|&x| x as f32).collect()).map(Into::into)
+            Volume::new(grid, doubles_to_f32(values.into_iter(), path)?).map(Into::into)
         }
     }
     .map_err(|e| IoError::core(path, e))?;
     Ok(v)
+}
+
+/// Doubles as float32 samples. A finite double beyond the float32 range is an error naming the
+/// sample (it would become an infinity, which `Volume::new` clamps to the finite range: a
+/// silently wrong value); NaN and infinities stay what they are (`Volume::new` replaces them
+/// and says so, decision 0030).
+pub(crate) fn doubles_to_f32(values: impl Iterator<Item = f64>, path: &Path) -> Result<Vec<f32>> {
+    values
+        .enumerate()
+        .map(|(n, x)| {
+            let y = x as f32;
+            if x.is_finite() && !y.is_finite() {
+                return Err(IoError::core(
+                    path,
+                    volsplat_core::CoreError::invalid(
+                        format!("sample #{n}"),
+                        x,
+                        "outside the float32 range",
+                    ),
+                ));
+            }
+            Ok(y)
+        })
+        .collect()
 }
 
 /// Converts raw bytes (exactly `voxel_count · size` of them) into a typed volume.
@@ -608,10 +629,41 @@ pub(crate) fn decode(
             Volume::new(grid, conv!(u32, 4).into_iter().map(|x| x as f32).collect()).map(Into::into)
         }
         FileType::F64 => {
-            Volume::new(grid, conv!(f64, 8).into_iter().map(|x| x as f32).collect()).map(Into::into)
+            Volume::new(grid, doubles_to_f32(conv!(f64, 8).into_iter(), path)?).map(Into::into)
         }
     };
     v.map_err(|e| IoError::core(path, e))
+}
+
+/// Writes the samples little-endian, i fastest.
+pub(crate) fn write_samples_le<W: std::io::Write + ?Sized>(
+    w: &mut W,
+    volume: &AnyVolume,
+) -> std::io::Result<()> {
+    trait LeBytes: Copy {
+        fn put(self, out: &mut Vec<u8>);
+    }
+    macro_rules! le {
+        ($($t:ty),*) => {$(impl LeBytes for $t {
+            fn put(self, out: &mut Vec<u8>) { out.extend_from_slice(&self.to_le_bytes()); }
+        })*};
+    }
+    le!(u8, i8, u16, i16, f32);
+    fn write_all<T: LeBytes, W: std::io::Write + ?Sized>(
+        w: &mut W,
+        data: &[T],
+    ) -> std::io::Result<()> {
+        let mut buf = Vec::with_capacity(64 * 1024);
+        for chunk in data.chunks(16 * 1024) {
+            buf.clear();
+            for &v in chunk {
+                v.put(&mut buf);
+            }
+            w.write_all(&buf)?;
+        }
+        Ok(())
+    }
+    volsplat_core::with_volume!(volume, v => write_all(w, v.data()))
 }
 
 #[cfg(test)]

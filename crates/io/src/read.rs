@@ -140,9 +140,17 @@ pub fn read_volume(path: impl AsRef<Path>) -> Result<AnyVolume> {
 }
 
 /// [`read_volume`] with [`ReadOptions`] (limits, frame, VTK array, DICOM series); the result
-/// also carries the format, the number of frames, the DICOM series found and notes.
+/// also carries the format, the number of frames, the DICOM series found and notes (among them
+/// the float samples that were NaN or infinite and what they became,
+/// [`volsplat_core::NonFiniteSamples`]).
 pub fn read_volume_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
-    let path = path.as_ref();
+    let mut loaded = read_any(path.as_ref(), options)?;
+    loaded.notes.extend(loaded.volume.non_finite_note());
+    Ok(loaded)
+}
+
+/// [`read_volume_with`] by format, before the notes every format shares.
+fn read_any(path: &Path, options: &ReadOptions) -> Result<LoadedVolume> {
     let dicom = |path: &Path| -> Result<LoadedVolume> {
         if options.array.is_some() {
             return Err(IoError::invalid_argument(
@@ -300,6 +308,48 @@ mod tests {
         assert!(e.contains("array") && e.contains(".vti"), "{e}");
         let e = read_volume(dir.path()).unwrap_err().to_string();
         assert!(e.contains("directory"), "{e}");
+    }
+
+    /// Issue 28 follow-up: a NaN background (SPM, nibabel's `resampled_anat_moved.nii`) made
+    /// the file unreadable; now every format reads it, NaN taken as the lowest finite value,
+    /// and says so in its notes.
+    #[test]
+    fn nan_samples_are_read_and_noted_for_every_format() {
+        let dir = tempfile::tempdir().unwrap();
+        let nan = f32::NAN;
+        let samples = [nan, 2.0, nan, 5.0];
+        let bytes: Vec<u8> = samples.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let nrrd = dir.path().join("v.nrrd");
+        let mut file =
+            b"NRRD0004\ntype: float\ndimension: 3\nsizes: 4 1 1\nencoding: raw\nendian: little\n\n"
+                .to_vec();
+        file.extend_from_slice(&bytes);
+        std::fs::write(&nrrd, file).unwrap();
+        let h = crate::nifti::tests::Hdr::new(&[4, 1, 1], 16);
+        let nii = dir.path().join("v.nii");
+        std::fs::write(&nii, h.file(&bytes)).unwrap();
+        let text = dir.path().join("t.nrrd");
+        std::fs::write(
+            &text,
+            "NRRD0004\ntype: float\ndimension: 3\nsizes: 4 1 1\nencoding: text\n\nnan 2 NaN 5\n",
+        )
+        .unwrap();
+        for p in [&nrrd, &nii, &text] {
+            let l = read_volume_with(p, &ReadOptions::default()).unwrap();
+            assert_eq!(
+                l.volume.to_f32().data(),
+                &[2.0, 2.0, 2.0, 5.0],
+                "{}",
+                p.display()
+            );
+            let note = "2 samples were NaN, taken as the lowest finite value 2";
+            assert!(
+                l.notes.iter().any(|n| n == note),
+                "{}: {:?}",
+                p.display(),
+                l.notes
+            );
+        }
     }
 
     #[test]

@@ -6,9 +6,10 @@
 //! - Every page (image file directory) in order: page `k` is slice `k`; within a page column `x`
 //!   is grid index `i` and row `y` (row 0 first, as stored) is `j`. Direction identity, origin 0
 //!   (as ITK; TIFF has no world frame, and no conversion is applied).
-//! - Grayscale pages of one sample: 8/16/32-bit unsigned or signed integers, 16/32/64-bit
-//!   floats. 8- and 16-bit integers and 32-bit floats are read as they are; 32-bit integers and
-//!   16/64-bit floats are converted to f32 (32-bit integers above 2²⁴ lose precision). All pages
+//! - Grayscale pages of one sample: 8/16/32/64-bit unsigned or signed integers, 16/32/64-bit
+//!   floats. 8- and 16-bit integers and 32-bit floats are read as they are; 32- and 64-bit
+//!   integers (NumPy's default `int64`, as `tifffile` writes it) and 16/64-bit floats are
+//!   converted to f32 with a note (integers above 2²⁴ in magnitude are rounded). All pages
 //!   must share the size and type of the first. RGB, palette, bilevel and multi-sample pages are
 //!   rejected.
 //! - ImageJ hyperstacks (`frames=` > 1 in the description): the pages of frame
@@ -17,7 +18,10 @@
 //! - Spacing (world units per voxel): from ImageJ's `ImageDescription` (`ImageJ=…` lines:
 //!   `spacing=` for z, `unit=`) with `XResolution`/`YResolution` (pixels per unit) for x and y;
 //!   else from OME-XML (`PhysicalSizeX/Y/Z`); else 1 with a note. The unit is reported in a
-//!   note and not converted.
+//!   note and not converted. A spacing that is not a positive finite number is never used:
+//!   a negative ImageJ `spacing=` becomes its magnitude (ImageJ's own rule), any other bad value
+//!   (0, NaN, infinite, a resolution of 0) becomes 1, each with a note naming the tag or key and
+//!   the value.
 //!
 //! # Limits
 //!
@@ -169,8 +173,15 @@ impl Stack {
         );
         let grid = Grid::new(dims, spacing, [0.0; 3], DMat3::IDENTITY)
             .map_err(|e| IoError::core(path, e))?;
-        if acc.converted() {
-            notes.push("samples converted to float32".into());
+        if let Acc::F32(_, kind, true) = &acc {
+            let precision = if matches!(*kind, "int32" | "uint32" | "int64" | "uint64") {
+                " (integers above 2^24 in magnitude are rounded)"
+            } else {
+                ""
+            };
+            notes.push(format!(
+                "samples of type {kind} converted to float32{precision}"
+            ));
         }
         let volume = acc.into_volume(grid).map_err(|e| IoError::core(path, e))?;
         Ok(LoadedVolume {
@@ -364,27 +375,69 @@ fn choose_frame(
     Ok(())
 }
 
+/// A RATIONAL tag's value as written (not yet checked: 0, NaN and infinity come back as such).
 fn rational<R: std::io::Read + std::io::Seek>(dec: &mut Decoder<R>, tag: Tag) -> Option<f64> {
     match dec.find_tag(tag).ok().flatten()? {
-        tiff::decoder::ifd::Value::Rational(n, d) if d != 0 => Some(n as f64 / d as f64),
+        tiff::decoder::ifd::Value::Rational(n, d) => Some(n as f64 / d as f64),
+        tiff::decoder::ifd::Value::SRational(n, d) => Some(n as f64 / d as f64),
         v => v.into_f64().ok(),
     }
-    .filter(|v| v.is_finite() && *v > 0.0)
 }
 
-/// Spacing from ImageJ or OME-XML metadata, else 1 (module documentation).
+/// A spacing from the file's metadata, checked: a positive finite value is used as is; a
+/// negative one, where `magnitude_rule` (ImageJ's `spacing=`: ImageJ's `FileOpener` takes its
+/// magnitude), becomes its magnitude; anything else (0, negative, NaN, infinite, not a number)
+/// becomes 1. Each replacement is said in a note naming `field` (as spelled in the file), the
+/// value and the `axis`.
+fn checked_spacing(
+    field: &str,
+    text: &str,
+    value: Option<f64>,
+    axis: &str,
+    magnitude_rule: bool,
+    notes: &mut Vec<String>,
+) -> f64 {
+    match value {
+        Some(v) if v.is_finite() && v > 0.0 => v,
+        Some(v) if v.is_finite() && v < 0.0 && magnitude_rule => {
+            notes.push(format!(
+                "{field} {text} is negative; {axis} spacing taken as its magnitude {}, as ImageJ does",
+                -v
+            ));
+            -v
+        }
+        _ => {
+            notes.push(format!(
+                "{field} {text} is not a positive finite number; {axis} spacing taken as 1"
+            ));
+            1.0
+        }
+    }
+}
+
+/// The pixel size along x or y from `XResolution` / `YResolution` (pixels per unit), checked.
+fn resolution_spacing(
+    tag: &str,
+    res: Option<f64>,
+    axis: &str,
+    notes: &mut Vec<String>,
+) -> Option<f64> {
+    let r = res?;
+    if r.is_finite() && r > 0.0 {
+        return Some(1.0 / r);
+    }
+    let text = format!("{r} (pixels per unit)");
+    Some(checked_spacing(tag, &text, None, axis, false, notes))
+}
+
+/// Spacing from ImageJ or OME-XML metadata, else 1 (module documentation). Values that are not
+/// positive finite numbers are replaced as [`checked_spacing`] says, with a note.
 fn spacing(
     description: Option<&str>,
     xres: Option<f64>,
     yres: Option<f64>,
     notes: &mut Vec<String>,
 ) -> [f64; 3] {
-    let positive = |t: &str| {
-        t.trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite() && *v > 0.0)
-    };
     if let Some(d) = description {
         if d.starts_with("ImageJ=") {
             let key = |k: &str| {
@@ -392,31 +445,48 @@ fn spacing(
                     .find_map(|l| l.strip_prefix(k).and_then(|r| r.strip_prefix('=')))
             };
             let unit = key("unit").unwrap_or("pixel").replace("\\u00B5", "µ");
-            let sx = xres.map_or(1.0, |r| 1.0 / r);
-            let sy = yres.map_or(sx, |r| 1.0 / r);
-            let sz = key("spacing").and_then(positive).unwrap_or(1.0);
+            let mut checks = Vec::new();
+            let sx = resolution_spacing("XResolution", xres, "x", &mut checks).unwrap_or(1.0);
+            let sy = resolution_spacing("YResolution", yres, "y", &mut checks).unwrap_or(sx);
+            let sz = key("spacing").map_or(1.0, |t| {
+                let text = format!("`spacing={}`", t.trim());
+                let field = "ImageDescription (ImageJ)";
+                checked_spacing(field, &text, t.trim().parse().ok(), "z", true, &mut checks)
+            });
             notes.push(format!(
                 "spacing from ImageJ metadata: {sx} × {sy} × {sz} {unit} (world units are {unit})"
             ));
+            notes.extend(checks);
             return [sx, sy, sz];
         }
         if d.contains("<OME") {
-            let attr = |name: &str| {
+            let mut checks = Vec::new();
+            let mut attr = |name: &str, axis: &str| {
                 let pat = format!("{name}=\"");
-                d.find(&pat)
-                    .and_then(|p| d[p + pat.len()..].split('"').next())
-                    .and_then(positive)
+                let text = d
+                    .find(&pat)
+                    .and_then(|p| d[p + pat.len()..].split('"').next())?;
+                let field = format!("OME-XML {name}");
+                Some(checked_spacing(
+                    &field,
+                    &format!("\"{text}\""),
+                    text.trim().parse().ok(),
+                    axis,
+                    false,
+                    &mut checks,
+                ))
             };
             let s = [
-                attr("PhysicalSizeX").unwrap_or(1.0),
-                attr("PhysicalSizeY").unwrap_or(1.0),
-                attr("PhysicalSizeZ").unwrap_or(1.0),
+                attr("PhysicalSizeX", "x").unwrap_or(1.0),
+                attr("PhysicalSizeY", "y").unwrap_or(1.0),
+                attr("PhysicalSizeZ", "z").unwrap_or(1.0),
             ];
             notes.push(format!(
                 "spacing from OME-XML physical sizes: {} × {} × {} (µm unless the file's \
                  PhysicalSize*Unit says otherwise)",
                 s[0], s[1], s[2]
             ));
+            notes.extend(checks);
             return s;
         }
     }
@@ -460,10 +530,6 @@ impl Acc {
         }
     }
 
-    fn converted(&self) -> bool {
-        matches!(self, Acc::F32(_, _, true))
-    }
-
     /// Appends a page; a page of another type is `Err((expected, found))`.
     fn push(&mut self, r: DecodingResult) -> std::result::Result<(), (&'static str, &'static str)> {
         let got = kind(&r);
@@ -478,6 +544,8 @@ impl Acc {
                 DecodingResult::F16(p) => v.extend(p.iter().map(|x| x.to_f32())),
                 DecodingResult::U32(p) => v.extend(p.iter().map(|&x| x as f32)),
                 DecodingResult::I32(p) => v.extend(p.iter().map(|&x| x as f32)),
+                DecodingResult::U64(p) => v.extend(p.iter().map(|&x| x as f32)),
+                DecodingResult::I64(p) => v.extend(p.iter().map(|&x| x as f32)),
                 _ => return Err((want, got)),
             },
             (a, _) => {
@@ -755,5 +823,98 @@ mod tests {
         };
         let e = read_tiff_with(&p, &o).unwrap_err().to_string();
         assert!(e.contains("exceeds the limit 10"), "{e}");
+    }
+
+    /// Issue 28 §4: an int64 TIFF (what `tifffile` writes for NumPy's default integers) used to
+    /// fail with "invalid sample type int64 … must have the sample type of the first (int64)";
+    /// 64-bit integers are now read, converted to float32 with a note.
+    #[test]
+    fn int64_and_uint64_stacks_are_read_as_f32() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = tmp(dir.path(), "i64.tif");
+        let pages: Vec<Vec<i64>> = vec![vec![-5, 0, 7, 1 << 20], vec![3, -(1 << 40), 9, 11]];
+        write_stack::<colortype::GrayI64>(&p, 2, 2, &pages, None, None);
+        let l = read_tiff_with(&p, &ReadOptions::default()).unwrap();
+        assert_eq!(l.volume.scalar_type(), ScalarType::F32);
+        let f = l.volume.to_f32();
+        assert_eq!(
+            f.data(),
+            &[-5.0, 0.0, 7.0, 1048576.0, 3.0, -1099511627776.0, 9.0, 11.0]
+        );
+        assert!(
+            l.notes
+                .iter()
+                .any(|n| n.contains("int64 converted to float32") && n.contains("rounded")),
+            "{:?}",
+            l.notes
+        );
+        let p = tmp(dir.path(), "u64.tif");
+        write_stack::<colortype::Gray64>(&p, 1, 1, &[vec![42u64], vec![7]], None, None);
+        let l = read_tiff_with(&p, &ReadOptions::default()).unwrap();
+        assert_eq!(l.volume.to_f32().data(), &[42.0, 7.0]);
+        assert!(
+            l.notes.iter().any(|n| n.contains("uint64")),
+            "{:?}",
+            l.notes
+        );
+    }
+
+    /// Issue 28 §3: ImageJ spacing that is negative, 0 or NaN, and resolutions of 0, are never
+    /// used silently: a negative `spacing=` becomes its magnitude (ImageJ's `FileOpener` rule),
+    /// the rest 1, each with a note naming the key or tag and the value.
+    #[test]
+    fn bad_imagej_and_ome_spacings_are_said() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = tmp(dir.path(), "s.tif");
+        let pages: Vec<Vec<u8>> = vec![vec![1; 4], vec![2; 4]];
+        let read = |desc: &str, res: Option<(u32, u32)>| {
+            write_stack::<colortype::Gray8>(&p, 2, 2, &pages, Some(desc), res);
+            let l = read_tiff_with(&p, &ReadOptions::default()).unwrap();
+            (l.volume.grid().spacing, l.notes)
+        };
+        let ij = |sp: &str| format!("ImageJ=1.54f\nimages=2\nslices=2\nunit=mm\nspacing={sp}\n");
+        let (s, notes) = read(&ij("-2.5"), Some((4, 1)));
+        assert_eq!(s, [0.25, 0.25, 2.5]);
+        assert!(
+            notes.iter().any(|n| n.contains("`spacing=-2.5`")
+                && n.contains("negative")
+                && n.contains("magnitude 2.5")),
+            "{notes:?}"
+        );
+        for bad in ["0", "NaN", "inf", "abc"] {
+            let (s, notes) = read(&ij(bad), Some((4, 1)));
+            assert_eq!(s, [0.25, 0.25, 1.0], "{bad}");
+            let want =
+                format!("`spacing={bad}` is not a positive finite number; z spacing taken as 1");
+            assert!(notes.iter().any(|n| n.contains(&want)), "{bad}: {notes:?}");
+        }
+        // XResolution 0 (pixels per unit): x and y spacing 1, said.
+        let (s, notes) = read(&ij("3"), Some((0, 1)));
+        assert_eq!(s, [1.0, 1.0, 3.0]);
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.contains("XResolution") && n.contains("taken as 1")),
+            "{notes:?}"
+        );
+        // OME-XML: a zero and a negative physical size.
+        let ome = "<?xml version=\"1.0\"?><OME><Image><Pixels PhysicalSizeX=\"0\" \
+                   PhysicalSizeY=\"-0.5\" PhysicalSizeZ=\"2\"/></Image></OME>";
+        let (s, notes) = read(ome, None);
+        assert_eq!(s, [1.0, 1.0, 2.0]);
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.contains("PhysicalSizeX \"0\"") && n.contains("x spacing taken as 1")),
+            "{notes:?}"
+        );
+        assert!(
+            notes.iter().any(|n| n.contains("PhysicalSizeY \"-0.5\"")),
+            "{notes:?}"
+        );
+        // Good values draw no such note.
+        let (s, notes) = read(&ij("2"), Some((2, 1)));
+        assert_eq!(s, [0.5, 0.5, 2.0]);
+        assert!(!notes.iter().any(|n| n.contains("taken as")), "{notes:?}");
     }
 }

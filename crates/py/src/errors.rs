@@ -6,7 +6,7 @@
 //! | bad arguments, arrays, request fields, camera or transfer-function values, file contents | `InvalidInputError` (`ValueError`) |
 //! | the progress callback returned `False` | `CancelledError` |
 //! | non-finite output, a thread pool that could not start, a crash inside the renderer | `RenderError` (`RuntimeError`) |
-//! | the memory for a copy of the caller's data, or for a file's samples, could not be allocated | Python's own `MemoryError` |
+//! | the memory for a copy of the caller's data, for a file's samples, or for a render's per-volume buffers (normal field, splat list) could not be allocated | Python's own `MemoryError` |
 //!
 //! The first four derive from `VolsplatError`. Ctrl-C raises Python's own `KeyboardInterrupt`.
 //!
@@ -144,6 +144,7 @@ pub fn is_out_of_memory(e: &(dyn std::error::Error + 'static)) -> bool {
         "memory allocation",
         "cannot allocate",
         "could not allocate",
+        "not enough memory",
     ]
     .iter()
     .any(|p| m.contains(p))
@@ -169,7 +170,7 @@ pub fn from_io(e: IoError) -> PyErr {
 
 /// An engine error.
 pub fn from_engine(e: EngineError) -> PyErr {
-    if is_out_of_memory(&e) {
+    if e.is_out_of_memory() || is_out_of_memory(&e) {
         return memory_error(e.to_string());
     }
     match e {

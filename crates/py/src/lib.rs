@@ -16,6 +16,7 @@ mod convert;
 mod errors;
 mod files;
 mod render;
+mod view;
 mod volume;
 
 use pyo3::prelude::*;
@@ -26,6 +27,7 @@ fn _volsplat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<volume::Volume>()?;
     m.add_class::<render::RendererCore>()?;
     m.add_class::<render::Output>()?;
+    m.add_class::<view::ViewerCore>()?;
     m.add_function(wrap_pyfunction!(volume::load, m)?)?;
     m.add_function(wrap_pyfunction!(volume::phantom, m)?)?;
     m.add_function(wrap_pyfunction!(files::load_camera, m)?)?;

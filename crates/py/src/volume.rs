@@ -111,8 +111,10 @@ pub fn numpy_name(t: ScalarType) -> &'static str {
 /// ``memcpy`` when the array is contiguous in the declared order (C-order ``"zyx"``, or
 /// Fortran-order ``"xyz"`` as nibabel gives it), a strided gather otherwise (views, slices,
 /// transposes; about the cost of ``np.ascontiguousarray``). ``.array`` is then a read-only,
-/// zero-copy view of the engine's samples. Float samples must be finite (NaN is an error
-/// naming the index). Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
+/// zero-copy view of the engine's samples. Float samples that are NaN (a masked background)
+/// become the lowest finite value, and ±inf the lowest or highest, as every reader does
+/// (a ``UserWarning`` and ``.notes`` say how many); an array with no finite value is an
+/// error. Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
 /// shapes, dtypes and geometry, and ``MemoryError`` when the copy cannot be allocated (the
 /// interpreter keeps running).
 #[pyclass(frozen, module = "volsplat")]
@@ -591,6 +593,26 @@ impl Volume {
                     )));
                 }
             }
+            if target == ScalarType::F32 && kind == b'f' {
+                // A finite value beyond the float32 range would become an infinity, which the
+                // engine clamps to the finite range: a silently wrong value. Name it instead.
+                let overflow = np.call_method1(
+                    "logical_and",
+                    (
+                        np.call_method1("isinf", (&converted,))?,
+                        np.call_method1("isfinite", (&arr,))?,
+                    ),
+                )?;
+                if overflow.call_method0("any")?.extract::<bool>()? {
+                    let first = np.call_method1("argwhere", (&overflow,))?.get_item(0)?;
+                    let index: Vec<usize> = first.call_method0("tolist")?.extract()?;
+                    let value = arr.get_item(pyo3::types::PyTuple::new(py, &index)?)?;
+                    return Err(invalid(format!(
+                        "array: the sample at index {index:?} ({value}) is outside the float32 \
+                         range; scale the data first"
+                    )));
+                }
+            }
             notes.push(format!(
                 "converted {src_name} to {} (one pass over the array)",
                 numpy_name(target)
@@ -610,29 +632,25 @@ impl Volume {
             ScalarType::I16 => CoreVolume::new(grid, samples::<i16>(&arr, axes)?)
                 .map_err(errors::from_core)?
                 .into(),
-            ScalarType::F32 => {
-                let s = samples::<f32>(&arr, axes)?;
-                if let Some(pos) = s.iter().position(|v| !v.is_finite()) {
-                    let [nx, ny, _] = grid.dims;
-                    let (i, j, k) = (pos % nx, (pos / nx) % ny, pos / (nx * ny));
-                    let index = match axes {
-                        Axes::Zyx => [k, j, i],
-                        Axes::Xyz => [i, j, k],
-                    };
-                    return Err(invalid(format!(
-                        "array: the sample at index {index:?} is {}{}; float samples must be \
-                         finite (replace NaN with a value, e.g. np.nan_to_num)",
-                        s[pos],
+            ScalarType::F32 => CoreVolume::new(grid, samples::<f32>(&arr, axes)?)
+                .map_err(|e| {
+                    invalid(format!(
+                        "array: {e}{}",
                         if convert {
-                            format!(" after conversion from {src_name} to float32")
+                            format!(" (after conversion from {src_name} to float32)")
                         } else {
                             String::new()
                         }
-                    )));
-                }
-                CoreVolume::new(grid, s).map_err(errors::from_core)?.into()
-            }
+                    ))
+                })?
+                .into(),
         };
+        // NaN (a masked background, as nibabel gives SPM's output) and infinities were replaced
+        // once, by the engine's rule (decision 0030): say so, as a note and a warning.
+        if let Some(note) = data.non_finite_note() {
+            warn_user(py, &format!("volsplat.Volume: {note}"), 1)?;
+            notes.push(note);
+        }
         let mut v = Volume::from_any(data, None, axes, "numpy array");
         v.notes = notes;
         Ok(v)
@@ -939,14 +957,19 @@ pub fn load(
         series: series.clone(),
     };
     if raw.is_some() {
-        let (data, _) = py
+        let (data, notes) = py
             .detach(|| source.load_with_limits(&limits))
             .map_err(errors::from_engine)?;
         let data = match Arc::try_unwrap(data) {
             Ok(d) => d,
             Err(shared) => try_clone(&shared)?,
         };
-        return Ok(Volume::from_any(data, Some(source), axes, "raw"));
+        if let Some(note) = data.non_finite_note() {
+            warn_user(py, &format!("{}: {note}", path.display()), 2)?;
+        }
+        let mut v = Volume::from_any(data, Some(source), axes, "raw");
+        v.notes = notes;
+        return Ok(v);
     }
     let options = volsplat::io::ReadOptions {
         frame,
@@ -957,12 +980,25 @@ pub fn load(
     let loaded = py
         .detach(|| volsplat::io::read_volume_with(&path, &options))
         .map_err(errors::from_io)?;
+    if let Some(note) = loaded.volume.non_finite_note() {
+        warn_user(py, &format!("{}: {note}", path.display()), 2)?;
+    }
     let mut v = Volume::from_any(loaded.volume, Some(source), axes, &loaded.format);
     v.frames = loaded.frames;
     v.frame = loaded.frame;
     v.arrays = loaded.arrays;
     v.notes = loaded.notes;
     Ok(v)
+}
+
+/// A `UserWarning` for something the user should know about their data (samples replaced),
+/// pointing `stacklevel` frames up (1: the caller of the Rust function; 2: its caller, past the
+/// `volsplat` wrapper). An error only if a warning filter turns it into one.
+fn warn_user(py: Python<'_>, message: &str, stacklevel: i32) -> PyResult<()> {
+    let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+    let text = std::ffi::CString::new(message.replace('\0', " "))
+        .map_err(|e| invalid(e.to_string()))?;
+    PyErr::warn(py, category.as_any(), &text, stacklevel)
 }
 
 /// A built-in phantom (see `volsplat.phantom`); `None` is the demo phantom the command line

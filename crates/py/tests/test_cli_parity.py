@@ -327,3 +327,38 @@ def test_paraview_colour_map_file(cli, tmp_path):
         img = volsplat.render(vol, transfer_function=tmp_path / "pv.json", azimuth=30, size=56)
     img.save(tmp_path / "py2.png")
     same_bytes(tmp_path / "cli.png", tmp_path / "py2.png")
+
+
+@pytest.mark.parametrize("offset", ["auto", "none", 500, "-20.5"])
+def test_xray_offset(cli, tmp_path, offset):
+    # The CT phantom (Hounsfield units, -1000 air): `auto` integrates max(HU + 1000, 0), `none`
+    # the raw values, a number max(HU + offset, 0); the Python keyword mirrors --xray-offset.
+    kw = {} if offset == "auto" else {"xray_offset": offset}
+    img = volsplat.render(volsplat.phantom("head", 32), mode="xray", azimuth=30, size=40, **kw)
+    # The raw integral of a CT is mostly negative: its PNG is nearly black (a tiny file).
+    for ext in ("npy",) if offset == "none" else ("npy", "png"):
+        cli(
+            "render",
+            "--phantom",
+            "head",
+            "--phantom-size",
+            32,
+            "--mode",
+            "xray",
+            "--azimuth",
+            30,
+            "--size",
+            40,
+            "--xray-offset",
+            offset,
+            "-o",
+            tmp_path / f"cli.{ext}",
+            "-q",
+        )
+        img.save(tmp_path / f"py.{ext}")
+        same_bytes(tmp_path / f"cli.{ext}", tmp_path / f"py.{ext}")
+    # The offset changes the integral (so the parity above is not vacuous).
+    raw = volsplat.render(volsplat.phantom("head", 32), mode="xray", azimuth=30, size=40,
+                          xray_offset="none")
+    if offset != "none":
+        assert not np.array_equal(img.values, raw.values)

@@ -443,3 +443,24 @@ def test_preintegrate(vol):
     assert not volsplat.render(vol, transfer_function=smooth, size=48).stats["preintegrated"]
     with pytest.raises(volsplat.InvalidInputError, match="preintegrate"):
         volsplat.render(vol, transfer_function=sharp, size=48, preintegrate="sometimes")
+
+
+def test_xray_offset_keyword():
+    # --xray-offset VALUE|auto|none as a keyword of render, Scene and Renderer.
+    ct = volsplat.phantom("head", 24)
+    s = volsplat.Scene(ct, mode="xray", size=24)
+    assert s.xray_offset == "auto" and "xray_density" not in s.to_dict()["scene"]
+    assert s.replace(xray_offset=1000).xray_offset == 1000.0
+    assert s.replace(xray_offset="none").to_dict()["scene"]["xray_density"] == "raw"
+    assert s.replace(xray_offset="-2.5").xray_offset == -2.5
+    assert s.replace(xray_offset=7).replace(xray_offset=None).xray_offset == "auto"
+    # The head is CT in Hounsfield units: `auto` is 1000 (attenuation relative to air).
+    auto = s.render().values
+    assert np.array_equal(s.replace(xray_offset=1000).render().values, auto)
+    raw = volsplat.Renderer(s, xray_offset="none").render().values
+    assert raw.min() < 0 <= auto.min()
+    # A saved scene keeps it.
+    assert volsplat.Scene.from_dict(s.replace(xray_offset=250).to_dict()).xray_offset == 250.0
+    for bad in ["water", float("nan"), float("inf"), True, [1]]:
+        with pytest.raises(volsplat.InvalidInputError, match="xray_offset"):
+            s.replace(xray_offset=bad)

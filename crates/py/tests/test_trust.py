@@ -10,7 +10,7 @@ import textwrap
 import numpy as np
 import pytest
 import volsplat
-from conftest import blob
+from conftest import blob, write_nifti
 
 resource = pytest.importorskip("resource", reason="address-space limits need POSIX")
 
@@ -211,3 +211,95 @@ def test_view_option_and_camera_field():
         volsplat.render(vol, view="sideways")
     with pytest.raises(volsplat.InvalidInputError, match="view"):
         volsplat.Camera(view=3)
+
+
+def nan_background(shape_zyx=(28, 32, 36)) -> np.ndarray:
+    """A smooth float32 blob inside a sphere and NaN outside: a masked image as SPM writes."""
+    a = blob(shape_zyx, np.float32) + 10.0
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in shape_zyx), indexing="ij")
+    a[x**2 + y**2 + z**2 > 0.8] = np.nan
+    return a
+
+
+def test_a_nan_background_renders_and_says_so(tmp_path):
+    # Issue 28 follow-up: NaN samples refused whole files that nibabel, ITK, Slicer and napari
+    # read. Now NaN is the lowest finite value (background: transparent, out of MIP).
+    a = nan_background()
+    with pytest.warns(UserWarning, match=r"samples were NaN, taken as the lowest finite value"):
+        vol = volsplat.Volume(a)
+    assert not np.isnan(vol.array).any()
+    assert vol.array.min() == np.nanmin(a)
+    for mode in ("composite", "mip", "minip"):
+        img = volsplat.render(vol, size=40, azimuth=30, mode=mode)
+        assert np.all(np.isfinite(img.rgba)), mode
+        if mode == "minip":
+            # Rays cross the background, now the lowest value: MinIP shows it (decision 0030).
+            assert img.values[20, 20] == pytest.approx(np.nanmin(a), abs=0.5)
+        else:
+            assert img.rgba[..., :3].max() > 0.05, f"{mode}: black"
+        assert any("NaN" in n for n in img.notes), img.notes
+    # MIP sees the data's maximum, not the replacement.
+    mip = volsplat.render(vol, size=40, mode="mip").values
+    assert 0.9 * np.nanmax(a) < np.nanmax(mip) <= 1.01 * np.nanmax(a)
+    # A file: the note reaches .notes and a warning naming the file.
+    write_nifti(tmp_path / "masked.nii", a.transpose(2, 1, 0), np.eye(4))
+    with pytest.warns(UserWarning, match=r"masked\.nii: .*NaN"):
+        f = volsplat.load(tmp_path / "masked.nii")
+    assert any("taken as the lowest finite value" in n for n in f.notes), f.notes
+    np.testing.assert_array_equal(np.asarray(f.with_axes("zyx").array), vol.array)
+
+
+def test_nibabels_nan_test_file(tmp_path):
+    # nibabel's own test file (an image resampled with NaN outside the field of view).
+    nib = pytest.importorskip("nibabel")
+    import os
+
+    path = os.path.join(os.path.dirname(nib.__file__), "tests", "data", "resampled_anat_moved.nii")
+    if not os.path.exists(path):
+        pytest.skip("this nibabel has no resampled_anat_moved.nii")
+    ref = np.asarray(nib.load(path).get_fdata(dtype=np.float32))
+    assert np.isnan(ref).any()
+    with pytest.warns(UserWarning, match="NaN"):
+        vol = volsplat.load(path, axes="xyz")
+    expect = np.where(np.isnan(ref), np.nanmin(ref), ref)
+    np.testing.assert_array_equal(np.asarray(vol.array), expect)
+    img = volsplat.render(vol, size=48)
+    assert np.all(np.isfinite(img.rgba)) and img.rgba[..., :3].max() > 0.05
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="RLIMIT_AS is enforced on Linux")
+def test_a_render_whose_normal_field_does_not_fit_raises_memory_error(tmp_path):
+    # Issue 28 follow-up: a 524 MB u8 volume loads under a 1.25 GiB address-space limit, but
+    # its normal field (shading at the voxels, 2 bytes per voxel: 1 GB) does not; the render
+    # aborted the interpreter. Now MemoryError naming it, and the interpreter goes on. The
+    # file is sparse: zeros with a bright cube (which the automatic function shades).
+    nx, ny, nz = 1024, 1024, 500
+    with open(tmp_path / "big.nrrd", "wb") as f:
+        f.write(b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 1024 1024 500\nencoding: raw\n\n")
+        base = f.tell()
+        for k in range(200, 300):
+            for j in range(400, 600):
+                f.seek(base + (k * ny + j) * nx + 400)
+                f.write(b"\xc8" * 200)
+        f.truncate(base + nx * ny * nz)
+    r = run_limited(
+        """
+        vol = volsplat.load("big.nrrd")
+        print("loaded", vol.shape)
+        sys.stdout.flush()
+        try:
+            volsplat.render(vol, size=32, threads=2)
+            print("rendered")
+        except MemoryError as e:
+            print("MemoryError", e)
+        del vol
+        img = volsplat.render(volsplat.phantom("blobs", 16), size=16)
+        print("after", img.shape)
+        """,
+        1.25,
+        tmp_path,
+    )
+    exited_cleanly(r)
+    assert "loaded (500, 1024, 1024)" in r.stdout, r.stdout + r.stderr[-2000:]
+    assert "MemoryError not enough memory for the normal field" in r.stdout, r.stdout
+    assert "(1048576002 bytes)" in r.stdout and "after (16, 16)" in r.stdout, r.stdout

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import volsplat
@@ -155,15 +157,46 @@ def test_bad_shapes_and_dtypes(array, match):
     assert isinstance(e.value, ValueError) and isinstance(e.value, volsplat.VolsplatError)
 
 
-def test_nan_is_an_error_naming_the_index():
+def test_nan_becomes_the_lowest_finite_value_with_a_warning():
+    # Issue 28 follow-up: NaN (a masked background, as nibabel gives SPM's output) was an error.
     a = blob()
+    lowest, highest = float(a.min()), float(a.max())
     a[3, 4, 5] = np.nan
-    with pytest.raises(volsplat.InvalidInputError, match=r"\[3, 4, 5\].*finite"):
-        volsplat.Volume(a)
-    with pytest.raises(volsplat.InvalidInputError, match=r"\[5, 4, 3\]"):
-        volsplat.Volume(a.transpose(), axes="xyz")
-    with np.errstate(over="ignore"), pytest.raises(volsplat.InvalidInputError, match="after conv"):
-        volsplat.Volume(np.full((2, 2, 2), 1e300))  # float64 beyond float32
+    a[0, 1, 2] = np.nan
+    a[7, 7, 7] = np.inf
+    with pytest.warns(UserWarning, match="2 samples were NaN, taken as the lowest finite value"):
+        v = volsplat.Volume(a)
+    [note] = [n for n in v.notes if "NaN" in n]
+    m = re.fullmatch(
+        r"2 samples were NaN, taken as the lowest finite value (\S+); "
+        r"1 sample was \+inf, taken as the highest finite value (\S+)",
+        note,
+    )
+    assert m, note
+    assert (np.float32(m[1]), np.float32(m[2])) == (np.float32(lowest), np.float32(highest))
+    b = v.array
+    assert np.all(np.isfinite(b))
+    assert b[3, 4, 5] == b[0, 1, 2] == np.float32(lowest) and b[7, 7, 7] == np.float32(highest)
+    rest = np.isfinite(a)
+    assert np.array_equal(b[rest], a[rest])
+    # The same in (x, y, z) order, and after a conversion from float64.
+    with pytest.warns(UserWarning, match="NaN"):
+        assert np.array_equal(volsplat.Volume(a.transpose(), axes="xyz").array, b.transpose())
+    with pytest.warns(UserWarning, match="NaN"):
+        assert np.array_equal(volsplat.Volume(a.astype(np.float64)).array, b)
+
+
+def test_an_array_with_no_finite_value_and_float32_overflow_are_errors():
+    with pytest.raises(volsplat.InvalidInputError, match="no sample is finite"):
+        volsplat.Volume(np.full((2, 2, 2), np.nan, np.float32))
+    big = np.ones((2, 3, 4))
+    big[1, 2, 3] = 1e300  # float64 beyond float32: an error, not a silent clamp
+    with np.errstate(over="ignore"), pytest.raises(
+        volsplat.InvalidInputError, match=r"\[1, 2, 3\].*float32 range"
+    ):
+        volsplat.Volume(big)
+    with np.errstate(over="ignore"), pytest.raises(volsplat.InvalidInputError, match="float32"):
+        volsplat.Volume(np.full((2, 2, 2), 1e300))
 
 
 @pytest.mark.parametrize(

@@ -9,7 +9,7 @@
 //! - `slab CT head 256x256x108 ct-skin/<size>² <level>`: the CT-like head phantom (i16 HU, as
 //!   `volsplat phantom head --grid 256,256,108`), `ct-skin`, shaded at the voxels, image-aligned
 //!   slabs, 2 threads, at 128², 256² and 512², the full level (minified views supersampled)
-//!   against the pyramid level whose voxel is about a pixel (`auto_level`; decision 0025).
+//!   against the pyramid level whose voxel is about a pixel (`auto_level`; decision 0031).
 //!
 //! Run: `cargo bench -p volsplat-splat --features bench --bench splat`. Numbers go to docs/BENCHMARKS.md.
 

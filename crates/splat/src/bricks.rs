@@ -89,15 +89,23 @@ impl BrickGrid {
     /// The direction codes of `volume`'s voxels ([`crate::normals::NormalField`]), built on the
     /// first call and kept; `None` if the grid was not built for a volume of this shape (or the
     /// kept field was built for other axes or spacings), in which case the caller builds its own.
-    pub fn normals<T: Scalar>(&self, volume: &Volume<T>) -> Option<&crate::normals::NormalField> {
+    /// Errors if the field cannot be allocated ([`crate::SplatError::OutOfMemory`]).
+    pub fn normals<T: Scalar>(
+        &self,
+        volume: &Volume<T>,
+    ) -> crate::Result<Option<&crate::normals::NormalField>> {
         let grid = volume.grid();
         if grid.dims != self.volume_dims {
-            return None;
+            return Ok(None);
         }
-        let f = self
-            .normals
-            .get_or_init(|| crate::normals::NormalField::build(volume));
-        f.fits(grid).then_some(f)
+        let f = match self.normals.get() {
+            Some(f) => f,
+            None => {
+                let built = crate::normals::NormalField::build(volume)?;
+                self.normals.get_or_init(|| built)
+            }
+        };
+        Ok(f.fits(grid).then_some(f))
     }
 
     /// Index of the brick holding the cell whose lower corner is voxel `(i, j, k)`.

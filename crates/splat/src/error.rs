@@ -62,6 +62,19 @@ pub enum SplatError {
         /// What overflowed, with the numbers.
         what: String,
     },
+    /// A large per-volume buffer of the render (normal field, splat list, …) could not be
+    /// allocated: the system, or an address-space limit (`ulimit -v`, a container's), refused
+    /// it. Nothing was drawn; a smaller volume, subsampling or another renderer may fit.
+    #[error(
+        "not enough memory for {what} ({bytes} bytes): the system or its address-space limit \
+         (ulimit -v, the container's memory limit) refused it"
+    )]
+    OutOfMemory {
+        /// What the memory was for, e.g. `the normal field (shading at the voxels)`.
+        what: &'static str,
+        /// Bytes asked for.
+        bytes: usize,
+    },
     /// Two images that must match in size do not.
     #[error("image size mismatch: {what} is {got:?}, expected {expected:?} (width, height)")]
     SizeMismatch {
@@ -94,6 +107,34 @@ pub enum SplatError {
         /// Row of the first one.
         y: usize,
     },
+}
+
+impl SplatError {
+    /// [`SplatError::OutOfMemory`] for `n` elements of `T`.
+    pub fn out_of_memory<T>(what: &'static str, n: usize) -> Self {
+        SplatError::OutOfMemory {
+            what,
+            bytes: n.saturating_mul(std::mem::size_of::<T>()),
+        }
+    }
+}
+
+/// An empty vector with room for exactly `n` elements, allocated fallibly
+/// ([`SplatError::OutOfMemory`] naming `what` when the memory cannot be had): the large
+/// per-volume buffers of the render path, so that a volume too big for the memory left is an
+/// error, never an abort.
+pub fn try_with_capacity<T>(n: usize, what: &'static str) -> Result<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n)
+        .map_err(|_| SplatError::out_of_memory::<T>(what, n))?;
+    Ok(v)
+}
+
+/// A vector of `n` copies of `value`, allocated fallibly (see [`try_with_capacity`]).
+pub fn try_filled<T: Clone>(n: usize, value: T, what: &'static str) -> Result<Vec<T>> {
+    let mut v = try_with_capacity(n, what)?;
+    v.resize(n, value);
+    Ok(v)
 }
 
 /// Result alias for rendering.

@@ -39,7 +39,9 @@ pub use clip::ClipPlane;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};
-pub use list::{ExtractSettings, SplatList, SplatRecord, render_list, render_list_with_progress};
+pub use list::{
+    ExtractSettings, ListVoxels, SplatList, SplatRecord, render_list, render_list_with_progress,
+};
 pub use normals::ShadeAt;
 pub use pyramid::{Pyramid, PyramidLevel, auto_level, focal_pixel_size, render_level};
 pub use render::{

@@ -35,7 +35,7 @@
 
 use crate::aa::{footprint_variance, widen};
 use crate::clip::LatticeClip;
-use crate::error::{Result, SplatError};
+use crate::error::{Result, SplatError, try_filled, try_with_capacity};
 use crate::footprint::metric_from;
 use crate::geometry::Order;
 use crate::render::{
@@ -53,16 +53,47 @@ use volsplat_core::{
     ScalarImage, Volume, with_volume,
 };
 
+/// What the records of a splat list are, in out-of-memory errors.
+const LIST_RECORDS: &str = "the splat list";
+
+/// Which voxels a splat list keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ListVoxels {
+    /// Those whose opacity under the tables exceeds [`ExtractSettings::threshold`]: what
+    /// composite draws (and X-ray, whose tables are its weight, not the transfer function).
+    #[default]
+    Visible,
+    /// Every voxel of the (subsampled) lattice, whatever the tables: MIP and MinIP project the
+    /// data values and only then map the projection through the transfer function (VTK's
+    /// order), so a voxel the function hides can still be the largest or smallest along a ray.
+    /// Under the automatic window the lowest values are transparent: keeping only the visible
+    /// voxels dropped the very minima MinIP shows.
+    Every,
+}
+
+impl ListVoxels {
+    /// The voxels a render in `mode` needs: [`ListVoxels::Every`] for MIP and MinIP,
+    /// [`ListVoxels::Visible`] otherwise.
+    pub fn for_mode(mode: RenderMode) -> Self {
+        match mode {
+            RenderMode::Mip | RenderMode::Minip => ListVoxels::Every,
+            RenderMode::Composite | RenderMode::Xray => ListVoxels::Visible,
+        }
+    }
+}
+
 /// How a splat list is extracted.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ExtractSettings {
     /// Keep voxels whose opacity exceeds this value, in `[0, 1)`: the transfer function's
     /// scalar opacity (per `opacity_unit_distance`) times its gradient opacity, at the largest
     /// depth-cue factor. `0` keeps every voxel that is not fully transparent, so the list renders
-    /// exactly what the dense renderer renders.
+    /// exactly what the dense renderer renders. Not used with [`ListVoxels::Every`].
     pub threshold: f32,
     /// Keep every `subsample`-th voxel per axis (≥ 1).
     pub subsample: usize,
+    /// Which voxels to keep: by opacity, or every one (MIP, MinIP: [`ListVoxels::for_mode`]).
+    pub voxels: ListVoxels,
 }
 
 impl Default for ExtractSettings {
@@ -70,6 +101,17 @@ impl Default for ExtractSettings {
         ExtractSettings {
             threshold: 0.0,
             subsample: 1,
+            voxels: ListVoxels::Visible,
+        }
+    }
+}
+
+impl ExtractSettings {
+    /// The default settings for a render in `mode` ([`ListVoxels::for_mode`]).
+    pub fn for_mode(mode: RenderMode) -> Self {
+        ExtractSettings {
+            voxels: ListVoxels::for_mode(mode),
+            ..ExtractSettings::default()
         }
     }
 }
@@ -110,7 +152,9 @@ impl SplatList {
         with_volume!(volume, v => Self::build(v, tables, s))
     }
 
-    /// Extracts the voxels of `volume` whose opacity under `tables` exceeds `s.threshold`.
+    /// Extracts the voxels of `volume` whose opacity under `tables` exceeds `s.threshold`, or
+    /// every voxel ([`ListVoxels::Every`]). Errors name a bad setting, or the memory the list
+    /// could not get ([`SplatError::OutOfMemory`]).
     pub fn build<T: Scalar>(
         volume: &Volume<T>,
         tables: &CrioTables,
@@ -148,9 +192,10 @@ impl SplatList {
         let inv_spacing = grid.spacing.map(|v| (1.0 / v) as f32);
         let full = grid.dims;
         let threshold = s.threshold;
+        let every = s.voxels == ListVoxels::Every;
         let slices: Vec<Vec<SplatRecord>> = (0..dims[2])
             .into_par_iter()
-            .map(|k| {
+            .map(|k| -> Result<Vec<SplatRecord>> {
                 let mut out = Vec::new();
                 for j in 0..dims[1] {
                     for i in 0..dims[0] {
@@ -167,16 +212,29 @@ impl SplatList {
                             at(0.0).max(at(1.0))
                         };
                         // Cheap test first when the opacity table is density-indexed.
-                        if classifier
-                            .density_opacity(density)
-                            .is_some_and(|a| a.is_nan() || a <= 0.0)
+                        if !every
+                            && classifier
+                                .density_opacity(density)
+                                .is_some_and(|a| a.is_nan() || a <= 0.0)
                         {
                             continue;
                         }
                         let gradient = gradient_at(data, full, inv_spacing, direction, p);
-                        let a = opacity_at(gradient);
-                        if a.is_nan() || a <= threshold {
-                            continue;
+                        if !every {
+                            let a = opacity_at(gradient);
+                            if a.is_nan() || a <= threshold {
+                                continue;
+                            }
+                        }
+                        if out.len() == out.capacity() {
+                            // Fallible growth (amortised doubling): the list of a large volume
+                            // may not fit; that is an error, never an abort.
+                            out.try_reserve(1).map_err(|_| {
+                                SplatError::out_of_memory::<SplatRecord>(
+                                    LIST_RECORDS,
+                                    2 * out.len().max(4),
+                                )
+                            })?;
                         }
                         out.push(SplatRecord {
                             ijk: [i as u16, j as u16, k as u16],
@@ -186,20 +244,20 @@ impl SplatList {
                         });
                     }
                 }
-                out
+                Ok(out)
             })
-            .collect();
+            .collect::<Result<_>>()?;
         let total: usize = slices.iter().map(Vec::len).sum();
         if total > u32::MAX as usize {
             return Err(SplatError::ListTooLarge {
                 what: format!("{total} splats exceed the list's 2^32 limit"),
             });
         }
-        let mut records = Vec::with_capacity(total);
+        let mut records = try_with_capacity(total, LIST_RECORDS)?;
         for sl in slices {
             records.extend(sl);
         }
-        let mut row_start = vec![0u32; dims[1] * dims[2] + 1];
+        let mut row_start = try_filled(dims[1] * dims[2] + 1, 0u32, "the splat list's row index")?;
         for r in &records {
             row_start[r.ijk[1] as usize + dims[1] * r.ijk[2] as usize + 1] += 1;
         }
@@ -265,25 +323,28 @@ impl SplatList {
         self.dims
     }
 
-    fn by_i(&self) -> &(Vec<u32>, Vec<u32>) {
-        self.by_i.get_or_init(|| {
-            let n = self.dims[0];
-            let mut start = vec![0u32; n + 1];
-            for r in &self.records {
-                start[r.ijk[0] as usize + 1] += 1;
-            }
-            for i in 1..=n {
-                start[i] += start[i - 1];
-            }
-            let mut next = start.clone();
-            let mut perm = vec![0u32; self.records.len()];
-            for (idx, r) in self.records.iter().enumerate() {
-                let slot = &mut next[r.ijk[0] as usize];
-                perm[*slot as usize] = idx as u32;
-                *slot += 1;
-            }
-            (perm, start)
-        })
+    /// The records grouped by `i`, built on first use (4 bytes per splat; fallibly: the
+    /// renderer calls this before the sheets perpendicular to `i` are visited).
+    fn try_by_i(&self) -> Result<&(Vec<u32>, Vec<u32>)> {
+        if let Some(b) = self.by_i.get() {
+            return Ok(b);
+        }
+        let n = self.dims[0];
+        let mut start = vec![0u32; n + 1];
+        for r in &self.records {
+            start[r.ijk[0] as usize + 1] += 1;
+        }
+        for i in 1..=n {
+            start[i] += start[i - 1];
+        }
+        let mut next = start.clone();
+        let mut perm = try_filled(self.records.len(), 0u32, "the splat list's index by i")?;
+        for (idx, r) in self.records.iter().enumerate() {
+            let slot = &mut next[r.ijk[0] as usize];
+            perm[*slot as usize] = idx as u32;
+            *slot += 1;
+        }
+        Ok(self.by_i.get_or_init(|| (perm, start)))
     }
 
     /// Calls `f` on every record of the lattice slice `c` perpendicular to `axis`, in storage
@@ -300,12 +361,20 @@ impl SplatList {
                         .for_each(&mut f);
                 }
             }
-            _ => {
-                let (perm, start) = self.by_i();
-                for &idx in &perm[start[c] as usize..start[c + 1] as usize] {
-                    f(&self.records[idx as usize]);
+            _ => match self.by_i.get() {
+                Some((perm, start)) => {
+                    for &idx in &perm[start[c] as usize..start[c + 1] as usize] {
+                        f(&self.records[idx as usize]);
+                    }
                 }
-            }
+                // The renderer builds the index first (`try_by_i`); without it, the same
+                // records in the same order, by a scan.
+                None => self
+                    .records
+                    .iter()
+                    .filter(|r| r.ijk[0] as usize == c)
+                    .for_each(f),
+            },
         }
     }
 }
@@ -344,6 +413,8 @@ struct SheetBuckets {
     splatted: u64,
     clipped: u64,
     widened: u64,
+    /// Bytes a bucket could not grow by (the sheet's classification stopped there).
+    out_of_memory: Option<usize>,
 }
 
 const LIST_TABLE_LEN: usize = 1024;
@@ -519,6 +590,9 @@ fn render_inner(
     if cosines[axis].is_nan() || cosines[axis] <= 1e-9 {
         return Err(SplatError::DegenerateView);
     }
+    if axis == 0 {
+        list.try_by_i()?;
+    }
     let axis_dir = grid.direction.col(axis);
     let frame_spacing = spacing[axis] / cosines[axis];
     // Sheet order: by depth (orthographic) or by distance of the sheet's plane from the eye.
@@ -626,7 +700,7 @@ fn render_inner(
         RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
         _ => [0.0; 4],
     };
-    let mut acc = vec![init; w * h];
+    let mut acc = try_filled(w * h, init, "the splat list's image buffer")?;
     let mut bands: Vec<BandState> = (0..n_bands)
         .map(|b| BandState::new(band_h.min(h - b * band_h), w))
         .collect();
@@ -652,6 +726,12 @@ fn render_inner(
             .zip(sheets.par_iter())
             .for_each(|(slot, &c)| fr.classify_sheet(axis, c, slot));
         stats.classify_ms += ms(t0);
+        if let Some(bytes) = classified.iter().find_map(|c| c.out_of_memory) {
+            return Err(SplatError::OutOfMemory {
+                what: "the splat list's sheet buffers",
+                bytes,
+            });
+        }
         for c in classified.iter() {
             stats.splats += c.splatted;
             stats.splats_clipped += c.clipped;
@@ -722,6 +802,7 @@ impl Frame<'_> {
         out.splatted = 0;
         out.clipped = 0;
         out.widened = 0;
+        out.out_of_memory = None;
         let s = self.settings;
         let (w, h) = (s.width as f32, s.height as f32);
         let mode = s.mode;
@@ -729,6 +810,9 @@ impl Frame<'_> {
         let needs_gradient = mode == RenderMode::Composite && self.classifier.needs_gradient;
         let stride = self.list.stride as f64;
         self.list.for_each_in_slice(axis, c, |r| {
+            if out.out_of_memory.is_some() {
+                return;
+            }
             let lattice = DVec3::new(r.ijk[0] as f64, r.ijk[1] as f64, r.ijk[2] as f64);
             // Smooth clipping: the kernel's share on the kept side of every plane.
             let keep = if self.clip.is_empty() {
@@ -829,6 +913,12 @@ impl Frame<'_> {
                 v,
             };
             for b in &mut out.buckets[b0..=b1] {
+                // Fallible growth: a sheet of a large list (every voxel, for MIP) may not fit.
+                if b.len() == b.capacity() && b.try_reserve(1).is_err() {
+                    let bytes = 2 * b.len().max(4) * std::mem::size_of::<PSplat>();
+                    out.out_of_memory = Some(bytes);
+                    return;
+                }
                 b.push(sp);
             }
         });
@@ -1015,23 +1105,34 @@ mod tests {
             let key = |r: &SplatRecord| (r.ijk[2], r.ijk[1], r.ijk[0]);
             assert!(key(&w[0]) < key(&w[1]));
         }
-        // Every slice along every axis holds exactly the records with that coordinate.
-        for axis in 0..3 {
-            let mut seen = 0;
-            for c in 0..list.dims()[axis] {
-                list.for_each_in_slice(axis, c, |r| {
-                    assert_eq!(r.ijk[axis] as usize, c);
-                    seen += 1;
-                });
+        // Every slice along every axis holds exactly the records with that coordinate, in the
+        // same order with and without the index by i.
+        let mut orders = Vec::new();
+        for built in [false, true] {
+            if built {
+                list.try_by_i().unwrap();
             }
-            assert_eq!(seen, list.len());
+            let mut order = Vec::new();
+            for axis in 0..3 {
+                let mut seen = 0;
+                for c in 0..list.dims()[axis] {
+                    list.for_each_in_slice(axis, c, |r| {
+                        assert_eq!(r.ijk[axis] as usize, c);
+                        seen += 1;
+                        order.push(r.ijk);
+                    });
+                }
+                assert_eq!(seen, list.len());
+            }
+            orders.push(order);
         }
+        assert_eq!(orders[0], orders[1]);
         let thin = SplatList::build(
             &vol,
             &t,
             &ExtractSettings {
                 threshold: 0.3,
-                subsample: 1,
+                ..ExtractSettings::default()
             },
         )
         .unwrap();
@@ -1043,11 +1144,36 @@ mod tests {
                 &t,
                 &ExtractSettings {
                     threshold: 1.0,
-                    subsample: 1
+                    ..ExtractSettings::default()
                 }
             )
             .is_err()
         );
+    }
+
+    /// MIP and MinIP lists keep every voxel ([`ListVoxels::for_mode`]): the ramp hides the
+    /// zeros, which a visible-voxel list drops and an every-voxel list keeps, with their values
+    /// and gradients as the visible list has them.
+    #[test]
+    fn every_voxel_lists_keep_what_the_tables_hide() {
+        let vol = smooth_volume(20);
+        let t = tables();
+        let visible = SplatList::build(&vol, &t, &ExtractSettings::default()).unwrap();
+        let every =
+            SplatList::build(&vol, &t, &ExtractSettings::for_mode(RenderMode::Minip)).unwrap();
+        assert_eq!(every.len(), vol.data().len());
+        assert!(visible.len() < every.len());
+        let by_ijk: std::collections::HashMap<[u16; 3], &SplatRecord> =
+            every.records().iter().map(|r| (r.ijk, r)).collect();
+        for r in visible.records() {
+            assert_eq!(by_ijk[&r.ijk], r);
+        }
+        for mode in [RenderMode::Mip, RenderMode::Minip] {
+            assert_eq!(ListVoxels::for_mode(mode), ListVoxels::Every);
+        }
+        for mode in [RenderMode::Composite, RenderMode::Xray] {
+            assert_eq!(ListVoxels::for_mode(mode), ListVoxels::Visible);
+        }
     }
 
     #[test]

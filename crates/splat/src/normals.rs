@@ -27,6 +27,7 @@
 //! zero (they reflect nothing, as a sample with a zero gradient does in
 //! [`volsplat_core::FrameClassifier::classify`]).
 
+use crate::error::{Result, try_filled};
 use crate::slab::ShadeTable;
 use rayon::prelude::*;
 use volsplat_core::glam::Vec3;
@@ -76,7 +77,10 @@ impl NormalField {
     /// turned into a world gradient with `grad_to_world` (as the sample-order shading does) and
     /// encoded ([`encode`]). Parallel over z slices; the codes do not depend on the thread
     /// count.
-    pub fn build<T: Scalar>(volume: &Volume<T>) -> Self {
+    ///
+    /// The field takes 2 bytes per voxel, twice a `u8` volume; it is allocated fallibly:
+    /// [`crate::SplatError::OutOfMemory`] when the memory cannot be had, never an abort.
+    pub fn build<T: Scalar>(volume: &Volume<T>) -> Result<Self> {
         let grid = volume.grid();
         let dims = grid.dims;
         let grad_to_world = grad_to_world(grid);
@@ -84,7 +88,11 @@ impl NormalField {
         let (nx, ny, nz) = (dims[0], dims[1], dims[2]);
         let stride = [1, nx, nx * ny];
         let m = grad_to_world;
-        let mut codes = vec![ZERO_NORMAL; data.len() + 1];
+        let mut codes = try_filled(
+            data.len() + 1,
+            ZERO_NORMAL,
+            "the normal field of shading at the voxels",
+        )?;
         codes[..data.len()]
             .par_chunks_mut(nx * ny)
             .enumerate()
@@ -115,11 +123,11 @@ impl NormalField {
                     }
                 }
             });
-        NormalField {
+        Ok(NormalField {
             codes,
             volume_dims: dims,
             grad_to_world,
-        }
+        })
     }
 
     /// The codes, one per voxel in the volume's order, followed by one [`ZERO_NORMAL`].
@@ -340,7 +348,7 @@ mod tests {
             2.0 * i as f32 * 0.5 - 3.0 * j as f32 * 2.0 + 5.0 * k as f32
         })
         .unwrap();
-        let f = NormalField::build(&v);
+        let f = NormalField::build(&v).unwrap();
         assert!(f.fits(&grid));
         assert_eq!(f.codes().len(), 6 * 5 * 4 + 1);
         let want = encode([2.0, -3.0, 5.0]);
@@ -348,7 +356,7 @@ mod tests {
         assert_eq!(f.codes()[120], ZERO_NORMAL);
         // A constant volume has no gradient anywhere.
         let flat = Volume::from_fn(Grid::with_dims([3, 3, 3]).unwrap(), |_, _, _| 1.0f32).unwrap();
-        let f = NormalField::build(&flat);
+        let f = NormalField::build(&flat).unwrap();
         assert!(f.codes().iter().all(|&c| c == ZERO_NORMAL));
     }
 }

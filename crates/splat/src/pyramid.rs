@@ -1,5 +1,5 @@
 //! A resolution pyramid of prefiltered volumes for previews and minified views (DESIGN.md §5,
-//! "Multiresolution"; `docs/decisions/0025-prefiltered-pyramid-previews.md`).
+//! "Multiresolution"; `docs/decisions/0031-prefiltered-pyramid-previews.md`).
 //!
 //! Level 0 is the volume itself; level `l + 1` halves the axes of level `l` that
 //! [`Grid::pyramid_axes`] picks (those within twice the smallest spacing, so a CT's thick slices
@@ -176,7 +176,11 @@ fn halve_any(v: &AnyVolume, axes: [bool; 3]) -> Result<AnyVolume> {
 fn halve_parallel<T: Scalar>(v: &Volume<T>, axes: [bool; 3]) -> Result<Volume<T>> {
     let grid = v.grid().halved(axes)?;
     let slice = grid.dims[0] * grid.dims[1];
-    let mut data = vec![v.data()[0]; grid.voxel_count()];
+    let mut data = crate::error::try_filled(
+        grid.voxel_count(),
+        v.data()[0],
+        "a level of the resolution pyramid",
+    )?;
     data.par_chunks_mut(slice)
         .enumerate()
         .for_each(|(k, out)| v.halved_slice(axes, k, out));

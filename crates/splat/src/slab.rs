@@ -50,7 +50,7 @@
 //! density table, one point per slab, tests each brick against that very table's interpolation
 //! ([`BrickGrid::active_in_table`]: a brick of pure background just below a ramp is skipped);
 //! pre-integrated segments and the per-sample classifier keep the slack test of
-//! [`BrickGrid::active`] (`docs/decisions/0025-prefiltered-pyramid-previews.md`).
+//! [`BrickGrid::active`] (`docs/decisions/0031-prefiltered-pyramid-previews.md`).
 //!
 //! # Speed (issue 12; `docs/BENCHMARKS.md` §13)
 //!
@@ -254,10 +254,10 @@ pub fn render_slabs<T: Scalar>(
     let owned_normals;
     let (voxel_shading, codes): (Option<VoxelShading>, &[u16]) = match &shade_table {
         Some(t) if settings.shade_at == ShadeAt::Voxels => {
-            let field = match bricks.normals(volume) {
+            let field = match bricks.normals(volume)? {
                 Some(f) => f,
                 None => {
-                    owned_normals = NormalField::build(volume);
+                    owned_normals = NormalField::build(volume)?;
                     &owned_normals
                 }
             };

@@ -1,4 +1,4 @@
-//! The resolution pyramid's previews (issue 29 item 7, decision 0025): a coarse level drawn by
+//! The resolution pyramid's previews (issue 29 item 7, decision 0031): a coarse level drawn by
 //! the slabs is right on its own input (against the reference integrator run on that level),
 //! keeps the full level's brightness, costs less, and keeps the slabs' bit-for-bit promises
 //! (thread count, AVX2 against the scalar twin).

@@ -208,7 +208,7 @@ fn empty_space_skipping_is_exact() {
 /// value + ½ transparent" on a CT whose air is the fill value): the bricks of pure background
 /// are skipped (the kernels' table reads exactly its zero entry there), and the picture keeps
 /// every bit. The slack test of `BrickGrid::active` kept every such brick: the CT-like head
-/// took 13.2 M samples a 512² frame instead of 2.5 M (`docs/BENCHMARKS.md` §19).
+/// took 13.2 M samples a 512² frame instead of 2.5 M (`docs/BENCHMARKS.md` §21).
 #[test]
 fn empty_space_skipping_is_exact_next_to_a_ramp() {
     // A ball of 1 in a background of exactly 0, on a grid whose bricks are mostly background.

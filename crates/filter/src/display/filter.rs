@@ -11,7 +11,8 @@
 //! Evaluation goes through the filter's lines ([`super::project::LineFilter`]): the direct
 //! evaluation ([`direct`]) integrates the data along each line clipped to the box; the NIL
 //! evaluation projects the filter onto the patches with the same lines. Slices and balls
-//! return `∭Fρ/∭F`; the linearised display returns `τ ∫∬ G e^{−τ(t−t_a)} ρ` with `∬G = 1`.
+//! return `∭Fρ/∭F`; the linearised display returns `τ ∫∬ G e^{−τ(t−t_a)} ρ` with `∬G = 1`, and
+//! the line integral returns `∬ G ∫ ρ dt` (Sabella's optical depth).
 
 use super::volume::{DisplayVolume, PixelRay};
 use crate::quadrature::gauss_legendre;
@@ -45,6 +46,12 @@ pub(crate) enum PixelFilter {
         sigma: Sigma,
         tau: f64,
     },
+    /// Sabella's display without linearisation (`Attenuation::OpticalDepth`): screen Gaussian ×
+    /// 1 along every line of the tube, each clipped to the box on its own (so each line
+    /// integrates its own whole segment, as each of Sabella's rays does). Its "integral" `K` is
+    /// the screen filter's weight per unit length, so `∭Fρ/K` is the screen-filtered line
+    /// integral `X = ∬G ∫ρ dt` (world units × density).
+    LineIntegral { ray: PixelRay, sigma: Sigma },
     /// §6-2: screen Gaussian × Gaussian along the ray centred at `tc`, std `w` (world units),
     /// truncated at `±3w`.
     Slice {
@@ -76,6 +83,19 @@ impl PixelFilter {
                 }
                 (-0.5 * (a * a + b * b) - tau * (t - ray.ta)).exp() / (s * s)
             }
+            PixelFilter::LineIntegral { ray, sigma } => {
+                let rel = p - ray.o;
+                let t = rel.dot(ray.d);
+                if t < ray.t_min {
+                    return 0.0;
+                }
+                let s = sigma.at(t);
+                let (a, b) = (rel.dot(ray.e1) / s, rel.dot(ray.e2) / s);
+                if a.abs() > TRUNC || b.abs() > TRUNC {
+                    return 0.0;
+                }
+                (-0.5 * (a * a + b * b)).exp() / (s * s)
+            }
             PixelFilter::Slice { ray, sigma, tc, w } => {
                 let rel = p - ray.o;
                 let t = rel.dot(ray.d);
@@ -97,6 +117,18 @@ impl PixelFilter {
                 }
                 (-0.5 * q.length_squared()).exp()
             }
+        }
+    }
+
+    /// The narrowest cross-section of the filter inside the volume's box, world units: the
+    /// width `2·3σ` of the truncated screen Gaussian at the ray's entry (σ grows with depth
+    /// under perspective), or of the ball.
+    pub fn min_width(&self) -> f64 {
+        match *self {
+            PixelFilter::Linearised { ray, sigma, .. }
+            | PixelFilter::LineIntegral { ray, sigma }
+            | PixelFilter::Slice { ray, sigma, .. } => 2.0 * TRUNC * sigma.at(ray.ta),
+            PixelFilter::Ball { s, .. } => 2.0 * TRUNC * s,
         }
     }
 
@@ -158,7 +190,7 @@ pub(crate) fn triggers(
     };
     let grid = |i: usize, n: usize| -2.0 + 4.0 * (i as f64 + 0.5) / n as f64;
     match *filter {
-        PixelFilter::Linearised { ray, sigma, .. } => {
+        PixelFilter::Linearised { ray, sigma, .. } | PixelFilter::LineIntegral { ray, sigma } => {
             let len = ray.tb - ray.ta;
             let k = ((len * steps / vol.unit()).ceil().max(1.0)) as usize;
             for j in 0..k {

@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | `Sabella` | `τ·I`, `I = ∫ e^{−τ∫ρ} ρ dt` (eq 3.1), `n × n` rays per pixel; green = mean of the per-ray maximum density (Plate 6.1) | §6-1 |
 //! | `Maximum` | maximum density along the ray, `n × n` rays per pixel | §6-3 |
-//! | `Linearised` | `τ·∭Fρ` with `F = G_screen · e^{−τ(t−t_a)}`, `t ≥ t_a`, `∬G_screen = 1` (eq 3.3 = 6.1) | §6-1 |
+//! | `Linearised` | default ([`Attenuation::OpticalDepth`]): `1 − e^{−τX}`, `X = ∭Fρ` with `F = G_screen` along the whole ray (Sabella's value, decision 0027); [`Attenuation::UnitDensity`]: `τ·∭Fρ` with `F = G_screen · e^{−τ(t−t_a)}`, `t ≥ t_a`, `∬G_screen = 1` (eq 3.3 = 6.1) | §6-1 |
 //! | `Slice` | `∭Fρ/∭F`, `F = G_screen · G(t − t_c; w)` (thick `w = 0.1`, thin `0.01`) | §6-2 |
 //! | `Search` | density at the point the ray search picks (Plate 6.10) | §6-3 |
 //! | `SampleFilter` | `½ + gain · (ρ̄_{σ₁} − ρ̄_{σ₂})`, a difference of Gaussians at the searched point | §6-3 |
@@ -29,7 +29,16 @@
 //! under perspective). Rays come from [`volsplat_core::Projection::ray`] through pixel centres
 //! `(x + ½, y + ½)`, so orthographic and perspective cameras both work. Images: row 0 at the top.
 //!
-//! ## Decisions (digest §7, A-15 …; decision 0007; `docs/nil-display/report.md`)
+//! ## Decisions (digest §7, A-15 …; decisions 0007, 0027; `docs/nil-display/report.md`)
+//! - **Sabella's attenuation by default** (decision 0027, [`Attenuation`]): eq 3.1's integrand is
+//!   an exact derivative, so Sabella's display is `1 − e^{−τX}` of the line integral `X`, a
+//!   linear filter the NIL map evaluates without linearising. eq 6.1's unit density from the
+//!   box's entry was 19 dB from Sabella's display on a 197×233×189 MRI.
+//! - **Continuous patches** (decision 0027, [`NilDisplaySettings::continuous`]): the cells'
+//!   projections of the data are averaged at shared nodes, so the tube of a pixel sees no jump
+//!   at a cell face (no seams); crossed cells are at most
+//!   [`NilDisplaySettings::max_cell_width`] filter widths wide; display values are clamped at
+//!   zero.
 //! - **Control points by projection** (decision 0007, [`ControlPoints::Project`], default): a
 //!   patch's control points are the L² projection of the filter onto the patch space, not the
 //!   filter's values at the Lagrange nodes (App. B). The thesis's rule misses a filter narrower
@@ -76,6 +85,7 @@
 //!   per pixel the `N` channel averages are kept ([`TransferCache`]), so a new transfer
 //!   function is `N` multiply-adds per pixel, without rebuilding the map or the hierarchies.
 
+mod continuous;
 pub mod filter;
 mod project;
 mod render;
@@ -153,6 +163,21 @@ pub struct NilDisplaySettings {
     /// split down to the coarsest level holding triggers. Off reproduces Fig 4.19 as printed,
     /// whose trigger-less cells next to a ray stay large and blur its fringe.
     pub refine_support: bool,
+    /// Continuous patches (decision 0027; projected control points, `M ≥ 2`): the data's
+    /// per-cell projections are averaged at the nodes that cells of one level share, so the
+    /// approximated density has no jumps at cell faces and the image no seams along projected
+    /// cell boundaries. For the tube filters (linearised display, slices); the balls of the
+    /// sample-and-filter display keep each cell's own fit (a difference of Gaussians measures
+    /// edges, which the shared values blur). Off: each cell's own projection (decision 0007 as
+    /// first written).
+    pub continuous: bool,
+    /// Largest cell a filter crosses, in multiples of the filter's narrowest cross-section
+    /// (`6σ`: the screen Gaussian's or the ball's truncated width; decision 0027): crossed
+    /// cells wider than that are split, like the support refinement, whatever their triggers.
+    /// A patch much wider than the filter cannot follow it, and the tube then samples a fit
+    /// of the data over the whole cell (blur, and seams along cell faces). `0`: no cap (the
+    /// trigger hierarchy alone, Fig 4.19).
+    pub max_cell_width: f64,
 }
 
 impl Default for NilDisplaySettings {
@@ -165,8 +190,27 @@ impl Default for NilDisplaySettings {
             gamma_min: -1,
             guard: 1e-3,
             refine_support: true,
+            continuous: true,
+            max_cell_width: 1.5,
         }
     }
+}
+
+/// How the linearised display ([`DisplayKind::Linearised`]) attenuates light along the ray.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Attenuation {
+    /// Sabella's own attenuation `e^{−τ∫ρ}` (eq 3.1), without linearisation (default,
+    /// decision 0027): the emission density is the absorption density, so the integrand of
+    /// eq 3.1 is `d/dt(−e^{−τ∫ρ}/τ)` and `τI = 1 − e^{−τX}` with `X = ∫ρ dt` along the ray. The
+    /// display evaluates the linear filter `X = ∬G ∫ρ dt` (screen Gaussian × line integral)
+    /// with NIL maps or quadrature and shows `1 − e^{−τX}`: Sabella's display up to the screen
+    /// filter (a Gaussian before the exponential instead of Sabella's `n × n` rays after it).
+    OpticalDepth,
+    /// eq 3.3 = 6.1 as printed: attenuation `e^{−τ(t − t_a)}` from the ray's entry into the
+    /// volume's box, i.e. unit density everywhere (the thesis's linearisation, Plates 6.3–6.6).
+    /// Far darker than Sabella's display where the box holds empty space or low densities
+    /// (19 dB against it on the Colin27 MRI, issue 28).
+    UnitDensity,
 }
 
 /// Direct-evaluation parameters.
@@ -176,7 +220,8 @@ pub struct QuadratureSettings {
     pub step: f64,
     /// Gauss–Legendre nodes per axis across the ray over `±3σ` (a multiple of 4): the filter's
     /// cross-section lines, shared by the direct evaluation and the NIL control points, so that
-    /// their difference is the patch approximation alone.
+    /// their difference is the patch approximation alone. Default 4 (16 lines; decision 0027:
+    /// 0.1 dB from 8 per axis on an MRI's NIL display, at a quarter of the cost).
     pub cross_nodes: usize,
 }
 
@@ -184,7 +229,7 @@ impl Default for QuadratureSettings {
     fn default() -> Self {
         QuadratureSettings {
             step: 0.5,
-            cross_nodes: 8,
+            cross_nodes: 4,
         }
     }
 }
@@ -198,6 +243,8 @@ pub struct DisplaySettings {
     pub evaluator: Evaluator,
     /// Attenuation `τ` per unit length (thesis: 3).
     pub tau: f64,
+    /// Attenuation model of the linearised display.
+    pub attenuation: Attenuation,
     /// Screen Gaussian standard deviation, pixels.
     pub screen_sigma_px: f64,
     /// Rays per pixel per axis for Sabella and the maximum (thesis: 4, i.e. 16 rays).
@@ -231,6 +278,7 @@ impl Default for DisplaySettings {
             kind: DisplayKind::Linearised,
             evaluator: Evaluator::Nil,
             tau: 3.0,
+            attenuation: Attenuation::OpticalDepth,
             screen_sigma_px: 0.5,
             supersample: 4,
             samples_per_ray: 256,
@@ -341,6 +389,12 @@ impl DisplaySettings {
             "must be in -8..=20",
         )?;
         check(
+            "max_cell_width",
+            fin(n.max_cell_width) && (0.0..=1e6).contains(&n.max_cell_width),
+            n.max_cell_width,
+            "must be in [0, 1e6] filter widths (0: no cap)",
+        )?;
+        check(
             "guard",
             fin(n.guard) && (0.0..1.0).contains(&n.guard),
             n.guard,
@@ -420,11 +474,15 @@ impl DisplayStats {
 }
 
 /// Per-pixel NIL channel averages kept for transfer-function changes (eq 4.24, §6-4): the
-/// display value of coefficients `b` is `scale · Σ_l b_l · channel_l`.
+/// display value of coefficients `b` is `max(0, scale · Σ_l b_l · channel_l)`, or with
+/// Sabella's attenuation `1 − e^{−τ·max(0, scale · Σ_l b_l · channel_l)}`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TransferCache {
     /// Channels per pixel `N`.
     pub channels: usize,
+    /// `Some(τ)` (per world unit) when the channels are line integrals to be shown as
+    /// `1 − e^{−τX}` ([`Attenuation::OpticalDepth`]); `None` when they are shown as they are.
+    pub tau: Option<f64>,
     /// Per-pixel scale (1 for the linearised display and slices).
     pub scale: Vec<f64>,
     /// Channel averages, pixel-major (`N` per pixel).
@@ -445,7 +503,13 @@ impl TransferCache {
             .scale
             .iter()
             .zip(self.values.chunks_exact(self.channels))
-            .map(|(s, c)| (s * c.iter().zip(b).map(|(x, y)| x * y).sum::<f64>()) as f32)
+            .map(|(s, c)| {
+                let v = (s * c.iter().zip(b).map(|(x, y)| x * y).sum::<f64>()).max(0.0);
+                match self.tau {
+                    Some(tau) => (1.0 - (-tau * v).exp()) as f32,
+                    None => v as f32,
+                }
+            })
             .collect())
     }
 }

@@ -39,6 +39,8 @@ pub(crate) enum Profile {
     Exp { ta: f64, tau: f64 },
     /// `exp(−½((t − t_c)/w)²)` for `|t − t_c| ≤ 3w` (slices, balls).
     Gauss { tc: f64, w: f64 },
+    /// `1` for `t ≥ t_0` (the line integral of Sabella's optical depth).
+    Uniform { t0: f64 },
 }
 
 impl Profile {
@@ -60,6 +62,13 @@ impl Profile {
                     (-0.5 * u * u).exp()
                 }
             }
+            Profile::Uniform { t0 } => {
+                if t < t0 {
+                    0.0
+                } else {
+                    1.0
+                }
+            }
         }
     }
 
@@ -67,6 +76,7 @@ impl Profile {
         match *self {
             Profile::Exp { ta, .. } => (ta, f64::INFINITY),
             Profile::Gauss { tc, w } => (tc - TRUNC * w, tc + TRUNC * w),
+            Profile::Uniform { t0 } => (t0, f64::INFINITY),
         }
     }
 
@@ -75,14 +85,18 @@ impl Profile {
         match *self {
             Profile::Exp { tau, .. } => 1.0 / tau,
             Profile::Gauss { w, .. } => w,
+            Profile::Uniform { .. } => f64::INFINITY,
         }
     }
 
     /// `∫` over the whole support (exact for the exponential; composite Gauss–Legendre with 24
-    /// panels of 5 nodes, relative error below 1e-12, for the truncated Gaussian).
+    /// panels of 5 nodes, relative error below 1e-12, for the truncated Gaussian). The uniform
+    /// profile has no finite integral: its normaliser is 1 per unit length, so that
+    /// `∭Fρ / K` is the screen-filtered line integral.
     fn total(&self) -> f64 {
         match *self {
             Profile::Exp { tau, .. } => 1.0 / tau,
+            Profile::Uniform { .. } => 1.0,
             Profile::Gauss { tc, w } => composite_nodes(tc - TRUNC * w, tc + TRUNC * w, 24, 5)
                 .iter()
                 .map(|&(t, wt)| wt * self.at(t))
@@ -100,6 +114,27 @@ struct Line {
     w: f64,
     t0: f64,
     t1: f64,
+    /// Bounding box of the clipped segment (index space), widened by [`AABB_PAD`]: a cell
+    /// outside it cannot meet the line, which saves the clip.
+    lo: DVec3,
+    hi: DVec3,
+}
+
+/// Widening of a line's bounding box, index units: only cells clearly apart from the segment
+/// are skipped, so the skip never changes a result.
+const AABB_PAD: f64 = 1e-6;
+
+impl Line {
+    /// Whether the segment's bounding box misses the box `[base, top]`.
+    #[inline]
+    fn misses(&self, base: DVec3, top: DVec3) -> bool {
+        self.hi.x < base.x
+            || self.hi.y < base.y
+            || self.hi.z < base.z
+            || self.lo.x > top.x
+            || self.lo.y > top.y
+            || self.lo.z > top.z
+    }
 }
 
 /// A display filter as weighted lines (module docs).
@@ -107,7 +142,8 @@ struct Line {
 pub(crate) struct LineFilter {
     lines: Vec<Line>,
     profile: Option<Profile>,
-    /// `∭ F` of the whole filter, world volume (not masked by the box).
+    /// `∭ F` of the whole filter, world volume (not masked by the box); for the line integral
+    /// (uniform profile) the screen filter's weight per unit length.
     pub k_full: f64,
     /// `∭ F` over the box of voxel centres (the masked filter).
     pub k_box: f64,
@@ -150,6 +186,16 @@ impl LineFilter {
                 1.0,
                 Profile::Exp { ta: ray.ta, tau },
             ),
+            PixelFilter::LineIntegral { ray, sigma } => (
+                ray.o,
+                ray.d,
+                ray.e1,
+                ray.e2,
+                sigma.a,
+                sigma.b,
+                1.0,
+                Profile::Uniform { t0: ray.t_min },
+            ),
             PixelFilter::Slice { ray, sigma, tc, w } => (
                 ray.o,
                 ray.d,
@@ -187,7 +233,17 @@ impl LineFilter {
                 let (t0, t1) = clip(q0, dq, lo, hi, sup0, sup1);
                 if t1 > t0 {
                     k_box += w * integrate(&profile, t0, t1);
-                    self.lines.push(Line { q0, dq, w, t0, t1 });
+                    let (a, b) = (q0 + dq * t0, q0 + dq * t1);
+                    let pad = DVec3::splat(AABB_PAD);
+                    self.lines.push(Line {
+                        q0,
+                        dq,
+                        w,
+                        t0,
+                        t1,
+                        lo: a.min(b) - pad,
+                        hi: a.max(b) + pad,
+                    });
                 }
             }
         }
@@ -218,6 +274,9 @@ impl LineFilter {
         ) * h;
         let hi = lo + DVec3::splat(h);
         self.lines.iter().any(|l| {
+            if l.misses(lo, hi) {
+                return false;
+            }
             let (t0, t1) = clip(l.q0, l.dq, lo, hi, l.t0, l.t1);
             t1 > t0
         })
@@ -322,25 +381,51 @@ impl Projector {
         }
     }
 
-    /// Control points of `filter` on `cell` into `b` (`M³`, index `(k·M + j)·M + i`): the L²
-    /// projection of the masked filter. Returns false if no line meets the cell.
-    pub fn control_points(&self, filter: &LineFilter, cell: &Cell, b: &mut [f64; 64]) -> bool {
+    /// Moments `m_ijk = ∫_cell F·B_ijk` (world volume; `M³`, index `(k·M + j)·M + i`) of the
+    /// masked filter on `cell`. Returns false if no line meets the cell.
+    pub fn moments(&self, filter: &LineFilter, cell: &Cell, mom: &mut [f64; 64]) -> bool {
+        match self.basis.order() {
+            1 => self.moments_m::<1>(filter, cell, mom),
+            2 => self.moments_m::<2>(filter, cell, mom),
+            3 => self.moments_m::<3>(filter, cell, mom),
+            _ => self.moments_m::<4>(filter, cell, mom),
+        }
+    }
+
+    /// [`Self::moments`] for `M` known at compile time (the loops unroll).
+    fn moments_m<const M: usize>(
+        &self,
+        filter: &LineFilter,
+        cell: &Cell,
+        mom: &mut [f64; 64],
+    ) -> bool {
         let Some(profile) = filter.profile else {
             return false;
         };
-        let m = self.basis.order();
         let h = cell.size();
+        // A power of two: multiplying by the inverse is exact.
+        let inv_h = 1.0 / h;
         let base = DVec3::new(
             cell.index[0] as f64,
             cell.index[1] as f64,
             cell.index[2] as f64,
         ) * h;
         let top = base + DVec3::splat(h);
-        let mut mom = [0.0; 64];
+        let mut acc = [[[0.0f64; M]; M]; M];
         let mut any = false;
         let (xi, wi) = gauss_legendre(self.nq);
         let scale = profile.scale();
+        let coef: [[f64; MAX_ORDER]; M] = std::array::from_fn(|i| *self.basis.coefficients(i));
+        let eval = |t: f64| -> [f64; M] {
+            std::array::from_fn(|i| {
+                let c = &coef[i];
+                ((c[3] * t + c[2]) * t + c[1]) * t + c[0]
+            })
+        };
         for l in &filter.lines {
+            if l.misses(base, top) {
+                continue;
+            }
             let (t0, t1) = clip(l.q0, l.dq, base, top, l.t0, l.t1);
             if t1 <= t0 {
                 continue;
@@ -356,46 +441,61 @@ impl Projector {
                     if f == 0.0 {
                         continue;
                     }
-                    let u = ((l.q0 + l.dq * t) - base) / h;
-                    let mut bx = [0.0; MAX_ORDER];
-                    let mut by = [0.0; MAX_ORDER];
-                    let mut bz = [0.0; MAX_ORDER];
-                    for i in 0..m {
-                        bx[i] = self.basis.eval(i, u.x);
-                        by[i] = self.basis.eval(i, u.y);
-                        bz[i] = self.basis.eval(i, u.z);
-                    }
-                    for k in 0..m {
-                        let fz = f * bz[k];
-                        for j in 0..m {
-                            let fyz = fz * by[j];
-                            let row = &mut mom[(k * m + j) * m..(k * m + j) * m + m];
-                            for (o, bxi) in row.iter_mut().zip(&bx[..m]) {
-                                *o += fyz * bxi;
+                    let u = ((l.q0 + l.dq * t) - base) * inv_h;
+                    let (bx, by, bz) = (eval(u.x), eval(u.y), eval(u.z));
+                    for (plane, &z) in acc.iter_mut().zip(&bz) {
+                        let fz = f * z;
+                        for (row, &y) in plane.iter_mut().zip(&by) {
+                            let fyz = fz * y;
+                            for (o, &x) in row.iter_mut().zip(&bx) {
+                                *o += fyz * x;
                             }
                         }
                     }
                 }
             }
         }
-        if !any {
+        for (k, plane) in acc.iter().enumerate() {
+            for (j, row) in plane.iter().enumerate() {
+                mom[(k * M + j) * M..(k * M + j + 1) * M].copy_from_slice(row);
+            }
+        }
+        any
+    }
+
+    /// Control points of `filter` on `cell` into `b` (`M³`, index `(k·M + j)·M + i`): the L²
+    /// projection of the masked filter, `b = (G⁻¹ ⊗ G⁻¹ ⊗ G⁻¹) m`. Returns false if no line
+    /// meets the cell.
+    pub fn control_points(&self, filter: &LineFilter, cell: &Cell, b: &mut [f64; 64]) -> bool {
+        let mut mom = [0.0; 64];
+        if !self.moments(filter, cell, &mut mom) {
             return false;
         }
-        // b = (G⁻¹ ⊗ G⁻¹ ⊗ G⁻¹) m, one axis at a time (m is in world volume; the cell's
-        // `h³·det` cancels against the unit-cell normalisation of the NIL moments C).
+        // m is in world volume; the cell's `h³·det` cancels against the unit-cell
+        // normalisation of the NIL moments C.
+        self.apply_ginv(&mut mom, b);
+        true
+    }
+
+    /// `out = (G⁻¹ ⊗ G⁻¹ ⊗ G⁻¹) x` for `M³` values (index `(k·M + j)·M + i`), one axis at a
+    /// time; `x` is overwritten. Applied to a filter's moments it gives its control points;
+    /// applied to a NIL cell `C` it gives the Lagrange coefficients of the cell's L²
+    /// projection of the data, i.e. that projection's values at the nodes.
+    pub fn apply_ginv(&self, x: &mut [f64], out: &mut [f64]) {
+        let m = self.basis.order();
         let g = &self.ginv;
         let mut tmp = [0.0; 64];
         // x
         for kj in 0..m * m {
             for i in 0..m {
-                tmp[kj * m + i] = (0..m).map(|p| g[i][p] * mom[kj * m + p]).sum();
+                tmp[kj * m + i] = (0..m).map(|p| g[i][p] * x[kj * m + p]).sum();
             }
         }
         // y
         for k in 0..m {
             for j in 0..m {
                 for i in 0..m {
-                    mom[(k * m + j) * m + i] =
+                    x[(k * m + j) * m + i] =
                         (0..m).map(|p| g[j][p] * tmp[(k * m + p) * m + i]).sum();
                 }
             }
@@ -404,12 +504,11 @@ impl Projector {
         for k in 0..m {
             for j in 0..m {
                 for i in 0..m {
-                    b[(k * m + j) * m + i] =
-                        (0..m).map(|p| g[k][p] * mom[(p * m + j) * m + i]).sum();
+                    out[(k * m + j) * m + i] =
+                        (0..m).map(|p| g[k][p] * x[(p * m + j) * m + i]).sum();
                 }
             }
         }
-        true
     }
 }
 

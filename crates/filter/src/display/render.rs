@@ -1,11 +1,12 @@
 //! The per-pixel loop of the Chapter 6 displays (Buchanan App. B) for both evaluators.
 
+use super::continuous::{NodeGrids, integrate_continuous};
 use super::filter::{PixelFilter, Sigma, TRUNC, composite_nodes, direct, triggers};
 use super::project::{LineFilter, Projector, integrate_cells};
 use super::volume::{DisplayVolume, PixelRay, Rays};
 use super::{
-    ControlPoints, DisplayImage, DisplayKind, DisplaySettings, DisplayStats, Evaluator, SearchRule,
-    TransferCache,
+    Attenuation, ControlPoints, DisplayImage, DisplayKind, DisplaySettings, DisplayStats,
+    Evaluator, SearchRule, TransferCache,
 };
 use crate::error::{FilterError, Result};
 use crate::nil::Cell;
@@ -35,6 +36,8 @@ struct Scratch {
     bs: Vec<Option<[f64; 64]>>,
     /// Cross-section nodes of the NIL line quadrature.
     cross: Vec<(f64, f64)>,
+    /// A cell's raw moments (continuous patches, decision 0027).
+    raw: Vec<f64>,
 }
 
 struct Pixel {
@@ -121,9 +124,28 @@ pub(crate) fn render(
     };
     let unit = vol.unit();
     let tau = s.tau / unit;
+    // Sabella's attenuation: the linearised display's value is `1 − e^{−τX}` of the line
+    // integral `X` (Attenuation::OpticalDepth).
+    let optical_tau = (s.kind == DisplayKind::Linearised
+        && s.attenuation == Attenuation::OpticalDepth)
+        .then_some(tau);
     let step = s.quadrature.step * vol.min_spacing();
     let cross = composite_nodes(-TRUNC, TRUNC, s.quadrature.cross_nodes / 4, 4);
     let projector = map.map(|m| Projector::new(*m.basis()));
+    // Continuous patches (decision 0027): shared node values per level, built on first use.
+    let grids = match (map, &projector) {
+        (Some(m), Some(p)) if s.nil.continuous && s.nil.control == ControlPoints::Project => {
+            let exact0 = m.transfer().is_none()
+                && m.texture().reconstruction() == crate::texture::Reconstruction::Trilinear;
+            Some(NodeGrids::new(
+                m,
+                p,
+                vol.dims().map(|n| (n - 1) as f64),
+                exact0,
+            ))
+        }
+        _ => None,
+    };
     let prepare = |sc: &mut Scratch| {
         if sc.cross.is_empty() {
             sc.cross.clone_from(&cross);
@@ -191,7 +213,14 @@ pub(crate) fn render(
                 st.rays += 1;
                 let sigma = sigma_of(&ray);
                 let (filter, scale) = if s.kind == DisplayKind::Linearised {
-                    (PixelFilter::Linearised { ray, sigma, tau }, 1.0)
+                    match s.attenuation {
+                        Attenuation::UnitDensity => {
+                            (PixelFilter::Linearised { ray, sigma, tau }, 1.0)
+                        }
+                        Attenuation::OpticalDepth => {
+                            (PixelFilter::LineIntegral { ray, sigma }, 1.0)
+                        }
+                    }
                 } else {
                     let tc = slice_depths / ray.cos.max(1e-12);
                     (
@@ -207,9 +236,19 @@ pub(crate) fn render(
                 let ch = match (s.evaluator, map, &projector) {
                     (Evaluator::Nil, Some(map), Some(proj)) => {
                         prepare(sc);
-                        nil_eval(vol, map, proj, &filter, &[&filter], s, sc, st)
-                            .pop()
-                            .unwrap_or_default()
+                        nil_eval(
+                            vol,
+                            map,
+                            proj,
+                            grids.as_ref(),
+                            &filter,
+                            &[&filter],
+                            s,
+                            sc,
+                            st,
+                        )
+                        .pop()
+                        .unwrap_or_default()
                     }
                     _ => {
                         let t0 = Instant::now();
@@ -222,8 +261,13 @@ pub(crate) fn render(
                 for (o, c) in px.channels.iter_mut().zip(&ch) {
                     *o = *c;
                 }
-                let v: f64 = ch.iter().zip(&coeffs).map(|(c, b)| c * b).sum();
-                px.value = (scale * v) as f32;
+                // A density is never negative, nor is a display of one: the clamp catches what
+                // a patch of order M ≥ 3 (or discontinuous patches) can still overshoot.
+                let v = (scale * ch.iter().zip(&coeffs).map(|(c, b)| c * b).sum::<f64>()).max(0.0);
+                px.value = match optical_tau {
+                    Some(tau) => 1.0 - (-tau * v).exp(),
+                    None => v,
+                } as f32;
                 px.green = px.value;
             }
             DisplayKind::Search | DisplayKind::SampleFilter => {
@@ -252,7 +296,17 @@ pub(crate) fn render(
                     let (a, b) = match (s.evaluator, map, &projector) {
                         (Evaluator::Nil, Some(map), Some(proj)) => {
                             prepare(sc);
-                            let r = nil_eval(vol, map, proj, &f2, &[&f1, &f2], s, sc, st);
+                            let r = nil_eval(
+                                vol,
+                                map,
+                                proj,
+                                grids.as_ref(),
+                                &f2,
+                                &[&f1, &f2],
+                                s,
+                                sc,
+                                st,
+                            );
                             let g = |i: usize| r.get(i).and_then(|c| c.first()).copied();
                             (g(0), g(1))
                         }
@@ -299,6 +353,7 @@ pub(crate) fn render(
     let keep_channels = uses_nil && s.kind != DisplayKind::SampleFilter;
     let mut cache = TransferCache {
         channels,
+        tau: optical_tau,
         scale: Vec::with_capacity(if keep_channels { n } else { 0 }),
         values: Vec::with_capacity(if keep_channels { n * channels } else { 0 }),
     };
@@ -399,6 +454,7 @@ fn nil_eval(
     vol: &DisplayVolume,
     map: &DiscreteNilMap,
     proj: &Projector,
+    grids: Option<&NodeGrids<'_>>,
     shape: &PixelFilter,
     filters: &[&PixelFilter],
     s: &DisplaySettings,
@@ -425,35 +481,7 @@ fn nil_eval(
     }
     let t2 = Instant::now();
     st.control_s += (t2 - t1).as_secs_f64();
-    sc.cells.clear();
-    sc.counted.clear();
-    let root = enclosing_cell(&sc.bound, s.nil.gamma_min, map.gamma_max());
-    if let Some(root) = root {
-        find_hierarchy_counted(
-            &sc.triggers,
-            root,
-            s.nil.tolerance,
-            s.nil.gamma_min,
-            &mut sc.counted,
-        );
-        // Support refinement (decision 0007): a cell without triggers that the filter crosses
-        // is split down to the coarsest level that holds triggers; split parts the filter
-        // does not cross are dropped (they carry no weight).
-        let g_ref = sc
-            .counted
-            .iter()
-            .filter(|c| c.1 > 0)
-            .map(|c| c.0.gamma)
-            .max();
-        for &(cell, n) in &sc.counted {
-            match g_ref {
-                Some(g) if s.nil.refine_support && n == 0 && cell.gamma > g => {
-                    refine(cell, g, &sc.lines, &mut sc.cells)
-                }
-                _ => sc.cells.push(cell),
-            }
-        }
-    }
+    let root = hierarchy(vol, map, filters, s, sc);
     let t3 = Instant::now();
     st.hierarchy_s += (t3 - t2).as_secs_f64();
     st.patches += sc.cells.len() as u64;
@@ -468,15 +496,30 @@ fn nil_eval(
         match s.nil.control {
             ControlPoints::Project => {
                 let tc = Instant::now();
+                // Continuous patches need the filter's moments, discontinuous ones its control
+                // points (`b = G⁻¹ m`); constant patches (M = 1) share no nodes.
+                // Balls (the difference of Gaussians) keep each cell's own fit: they measure
+                // the data's edges, which the shared node values blur (decision 0027).
+                let tube = !matches!(shape, PixelFilter::Ball { .. });
+                let continuous = grids.filter(|_| tube && map.basis().order() > 1);
                 sc.bs.clear();
                 for cell in &sc.cells {
                     let mut b = [0.0; 64];
-                    let hit = proj.control_points(lf, cell, &mut b);
+                    let hit = if continuous.is_some() {
+                        proj.moments(lf, cell, &mut b)
+                    } else {
+                        proj.control_points(lf, cell, &mut b)
+                    };
                     sc.bs.push(hit.then_some(b));
                 }
                 let ti = Instant::now();
                 st.control_s += (ti - tc).as_secs_f64();
-                if !integrate_cells(map, &sc.cells, &sc.bs, &mut sc.moments, &mut num) {
+                let ok = if let Some(g) = continuous {
+                    integrate_continuous(g, &sc.cells, &sc.bs, &mut sc.raw, &mut num)
+                } else {
+                    integrate_cells(map, &sc.cells, &sc.bs, &mut sc.moments, &mut num)
+                };
+                if !ok {
                     st.fallbacks += 1;
                     num = point_sampled(vol, map, &sc.triggers, &|p| LineFilter::masked(vol, f, p));
                     num.iter_mut().for_each(|x| *x *= lf.k_box);
@@ -510,6 +553,67 @@ fn nil_eval(
         out.push(num);
     }
     out
+}
+
+/// The cells of one NIL evaluation into `sc.cells`: Fig 4.19's hierarchy of `sc.triggers` under
+/// the smallest cell enclosing `sc.bound`, with the support refinement (decision 0007) and the
+/// size cap (decision 0027). Returns the root (`None`: no cell within `γ_max` encloses them).
+fn hierarchy(
+    vol: &DisplayVolume,
+    map: &DiscreteNilMap,
+    filters: &[&PixelFilter],
+    s: &DisplaySettings,
+    sc: &mut Scratch,
+) -> Option<Cell> {
+    sc.cells.clear();
+    sc.counted.clear();
+    let root = enclosing_cell(&sc.bound, s.nil.gamma_min, map.gamma_max())?;
+    find_hierarchy_counted(
+        &sc.triggers,
+        root,
+        s.nil.tolerance,
+        s.nil.gamma_min,
+        &mut sc.counted,
+    );
+    // Support refinement (decision 0007): a cell without triggers that the filter crosses
+    // is split down to the coarsest level that holds triggers; split parts the filter
+    // does not cross are dropped (they carry no weight).
+    let g_ref = sc
+        .counted
+        .iter()
+        .filter(|c| c.1 > 0)
+        .map(|c| c.0.gamma)
+        .max();
+    // Size cap (decision 0027): no crossed cell wider than `max_cell_width` times the
+    // narrowest filter's cross-section (index units along the coarsest axis), and none
+    // finer than a voxel for the cap's sake: a cell of level ≤ 0 lies in one voxel cell,
+    // where the data is already in the patch space.
+    let cap = (s.nil.max_cell_width > 0.0).then(|| {
+        let w = filters
+            .iter()
+            .map(|f| f.min_width())
+            .fold(f64::INFINITY, f64::min);
+        let side = s.nil.max_cell_width * w / vol.max_spacing();
+        (side.log2().floor() as i32).max(0).max(s.nil.gamma_min)
+    });
+    for &(cell, n) in &sc.counted {
+        let mut target = cell.gamma;
+        if let Some(g) = g_ref
+            && s.nil.refine_support
+            && n == 0
+        {
+            target = target.min(g);
+        }
+        if let Some(c) = cap {
+            target = target.min(c);
+        }
+        if target < cell.gamma {
+            refine(cell, target, &sc.lines, &mut sc.cells);
+        } else {
+            sc.cells.push(cell);
+        }
+    }
+    Some(root)
 }
 
 /// Splits `cell` into its descendants of level `g` that a filter line crosses.

@@ -40,6 +40,7 @@ pub struct DisplayVolume {
     origin: DVec3,
     unit: f64,
     min_spacing: f64,
+    max_spacing: f64,
 }
 
 impl DisplayVolume {
@@ -81,6 +82,7 @@ impl DisplayVolume {
         let (lo, hi) = grid.bounds_world();
         let unit = (hi - lo).max_element();
         let min_spacing = grid.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
+        let max_spacing = grid.spacing.iter().fold(0.0f64, |m, &s| m.max(s));
         Ok(DisplayVolume {
             texture,
             dims,
@@ -89,6 +91,7 @@ impl DisplayVolume {
             origin: grid.world_from_index(DVec3::ZERO),
             unit,
             min_spacing,
+            max_spacing,
         })
     }
 
@@ -131,6 +134,11 @@ impl DisplayVolume {
     /// Smallest grid spacing, world units.
     pub fn min_spacing(&self) -> f64 {
         self.min_spacing
+    }
+
+    /// Largest grid spacing, world units.
+    pub fn max_spacing(&self) -> f64 {
+        self.max_spacing
     }
 
     /// Whether an index-space point lies in the box of voxel centres `[0, n − 1]³`.
@@ -212,6 +220,9 @@ pub(crate) struct PixelRay {
     pub tb: f64,
     /// `d · forward` (converts `t` to depth along the direction of projection).
     pub cos: f64,
+    /// Where the lines of a tube around this ray may start: 0 (the eye) under perspective,
+    /// `−∞` for orthographic rays (whose origin may lie inside the volume, VTK semantics).
+    pub t_min: f64,
 }
 
 /// Ray generation for one projection (either kind, through [`Projection::ray`]).
@@ -232,11 +243,12 @@ impl Rays {
         let e1 = e1.normalize();
         let e2 = d.cross(e1);
         // Orthographic rays may start behind the volume's front (VTK semantics); clip anyway.
-        let ta = if matches!(self.proj, Projection::Perspective(_)) {
-            ta.max(0.0)
+        let t_min = if matches!(self.proj, Projection::Perspective(_)) {
+            0.0
         } else {
-            ta
+            f64::NEG_INFINITY
         };
+        let ta = ta.max(t_min);
         (tb > ta).then_some(PixelRay {
             o,
             d,
@@ -245,6 +257,7 @@ impl Rays {
             ta,
             tb,
             cos: d.dot(f.forward),
+            t_min,
         })
     }
 

@@ -102,82 +102,81 @@ pub(crate) fn cell_row(
 
 /// Separable contraction of a grid (`dims`, x fastest) with per-axis rows for `P_x × P_y × P_z`
 /// cells. Output: cell `(cx, cy, cz)` at `((cz·P_y + cy)·P_x + cx)·M³`, moments `(k·M + j)·M + i`.
+/// Each step runs in parallel over independent output slices (rayon); every output value is
+/// summed in the same order whatever the thread count.
 pub(crate) fn contract(
     grid: &[f64],
     dims: [usize; 3],
     rows: [&[AxisRow]; 3],
     m: usize,
 ) -> Vec<f64> {
+    use rayon::prelude::*;
     let [nx, ny, nz] = dims;
     let [rx, ry, rz] = rows;
     let (px, py, pz) = (rx.len(), ry.len(), rz.len());
-    // Step 1 (x): a[z][y][cx][i].
-    let mut a = vec![0.0; nz * ny * px * m];
-    for z in 0..nz {
-        for y in 0..ny {
-            let line = &grid[(z * ny + y) * nx..(z * ny + y + 1) * nx];
-            let out = &mut a[(z * ny + y) * px * m..(z * ny + y + 1) * px * m];
-            for (cx, row) in rx.iter().enumerate() {
-                for &(s, w) in row {
-                    let v = line[s];
-                    for i in 0..m {
-                        out[cx * m + i] += w[i] * v;
-                    }
-                }
-            }
-        }
-    }
-    // Step 2 (y): b[z][cy][j][cx·m + i].
     let xm = px * m;
-    let mut b = vec![0.0; nz * py * m * xm];
-    for z in 0..nz {
-        for (cy, row) in ry.iter().enumerate() {
-            for &(t, w) in row {
-                let src = &a[(z * ny + t) * xm..(z * ny + t + 1) * xm];
-                for j in 0..m {
-                    let dst =
-                        &mut b[((z * py + cy) * m + j) * xm..((z * py + cy) * m + j + 1) * xm];
-                    let wj = w[j];
-                    for (d, s) in dst.iter_mut().zip(src) {
-                        *d += wj * s;
+    // Step 2's output b[z][cy][j][cx·m + i], from step 1's a[z][y][cx][i] (x contracted).
+    let b = {
+        // Step 1 (x): one output line per grid line.
+        let mut a = vec![0.0; nz * ny * xm];
+        a.par_chunks_mut(xm.max(1))
+            .zip(grid.par_chunks(nx.max(1)))
+            .for_each(|(out, line)| {
+                for (cx, row) in rx.iter().enumerate() {
+                    for &(s, w) in row {
+                        let v = line[s];
+                        for i in 0..m {
+                            out[cx * m + i] += w[i] * v;
+                        }
                     }
                 }
-            }
-        }
-    }
-    // Step 3 (z): c[cz][k][cy][j][cx][i].
-    let yxm = py * m * xm;
-    let mut c = vec![0.0; pz * m * yxm];
-    for (cz, row) in rz.iter().enumerate() {
-        for &(u, w) in row {
-            let src = &b[u * yxm..(u + 1) * yxm];
-            for k in 0..m {
-                let dst = &mut c[(cz * m + k) * yxm..(cz * m + k + 1) * yxm];
-                let wk = w[k];
-                for (d, s) in dst.iter_mut().zip(src) {
-                    *d += wk * s;
+            });
+        // Step 2 (y): one output slab per z.
+        let mut b = vec![0.0; nz * py * m * xm];
+        b.par_chunks_mut((py * m * xm).max(1))
+            .enumerate()
+            .for_each(|(z, slab)| {
+                for (cy, row) in ry.iter().enumerate() {
+                    for &(t, w) in row {
+                        let src = &a[(z * ny + t) * xm..(z * ny + t + 1) * xm];
+                        for j in 0..m {
+                            let dst = &mut slab[(cy * m + j) * xm..(cy * m + j + 1) * xm];
+                            let wj = w[j];
+                            for (d, s) in dst.iter_mut().zip(src) {
+                                *d += wj * s;
+                            }
+                        }
+                    }
                 }
-            }
-        }
-    }
-    // Reorder to cell-major.
+            });
+        b
+    };
+    // Step 3 (z), written straight into cell-major order: one output slab per cz.
     let m3 = m * m * m;
+    let yxm = py * m * xm;
     let mut out = vec![0.0; px * py * pz * m3];
-    for cz in 0..pz {
-        for k in 0..m {
-            for cy in 0..py {
-                for j in 0..m {
-                    for cx in 0..px {
-                        for i in 0..m {
-                            let src = (((cz * m + k) * py + cy) * m + j) * xm + cx * m + i;
-                            let dst = ((cz * py + cy) * px + cx) * m3 + (k * m + j) * m + i;
-                            out[dst] = c[src];
+    out.par_chunks_mut((py * px * m3).max(1))
+        .zip(rz.par_iter())
+        .for_each(|(slab, row)| {
+            for &(u, w) in row {
+                let src = &b[u * yxm..(u + 1) * yxm];
+                for k in 0..m {
+                    let wk = w[k];
+                    for cy in 0..py {
+                        for j in 0..m {
+                            let s_row = &src[(cy * m + j) * xm..(cy * m + j + 1) * xm];
+                            for cx in 0..px {
+                                let d0 = (cy * px + cx) * m3 + (k * m + j) * m;
+                                let dst = &mut slab[d0..d0 + m];
+                                for (d, s) in dst.iter_mut().zip(&s_row[cx * m..cx * m + m]) {
+                                    *d += wk * s;
+                                }
+                            }
                         }
                     }
                 }
             }
-        }
-    }
+        });
     out
 }
 

@@ -29,14 +29,59 @@ pub(super) const MAX_NESTING: usize = 64;
 const PIXEL_DATA: Tag = Tag(0x7FE0, 0x0010);
 const ITEM_END: Tag = Tag(0xFFFE, 0xE00D);
 const IMPLICIT_VR_LE: &str = "1.2.840.10008.1.2";
+const EXPLICIT_VR_LE: &str = "1.2.840.10008.1.2.1";
+/// Media Storage Directory Storage: a DICOMDIR (PS3.10 §8), never an image.
+pub(super) const DICOMDIR_SOP_CLASS: &str = "1.2.840.10008.1.3.10";
+/// A value length meaning "undefined" (PS3.5 §7.1.1).
+pub(super) const UNDEFINED: u32 = 0xFFFF_FFFF;
 
 /// What the walk found.
 #[derive(Debug, Clone)]
 pub(super) struct Walked {
-    /// The transfer syntax UID (trailing NUL and spaces removed).
+    /// The transfer syntax UID the data set is read with (trailing NUL and spaces removed): the
+    /// file meta group's, or implicit/explicit VR little endian where the data set is written
+    /// in the other one ([`Walked::vr_mismatch`]).
     pub ts_uid: String,
     /// The transfer syntax name from dicom-rs's registry.
     pub ts_name: String,
+    /// MediaStorageSOPClassUID (0002,0002) of the file meta group (empty if absent).
+    pub media_sop_class: String,
+    /// The data set is written in the other VR encoding than the meta group declares (explicit
+    /// VR declared, implicit written, or the reverse); it is read as written, as pydicom does.
+    /// Holds the declared UID.
+    pub vr_mismatch: Option<String>,
+    /// The top-level Pixel Data (7FE0,0010) element's declared length ([`UNDEFINED`] when
+    /// encapsulated) and where its value starts in the file; `None` when the walk ended
+    /// before it. For a deflated data set, the position is in the inflated stream.
+    pub pixel: Option<(u32, u64)>,
+    /// Whether the data set is deflated (PS3.5 §A.5).
+    pub deflated: bool,
+}
+
+/// The image size a data set's top level declares, as read by the walk (not validated).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(super) struct Declared {
+    pub rows: Option<u16>,
+    pub cols: Option<u16>,
+    pub samples: Option<u16>,
+    pub bits_allocated: Option<u16>,
+    pub frames: Option<u64>,
+}
+
+impl Declared {
+    /// Bytes of pixel data the attributes declare (at least one byte per sample), or `None`
+    /// when Rows or Columns is missing.
+    pub(super) fn image_bytes(&self) -> Option<u64> {
+        let px = u64::from(self.rows?) * u64::from(self.cols?);
+        let bytes = u64::from(self.bits_allocated.unwrap_or(16))
+            .div_ceil(8)
+            .max(1);
+        Some(
+            px.saturating_mul(u64::from(self.samples.unwrap_or(1).max(1)))
+                .saturating_mul(bytes)
+                .saturating_mul(self.frames.unwrap_or(1).max(1)),
+        )
+    }
 }
 
 /// How the data set after the file meta group is encoded.
@@ -53,17 +98,31 @@ fn err(path: &Path, at: u64, what: String) -> IoError {
     }
 }
 
+/// Bytes inflated at first from a deflated data set to find the image attributes (and, for a
+/// header, all of it up to Pixel Data).
+const INFLATE_PREFIX: u64 = 1 << 20;
+
+/// Whether the first data element of `data` looks explicit-VR encoded (a known VR after the
+/// tag), as pydicom decides it (`filereader._is_implicit_vr`). `None`: too short to tell.
+fn looks_explicit(data: &[u8]) -> Option<bool> {
+    let b = data.get(4..6)?;
+    Some(VR::from_binary([b[0], b[1]]).is_some())
+}
+
 /// Walks `bytes` (a DICOM file from its `DICM` magic on: the 128-byte preamble, if any, already
 /// removed; `offset` is where `DICM` was in the file, added to byte positions in messages).
 /// `until_pixel_data`: stop at the first top-level element at or after Pixel Data
 /// (7FE0,0010), as `OpenFileOptions::read_until(PIXEL_DATA)` does. `max_inflated`: the most
-/// bytes a deflated data set (PS3.5 §A.5) may inflate to.
+/// bytes a deflated data set (PS3.5 §A.5) may inflate to; it is lowered to the image size the
+/// data set declares plus `other_bytes` (issue 28: a 3 MB deflated bomb no longer inflates
+/// towards the voxel limit's 64 GiB).
 pub(super) fn walk(
     path: &Path,
     bytes: &[u8],
     offset: u64,
     until_pixel_data: bool,
     max_inflated: u64,
+    other_bytes: u64,
 ) -> Result<Walked> {
     if bytes.len() < 4 || &bytes[..4] != b"DICM" {
         return Err(IoError::Dicom {
@@ -73,52 +132,184 @@ pub(super) fn walk(
                 .into(),
         });
     }
-    let (ts_uid, meta_end) = walk_meta(path, bytes, offset)?;
-    let ts = TransferSyntaxRegistry.get(&ts_uid).ok_or_else(|| {
+    let meta = walk_meta(path, bytes, offset)?;
+    let ts = TransferSyntaxRegistry.get(&meta.ts_uid).ok_or_else(|| {
         IoError::unsupported(
             path,
             "TransferSyntaxUID (0002,0010)",
-            &ts_uid,
+            &meta.ts_uid,
             "the transfer syntaxes known to dicom-rs",
         )
     })?;
+    // The registry's spelling, which the parser uses.
+    let declared_ts = ts.uid().to_string();
     let enc = Enc {
-        explicit: ts_uid != IMPLICIT_VR_LE,
+        explicit: declared_ts != IMPLICIT_VR_LE,
         big_endian: ts.endianness() == Endianness::Big,
     };
-    let rest = &bytes[meta_end..];
-    if matches!(ts.codec(), Codec::Dataset(_)) {
-        // Deflated data set (PS3.5 §A.5): raw deflate after the meta group.
-        let mut inflated = Vec::new();
-        let r = flate2::read::DeflateDecoder::new(rest)
-            .take(max_inflated.saturating_add(1))
-            .read_to_end(&mut inflated);
-        if let Err(e) = r {
-            return Err(IoError::Decompress {
-                path: path.to_path_buf(),
-                what: "deflated data set".into(),
-                error: e,
-            });
-        }
-        if inflated.len() as u64 > max_inflated {
-            return Err(IoError::TooLarge {
-                path: path.to_path_buf(),
-                what: "inflated size of the deflated data set (bytes)".into(),
-                value: inflated.len() as u128,
-                limit: max_inflated as u128,
-            });
-        }
-        walk_dataset(path, &inflated, 0, enc, until_pixel_data)?;
-    } else {
-        walk_dataset(path, rest, offset + meta_end as u64, enc, until_pixel_data)?;
+    let rest = &bytes[meta.end..];
+    let deflated = matches!(ts.codec(), Codec::Dataset(_));
+    if until_pixel_data && meta.sop_class == DICOMDIR_SOP_CLASS {
+        // A directory: told by its meta group; its records are not needed.
+        return Ok(Walked {
+            ts_name: ts.name().to_string(),
+            ts_uid: declared_ts,
+            media_sop_class: meta.sop_class,
+            vr_mismatch: None,
+            pixel: None,
+            deflated,
+        });
     }
-    Ok(Walked {
-        ts_uid,
-        ts_name: ts.name().to_string(),
-    })
+    let walk_data = |data: &[u8], base: u64| -> Result<Walked> {
+        let mut enc = enc;
+        let mut ts_uid = declared_ts.clone();
+        let mut vr_mismatch = None;
+        // Read as written, as the parser will (`header::parse_walked` maps the declared UID to
+        // the written encoding). Only for the two native little-endian syntaxes: inside a
+        // deflated stream the parser has no such mapping (and the walk must follow the
+        // parser), and an encapsulated syntax's UID must stay to choose the pixel decoder.
+        if matches!(declared_ts.as_str(), IMPLICIT_VR_LE | EXPLICIT_VR_LE)
+            && let Some(explicit) = looks_explicit(data)
+            && explicit != enc.explicit
+        {
+            enc.explicit = explicit;
+            vr_mismatch = Some(declared_ts.clone());
+            ts_uid = if explicit {
+                EXPLICIT_VR_LE
+            } else {
+                IMPLICIT_VR_LE
+            }
+            .to_string();
+        }
+        let found = walk_dataset(path, data, base, enc, until_pixel_data)?;
+        let ts_name = TransferSyntaxRegistry
+            .get(&ts_uid)
+            .map_or_else(|| ts_uid.clone(), |t| t.name().to_string());
+        Ok(Walked {
+            ts_uid,
+            ts_name,
+            media_sop_class: meta.sop_class.clone(),
+            vr_mismatch,
+            pixel: found.pixel,
+            deflated,
+        })
+    };
+    if !deflated {
+        return walk_data(rest, offset + meta.end as u64);
+    }
+    if until_pixel_data {
+        // A header: inflate a little, more only if the header runs past it, and never more
+        // than `other_bytes` (the allowance for everything but pixel data).
+        let mut limit = INFLATE_PREFIX.min(other_bytes);
+        loop {
+            let (data, complete) = inflate_prefix(path, rest, limit)?;
+            match walk_data(&data, 0) {
+                Err(_) if !complete && limit < other_bytes => limit = other_bytes,
+                Err(_) if !complete => {
+                    return Err(IoError::TooLarge {
+                        path: path.to_path_buf(),
+                        what: "inflated size of the deflated data set's elements before Pixel \
+                               Data (bytes; 64 MiB at most)"
+                            .into(),
+                        value: data.len() as u128,
+                        limit: limit as u128,
+                    });
+                }
+                r => return r,
+            }
+        }
+    }
+    let data = inflate(path, rest, max_inflated, other_bytes)?;
+    walk_data(&data, 0)
 }
 
-/// A byte cursor that never reads past the end.
+fn inflate_error(path: &Path, e: std::io::Error) -> IoError {
+    IoError::Decompress {
+        path: path.to_path_buf(),
+        what: "deflated data set".into(),
+        error: e,
+    }
+}
+
+/// The first `limit` bytes of a deflated data set (`limit` + 1 when there are more), and
+/// whether that is all of it.
+fn inflate_prefix(path: &Path, rest: &[u8], limit: u64) -> Result<(Vec<u8>, bool)> {
+    let mut out = Vec::new();
+    flate2::read::DeflateDecoder::new(rest)
+        .take(limit + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| inflate_error(path, e))?;
+    let complete = (out.len() as u64) <= limit;
+    Ok((out, complete))
+}
+
+/// Inflates a whole deflated data set (PS3.5 §A.5: raw deflate after the meta group), refused
+/// beyond the image size its attributes declare plus `other_bytes`, and beyond `max_inflated`
+/// in any case.
+fn inflate(path: &Path, rest: &[u8], max_inflated: u64, other_bytes: u64) -> Result<Vec<u8>> {
+    let mut dec = flate2::read::DeflateDecoder::new(rest);
+    let mut out = Vec::new();
+    let first = INFLATE_PREFIX.min(max_inflated.saturating_add(1));
+    (&mut dec)
+        .take(first)
+        .read_to_end(&mut out)
+        .map_err(|e| inflate_error(path, e))?;
+    if (out.len() as u64) < first {
+        return Ok(out);
+    }
+    // More to come: cap it by what the first part declares.
+    let declared = declared_in_prefix(path, &out);
+    let cap = match declared.image_bytes() {
+        Some(img) => img.saturating_add(other_bytes).min(max_inflated),
+        None => other_bytes.min(max_inflated),
+    };
+    (&mut dec)
+        .take(cap.saturating_add(1).saturating_sub(out.len() as u64))
+        .read_to_end(&mut out)
+        .map_err(|e| inflate_error(path, e))?;
+    if out.len() as u64 > cap {
+        return Err(too_large(path, out.len() as u64, cap, declared));
+    }
+    Ok(out)
+}
+
+fn too_large(path: &Path, value: u64, limit: u64, d: Declared) -> IoError {
+    let what = match d.image_bytes() {
+        Some(_) => format!(
+            "inflated size of the deflated data set (bytes; the image it declares, Rows {} × \
+             Columns {} × {} frame(s), plus 64 MiB for other elements)",
+            d.rows.map_or("?".into(), |v| v.to_string()),
+            d.cols.map_or("?".into(), |v| v.to_string()),
+            d.frames.unwrap_or(1)
+        ),
+        None => "inflated size of the deflated data set (bytes; no Rows/Columns before the \
+                 first MiB, so 64 MiB at most)"
+            .into(),
+    };
+    IoError::TooLarge {
+        path: path.to_path_buf(),
+        what,
+        value: value as u128,
+        limit: limit as u128,
+    }
+}
+
+/// The image attributes of the start of an inflated data set (explicit VR little endian, the
+/// only deflated syntax, PS3.5 §A.5), read until the walk stops (at Pixel Data, or where the
+/// prefix ends).
+fn declared_in_prefix(path: &Path, data: &[u8]) -> Declared {
+    let enc = Enc {
+        explicit: true,
+        big_endian: false,
+    };
+    let mut found = Found::default();
+    // An element running past the prefix ends the walk with an error; what was read before it
+    // stays in `found`.
+    let _ = walk_dataset_into(path, data, 0, enc, true, &mut found);
+    found.declared
+}
+
+/// A byte cursor that never reads past the end./// A byte cursor that never reads past the end.
 struct Cur<'a> {
     b: &'a [u8],
     pos: usize,
@@ -185,8 +376,6 @@ fn short_length(vr: VR) -> bool {
     )
 }
 
-const UNDEFINED: u32 = 0xFFFF_FFFF;
-
 /// A data element header as the parser reads it: `None` at a clean end (no bytes, or a partial
 /// tag, as the parser ends gracefully there), `Err` for a header cut after its tag.
 fn element_header(
@@ -246,9 +435,19 @@ fn skip_value(c: &mut Cur<'_>, len: u32, tag: Tag, path: &Path, base: u64) -> Re
     Ok(())
 }
 
+/// What the file meta group says.
+struct Meta {
+    /// TransferSyntaxUID (0002,0010).
+    ts_uid: String,
+    /// MediaStorageSOPClassUID (0002,0002), empty if absent.
+    sop_class: String,
+    /// Where the data set starts.
+    end: usize,
+}
+
 /// The file meta group (PS3.10 §7.1): explicit VR little endian, `(0002,0000)` first giving the
-/// group's length. Returns the transfer syntax UID and where the data set starts.
-fn walk_meta(path: &Path, bytes: &[u8], base: u64) -> Result<(String, usize)> {
+/// group's length.
+fn walk_meta(path: &Path, bytes: &[u8], base: u64) -> Result<Meta> {
     let mut c = Cur {
         b: bytes,
         pos: 4,
@@ -277,6 +476,7 @@ fn walk_meta(path: &Path, bytes: &[u8], base: u64) -> Result<(String, usize)> {
     })?;
     let mut total: u32 = 0;
     let mut ts = None;
+    let mut sop_class = String::new();
     while total < group_length {
         let at = c.pos as u64;
         let (tag, _, len) = element_header(&mut c, enc, path, base)?
@@ -291,18 +491,27 @@ fn walk_meta(path: &Path, bytes: &[u8], base: u64) -> Result<(String, usize)> {
         let header_bytes = (c.pos as u64 - at) as u32;
         let start = c.pos;
         skip_value(&mut c, len, tag, path, base)?;
+        let text = || {
+            String::from_utf8_lossy(&bytes[start..c.pos])
+                // As dicom-object's `FileMetaTable::transfer_syntax` trims (a trailing tab
+                // too: found by fuzzing, the walk read explicit VR where the parser read
+                // implicit).
+                .trim_end_matches(|c: char| c.is_whitespace() || c == '\0')
+                .to_string()
+        };
         if tag == Tag(0x0002, 0x0010) {
-            let v = &bytes[start..c.pos];
-            ts = Some(
-                String::from_utf8_lossy(v)
-                    .trim_end_matches(['\0', ' '])
-                    .to_string(),
-            );
+            ts = Some(text());
+        } else if tag == Tag(0x0002, 0x0002) {
+            sop_class = text();
         }
         total = total.saturating_add(header_bytes).saturating_add(len);
     }
-    let ts = ts.ok_or_else(|| IoError::missing(path, "TransferSyntaxUID (0002,0010)"))?;
-    Ok((ts, c.pos))
+    let ts_uid = ts.ok_or_else(|| IoError::missing(path, "TransferSyntaxUID (0002,0010)"))?;
+    Ok(Meta {
+        ts_uid,
+        sop_class,
+        end: c.pos,
+    })
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -373,9 +582,64 @@ impl Walker<'_> {
     }
 }
 
+/// What the data set walk records on its way.
+#[derive(Debug, Default)]
+struct Found {
+    pixel: Option<(u32, u64)>,
+    declared: Declared,
+}
+
+impl Found {
+    /// Records the value of a top-level image attribute (binary or text, as written).
+    fn capture(&mut self, tag: Tag, value: &[u8], be: bool) {
+        let us = || {
+            (value.len() == 2).then(|| {
+                let a = [value[0], value[1]];
+                if be {
+                    u16::from_be_bytes(a)
+                } else {
+                    u16::from_le_bytes(a)
+                }
+            })
+        };
+        match (tag.0, tag.1) {
+            (0x0028, 0x0002) => self.declared.samples = us(),
+            (0x0028, 0x0010) => self.declared.rows = us(),
+            (0x0028, 0x0011) => self.declared.cols = us(),
+            (0x0028, 0x0100) => self.declared.bits_allocated = us(),
+            (0x0028, 0x0008) => {
+                self.declared.frames = std::str::from_utf8(value)
+                    .ok()
+                    .and_then(|t| t.trim_matches(|c: char| c == '\0' || c == ' ').parse().ok());
+            }
+            _ => {}
+        }
+    }
+}
+
 /// The data set, as `DataSetReader` tokenises it. `base` (the data set's offset in the file)
 /// is added to positions in messages.
-fn walk_dataset(path: &Path, bytes: &[u8], base: u64, enc: Enc, until_pixel: bool) -> Result<()> {
+fn walk_dataset(
+    path: &Path,
+    bytes: &[u8],
+    base: u64,
+    enc: Enc,
+    until_pixel: bool,
+) -> Result<Found> {
+    let mut found = Found::default();
+    walk_dataset_into(path, bytes, base, enc, until_pixel, &mut found)?;
+    Ok(found)
+}
+
+/// [`walk_dataset`], recording into `found` as it goes (kept when the walk fails).
+fn walk_dataset_into(
+    path: &Path,
+    bytes: &[u8],
+    base: u64,
+    enc: Enc,
+    until_pixel: bool,
+    found: &mut Found,
+) -> Result<()> {
     let mut w = Walker {
         c: Cur {
             b: bytes,
@@ -513,6 +777,12 @@ fn walk_dataset(path: &Path, bytes: &[u8], base: u64, enc: Enc, until_pixel: boo
                     }
                 }
             } else {
+                if stack.is_empty()
+                    && tag.0 == 0x0028
+                    && let Some(v) = w.c.b.get(w.c.pos..w.c.pos + len as usize)
+                {
+                    found.capture(tag, v, enc.big_endian);
+                }
                 let read = if len == 0 { 0 } else { consumed(vr, len) };
                 w.value(tag, len, read)?;
                 check_pending = true;
@@ -523,7 +793,14 @@ fn walk_dataset(path: &Path, bytes: &[u8], base: u64, enc: Enc, until_pixel: boo
                 return Ok(());
             };
             w.logical += (w.c.pos - before) as u64;
-            if until_pixel && stack.is_empty() && tag >= PIXEL_DATA {
+            if stack.is_empty() && tag == PIXEL_DATA {
+                found.pixel = Some((len, w.at()));
+            }
+            // Item and delimitation tags (group FFFE) sort after Pixel Data but are not data
+            // elements: the parser's `read_until` never stops at them (found by fuzzing: a
+            // stray item delimiter at the top level ended this walk while the parser read on
+            // into a 2.4 GB value).
+            if until_pixel && stack.is_empty() && tag >= PIXEL_DATA && tag.0 != 0xFFFE {
                 return Ok(());
             }
             if vr == VR::SQ || (len == UNDEFINED && !(tag == PIXEL_DATA || tag == ITEM_END)) {

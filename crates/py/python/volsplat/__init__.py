@@ -13,6 +13,9 @@ numpy in, picture out, with the same engine (and the same bytes) as the ``volspl
     r = volsplat.Renderer(vol, size=256)             # keeps tables between frames
     frames = [r.render(azimuth=a).to_uint8(srgb=True) for a in range(0, 360, 10)]
 
+    v = volsplat.view(vol, transfer_function="ct-bone")  # the interactive viewer (Jupyter
+    v.screenshot()                                   # shows the page); the frame on screen
+
 Arrays are (z, y, x) in C order by default (SimpleITK, napari); ``axes="xyz"`` takes nibabel's
 order. World space, cameras and transfer functions follow VTK (world units, degrees; LPS for
 medical data). See ``Volume``, ``load``, ``Camera``, ``TransferFunction``, ``Scene``,
@@ -33,6 +36,7 @@ from ._errors import (
 from ._io import VOLUME_EXTENSIONS, from_nibabel, from_simpleitk, load, phantom
 from ._scene import OPTIONS, Image, Renderer, Scene, render
 from ._transfer import PRESETS, TransferFunction
+from ._view import Viewer, view
 from ._volsplat import Volume
 
 __version__: str = _volsplat.__version__
@@ -49,6 +53,8 @@ __all__ = [
     "Renderer",
     "Image",
     "render",
+    "view",
+    "Viewer",
     "VolsplatError",
     "InvalidInputError",
     "FileError",

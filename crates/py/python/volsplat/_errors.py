@@ -3,7 +3,7 @@
 Every error volsplat raises derives from :class:`VolsplatError`, and also from the built-in
 class it belongs to, so ``except ValueError`` and ``except OSError`` work as usual:
 
-- :class:`InvalidInputError` (``ValueError``): bad arguments or arrays (shape, dtype, NaN),
+- :class:`InvalidInputError` (``ValueError``): bad arguments or arrays (shape, dtype, no finite value),
   request fields out of range, invalid camera or transfer-function values, malformed or
   unsupported files. The message names the argument, field or header entry and the value.
 - :class:`FileError` (``OSError``): the operating system refused to open, read or write a file

@@ -29,7 +29,7 @@ _QUALITY = (
     "preintegrate",
     "level",
 )
-_SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping")
+_SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping", "xray_offset")
 _ORBIT = ("view", "azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
 OPTIONS: Tuple[str, ...] = (
     ("volume", "camera", "transfer_function", "size", "quality") + _TOP + _QUALITY + _SCENE + _ORBIT
@@ -40,6 +40,29 @@ ProgressCallback = Callable[[float, str], Optional[bool]]
 
 def _is_path(value: Any) -> bool:
     return isinstance(value, (str, bytes, os.PathLike))
+
+
+def _xray_density(value: Any) -> Any:
+    """``xray_offset`` as the scene file's ``xray_density``: ``"auto"`` (``None`` too),
+    ``"raw"`` (``"none"``), or ``{"offset": v}``, as ``--xray-offset VALUE|auto|none`` parses."""
+    if value is None:
+        return "auto"
+    if isinstance(value, str):
+        t = value.strip()
+        if t == "auto":
+            return "auto"
+        if t in ("none", "raw"):
+            return "raw"
+        try:
+            value = float(t)
+        except ValueError:
+            raise InvalidInputError(
+                f"xray_offset: expected 'auto', 'none' or a finite offset in data units (1000 for "
+                f"CT in Hounsfield units), got {value!r}"
+            ) from None
+    if isinstance(value, bool):
+        raise InvalidInputError(f"xray_offset: expected 'auto', 'none' or a number, got {value!r}")
+    return {"offset": number(value, "xray_offset")}
 
 
 def _lights(value: Any) -> List[Dict[str, Any]]:
@@ -107,6 +130,10 @@ class Scene:
     - ``clipping``: a crop box and clipping planes, the scene file's object (``--crop``,
       ``--clip-plane``): ``{"crop": {"min": (x, y, z), "max": (x, y, z), "units": "voxels"},
       "planes": [{"normal": (nx, ny, nz), "offset": d}]}``; planes keep ``n·x + d ≥ 0``.
+    - ``xray_offset`` (``--xray-offset``): what ``mode="xray"`` integrates: ``"auto"`` (the
+      default, also ``None``: ``max(v + 1000, 0)`` where the values look like CT in Hounsfield
+      units, attenuation relative to air; the values as they are otherwise), ``"none"`` (the
+      raw values, negative parts included) or a number ``o`` (``max(v + o, 0)``, data units).
     - ``display={...}``: options of the Chapter 6 displays (``renderer="sabella"|"nil"``).
     - ``threads``: worker threads (default: all cores; the image does not depend on it).
 
@@ -226,6 +253,12 @@ class Scene:
                 raise InvalidInputError(
                     "clipping: expected a dict with 'crop' and/or 'planes', got " + repr(c)
                 )
+        if "xray_offset" in options:
+            d = _xray_density(options["xray_offset"])
+            if d == "auto":
+                scene.pop("xray_density", None)
+            else:
+                scene["xray_density"] = d
         for k in ("surface_enhance", "depth_cue"):
             if k in options:
                 if options[k] is None:
@@ -351,6 +384,15 @@ class Scene:
     @property
     def quality(self) -> Dict[str, Any]:
         return dict(self._req.get("quality", {}))
+
+    @property
+    def xray_offset(self) -> Union[str, float]:
+        """What ``mode="xray"`` integrates: ``"auto"``, ``"none"`` or the offset (data
+        units)."""
+        d = self._req["scene"].get("xray_density", "auto")
+        if isinstance(d, dict):
+            return float(d["offset"])
+        return "none" if d == "raw" else str(d)
 
     def render(self, **overrides: Any) -> "Image":
         """Renders once (a fresh :class:`Renderer`; keep one to render many frames)."""

@@ -49,8 +49,10 @@ class Volume:
     ``memcpy`` when the array is contiguous in the declared order (C-order ``"zyx"``, or
     Fortran-order ``"xyz"`` as nibabel gives it), a strided gather otherwise (views, slices,
     transposes; about the cost of ``np.ascontiguousarray``). ``.array`` is then a read-only,
-    zero-copy view of the engine's samples. Float samples must be finite (NaN is an error
-    naming the index). Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
+    zero-copy view of the engine's samples. Float samples that are NaN (a masked background)
+    become the lowest finite value, and ±inf the lowest or highest, as every reader does (a
+    ``UserWarning`` and ``.notes`` say how many); an array with no finite value is an error.
+    Raises :class:`volsplat.InvalidInputError` (a ``ValueError``) for bad
     shapes, dtypes and geometry, and ``MemoryError`` when the copy cannot be allocated (the
     interpreter keeps running).
     """
@@ -129,6 +131,32 @@ class RendererCore:
     def camera(self, request_json: str, volume: Optional[Volume] = None) -> str: ...
     def transfer_function(self, request_json: str, volume: Optional[Volume] = None) -> str: ...
     def clear(self) -> None: ...
+
+class ViewerCore:
+    def __init__(
+        self,
+        request_json: str,
+        volume: Optional[Volume] = None,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        allow_remote: bool = False,
+        data_dir: Optional[str] = None,
+        target_fps: float = 30.0,
+        target_latency: float = 50.0,
+        srgb: Optional[bool] = None,
+        bits: int = 8,
+        background: Sequence[float] = ...,
+        window: Optional[Tuple[float, float]] = None,
+    ) -> None: ...
+    @property
+    def url(self) -> str: ...
+    @property
+    def running(self) -> bool: ...
+    @property
+    def tabs(self) -> int: ...
+    def scene(self) -> Tuple[str, Optional[Tuple[float, float]]]: ...
+    def close(self) -> None: ...
 
 class Output:
     @property

@@ -1,0 +1,138 @@
+//! `volsplat view` as a user starts it: the printed URL, the token, a drag over the WebSocket,
+//! the final frame against `volsplat render --scene` of the saved scene, and Ctrl-C.
+
+use std::io::{BufRead, BufReader};
+use std::net::SocketAddr;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+use volsplat::session::Event;
+use volsplat_view::replay::Client;
+
+const WAIT: Duration = Duration::from_secs(120);
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_volsplat")
+}
+
+/// Starts `volsplat view ARGS --no-browser` and reads its one line of standard output.
+fn start(args: &[&str]) -> (Child, SocketAddr, String) {
+    let mut child = Command::new(bin())
+        .arg("view")
+        .args(args)
+        .arg("--no-browser")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line
+        .strip_prefix("open ")
+        .unwrap_or_else(|| panic!("first line: {line:?}"))
+        .trim()
+        .to_string();
+    let rest = url.strip_prefix("http://").unwrap();
+    let (host_port, query) = rest.split_once("/?token=").unwrap();
+    assert_eq!(query.len(), 32, "a 128-bit token in hex: {url}");
+    (child, host_port.parse().unwrap(), query.to_string())
+}
+
+#[cfg(unix)]
+fn interrupt(child: &mut Child) -> String {
+    Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let out = child.wait().unwrap();
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(out.success(), "exit {out:?}: {err}");
+    err
+}
+
+fn render_scene(scene: &Path, out: &Path, extra: &[&str]) -> Vec<u8> {
+    let r = Command::new(bin())
+        .arg("render")
+        .arg("--scene")
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .args(extra)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    std::fs::read(out).unwrap()
+}
+
+/// The final frame after a drag is the file `volsplat render --scene` writes from the saved
+/// scene, with the same image flags (a MIP through a grey window here).
+#[cfg(unix)]
+#[test]
+fn view_drag_save_render_and_stop() {
+    for (flags, image) in [
+        (vec!["--azimuth", "20"], vec![]),
+        // `render --scene FILE --wl …` checks the window against the --mode flag, not the
+        // scene's mode, so the mode is repeated for render.
+        (
+            vec!["--mode", "mip"],
+            vec!["--mode", "mip", "--wl", "300,1200"],
+        ),
+    ] {
+        let mut args = vec![
+            "--phantom",
+            "head",
+            "--phantom-size",
+            "40,48,44",
+            "--size",
+            "80x64",
+        ];
+        args.extend(&flags);
+        args.extend(image.iter().filter(|f| !flags.contains(f)));
+        let (mut child, addr, token) = start(&args);
+        assert!(Client::connect(addr, "", None).unwrap_err().contains("403"));
+        let mut c = Client::connect(addr, &token, None).unwrap();
+        c.wait_final(0, WAIT).unwrap();
+        c.event(Event::Interaction { active: true }).unwrap();
+        for _ in 0..5 {
+            c.event(Event::Orbit { dx: 8.0, dy: -3.0 }).unwrap();
+        }
+        let release = c.event(Event::Interaction { active: false }).unwrap();
+        let (header, png) = c.wait_final(release, WAIT).unwrap();
+        assert_eq!((header.width, header.height), (80, 64));
+        let scene = c.scene(WAIT).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.json");
+        scene.save(&path).unwrap();
+        let rendered = render_scene(&path, &dir.path().join("r.png"), &image);
+        let decode = |b: &[u8]| volsplat_view::replay::decode_rgb("png", b).unwrap();
+        assert_eq!(decode(&png), decode(&rendered), "{flags:?} {image:?}");
+        assert_eq!(c.screenshot(WAIT).unwrap(), rendered, "{flags:?} {image:?}");
+        let err = interrupt(&mut child);
+        assert!(err.contains("stopped"), "{err}");
+    }
+}
+
+#[test]
+fn view_refuses_what_it_cannot_serve() {
+    let cases: [(&[&str], &str); 3] = [
+        (&["/no/such/volume.nrrd"], "no/such/volume.nrrd"),
+        (&["--host", "0.0.0.0"], "--allow-remote"),
+        (&["--mode", "composite", "--wl", "1,2"], "grey window"),
+    ];
+    for (args, expect) in cases {
+        let out = Command::new(bin())
+            .arg("view")
+            .args(args)
+            .arg("--no-browser")
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        assert!(out.stdout.is_empty(), "printed a URL for {args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expect), "{args:?}: {err}");
+    }
+}

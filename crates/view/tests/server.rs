@@ -1,0 +1,380 @@
+//! The server through its sockets, as a browser and an attacker would reach it: a Rust
+//! WebSocket client (`volsplat_view::replay::Client`) and raw HTTP.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::time::Duration;
+use volsplat::session::Event;
+use volsplat::{PhantomKind, RenderRequest, Renderer, Scene, VolumeSource};
+use volsplat_view::protocol::{ClientMessage, MAX_MESSAGE_BYTES, ServerMessage};
+use volsplat_view::replay::{Client, Incoming};
+use volsplat_view::{Viewer, ViewerHandle, ViewerSettings};
+
+const WAIT: Duration = Duration::from_secs(60);
+
+fn request(size: usize) -> RenderRequest {
+    let scene = Scene {
+        volume: VolumeSource::Phantom {
+            phantom: PhantomKind::Head,
+            grid: Some(vec![40, 48, 44]),
+        },
+        ..Scene::default()
+    };
+    RenderRequest::new(scene, size, size)
+}
+
+fn serve(settings: ViewerSettings) -> ViewerHandle {
+    Viewer::bind(request(96), Renderer::new(), settings)
+        .unwrap()
+        .spawn()
+        .unwrap()
+}
+
+/// A raw HTTP GET; returns the status code, the headers and the body.
+fn get(addr: SocketAddr, target: &str, extra: &str) -> (u16, String, String) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(WAIT)).unwrap();
+    write!(
+        s,
+        "GET {target} HTTP/1.1\r\nHost: 127.0.0.1:{}\r\n{extra}\r\n",
+        addr.port()
+    )
+    .unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).unwrap();
+    let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
+    let status = head
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    (status, head.to_string(), body.to_string())
+}
+
+/// Connects and waits for the hello and the first final frame.
+fn connect(h: &ViewerHandle) -> (Client, volsplat_view::protocol::Hello) {
+    let mut c = Client::connect(h.local_addr(), &h.token(), None).unwrap();
+    let hello = c
+        .wait_for(WAIT, |m| match m {
+            Incoming::Text(ServerMessage::Hello(h)) => Some((**h).clone()),
+            _ => None,
+        })
+        .unwrap();
+    c.wait_final(0, WAIT).unwrap();
+    (c, hello)
+}
+
+fn error_reply(c: &mut Client) -> String {
+    c.wait_for(WAIT, |m| match m {
+        Incoming::Text(ServerMessage::Error { message, .. }) => Some(message.clone()),
+        _ => None,
+    })
+    .unwrap()
+}
+
+#[test]
+fn the_page_needs_the_token() {
+    let h = serve(ViewerSettings::default());
+    let addr = h.local_addr();
+    let token = h.token();
+    assert!(
+        h.url()
+            .contains(&format!("127.0.0.1:{}/?token={token}", addr.port()))
+    );
+    let (status, head, body) = get(addr, &format!("/?token={token}"), "");
+    assert_eq!(status, 200, "{head}");
+    assert!(body.contains("<canvas"), "{body}");
+    assert!(head.contains("Content-Security-Policy") && head.contains("no-store"));
+    assert!(head.contains("Referrer-Policy: no-referrer"));
+    let wrong = format!(
+        "{}{}",
+        &token[..31],
+        if token.ends_with('0') { '1' } else { '0' }
+    );
+    for target in [
+        "/".to_string(),
+        "/?token=".into(),
+        format!("/?token={wrong}"),
+        format!("/?token={}", token.to_ascii_uppercase().replace('A', "G")),
+    ] {
+        let (status, _, body) = get(addr, &target, "");
+        assert_eq!(status, 403, "{target}");
+        assert!(!body.contains(&token), "the refusal leaks the token");
+    }
+    let (status, _, _) = get(addr, &format!("/secret.nrrd?token={token}"), "");
+    assert_eq!(status, 404);
+}
+
+#[test]
+fn the_socket_needs_the_token_and_the_pages_own_origin() {
+    let h = serve(ViewerSettings::default());
+    let addr = h.local_addr();
+    let token = h.token();
+    for bad in ["", "0123", &"f".repeat(32)] {
+        let e = Client::connect(addr, bad, None).unwrap_err();
+        assert!(e.contains("403"), "token {bad:?}: {e}");
+    }
+    let e = Client::connect(addr, &token, Some("http://evil.example")).unwrap_err();
+    assert!(e.contains("403"), "{e}");
+    let own = format!("http://127.0.0.1:{}", addr.port());
+    let mut c = Client::connect(addr, &token, Some(&own)).unwrap();
+    c.wait_final(0, WAIT).unwrap();
+}
+
+/// A drag: previews while the pointer is held, each echoing the latest event, the final frame
+/// after release; and the final frame's bytes are the PNG `render` writes for the saved scene.
+/// Settings whose frame budget no final frame fits (1 ms), so that every drag previews.
+fn previewing() -> ViewerSettings {
+    let mut s = ViewerSettings::default();
+    s.session.target_fps = 1000.0;
+    s
+}
+
+#[test]
+fn events_give_previews_then_the_final_frame_of_render() {
+    let h = serve(previewing());
+    let (mut c, hello) = connect(&h);
+    assert_eq!(hello.dims, [40, 48, 44]);
+    assert_eq!(hello.histogram.len(), 256);
+    assert_eq!(
+        hello.histogram.iter().sum::<u64>(),
+        40 * 48 * 44,
+        "every voxel counted once"
+    );
+    assert!(hello.presets.iter().any(|p| p == "CT-Bone"));
+    c.event(Event::Interaction { active: true }).unwrap();
+    let mut last = 0;
+    let mut previews = 0;
+    for _ in 0..6 {
+        last = c.event(Event::Orbit { dx: 6.0, dy: 2.0 }).unwrap();
+        let (q, seq, w) = c
+            .wait_for(WAIT, |m| match m {
+                Incoming::Frame(f, _) => Some((f.quality.clone(), f.seq, f.width)),
+                _ => None,
+            })
+            .unwrap();
+        assert!(seq <= last);
+        if q == "preview" {
+            previews += 1;
+            assert!(w <= 96);
+        }
+    }
+    assert!(previews > 0, "no previews while dragging");
+    let release = c.event(Event::Interaction { active: false }).unwrap();
+    assert!(release > last);
+    let (header, png) = c.wait_final(release, WAIT).unwrap();
+    assert_eq!(
+        (header.width, header.height, header.format.as_str()),
+        (96, 96, "png")
+    );
+
+    let scene = c.scene(WAIT).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.json");
+    scene.save(&path).unwrap();
+    let (loaded, _) = RenderRequest::load(&path).unwrap();
+    let out = Renderer::new().render(&loaded, &mut |_| true).unwrap();
+    let expect = volsplat::encode_png(
+        &out.image,
+        out.values.as_ref(),
+        loaded.mode,
+        &volsplat::WriteOptions::default(),
+    )
+    .unwrap();
+    let decode = |b: &[u8]| volsplat_view::replay::decode_rgb("png", b).unwrap();
+    assert_eq!(
+        decode(&png),
+        decode(&expect),
+        "the final frame shows other pixels than render"
+    );
+    let shot = c.screenshot(WAIT).unwrap();
+    assert_eq!(shot, expect, "the screenshot is not render's PNG file");
+}
+
+#[test]
+fn malformed_messages_get_an_error_and_change_nothing() {
+    let h = serve(ViewerSettings::default());
+    let (mut c, _) = connect(&h);
+    let before = c.scene(WAIT).unwrap();
+    let bad = [
+        "not json".to_string(),
+        r#"{"type":"event","seq":1,"event":{"type":"orbit","dx":1}}"#.into(),
+        r#"{"type":"event","seq":2,"event":{"type":"orbit","dx":1,"dy":2,"dz":3}}"#.into(),
+        r#"{"type":"event","seq":3,"event":{"type":"zoom","factor":-1}}"#.into(),
+        r#"{"type":"event","seq":4,"event":{"type":"resize","width":0,"height":5}}"#.into(),
+        r#"{"type":"event","seq":5,"event":{"type":"set_window","window":[0,1]}}"#.into(),
+        r#"{"type":"open","name":"../../etc/passwd"}"#.into(),
+        r#"{"type":"open","name":"brain.nrrd"}"#.into(),
+        r#"{"type":"rm","path":"/"}"#.into(),
+        format!(
+            r#"{{"type":"save_scene","x":"{}"}}"#,
+            "a".repeat(MAX_MESSAGE_BYTES)
+        ),
+    ];
+    for text in &bad {
+        c.send_text(text).unwrap();
+        let e = error_reply(&mut c);
+        assert!(!e.is_empty());
+    }
+    assert_eq!(
+        c.scene(WAIT).unwrap(),
+        before,
+        "a refused message changed the scene"
+    );
+    // Still alive: a good event renders.
+    let seq = c.event(Event::Zoom { factor: 1.5 }).unwrap();
+    c.wait_final(seq, WAIT).unwrap();
+    // A message over the socket's own limit closes this tab but not the server.
+    let huge = "x".repeat(2 << 20);
+    let _ = c.send_text(&huge);
+    let closed = (0..200).any(|_| c.recv(Duration::from_millis(50)).is_err());
+    assert!(closed, "a 2 MiB message left the tab open");
+    let (mut again, _) = connect(&h);
+    let seq = again.event(Event::Roll { degrees: 10.0 }).unwrap();
+    again.wait_final(seq, WAIT).unwrap();
+}
+
+/// Without acknowledgements the server sends one frame and waits, however much input comes;
+/// the acknowledgement releases the next.
+#[test]
+fn at_most_one_frame_is_in_flight() {
+    let h = serve(previewing());
+    let (mut c, _) = connect(&h);
+    c.event(Event::Interaction { active: true }).unwrap();
+    let mut frames = Vec::new();
+    for _ in 0..30 {
+        c.event(Event::Orbit { dx: 3.0, dy: 0.0 }).unwrap();
+        if let Some(Incoming::Frame(f, _)) = c.recv(Duration::from_millis(50)).unwrap() {
+            frames.push(f);
+        }
+    }
+    assert_eq!(frames.len(), 1, "{frames:?}");
+    c.ack(frames[0].id).unwrap();
+    let next = c
+        .wait_for(WAIT, |m| match m {
+            Incoming::Frame(f, _) => Some((f.id, f.seq)),
+            _ => None,
+        })
+        .unwrap();
+    assert!(next.0 > frames[0].id && next.1 > frames[0].seq, "{next:?}");
+}
+
+/// Two tabs on one volume: each has its own scene.
+#[test]
+fn two_tabs_watch_one_volume_with_their_own_cameras() {
+    let h = serve(ViewerSettings::default());
+    let (mut a, _) = connect(&h);
+    let (mut b, _) = connect(&h);
+    assert_eq!(h.tabs(), 2);
+    let sa = a.event(Event::Orbit { dx: 40.0, dy: 0.0 }).unwrap();
+    a.wait_final(sa, WAIT).unwrap();
+    let sb = b.event(Event::Zoom { factor: 2.0 }).unwrap();
+    b.wait_final(sb, WAIT).unwrap();
+    let (ra, rb) = (a.scene(WAIT).unwrap(), b.scene(WAIT).unwrap());
+    assert_ne!(ra.scene.camera, rb.scene.camera);
+    assert_eq!(
+        h.scene().0,
+        rb,
+        "the handle's scene is the tab that changed last"
+    );
+    assert_eq!(ra.scene.volume, rb.scene.volume);
+}
+
+/// The data folder: listed by name, opened by name, nothing outside it.
+#[test]
+fn the_data_folder_is_listed_and_opened_by_name_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = volsplat::make_phantom(PhantomKind::Blobs, Some(&[20]), "grid").unwrap();
+    volsplat::io::write_nrrd(dir.path().join("blobs.nrrd"), &vol, false).unwrap();
+    std::fs::write(dir.path().join("notes.txt"), "not a volume").unwrap();
+    std::fs::write(dir.path().join(".hidden.nrrd"), "hidden").unwrap();
+    let h = serve(ViewerSettings {
+        data_dir: Some(dir.path().to_path_buf()),
+        ..ViewerSettings::default()
+    });
+    let (mut c, hello) = connect(&h);
+    assert_eq!(hello.volumes, vec!["blobs.nrrd".to_string()]);
+    c.send(&ClientMessage::Open {
+        name: "notes.txt".into(),
+    })
+    .unwrap();
+    assert!(error_reply(&mut c).contains("not in the volume list"));
+    c.send(&ClientMessage::Open {
+        name: "blobs.nrrd".into(),
+    })
+    .unwrap();
+    let hello = c
+        .wait_for(WAIT, |m| match m {
+            Incoming::Text(ServerMessage::Hello(h)) => Some((**h).clone()),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(hello.dims, [20, 20, 20]);
+    assert_eq!(
+        hello.volume, "blobs.nrrd",
+        "the page sees names, never paths"
+    );
+    c.wait_final(0, WAIT).unwrap();
+}
+
+/// Listening beyond loopback needs `allow_remote`.
+#[test]
+fn remote_hosts_need_allow_remote() {
+    let e = Viewer::bind(
+        request(32),
+        Renderer::new(),
+        ViewerSettings {
+            host: "0.0.0.0".into(),
+            ..ViewerSettings::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("--allow-remote"), "{e}");
+}
+
+/// Stopping closes the tabs and frees the port.
+#[test]
+fn stopping_closes_tabs() {
+    let mut h = serve(ViewerSettings::default());
+    let (mut c, _) = connect(&h);
+    let addr = h.local_addr();
+    h.stop();
+    let closed = (0..100).any(|_| c.recv(Duration::from_millis(50)).is_err());
+    assert!(closed);
+    assert!(
+        std::net::TcpListener::bind(addr).is_ok(),
+        "the port is still held"
+    );
+}
+
+/// The turntable GIF comes back as a file.
+#[test]
+fn a_turntable_gif_is_rendered_on_the_server() {
+    let h = serve(ViewerSettings::default());
+    let (mut c, _) = connect(&h);
+    c.send(&ClientMessage::Turntable {
+        frames: 6,
+        degrees: 360.0,
+        fps: 12.0,
+        max_size: 48,
+    })
+    .unwrap();
+    let (name, bytes) = c
+        .wait_for(WAIT, |m| match m {
+            Incoming::Frame(f, b) if f.kind == "file" => Some((f.name.clone(), b.clone())),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(name.as_deref(), Some("turntable.gif"));
+    assert_eq!(&bytes[..6], b"GIF89a");
+    let mut d = gif::DecodeOptions::new();
+    d.set_color_output(gif::ColorOutput::Indexed);
+    let mut r = d.read_info(std::io::Cursor::new(&bytes)).unwrap();
+    assert_eq!((r.width(), r.height()), (48, 48));
+    let mut n = 0;
+    while r.read_next_frame().unwrap().is_some() {
+        n += 1;
+    }
+    assert_eq!(n, 6);
+}
