@@ -4,7 +4,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 pub use volsplat::{
     AntialiasChoice, KernelChoice, Mode, OrderChoice, PhantomKind, PreintegrateChoice,
-    ShadeAtChoice, VisibilityChoice,
+    ShadeAtChoice, VisibilityChoice, VolumeLevel,
 };
 
 /// Direct volume rendering on the CPU by splatting (Westover 1991; Swan et al. 1997), image-aligned
@@ -367,6 +367,17 @@ pub struct RenderOptions {
         hide_short_help = true
     )]
     pub preintegrate: PreintegrateChoice,
+    /// Image-aligned slabs: the level of the volume's resolution pyramid to draw: `full` (the
+    /// volume itself), `auto` (the level whose voxel is about a pixel at the focal point: a
+    /// preview whose cost falls with the pixel count) or a level number, each level low-pass
+    /// filtered and halved once more (docs/decisions/0031).
+    #[arg(
+        long,
+        default_value = "full",
+        help_heading = "Quality",
+        hide_short_help = true
+    )]
+    pub level: VolumeLevel,
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
@@ -540,6 +551,7 @@ pub const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
     ("slab", "--slab"),
     ("shade_at", "--shade-at"),
     ("preintegrate", "--preintegrate"),
+    ("level", "--level"),
     ("antialias", "--antialias"),
     ("splat_list", "--splat-list"),
     ("list_threshold", "--list-threshold"),

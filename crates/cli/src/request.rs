@@ -422,7 +422,8 @@ pub fn build_request_noted(
         list_threshold,
         slab,
         shade_at,
-        preintegrate
+        preintegrate,
+        level
     );
     if set("threads") {
         req.threads = o.threads;

@@ -201,7 +201,53 @@ impl Grid {
         let (lo, hi) = self.bounds_world();
         (lo + hi) * 0.5
     }
+
+    /// The axes the next level of a resolution pyramid halves (DESIGN.md §5; decision 0031):
+    /// those whose spacing is at most twice the smallest spacing, so that anisotropic data
+    /// become more isotropic level by level (BigDataViewer's rule, `bdv.export.ProposeMipmaps`
+    /// in bigdataviewer-core), and that hold at least [`PYRAMID_MIN_SAMPLES`] samples. All
+    /// `false` when no axis qualifies: the pyramid ends.
+    pub fn pyramid_axes(&self) -> [bool; 3] {
+        let min = self.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
+        std::array::from_fn(|a| {
+            self.dims[a] >= PYRAMID_MIN_SAMPLES && self.spacing[a] <= 2.0 * min * (1.0 + 1e-9)
+        })
+    }
+
+    /// The grid of the level that halves `axes` ([`Volume::halved`]): along a halved axis of
+    /// `n` samples, `⌈n/2⌉ + 1` samples at twice the spacing, sample `m` centred on the fine
+    /// index `2m − ½` (the centre of the filter's taps `2m − 2 … 2m + 1`), so the origin moves
+    /// back by half a fine spacing along that axis (VTK's world convention, DESIGN.md §3) and the
+    /// level's first and last samples lie ½ (n even) or 1½ (n odd) fine spacings outside the
+    /// fine ones: the level's box covers the fine level's. Other axes are kept as they are.
+    pub fn halved(&self, axes: [bool; 3]) -> Result<Grid> {
+        let mut dims = self.dims;
+        let mut spacing = self.spacing;
+        let mut shift = DVec3::ZERO;
+        for a in 0..3 {
+            if axes[a] {
+                dims[a] = self.dims[a].div_ceil(2) + 1;
+                spacing[a] = 2.0 * self.spacing[a];
+                shift[a] = -0.5;
+            }
+        }
+        let origin = self.world_from_index(shift).to_array();
+        Grid::new(dims, spacing, origin, self.direction)
+    }
 }
+
+/// An axis with fewer samples is not halved by a pyramid level ([`Grid::pyramid_axes`]).
+pub const PYRAMID_MIN_SAMPLES: usize = 8;
+
+/// The pyramid's low-pass filter per halved axis, applied at the fine indices `2m − 2 … 2m + 1`
+/// for coarse sample `m` (decision 0031): the binomial `[1, 3, 3, 1] / 8`, the two-sample box
+/// applied three times (Burt 1981, *Fast filter transforms for image processing*; the
+/// even-length member of the binomial family of Burt & Adelson's pyramid). Its response
+/// `cos³(πf)` (f in cycles per fine sample) is 0.35 at the coarse level's Nyquist frequency
+/// (¼) and 0 at the fine one's, where the box `[1, 1] / 2` passes 0.71: 3 % of white noise's
+/// energy aliases against the box's 18 %. The weights sum to 1 (a constant stays constant),
+/// and every interior fine sample gets ½ in total (the integral is kept).
+pub const PYRAMID_TAPS: [f64; 4] = [0.125, 0.375, 0.375, 0.125];
 
 /// The sample types a volume may hold.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -265,6 +311,9 @@ pub trait Scalar: Copy + Send + Sync + PartialOrd + std::fmt::Debug + 'static {
     const TYPE: ScalarType;
     /// Converts to `f32` (exact for every integer type here).
     fn to_f32(self) -> f32;
+    /// The sample nearest `v`: integer types round half away from zero and saturate at their
+    /// range (NaN gives 0); `f32` rounds to the nearest float.
+    fn from_f64(v: f64) -> Self;
     /// Replaces the samples that are not finite (NaN, ±∞) by finite ones, as
     /// [`NonFiniteSamples`] documents, and says what was replaced (`None`: every sample was
     /// finite, nothing changed). Integer types are always finite. Errors if no sample is finite.
@@ -282,6 +331,11 @@ macro_rules! impl_scalar {
             fn to_f32(self) -> f32 {
                 self as f32
             }
+            #[inline(always)]
+            fn from_f64(v: f64) -> Self {
+                // `as` saturates and maps NaN to 0.
+                v.round() as $t
+            }
         }
     };
 }
@@ -295,6 +349,10 @@ impl Scalar for f32 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self
+    }
+    #[inline(always)]
+    fn from_f64(v: f64) -> Self {
+        v as f32
     }
     fn replace_non_finite(data: &mut [f32]) -> Result<Option<NonFiniteSamples>> {
         // The common case, every sample finite, costs one read-only pass.
@@ -507,6 +565,65 @@ impl<T: Scalar> Volume<T> {
             grid: self.grid.clone(),
             data: self.data.iter().map(|v| v.to_f32()).collect(),
             non_finite: self.non_finite,
+        }
+    }
+
+    /// The next level of a resolution pyramid: `axes` halved ([`Grid::halved`]), each filtered
+    /// with [`PYRAMID_TAPS`] (separable; fine indices outside the grid take the nearest edge
+    /// sample), summed in f64 and rounded to the sample type ([`Scalar::from_f64`]). Integer
+    /// samples times the taps' eighths are exact in f64, so a constant volume gives the same
+    /// constant. One slice at a time ([`Volume::halved_slice`], which callers may run in
+    /// parallel).
+    pub fn halved(&self, axes: [bool; 3]) -> Result<Volume<T>> {
+        let grid = self.grid.halved(axes)?;
+        let slice = grid.dims[0] * grid.dims[1];
+        let mut data = Vec::with_capacity(grid.voxel_count());
+        let mut out = vec![self.data[0]; slice];
+        for k in 0..grid.dims[2] {
+            self.halved_slice(axes, k, &mut out);
+            data.extend_from_slice(&out);
+        }
+        Volume::new(grid, data)
+    }
+
+    /// Slice `k` (the coarse index along the third axis) of [`Volume::halved`] into `out`, whose
+    /// length must be the coarse slice's (`dims[0] · dims[1]` of `self.grid().halved(axes)`).
+    pub fn halved_slice(&self, axes: [bool; 3], k: usize, out: &mut [T]) {
+        let [nx, ny, nz] = self.grid.dims;
+        let taps_of = |halved: bool, n: usize, m: usize| -> Vec<(usize, f64)> {
+            if halved {
+                (0..4)
+                    .map(|t| {
+                        let i = (2 * m + t).saturating_sub(2).min(n - 1);
+                        (i, PYRAMID_TAPS[t])
+                    })
+                    .collect()
+            } else {
+                vec![(m, 1.0)]
+            }
+        };
+        let mx = if axes[0] { nx.div_ceil(2) + 1 } else { nx };
+        let my = if axes[1] { ny.div_ceil(2) + 1 } else { ny };
+        assert_eq!(out.len(), mx * my, "halved_slice: output slice length");
+        let tx: Vec<Vec<(usize, f64)>> = (0..mx).map(|m| taps_of(axes[0], nx, m)).collect();
+        let ty: Vec<Vec<(usize, f64)>> = (0..my).map(|m| taps_of(axes[1], ny, m)).collect();
+        // Along z, then y, into a fine row; then x into the coarse row.
+        let mut rows = vec![0.0f64; nx];
+        for (j, tyj) in ty.iter().enumerate() {
+            rows.fill(0.0);
+            for &(kz, wz) in &taps_of(axes[2], nz, k) {
+                for &(jy, wy) in tyj {
+                    let w = wz * wy;
+                    let row = &self.data[(kz * ny + jy) * nx..][..nx];
+                    for (acc, v) in rows.iter_mut().zip(row) {
+                        *acc += w * v.to_f32() as f64;
+                    }
+                }
+            }
+            for (i, txi) in tx.iter().enumerate() {
+                let v: f64 = txi.iter().map(|&(ix, wx)| wx * rows[ix]).sum();
+                out[j * mx + i] = T::from_f64(v);
+            }
         }
     }
 }
@@ -742,6 +859,164 @@ mod tests {
                 "{e}"
             );
         }
+    }
+
+    /// A rotated, anisotropic grid for the pyramid's tests.
+    fn tilted(dims: [usize; 3]) -> Grid {
+        let rot = DMat3::from_rotation_z(0.3) * DMat3::from_rotation_x(-1.1);
+        Grid::new(dims, [0.7, 0.9, 1.2], [10.0, -3.0, 7.0], rot).unwrap()
+    }
+
+    #[test]
+    fn a_pyramid_level_keeps_a_constant() {
+        let g = tilted([19, 16, 9]);
+        let axes = [true; 3];
+        let v = Volume::new(g.clone(), vec![200u8; g.voxel_count()]).unwrap();
+        assert!(v.halved(axes).unwrap().data().iter().all(|&x| x == 200));
+        let v = Volume::new(g.clone(), vec![-1000i16; g.voxel_count()]).unwrap();
+        let h = v.halved(axes).unwrap();
+        assert_eq!(h.grid().dims, [11, 9, 6]);
+        assert!(h.data().iter().all(|&x| x == -1000));
+        let v = Volume::new(g.clone(), vec![0.3f32; g.voxel_count()]).unwrap();
+        let h = v.halved([true, false, true]).unwrap();
+        assert_eq!(h.grid().dims, [11, 16, 6]);
+        assert!(h.data().iter().all(|&x| x == 0.3));
+        // Again, level after level.
+        let h2 = h.halved([true, true, false]).unwrap();
+        assert!(h2.data().iter().all(|&x| x == 0.3));
+    }
+
+    /// Pseudo-random values in [0, 1) inside a margin of `margin` voxels, 0 outside it.
+    fn speckle(g: &Grid, margin: usize) -> Volume<f32> {
+        let n = g.dims;
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        Volume::from_fn(g.clone(), |i, j, k| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let inside = [i, j, k]
+                .iter()
+                .zip(n)
+                .all(|(&c, n)| c >= margin && c + margin < n);
+            if inside {
+                (seed >> 40) as f32 / (1u64 << 24) as f32
+            } else {
+                0.0
+            }
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_pyramid_level_keeps_the_integral_and_the_mean() {
+        let g = tilted([24, 19, 14]);
+        let v = speckle(&g, 2);
+        let sum = |v: &Volume<f32>| v.data().iter().map(|&x| x as f64).sum::<f64>();
+        let voxel = |g: &Grid| g.spacing.iter().product::<f64>();
+        let fine = sum(&v) * voxel(&g);
+        for axes in [[true; 3], [true, false, true], [false, true, false]] {
+            let h = v.halved(axes).unwrap();
+            let coarse = sum(&h) * voxel(h.grid());
+            // Exact in f64; the f32 rounding of each coarse sample is all that is left.
+            assert!(
+                (coarse - fine).abs() < 1e-6 * fine,
+                "{axes:?}: {coarse} against {fine}"
+            );
+        }
+        // Integer samples: the same up to the rounding of each coarse sample (±½).
+        let q = Volume::from_fn(g.clone(), |i, j, k| (v.get(i, j, k) * 1000.0) as i16).unwrap();
+        let h = q.halved([true; 3]).unwrap();
+        let fine: f64 = q.data().iter().map(|&x| x as f64).sum();
+        let coarse: f64 = h.data().iter().map(|&x| x as f64).sum::<f64>() * 8.0;
+        let bound = 0.5 * 8.0 * h.data().len() as f64;
+        assert!((coarse - fine).abs() < bound, "{coarse} against {fine}");
+        // Data up to the edges: the mean of the coarse samples stays within the edge samples'
+        // share of the mean (the level reaches half a voxel past the fine one and repeats the
+        // edge there).
+        let full = speckle(&g, 0);
+        let h = full.halved([true; 3]).unwrap();
+        let mean = |v: &Volume<f32>| sum(v) / v.data().len() as f64;
+        assert!(
+            (mean(&h) - mean(&full)).abs() < 0.02,
+            "{} {}",
+            mean(&h),
+            mean(&full)
+        );
+    }
+
+    #[test]
+    fn a_pyramid_level_covers_the_fine_box_and_keeps_the_centroid() {
+        for dims in [[24, 19, 14], [9, 8, 31]] {
+            let g = tilted(dims);
+            let h = g.halved([true; 3]).unwrap();
+            // Sample m lies on the fine index 2m − ½.
+            for m in [0, 3, h.dims[0] - 1] {
+                let c = h.world_from_index(DVec3::new(m as f64, 1.0, 2.0));
+                let f = g.world_from_index(DVec3::new(2.0 * m as f64 - 0.5, 1.5, 3.5));
+                assert!((c - f).length() < 1e-9, "{dims:?} m = {m}");
+            }
+            // The level's box (index space of the fine grid) covers the fine box by ½ or 1½.
+            let corner =
+                g.index_from_world(h.world_from_index(DVec3::from(h.dims.map(|n| (n - 1) as f64))));
+            let lo = g.index_from_world(DVec3::from(h.origin));
+            for a in 0..3 {
+                assert!((lo[a] + 0.5).abs() < 1e-9, "{dims:?} axis {a}: {}", lo[a]);
+                let past = corner[a] - (dims[a] - 1) as f64;
+                let expect = if dims[a] % 2 == 0 { 0.5 } else { 1.5 };
+                assert!((past - expect).abs() < 1e-9, "{dims:?} axis {a}: {past}");
+            }
+            // The filter is centred where the grid says: the world centroid of a compact
+            // object is the same at both levels.
+            let v = speckle(&g, 3);
+            let centroid = |v: &Volume<f32>| {
+                let [nx, ny, _] = v.grid().dims;
+                let (mut m, mut p) = (0.0f64, DVec3::ZERO);
+                for (n, &x) in v.data().iter().enumerate() {
+                    let ijk =
+                        DVec3::new((n % nx) as f64, (n / nx % ny) as f64, (n / nx / ny) as f64);
+                    m += x as f64;
+                    p += v.grid().world_from_index(ijk) * x as f64;
+                }
+                p / m
+            };
+            let hv = v.halved([true; 3]).unwrap();
+            let (a, b) = (centroid(&v), centroid(&hv));
+            assert!((a - b).length() < 1e-5, "{dims:?}: {a} against {b}");
+        }
+    }
+
+    #[test]
+    fn pyramid_axes_make_anisotropic_grids_more_isotropic() {
+        // The CT-like head: x and y first, z (2.6× the smallest spacing) from the second level.
+        let ct = Grid::new(
+            [256, 256, 108],
+            [0.706, 0.863, 1.869],
+            [0.0; 3],
+            DMat3::IDENTITY,
+        )
+        .unwrap();
+        assert_eq!(ct.pyramid_axes(), [true, true, false]);
+        let l1 = ct.halved(ct.pyramid_axes()).unwrap();
+        assert_eq!(l1.dims, [129, 129, 108]);
+        assert_eq!(l1.pyramid_axes(), [true; 3]);
+        // Short axes stay; a grid of short axes ends the pyramid.
+        let thin = Grid::with_dims([64, 64, 4]).unwrap();
+        assert_eq!(thin.pyramid_axes(), [true, true, false]);
+        assert_eq!(
+            Grid::with_dims([7, 5, 1]).unwrap().pyramid_axes(),
+            [false; 3]
+        );
+    }
+
+    #[test]
+    fn samples_round_to_the_nearest_and_saturate() {
+        assert_eq!(u8::from_f64(254.5), 255);
+        assert_eq!(u8::from_f64(300.0), 255);
+        assert_eq!(u8::from_f64(-3.0), 0);
+        assert_eq!(i16::from_f64(-1000.5), -1001);
+        assert_eq!(i16::from_f64(-999.49), -999);
+        assert_eq!(i8::from_f64(f64::NAN), 0);
+        assert_eq!(f32::from_f64(0.1), 0.1f32);
     }
 
     #[test]

@@ -46,7 +46,7 @@ pub use renderer::{
 pub use request::{
     AntialiasChoice, AttenuationChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice,
     DisplayChoice, DisplayOptions, KernelChoice, Mode, OrderChoice, PreintegrateChoice, Quality,
-    RenderRequest, RendererChoice, ShadeAtChoice, VisibilityChoice,
+    RenderRequest, RendererChoice, ShadeAtChoice, VisibilityChoice, VolumeLevel,
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,

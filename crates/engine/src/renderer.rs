@@ -4,7 +4,7 @@
 use crate::error::{EngineError, Result};
 use crate::request::{
     AntialiasChoice, DensityChoice, KernelChoice, Mode, OrderChoice, RenderRequest, RendererChoice,
-    VisibilityChoice,
+    VisibilityChoice, VolumeLevel,
 };
 use crate::scene::{TransferSpec, VolumeSource};
 use serde::Serialize;
@@ -20,8 +20,8 @@ use volsplat_filter::texture::Reconstruction;
 use volsplat_splat::list::{draw_depth_contour, k_distance, render_list_depth};
 use volsplat_splat::refine::{RefinementStep, render_ladder};
 use volsplat_splat::{
-    BrickGrid, ExtractSettings, Rendered, SplatList, render_list_with_progress, render_slabs_any,
-    render_with_progress,
+    BrickGrid, ExtractSettings, Pyramid, Rendered, SplatList, render_level,
+    render_list_with_progress, render_with_progress,
 };
 
 /// Progress of a render, passed to the caller's callback.
@@ -109,6 +109,17 @@ pub struct Stats {
     /// against the data (`volsplat_splat::slab::ring_risk`; `auto` pre-integrates above 4).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ring_risk: Option<f64>,
+    /// Image-aligned slabs asked for a pyramid level (`quality.level` other than `full`): the
+    /// level drawn, 0 for the full volume (decision 0031). Absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub level: Option<usize>,
+    /// With `level`: the smallest spacing of the level drawn, world units (`auto` keeps it at
+    /// most √2 × `focal_pixel`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub level_spacing: Option<f64>,
+    /// With `level`: the size of a pixel at the focal point, world units.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub focal_pixel: Option<f64>,
     /// Sheets.
     pub sheets: usize,
     /// Sheet-normal axis, `i`, `j` or `k`.
@@ -282,6 +293,9 @@ pub struct Renderer {
     list: Option<Cached<ListKey, Arc<SplatList>>>,
     /// Min/max bricks of the volume (image-aligned slabs' empty-space skipping).
     bricks: Option<Cached<VolumeSource, Arc<BrickGrid>>>,
+    /// The volume's resolution pyramid (previews, `quality.level`), its levels built on first
+    /// use.
+    pyramid: Option<Cached<VolumeSource, Arc<Pyramid>>>,
     display: Option<Cached<(VolumeSource, String), Arc<DisplayState>>>,
     pool: Option<Cached<Option<usize>, Arc<rayon::ThreadPool>>>,
     /// The automatic transfer function and its description, per volume (keyed by address).
@@ -486,6 +500,14 @@ impl Renderer {
                 "the line at distance k needs the splat-list renderer (perspective or splat_list)",
             ));
         }
+        if !request.quality.level.is_full() && renderer != UsedRenderer::Slab {
+            warnings.push(format!(
+                "quality.level {} applies to the image-aligned slab renderer; the {} drew the \
+                 full volume",
+                request.quality.level,
+                renderer_name(renderer)
+            ));
+        }
         let projection = if camera.parallel_projection {
             "orthographic"
         } else {
@@ -642,7 +664,30 @@ impl Renderer {
                         slab_shading(&request.quality, &tables),
                     )
                 });
-                let prepare_ms = if fresh_tables || fresh_bricks {
+                // The pyramid level (decision 0031): the full volume unless asked; coarse levels
+                // are built here, once per volume, so that their cost counts as preparation.
+                let asked = request.quality.level;
+                let (level, focal_pixel) = slab_level(asked, &vol, &camera, w, h)?;
+                let pyramid = Arc::clone(
+                    cached(&mut self.pyramid, request.scene.volume.clone(), || {
+                        Ok(Arc::new(Pyramid::new(Arc::clone(&vol))))
+                    })?
+                    .0,
+                );
+                let built = !pyramid.is_built(level);
+                if built {
+                    pool.install(|| pyramid.level(level))?;
+                }
+                let level = level.min(pyramid.len() - 1);
+                if let VolumeLevel::Level(n) = asked
+                    && usize::from(n) > level
+                {
+                    warnings.push(format!(
+                        "quality.level {n}: the volume's pyramid ends at level {level}; drew \
+                         level {level}"
+                    ));
+                }
+                let prepare_ms = if fresh_tables || fresh_bricks || built {
                     ms(t_prep)
                 } else {
                     0.0
@@ -650,16 +695,25 @@ impl Renderer {
                 report(progress, 0.2, "render")?;
                 let mut cancelled = false;
                 let out = pool.install(|| {
-                    render_slabs_any(&vol, &camera, &tables, &settings, Some(&bricks), &mut |p| {
-                        let f =
-                            render_fraction(p.sheets_done as f64 / p.sheets_total.max(1) as f64);
-                        let go = progress(&Progress {
-                            fraction: f,
-                            stage: "render",
-                        });
-                        cancelled |= !go;
-                        go
-                    })
+                    render_level(
+                        &pyramid,
+                        level,
+                        &camera,
+                        &tables,
+                        &settings,
+                        Some(&bricks),
+                        &mut |p| {
+                            let f = render_fraction(
+                                p.sheets_done as f64 / p.sheets_total.max(1) as f64,
+                            );
+                            let go = progress(&Progress {
+                                fraction: f,
+                                stage: "render",
+                            });
+                            cancelled |= !go;
+                            go
+                        },
+                    )
                 });
                 if cancelled {
                     return Err(EngineError::Cancelled);
@@ -696,6 +750,12 @@ impl Renderer {
                     ring_risk: (settings.mode == volsplat_splat::RenderMode::Composite)
                         .then_some(s.ring_risk),
                     threads: s.threads,
+                    level: (!asked.is_full()).then_some(level),
+                    level_spacing: (!asked.is_full()).then(|| {
+                        let g = &pyramid.grids()[level];
+                        g.spacing.iter().fold(f64::INFINITY, |m, &v| m.min(v))
+                    }),
+                    focal_pixel: (!asked.is_full()).then_some(focal_pixel),
                     ..Stats::default()
                 };
                 (rendered.image, rendered.values)
@@ -903,6 +963,27 @@ impl Renderer {
             notes,
         })
     }
+}
+
+/// The pyramid level the slabs draw for `asked` (decision 0031) and the pixel size at the focal
+/// point (world units): 0 for the full level; `auto` the level whose voxel is about a pixel
+/// ([`volsplat_splat::auto_level`], from the level grids alone: nothing is built to choose).
+fn slab_level(
+    asked: VolumeLevel,
+    vol: &AnyVolume,
+    camera: &Camera,
+    w: usize,
+    h: usize,
+) -> Result<(usize, f64)> {
+    let pixel = volsplat_splat::focal_pixel_size(camera, w, h)?;
+    let level = match asked {
+        VolumeLevel::Full => 0,
+        VolumeLevel::Level(n) => usize::from(n),
+        VolumeLevel::Auto => {
+            volsplat_splat::auto_level(pixel, &volsplat_splat::pyramid::level_grids(vol.grid()))
+        }
+    };
+    Ok((level, pixel))
 }
 
 /// Calls the progress callback; `false` from it is [`EngineError::Cancelled`].

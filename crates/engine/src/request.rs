@@ -186,6 +186,83 @@ pub enum PreintegrateChoice {
     Off,
 }
 
+/// Which level of the volume's resolution pyramid the image-aligned slabs draw
+/// ([`volsplat_splat::pyramid`]; `docs/decisions/0031-prefiltered-pyramid-previews.md`). In
+/// request and scene files: `"full"`, `"auto"` or a level number (`0` is the full level).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum VolumeLevel {
+    /// The volume itself, minified views anti-aliased by rays averaged per pixel (the default;
+    /// every image as before).
+    #[default]
+    Full,
+    /// The level whose voxel is about a pixel at the focal point
+    /// ([`volsplat_splat::auto_level`]: the coarsest whose smallest spacing is at most √2
+    /// pixels); the full level (as [`VolumeLevel::Full`]) when no coarser one qualifies. For
+    /// previews: the cost falls with the pixel count.
+    Auto,
+    /// Level `n`: the volume low-pass filtered and halved `n` times (past the coarsest level:
+    /// the coarsest); 0 is [`VolumeLevel::Full`]. Coarse levels take one ray per pixel.
+    Level(u8),
+}
+
+impl std::fmt::Display for VolumeLevel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            VolumeLevel::Full => f.write_str("full"),
+            VolumeLevel::Auto => f.write_str("auto"),
+            VolumeLevel::Level(n) => write!(f, "{n}"),
+        }
+    }
+}
+
+impl std::str::FromStr for VolumeLevel {
+    type Err = String;
+
+    /// `full`, `auto` or a level number 0–255.
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s.trim() {
+            "full" => Ok(VolumeLevel::Full),
+            "auto" => Ok(VolumeLevel::Auto),
+            n => n.parse::<u8>().map(VolumeLevel::Level).map_err(|_| {
+                format!("volume level {s:?}: expected full, auto or a level number 0–255")
+            }),
+        }
+    }
+}
+
+impl Serialize for VolumeLevel {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            VolumeLevel::Level(n) => s.serialize_u8(*n),
+            other => s.serialize_str(&other.to_string()),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for VolumeLevel {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Repr {
+            Number(u8),
+            Name(String),
+        }
+        match Repr::deserialize(d).map_err(|_| {
+            serde::de::Error::custom("expected \"full\", \"auto\" or a level number 0–255")
+        })? {
+            Repr::Number(n) => Ok(VolumeLevel::Level(n)),
+            Repr::Name(name) => name.parse().map_err(serde::de::Error::custom),
+        }
+    }
+}
+
+impl VolumeLevel {
+    /// Whether this asks for the full level ([`VolumeLevel::Full`] or level 0).
+    pub fn is_full(self) -> bool {
+        matches!(self, VolumeLevel::Full | VolumeLevel::Level(0))
+    }
+}
+
 /// Traversal order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -233,6 +310,10 @@ pub struct Quality {
     /// transfer-function ramp is sharper than the data's steps) or by its one sample; default
     /// `auto` (decision 0020).
     pub preintegrate: PreintegrateChoice,
+    /// Image-aligned visibility: which level of the volume's resolution pyramid is drawn
+    /// (default [`VolumeLevel::Full`]); `auto` for previews whose cost falls with the pixel
+    /// count (decision 0031). The other renderers draw the full level (with a warning).
+    pub level: VolumeLevel,
 }
 
 /// The front ends' early-termination opacity ([`Quality::opacity_cutoff`]), 1 − 255/32767 ≈
@@ -255,6 +336,7 @@ impl Default for Quality {
             slab: None,
             shade_at: ShadeAtChoice::Voxels,
             preintegrate: PreintegrateChoice::Auto,
+            level: VolumeLevel::Full,
         }
     }
 }

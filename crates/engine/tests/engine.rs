@@ -611,3 +611,126 @@ fn preintegration_by_choice_and_by_ramp() {
     );
     assert_eq!(run(PreintegrateChoice::On, true, Mode::Mip).0, None);
 }
+
+/// `quality.level` (issue 29 item 7, decision 0031) in request files: `"full"` (the default when
+/// absent), `"auto"` or a level number; anything else names the field.
+#[test]
+fn the_volume_level_round_trips_in_request_files() {
+    use volsplat::VolumeLevel;
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("s.json");
+    let base = r#"{"scene": {"volume": {"phantom": {"phantom": "blobs", "grid": [16]}}},
+                   "width": 8, "height": 8"#;
+    std::fs::write(&p, format!("{base}}}")).unwrap();
+    assert_eq!(
+        RenderRequest::load(&p).unwrap().0.quality.level,
+        VolumeLevel::Full
+    );
+    for (text, level) in [
+        (r#""full""#, VolumeLevel::Full),
+        (r#""auto""#, VolumeLevel::Auto),
+        ("2", VolumeLevel::Level(2)),
+        ("0", VolumeLevel::Level(0)),
+    ] {
+        std::fs::write(&p, format!(r#"{base}, "quality": {{"level": {text}}}}}"#)).unwrap();
+        let (req, warnings) = RenderRequest::load(&p).unwrap();
+        assert_eq!(req.quality.level, level, "{text}");
+        assert!(warnings.is_empty(), "{warnings:?}");
+        let back = dir.path().join("back.json");
+        req.save(&back).unwrap();
+        assert_eq!(RenderRequest::load(&back).unwrap().0.quality.level, level);
+    }
+    for bad in [r#""coarse""#, "-1", "256", "1.5", "true"] {
+        std::fs::write(&p, format!(r#"{base}, "quality": {{"level": {bad}}}}}"#)).unwrap();
+        let e = RenderRequest::load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("quality.level") && e.contains("auto"),
+            "{bad}: {e}"
+        );
+    }
+    assert_eq!("auto".parse::<VolumeLevel>(), Ok(VolumeLevel::Auto));
+    assert_eq!("3".parse::<VolumeLevel>(), Ok(VolumeLevel::Level(3)));
+    assert!("fine".parse::<VolumeLevel>().is_err());
+}
+
+/// A preview (`quality.level = auto`) of a small image draws a coarse level, takes a fraction
+/// of the full frame's samples, says which level it drew, and looks like the full frame; the
+/// level is built once per volume; an explicit level past the coarsest draws the coarsest with
+/// a warning; the full level is the default and its stats say nothing of levels; renderers other
+/// than the slabs draw the full volume and say so.
+#[test]
+fn auto_level_previews_draw_a_coarse_level_once() {
+    use volsplat::VolumeLevel;
+    use volsplat::core::Orbit;
+    let mut scene = blobs(64);
+    scene.camera = orbit(30.0, 20.0, false);
+    let mut req = RenderRequest::new(scene, 32, 32);
+    let mut r = Renderer::new();
+    let full = r.render(&req, &mut |_| true).unwrap();
+    assert_eq!(full.stats.renderer, Some(UsedRenderer::Slab));
+    assert_eq!(full.stats.level, None);
+    let json = serde_json::to_string(&full.stats).unwrap();
+    assert!(!json.contains("level"), "{json}");
+    req.quality.level = VolumeLevel::Auto;
+    let preview = r.render(&req, &mut |_| true).unwrap();
+    let level = preview.stats.level.expect("the level drawn");
+    assert!(level >= 1, "level {level}");
+    assert!(
+        preview.stats.prepare_ms > 0.0,
+        "the level is built in this frame"
+    );
+    assert!(
+        preview.stats.voxels * 8 < full.stats.voxels,
+        "{} samples against {}",
+        preview.stats.voxels,
+        full.stats.voxels
+    );
+    let (sp, px) = (
+        preview.stats.level_spacing.unwrap(),
+        preview.stats.focal_pixel.unwrap(),
+    );
+    assert!(sp <= px * std::f64::consts::SQRT_2 && sp * 2.0 > px * std::f64::consts::SQRT_2);
+    let psnr = volsplat_testkit_psnr(&preview.image, &full.image);
+    assert!(psnr > 30.0, "{psnr:.1} dB");
+    // Another camera: the level is kept, and the frame is what a fresh renderer draws.
+    req.scene.camera = CameraSpec::Orbit(Orbit {
+        azimuth: Some(50.0),
+        ..Orbit::default()
+    });
+    let second = r.render(&req, &mut |_| true).unwrap();
+    assert_eq!(second.stats.level, Some(level));
+    assert_eq!(second.stats.prepare_ms, 0.0);
+    let fresh = Renderer::new().render(&req, &mut |_| true).unwrap();
+    assert_eq!(bits(&second), bits(&fresh));
+    // Past the coarsest level.
+    req.quality.level = VolumeLevel::Level(40);
+    let out = r.render(&req, &mut |_| true).unwrap();
+    let coarsest = out.stats.level.unwrap();
+    assert!(coarsest > level);
+    assert!(
+        out.warnings.iter().any(|w| w.contains("quality.level 40")),
+        "{:?}",
+        out.warnings
+    );
+    // X-ray is drawn by the sheets, from the full volume.
+    req.mode = Mode::Xray;
+    let out = r.render(&req, &mut |_| true).unwrap();
+    assert_eq!(out.stats.level, None);
+    assert!(
+        out.warnings.iter().any(|w| w.contains("full volume")),
+        "{:?}",
+        out.warnings
+    );
+}
+
+/// PSNR over premultiplied RGBA, peak 1.
+fn volsplat_testkit_psnr(a: &volsplat::core::Image, b: &volsplat::core::Image) -> f64 {
+    let (a, b) = (a.pixels().as_flattened(), b.pixels().as_flattened());
+    let mse = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| ((x - y) as f64).powi(2))
+        .sum::<f64>()
+        / a.len() as f64;
+    10.0 * (1.0 / mse).log10()
+}

@@ -6,15 +6,23 @@
 //! - `table-4.01/<resolution>/<kernel>`: Westover's Table 4.01 grid on a CT-like head of
 //!   256×256×93 voxels with z spacing twice x/y, 512², three input resolutions (every 4th, 2nd,
 //!   every voxel) × three kernels (single-point, nearest, Gaussian).
+//! - `slab CT head 256x256x108 ct-skin/<size>² <level>`: the CT-like head phantom (i16 HU, as
+//!   `volsplat phantom head --grid 256,256,108`), `ct-skin`, shaded at the voxels, image-aligned
+//!   slabs, 2 threads, at 128², 256² and 512², the full level (minified views supersampled)
+//!   against the pyramid level whose voxel is about a pixel (`auto_level`; decision 0031).
 //!
 //! Run: `cargo bench -p volsplat-splat --features bench --bench splat`. Numbers go to docs/BENCHMARKS.md.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
+use std::sync::Arc;
 use volsplat_core::glam::DMat3;
 use volsplat_core::phantom::{self, EllipsoidPhantom, MarschnerLobb, Phantom};
 use volsplat_core::{Camera, CrioTables, Grid, Kernel, TransferFunction, Volume};
-use volsplat_splat::{RenderSettings, render};
+use volsplat_splat::{
+    Pyramid, RenderSettings, ShadeAt, Visibility, auto_level, focal_pixel_size, render,
+    render_level,
+};
 
 fn marschner_lobb_u8(n: usize) -> Volume<u8> {
     let f = phantom::sample(
@@ -121,5 +129,66 @@ fn table_4_01(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, composite_256, table_4_01);
+fn slab_previews(c: &mut Criterion) {
+    let vol = phantom::ct_head_volume([256, 256, 108]).expect("phantom");
+    let grid = vol.grid().clone();
+    let pyramid = Pyramid::new(Arc::new(vol.into()));
+    let tables = CrioTables::from_transfer_function(
+        &TransferFunction::preset("ct-skin", (-1024.0, 3071.0)).expect("preset"),
+        4096,
+    )
+    .expect("valid tf");
+    let cam = orbit_camera(&grid, 30.0, 15.0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("pool");
+    let bricks = volsplat_splat::BrickGrid::build(match &**pyramid.full() {
+        volsplat_core::AnyVolume::I16(v) => v,
+        _ => unreachable!("the head is i16"),
+    });
+    let mut g = c.benchmark_group("slab CT head 256x256x108 ct-skin");
+    g.sample_size(10);
+    for n in [128, 256, 512] {
+        let auto = auto_level(
+            focal_pixel_size(&cam, n, n).expect("camera"),
+            pyramid.grids(),
+        );
+        // Levels are built once, outside the timing.
+        pyramid.level(auto).expect("level");
+        let s = RenderSettings {
+            width: n,
+            height: n,
+            visibility: Visibility::ImageAligned,
+            shade_at: ShadeAt::Voxels,
+            slab: 1.0,
+            opacity_cutoff: 1.0 - 255.0 / 32767.0,
+            antialias: volsplat_splat::Antialias::Swan,
+            ..RenderSettings::default()
+        };
+        for (name, level) in [("full", 0), ("auto", auto)] {
+            g.bench_function(format!("{n}² {name} (level {level})"), |b| {
+                b.iter(|| {
+                    pool.install(|| {
+                        black_box(
+                            render_level(
+                                &pyramid,
+                                level,
+                                &cam,
+                                &tables,
+                                &s,
+                                Some(&bricks),
+                                &mut |_| true,
+                            )
+                            .expect("render"),
+                        )
+                    })
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, composite_256, table_4_01, slab_previews);
 criterion_main!(benches);

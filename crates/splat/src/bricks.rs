@@ -180,6 +180,52 @@ impl BrickGrid {
         }
         flags
     }
+
+    /// One flag per brick: whether a trilinear sample in it can have opacity through a table
+    /// read the way the slab kernels read theirs: at position `pos(x)` (monotone in `x`,
+    /// clamped to the table) by linear interpolation between entries `⌊t⌋` and `⌊t⌋ + 1` with
+    /// weight `t − ⌊t⌋`, where `nonzero[i]` says whether entry `i` has opacity (NaN counts as
+    /// opacity). Exact for the tables' own interpolation: a brick whose eight-corner samples
+    /// all map between two entries without opacity is inactive, however close its range lies
+    /// to a ramp, where [`BrickGrid::active`] keeps a slack of table entries around it. A brick
+    /// of one value `c` reads exactly the table at `pos(c)` (every trilinear combination of
+    /// equal corners is `c` in f32); other ranges are widened by 2⁻¹⁹ of their magnitude, above
+    /// the rounding of three nested f32 linear interpolations (at most a few units in the last
+    /// place).
+    pub fn active_in_table(&self, nonzero: &[bool], pos: impl Fn(f32) -> f32) -> Vec<bool> {
+        let n = nonzero.len();
+        if n == 0 {
+            return vec![false; self.ranges.len()];
+        }
+        let mut prefix = Vec::with_capacity(n + 1);
+        prefix.push(0u32);
+        for &z in nonzero {
+            let last = *prefix.last().unwrap_or(&0);
+            prefix.push(last + u32::from(z));
+        }
+        let last = (n - 1) as f32;
+        self.ranges
+            .iter()
+            .map(|&[lo, hi]| {
+                if lo > hi || lo.is_nan() || hi.is_nan() {
+                    return false;
+                }
+                let (a, b) = if lo == hi {
+                    (lo, hi)
+                } else {
+                    let eps = lo.abs().max(hi.abs()) * f32::EPSILON * 16.0 + f32::MIN_POSITIVE;
+                    (lo - eps, hi + eps)
+                };
+                let (ta, tb) = (pos(a), pos(b));
+                if ta.is_nan() || tb.is_nan() {
+                    return true;
+                }
+                let i0 = ta.floor().clamp(0.0, last) as usize;
+                let i1 = tb.ceil().clamp(0.0, last) as usize;
+                prefix[i1 + 1] > prefix[i0]
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]
@@ -234,5 +280,37 @@ mod tests {
             LookupTable::from_fn(TableIndex::Density, 0.0, 16.0, 17, |x| [(x - 8.0).max(0.0)]);
         assert_eq!(g.active(&ramp, 0.0, false), vec![false, true]);
         assert_eq!(g.active(&ramp, 0.5, false), vec![true, true]);
+    }
+
+    #[test]
+    fn table_activity_is_exact_at_an_entry() {
+        // Brick 0 holds only 0; brick 1 holds 0 and 16; brick 2 only 16.
+        let v = vol([25, 9, 9], |i, _, _| if i <= 8 { 0.0 } else { 16.0 });
+        let g = BrickGrid::build(&v);
+        assert_eq!(g.dims, [3, 1, 1]);
+        // Entries at 0, 1, …, 16: opacity from entry 1 on. Value 0 reads entry 0 alone.
+        let nonzero: Vec<bool> = (0..17).map(|i| i >= 1).collect();
+        let pos = |x: f32| x.clamp(0.0, 16.0);
+        assert_eq!(g.active_in_table(&nonzero, pos), vec![false, true, true]);
+        // The slack test cannot tell brick 0 from a brick that reaches into the ramp.
+        let table = LookupTable::from_fn(TableIndex::Density, 0.0, 16.0, 17, |x| {
+            [if x >= 1.0 { 0.5 } else { 0.0 }]
+        });
+        assert_eq!(g.active(&table, 0.01, false), vec![true, true, true]);
+        // Opacity only above 16 (past the table): nothing is active; only at entry 0 (below
+        // the data's range start): brick 0 and brick 1, whose range starts there.
+        let none = vec![false; 17];
+        assert_eq!(g.active_in_table(&none, pos), vec![false; 3]);
+        let first: Vec<bool> = (0..17).map(|i| i == 0).collect();
+        assert_eq!(g.active_in_table(&first, pos), vec![true, true, false]);
+        // A range a hair wide around an entry reaches the neighbours of that entry.
+        let near = vol([9, 9, 9], |i, _, _| if i == 0 { 3.0 } else { 3.0 + 1e-3 });
+        let g = BrickGrid::build(&near);
+        let only4: Vec<bool> = (0..17).map(|i| i == 4).collect();
+        assert_eq!(g.active_in_table(&only4, pos), vec![true]);
+        let only2: Vec<bool> = (0..17).map(|i| i == 2).collect();
+        assert_eq!(g.active_in_table(&only2, pos), vec![true]);
+        let only5: Vec<bool> = (0..17).map(|i| i == 5).collect();
+        assert_eq!(g.active_in_table(&only5, pos), vec![false]);
     }
 }

@@ -12,6 +12,8 @@
 //! - [`refine`]: the preview ladder of subsampled renders with cheaper kernels (§4.2.2–4.2.4).
 //! - [`footprint`]: per-frame footprint tables with exact elliptical mapping (§3.7).
 //! - [`geometry`]: incremental view transform, sheet choice and traversal order (§3.5).
+//! - [`pyramid`]: prefiltered levels of a volume for previews ([`Pyramid`], [`render_level`],
+//!   [`auto_level`]: the level whose voxel is about a pixel).
 //!
 //! Output is bit-identical for any rayon thread count.
 #![deny(missing_docs)]
@@ -25,6 +27,7 @@ pub mod geometry;
 pub mod list;
 mod mipcull;
 pub mod normals;
+pub mod pyramid;
 pub mod refine;
 pub mod render;
 mod row;
@@ -40,6 +43,7 @@ pub use list::{
     ExtractSettings, ListVoxels, SplatList, SplatRecord, render_list, render_list_with_progress,
 };
 pub use normals::ShadeAt;
+pub use pyramid::{Pyramid, PyramidLevel, auto_level, focal_pixel_size, render_level};
 pub use render::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
     render_any, render_with_progress, xray_weight,

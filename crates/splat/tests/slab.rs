@@ -203,6 +203,84 @@ fn empty_space_skipping_is_exact() {
     }
 }
 
+/// A background exactly at the transfer function's first point, with the opacity ramp starting
+/// a fraction of a table entry above it (the automatic transfer function's "background ≤ fill
+/// value + ½ transparent" on a CT whose air is the fill value): the bricks of pure background
+/// are skipped (the kernels' table reads exactly its zero entry there), and the picture keeps
+/// every bit. The slack test of `BrickGrid::active` kept every such brick: the CT-like head
+/// took 13.2 M samples a 512² frame instead of 2.5 M (`docs/BENCHMARKS.md` §21).
+#[test]
+fn empty_space_skipping_is_exact_next_to_a_ramp() {
+    // A ball of 1 in a background of exactly 0, on a grid whose bricks are mostly background.
+    let n = 48;
+    let c = (n - 1) as f32 / 2.0;
+    let vol = Volume::from_fn(Grid::with_dims([n; 3]).unwrap(), |i, j, k| {
+        let r2 = [i, j, k]
+            .map(|v| (v as f32 - c).powi(2))
+            .iter()
+            .sum::<f32>();
+        if r2 < (0.25 * n as f32).powi(2) {
+            1.0
+        } else {
+            0.0
+        }
+    })
+    .unwrap();
+    let mut nothing_skipped = BrickGrid::build(&vol);
+    for r in &mut nothing_skipped.ranges {
+        *r = [f32::NEG_INFINITY, f32::INFINITY];
+    }
+    let real = BrickGrid::build(&vol);
+    let tf = TransferFunction {
+        scalar_opacity: vec![[0.0, 0.0], [0.0002, 0.0], [0.02, 0.2], [1.0, 0.6]],
+        ..volsplat_testkit::fixtures::shaded_transfer_function()
+    };
+    let shaded = CrioTables::from_transfer_function(&tf, 1024).unwrap();
+    let unshaded = CrioTables::from_transfer_function(
+        &TransferFunction {
+            shade: false,
+            ..tf.clone()
+        },
+        1024,
+    )
+    .unwrap();
+    for (tables, shade_at) in [
+        (&unshaded, ShadeAt::Voxels),
+        (&shaded, ShadeAt::Voxels),
+        (&shaded, ShadeAt::Samples),
+    ] {
+        for parallel in [true, false] {
+            let cam = camera(vol.grid(), 23.0, 31.0, parallel);
+            let s = RenderSettings {
+                shade_at,
+                preintegrate: Preintegrate::Off,
+                ..settings(72, 64, RenderMode::Composite)
+            };
+            let a = render_slabs(&vol, &cam, tables, &s, Some(&real), &mut |_| true).unwrap();
+            let b = render_slabs(&vol, &cam, tables, &s, Some(&nothing_skipped), &mut |_| {
+                true
+            })
+            .unwrap();
+            let what = format!(
+                "shade {} at {shade_at:?}, parallel={parallel}",
+                tables.needs_gradient()
+            );
+            assert_eq!(a.image.pixels(), b.image.pixels(), "{what}");
+            assert!(
+                a.image.pixels().iter().any(|p| p[3] > 0.5),
+                "{what}: the ball is drawn"
+            );
+            // Most samples lie in the background around the ball: skipped.
+            assert!(
+                2 * a.stats.voxels < b.stats.voxels,
+                "{what}: {} samples with skipping, {} without",
+                a.stats.voxels,
+                b.stats.voxels
+            );
+        }
+    }
+}
+
 /// Calls `f` with a 36³ volume, a 70 × 52 image's camera and the settings for it, for shaded and
 /// unshaded composite and MIP, orthographic and perspective: the cases of the tests that compare
 /// two renders of the same scene bit for bit.

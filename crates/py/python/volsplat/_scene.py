@@ -27,6 +27,7 @@ _QUALITY = (
     "slab",
     "shade_at",
     "preintegrate",
+    "level",
 )
 _SCENE = ("lights", "shading", "surface_enhance", "depth_cue", "clipping", "xray_offset")
 _ORBIT = ("view", "azimuth", "elevation", "roll", "zoom", "dolly", "perspective", "view_angle")
@@ -118,7 +119,9 @@ class Scene:
       thickness in voxels; default ``None``: 1 for composite, 0.5 for MIP, MinIP and shading at
       the samples), ``shade_at`` (``"voxels"``, the default, as VTK shades, or ``"samples"``),
       ``preintegrate`` (``"auto"``, the default: by segment where the transfer function's ramp
-      is sharp; ``"on"``; ``"off"``: one point per slab),
+      is sharp; ``"on"``; ``"off"``: one point per slab), ``level`` (``"full"``, the default;
+      ``"auto"``: a preview from the resolution pyramid level whose voxel is about a pixel, its
+      cost falling with the pixel count; or a level number; ``--level``),
       ``order`` (``"ftb"``/``"btf"``),
       ``opacity_cutoff``, ``subsample``, ``list_threshold``; or ``quality={...}``.
     - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
