@@ -95,12 +95,16 @@ fn the_page_needs_the_token() {
         "/".to_string(),
         "/?token=".into(),
         format!("/?token={wrong}"),
-        format!("/?token={}", token.to_ascii_uppercase().replace('A', "G")),
+        // Not hex at all (a `g`): refused whatever the token's digits are.
+        format!("/?token=g{}", &token[1..]),
     ] {
         let (status, _, body) = get(addr, &target, "");
         assert_eq!(status, 403, "{target}");
         assert!(!body.contains(&token), "the refusal leaks the token");
     }
+    // The same 128 bits in upper-case hex are the token (`Token::matches` takes either case).
+    let (status, _, _) = get(addr, &format!("/?token={}", token.to_ascii_uppercase()), "");
+    assert_eq!(status, 200);
     let (status, _, _) = get(addr, &format!("/secret.nrrd?token={token}"), "");
     assert_eq!(status, 404);
 }
