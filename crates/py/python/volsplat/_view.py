@@ -124,8 +124,10 @@ def view(
     ``transfer_function``, ``azimuth``, ``size``, ``mode``, …): they set the starting scene.
     ``host``/``port``/``allow_remote``/``data_dir``/``target_fps``/``target_latency`` are the
     server's (``--host`` …); ``srgb``, ``bits``, ``background`` and ``window`` how frames are
-    shown and the screenshot written (``--srgb`` …). In Jupyter the returned object displays
-    as the page (``frame_height`` pixels high)::
+    shown and the screenshot written (``--srgb`` …; they are kept in :attr:`Viewer.scene`, so
+    its scene file renders to the screenshot's bytes). Without ``size`` (or a :class:`Scene`,
+    which has one) the image follows the page's view, as ``volsplat view`` without ``--size``.
+    In Jupyter the returned object displays as the page (``frame_height`` pixels high)::
 
         v = volsplat.view("head.nrrd", transfer_function="ct-bone")
         v                      # the page, in the notebook
@@ -137,6 +139,7 @@ def view(
         if volume is None or isinstance(volume, (Volume, Scene)) or _is_path(volume):
             raise InvalidInputError(f"{', '.join(vkw)}: only apply when volume is a numpy array")
         volume = Volume(volume, **vkw)
+    fit_view = "size" not in options and not isinstance(volume, Scene)
     scene = volume.replace(**options) if isinstance(volume, Scene) else Scene(volume, **options)
     request, vol = scene._render_args()
     win = None if window is None else tuple(floats(window, 2, "window"))
@@ -153,5 +156,6 @@ def view(
         bits=int(bits),
         background=floats(background, 3, "background"),
         window=win,
+        fit_view=fit_view,
     )
     return Viewer(core, vol, frame_height)

@@ -148,6 +148,7 @@ class ViewerCore:
         bits: int = 8,
         background: Sequence[float] = ...,
         window: Optional[Tuple[float, float]] = None,
+        fit_view: bool = False,
     ) -> None: ...
     @property
     def url(self) -> str: ...
