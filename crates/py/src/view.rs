@@ -30,13 +30,14 @@ pub struct ViewerCore {
 #[pymethods]
 impl ViewerCore {
     /// Starts a viewer on `request_json` (the engine's request; `volume` replaces its volume),
-    /// listening on `host:port` (0: a free port). `srgb`, `bits`, `background` and `window`
-    /// become the request's output options (its `output`); `fit_view`: the image follows the
-    /// page's view instead of the request's size.
+    /// listening on `host:port` (0: a free port). `srgb`, `bits`, `background` and `window`,
+    /// where given, replace the request's output options (its `output`; a scene file's are
+    /// kept otherwise); `fit_view`: the image follows the page's view instead of the
+    /// request's size.
     #[new]
     #[pyo3(signature = (request_json, volume=None, *, host="127.0.0.1".to_string(), port=0,
         allow_remote=false, data_dir=None, target_fps=30.0, target_latency=50.0, srgb=None,
-        bits=8, background=[0.0, 0.0, 0.0], window=None, fit_view=false))]
+        bits=None, background=None, window=None, fit_view=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -49,20 +50,26 @@ impl ViewerCore {
         target_fps: f64,
         target_latency: f64,
         srgb: Option<bool>,
-        bits: u32,
-        background: [f32; 3],
+        bits: Option<u32>,
+        background: Option<[f32; 3]>,
         window: Option<(f32, f32)>,
         fit_view: bool,
     ) -> PyResult<Self> {
         let mut request = parse_request(request_json, volume.as_deref())?;
         let memory = matches!(request.scene.volume, VolumeSource::Memory(_));
         let output = &mut request.output;
-        output.bit_depth = bits;
+        if let Some(bits) = bits {
+            output.bit_depth = bits;
+        }
         if let Some(srgb) = srgb {
             output.srgb = srgb;
         }
-        output.background = background;
-        output.window = window.map(|(lo, hi)| [lo, hi]);
+        if let Some(background) = background {
+            output.background = background;
+        }
+        if let Some((lo, hi)) = window {
+            output.window = Some([lo, hi]);
+        }
         // Checked here so that a bad option is an error naming it, before any port is bound.
         request
             .output
