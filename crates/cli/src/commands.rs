@@ -9,7 +9,7 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use volsplat::core::{Image, ScalarImage};
-use volsplat::io::{PngBitDepth, PngSettings};
+use volsplat::io::PngBitDepth;
 use volsplat::{
     CameraSpec, Mode, RenderRequest, Renderer, TransferSpec, UsedRenderer, VolumeSource,
     default_ladder, renderer_name,
@@ -169,18 +169,18 @@ pub(crate) fn non_finite_pixels(
 }
 
 /// Writes an image (or the X-ray values) to `path` unless it holds non-finite values
-/// ([`NonFiniteOutput`], naming `stage`; `written` lists the files already written).
+/// ([`NonFiniteOutput`], naming `stage`; `written` lists the files already written), with the
+/// request's mode and output options.
 fn write_checked(
     path: &Path,
     image: &Image,
     values: Option<&ScalarImage>,
     req: &RenderRequest,
-    a: &RenderArgs,
     stage: &str,
     written: &[PathBuf],
 ) -> Result<()> {
-    let window = grey_window(&a.image)?;
-    let grey = volsplat::writes_values(values.is_some(), req.mode, window);
+    let options = req.output.write_options().map_err(explain)?;
+    let grey = volsplat::writes_values(values.is_some(), req.mode, options.window);
     let bad = match (grey, req.mode, values) {
         // MIP and MinIP values are NaN where no sample covers the pixel, by design.
         (true, Mode::Mip | Mode::Minip, Some(v)) => {
@@ -197,21 +197,9 @@ fn write_checked(
         }
         .into());
     }
-    volsplat::write_image(path, image, values, req.mode, &write_options(&a.image)?)
+    volsplat::write_image(path, image, values, req.mode, &options)
         .map_err(explain)
         .with_context(|| format!("writing {}", path.display()))
-}
-
-/// The engine's write options of the image flags.
-pub(crate) fn write_options(o: &ImageOptions) -> Result<volsplat::WriteOptions> {
-    Ok(volsplat::WriteOptions {
-        png: PngSettings {
-            bits: png_bits(o)?,
-            srgb: o.srgb,
-            background: background(o)?,
-        },
-        window: grey_window(o)?,
-    })
 }
 
 /// The `--background` colour: three linear values in [0, 1].
@@ -227,21 +215,14 @@ pub(crate) fn png_bits(o: &ImageOptions) -> Result<PngBitDepth> {
         .ok_or_else(|| anyhow!("--bit-depth must be 8 or 16, got {}", o.bits))
 }
 
-/// The checks of the image options that need no volume.
-pub(crate) fn check_image_options(o: &ImageOptions, mode: Mode) -> Result<()> {
+/// The checks of the image options that need neither a volume nor the request: their syntax
+/// and ranges. Whether a grey window suits the mode is the request's check
+/// (`RenderRequest::validate`, field `output.window`), made once a `--scene` file's mode and
+/// the flags are resolved: `render --scene mip.json --wl …` needs no `--mode mip`.
+pub(crate) fn check_image_options(o: &ImageOptions) -> Result<()> {
     png_bits(o)?;
     background(o)?;
-    if grey_window(o)?.is_some() && mode == Mode::Composite {
-        bail!(
-            "{}: a grey window applies to --mode mip, minip and xray; composite images take their \
-             colours from the transfer function",
-            if o.window.is_some() {
-                "--window"
-            } else {
-                "--wl"
-            }
-        );
-    }
+    grey_window(o)?;
     Ok(())
 }
 
@@ -256,7 +237,7 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
         check_output_path(p, "--save-scene", &["json"])?;
     }
     parse_image_size(&a.options.size, "--size")?;
-    check_image_options(&a.image, a.options.mode)?;
+    check_image_options(&a.image)?;
     if let Some(c) = &a.draw_k {
         triple::<f32>(c, "--draw-k")?;
     }
@@ -304,6 +285,7 @@ fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
         &a.input,
         &a.view,
         &a.options,
+        Some(&a.image),
         a.renderer,
         Some(&a.display),
         a.draw_k.as_deref(),
@@ -315,6 +297,8 @@ fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
             say!("note: {n}");
         }
     }
+    // Before the volume is loaded, which can take seconds.
+    req.validate().map_err(explain)?;
     Ok(req)
 }
 
@@ -357,7 +341,9 @@ fn flag_of(field: &str) -> Option<&'static str> {
         "scene.transfer_function" => "--tf/--preset",
         "scene.shading" => "--no-emission/--no-diffuse/--no-specular",
         "scene.clipping.crop" => "--crop/--crop-mm",
-        "background" => "--background",
+        "background" | "output.background" => "--background",
+        "output.window" => "--window/--wl",
+        "output.bit_depth" => "--bit-depth",
         "frames" => "--frames",
         "fps" => "--fps",
         "degrees" => "--degrees",
@@ -403,7 +389,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     let out = if a.ladder {
         let ladder = default_ladder(req.quality.kernel.kernel());
         let quiet = a.quiet;
-        let (output, args, stop) = (&a.output, &a, &stop);
+        let (output, stop) = (&a.output, &stop);
         let written = &mut written;
         renderer.render_refined(&req, &ladder, &mut |p| {
             let path = preview_path(output, p.subsample);
@@ -417,7 +403,6 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
                 &out.image,
                 out.values.as_ref(),
                 &req,
-                args,
                 &stage,
                 written,
             )
@@ -516,7 +501,6 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         &out.image,
         out.values.as_ref(),
         &req,
-        &a,
         stage,
         &written,
     )?;
@@ -767,6 +751,7 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
         &a.input,
         &a.view,
         &a.options,
+        None,
         RendererArg::Splat,
         None,
         None,
@@ -850,6 +835,23 @@ mod tests {
             Command::Render(a) => *a,
             other => panic!("{other:?}"),
         }
+    }
+
+    /// Issue 29 follow-up: the checks made before the scene file is read no longer test a
+    /// window against the `--mode` flag's default (composite); a bad window is still refused.
+    #[test]
+    fn a_window_is_not_checked_against_the_mode_flags_default() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("a.png");
+        let out = out.to_str().unwrap();
+        check_render_args(&render_args(&[
+            "--scene", "mip.json", "--wl", "1,2", "-o", out,
+        ]))
+        .unwrap();
+        let e = check_render_args(&render_args(&["--wl", "1,-2", "-o", out])).unwrap_err();
+        assert!(e.to_string().contains("width must be > 0"), "{e}");
+        let e = check_render_args(&render_args(&["--window", "3:1", "-o", out])).unwrap_err();
+        assert!(e.to_string().contains("LO < HI"), "{e}");
     }
 
     struct Out {
@@ -944,7 +946,6 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         for name in ["a.png", "a.npy"] {
             let path = dir.path().join(name);
-            let a = render_args(&["-o", path.to_str().unwrap()]);
             let req = RenderRequest::new(volsplat::Scene::default(), 5, 4);
             let mut out = rendered(5, 4);
             out.image.pixels_mut()[3][0] = f32::NAN;
@@ -954,7 +955,6 @@ mod tests {
                 &out.image,
                 out.values.as_ref(),
                 &req,
-                &a,
                 "splatting renderer",
                 &[],
             )
@@ -975,7 +975,6 @@ mod tests {
                 &out.image,
                 out.values.as_ref(),
                 &req,
-                &a,
                 "splatting renderer",
                 &[],
             )
@@ -985,7 +984,6 @@ mod tests {
         }
         // X-ray: the line integrals are checked, and a ladder's earlier previews are named.
         let path = dir.path().join("x.npy");
-        let a = render_args(&["--mode", "xray", "-o", path.to_str().unwrap()]);
         let mut out = rendered(2, 2);
         out.values = Some(ScalarImage::from_values(2, 2, vec![0.0, f32::NAN, 1.0, 2.0]).unwrap());
         let preview = dir.path().join("x.preview-s4.npy");
@@ -996,7 +994,6 @@ mod tests {
             &out.image,
             out.values.as_ref(),
             &req,
-            &a,
             "splatting renderer",
             std::slice::from_ref(&preview),
         )

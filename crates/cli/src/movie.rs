@@ -3,9 +3,7 @@
 //! files). Flags only.
 
 use crate::args::{ImageOptions, InputArgs, RenderOptions, RendererArg, ViewArgs};
-use crate::commands::{
-    background, check_image_options, emit, explain, grey_window, load_scene, png_bits,
-};
+use crate::commands::{check_image_options, emit, explain, load_scene};
 use crate::request::{build_request_noted, parse_image_size};
 use crate::say::say;
 use crate::signals::Stop;
@@ -15,7 +13,7 @@ use serde_json::json;
 use std::path::PathBuf;
 use std::time::Instant;
 use volsplat::core::glam::DVec3;
-use volsplat::io::{MovieSettings, MovieWriter, PngSettings};
+use volsplat::io::{MovieSettings, MovieWriter};
 use volsplat::movie::{
     Flight, FlightFrame, KeyframeFile, MAX_MOVIE_FRAMES, TurnAxis, scene_up, turntable,
 };
@@ -212,7 +210,7 @@ fn say_written(
 /// The checks of `movie` that need no volume.
 fn check_movie_args(a: &MovieArgs) -> Result<(usize, usize)> {
     let size = parse_image_size(&a.options.size, "--size")?;
-    check_image_options(&a.image, a.options.mode)?;
+    check_image_options(&a.image)?;
     if a.keyframes.is_none() && !(1..=MAX_MOVIE_FRAMES).contains(&a.frames) {
         bail!(
             "--frames {}: a movie has 1 to {MAX_MOVIE_FRAMES} frames",
@@ -242,6 +240,7 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
         &a.input,
         &a.view,
         &a.options,
+        Some(&a.image),
         RendererArg::Splat,
         None,
         None,
@@ -258,16 +257,14 @@ pub fn movie_cmd(a: MovieArgs) -> Result<()> {
     let label = req.scene.volume.label();
     let frames = plan_frames(&a, &req, &mut renderer, keyframes.as_ref(), axis)?;
     let fps = keyframes.as_ref().and_then(|k| k.fps).unwrap_or(a.fps);
+    // The request's output options: the flags, or a `--scene` file's where none is given.
+    let output = req.output.write_options().map_err(explain)?;
     let settings = MovieSettings {
         fps,
-        png: PngSettings {
-            bits: png_bits(&a.image)?,
-            srgb: a.image.srgb,
-            background: background(&a.image)?,
-        },
+        png: output.png,
         ..MovieSettings::default()
     };
-    let window = grey_window(&a.image)?;
+    let window = output.window;
     let stop = Stop::install()?;
     // The writer's errors name the output.
     let mut writer = MovieWriter::create(&a.output, w, h, frames.len(), &settings)?;

@@ -226,13 +226,16 @@ pub fn build_request(
     input: &InputArgs,
     view: &ViewArgs,
     o: &RenderOptions,
+    image: Option<&ImageOptions>,
     renderer: RendererArg,
     display: Option<&crate::display::DisplayArgs>,
     draw_k: Option<&str>,
     given: &Given,
     base: Option<RenderRequest>,
 ) -> Result<RenderRequest> {
-    let (req, notes) = build_request_noted(input, view, o, renderer, display, draw_k, given, base)?;
+    let (req, notes) = build_request_noted(
+        input, view, o, image, renderer, display, draw_k, given, base,
+    )?;
     for n in notes {
         say!("note: {n}");
     }
@@ -241,12 +244,15 @@ pub fn build_request(
 
 /// [`build_request`], returning its notes for the user instead of printing them (a caller
 /// with `--quiet` leaves them out): today, that a `--mode` given over a scene file's other mode
-/// replaced the scene's transfer function by the new mode's default.
+/// replaced the scene's transfer function by the new mode's default, or dropped its grey
+/// window. `image` is the output flags (`--background`, `--srgb`, `--bit-depth`,
+/// `--window`/`--wl`; `None` for a command without them, which keeps a scene's).
 #[allow(clippy::too_many_arguments)]
 pub fn build_request_noted(
     input: &InputArgs,
     view: &ViewArgs,
     o: &RenderOptions,
+    image: Option<&ImageOptions>,
     renderer: RendererArg,
     display: Option<&crate::display::DisplayArgs>,
     draw_k: Option<&str>,
@@ -397,7 +403,25 @@ pub fn build_request_noted(
             ));
             req.scene.transfer_function = TransferSpec::Auto;
         }
+        // A scene's grey window was made for its mode's values: another mode without --window
+        // or --wl drops it (MIP and MinIP share units; X-ray's are data × world units).
+        if let Some([lo, hi]) = req.output.window
+            && !req.mode.shares_window_with(o.mode)
+            && !given.contains("window")
+            && !given.contains("wl")
+        {
+            notes.push(format!(
+                "--mode {}: the scene's grey window {lo}:{hi} was made for mode {}; dropped \
+                 (give --window or --wl to set one)",
+                mode_name(o.mode),
+                mode_name(req.mode)
+            ));
+            req.output.window = None;
+        }
         req.mode = o.mode;
+    }
+    if let Some(image) = image {
+        apply_output_flags(&mut req.output, image, &set)?;
     }
     if set("renderer") || set("splat_list") {
         req.renderer = match renderer {
@@ -475,6 +499,29 @@ pub fn build_request_noted(
         );
     }
     Ok((req, notes))
+}
+
+/// The output flags into the request's output options: all of them without a scene
+/// (`set` is always true), the given ones over a scene's.
+fn apply_output_flags(
+    out: &mut volsplat::OutputOptions,
+    image: &ImageOptions,
+    set: &dyn Fn(&str) -> bool,
+) -> Result<()> {
+    use crate::commands::{background, grey_window, png_bits};
+    if set("bits") {
+        out.bit_depth = png_bits(image)?.bits();
+    }
+    if set("srgb") || set("linear") {
+        out.srgb = image.srgb;
+    }
+    if set("background") {
+        out.background = background(image)?;
+    }
+    if set("window") || set("wl") {
+        out.window = grey_window(image)?.map(|(lo, hi)| [lo, hi]);
+    }
+    Ok(())
 }
 
 /// A mode's name as `--mode` takes it.

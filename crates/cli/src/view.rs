@@ -3,7 +3,7 @@
 //! session `volsplat::session`.
 
 use crate::args::{ImageOptions, InputArgs, RenderOptions, RendererArg, ViewArgs};
-use crate::commands::{check_image_options, emit, explain, load_scene, write_options};
+use crate::commands::{check_image_options, emit, explain, load_scene};
 use crate::request::{build_request, reader_limits};
 use crate::say::say;
 use crate::signals::Stop;
@@ -74,12 +74,14 @@ pub struct ServerArgs {
     pub preview_quality: u8,
 }
 
-/// The request of `view`/`bench-view`: `render`'s flags and `--scene`, and with only a
+/// The request of `view`/`bench-view`: `render`'s flags (the output flags too: they decide
+/// the picture the final frame and the screenshot hold) and `--scene`, and with only a
 /// `--data-dir` its first volume.
 fn view_request(
     input: &InputArgs,
     view: &ViewArgs,
     options: &RenderOptions,
+    image: &ImageOptions,
     scene: Option<&std::path::Path>,
     given: &[String],
     data_dir: Option<&std::path::Path>,
@@ -89,6 +91,7 @@ fn view_request(
         input,
         view,
         options,
+        Some(image),
         RendererArg::Splat,
         None,
         None,
@@ -116,14 +119,20 @@ fn view_request(
     Ok(req)
 }
 
-fn viewer_settings(s: &ServerArgs, image: &ImageOptions) -> Result<ViewerSettings> {
+/// Whether the image follows the page's view: unless `--size` or `--scene` (whose request has
+/// its size) gives a size, as ParaView's and napari's views fill their window.
+fn fit_view(scene: Option<&std::path::Path>, given: &[String]) -> bool {
+    scene.is_none() && !given.iter().any(|g| g == "size")
+}
+
+fn viewer_settings(s: &ServerArgs, fit_view: bool) -> Result<ViewerSettings> {
     let mut settings = ViewerSettings {
         host: s.host.clone(),
         port: s.port,
         allow_remote: s.allow_remote,
         data_dir: s.data_dir.clone(),
-        display: write_options(image)?,
         preview_quality: s.preview_quality,
+        fit_view,
         ..ViewerSettings::default()
     };
     settings.session.target_fps = s.target_fps;
@@ -132,11 +141,12 @@ fn viewer_settings(s: &ServerArgs, image: &ImageOptions) -> Result<ViewerSetting
 }
 
 pub fn view_cmd(a: ViewCmdArgs) -> Result<()> {
-    check_image_options(&a.image, a.options.mode)?;
+    check_image_options(&a.image)?;
     let req = view_request(
         &a.input,
         &a.view,
         &a.options,
+        &a.image,
         a.scene.as_deref(),
         &a.given,
         a.server.data_dir.as_deref(),
@@ -146,7 +156,7 @@ pub fn view_cmd(a: ViewCmdArgs) -> Result<()> {
     let viewer = Viewer::bind(
         req,
         Renderer::with_limits(reader_limits(&a.input)?),
-        viewer_settings(&a.server, &a.image)?,
+        viewer_settings(&a.server, fit_view(a.scene.as_deref(), &a.given))?,
     );
     bar.clear();
     let viewer = viewer
@@ -242,18 +252,20 @@ pub struct BenchViewArgs {
 /// `bench-view`: starts the viewer in this process, replays recorded input over a WebSocket
 /// as the page would send it, and prints one JSON object (docs/BENCHMARKS.md).
 pub fn bench_view_cmd(a: BenchViewArgs) -> Result<()> {
-    check_image_options(&a.image, a.options.mode)?;
+    check_image_options(&a.image)?;
     let req = view_request(
         &a.input,
         &a.view,
         &a.options,
+        &a.image,
         a.scene.as_deref(),
         &a.given,
         a.server.data_dir.as_deref(),
     )?;
     let label = req.scene.volume.label();
     let (width, height) = (req.width, req.height);
-    let settings = viewer_settings(&a.server, &a.image)?;
+    // The replay measures the request's own size (--size, default 512²).
+    let settings = viewer_settings(&a.server, false)?;
     let budget_ms = settings.session.budget_ms();
     let aim_ms = settings.session.aim_ms();
     let handle = Viewer::bind(

@@ -192,155 +192,379 @@ fn downloaded(dir: &Path, name: &str) -> PathBuf {
     panic!("no download {name} in {}", dir.display());
 }
 
-#[test]
-fn a_real_browser_drags_the_view_and_matches_render() {
-    if std::env::var_os("VOLSPLAT_BROWSER_TEST").is_none() {
-        eprintln!("skipped: set VOLSPLAT_BROWSER_TEST=1 (and have chromium) to run");
-        return;
+/// A page in headless Chromium on `volsplat view ARGS`, with its server and download folder.
+struct Page {
+    cdp: Cdp,
+    server: Child,
+    browser: Child,
+    downloads: PathBuf,
+    tmp: tempfile::TempDir,
+}
+
+impl Page {
+    /// Starts the viewer and the browser, opens the page at `width × height` CSS pixels
+    /// (device scale 1) and waits for the first final frame.
+    fn open(args: &[&str], width: u32, height: u32) -> Page {
+        let tmp = tempfile::tempdir().unwrap();
+        let downloads = tmp.path().join("downloads");
+        std::fs::create_dir(&downloads).unwrap();
+        let (server, url) = viewer(args);
+        let (browser, endpoint) = chromium(&tmp.path().join("profile"));
+        let mut cdp = Cdp::connect(&endpoint);
+        cdp.call(
+            "Browser.setDownloadBehavior",
+            json!({"behavior": "allow", "downloadPath": downloads.to_str().unwrap()}),
+        );
+        let target = cdp.call("Target.createTarget", json!({"url": "about:blank"}));
+        let attached = cdp.call(
+            "Target.attachToTarget",
+            json!({"targetId": target["targetId"], "flatten": true}),
+        );
+        cdp.session = Some(attached["sessionId"].as_str().unwrap().to_string());
+        let mut page = Page {
+            cdp,
+            server,
+            browser,
+            downloads,
+            tmp,
+        };
+        page.set_size(width, height);
+        page.cdp.call("Page.navigate", json!({"url": url}));
+        page.cdp.wait(
+            "!!(window.__volsplat && window.__volsplat.finalFrames >= 1)",
+            "the first final frame",
+        );
+        page
     }
-    let tmp = tempfile::tempdir().unwrap();
-    let downloads = tmp.path().join("downloads");
-    std::fs::create_dir(&downloads).unwrap();
-    let (mut server, url) = viewer(&[
-        "--phantom",
-        "head",
-        "--phantom-size",
-        "64,80,72",
-        "--size",
-        "384",
-        "--preset",
-        "ct-bone",
-    ]);
-    let (mut browser, endpoint) = chromium(&tmp.path().join("profile"));
-    let mut cdp = Cdp::connect(&endpoint);
-    cdp.call(
-        "Browser.setDownloadBehavior",
-        json!({"behavior": "allow", "downloadPath": downloads.to_str().unwrap()}),
-    );
-    let target = cdp.call("Target.createTarget", json!({"url": "about:blank"}));
-    let attached = cdp.call(
-        "Target.attachToTarget",
-        json!({"targetId": target["targetId"], "flatten": true}),
-    );
-    cdp.session = Some(attached["sessionId"].as_str().unwrap().to_string());
-    cdp.call(
-        "Emulation.setDeviceMetricsOverride",
-        json!({"width": 1300, "height": 860, "deviceScaleFactor": 1, "mobile": false}),
-    );
-    cdp.call("Page.navigate", json!({"url": url}));
-    cdp.wait(
-        "!!(window.__volsplat && window.__volsplat.finalFrames >= 1)",
-        "the first final frame",
-    );
 
-    // Drag across the view with the mouse: the page turns it into pointer events.
-    let rect = cdp.eval(
-        "(() => { const r = document.getElementById('view').getBoundingClientRect(); \
-         return [r.left, r.top, r.width, r.height]; })()",
-    );
-    let r: Vec<f64> = rect
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    assert_eq!((r[2], r[3]), (384.0, 384.0), "the view is shown 1:1");
-    let (cx, cy) = (r[0] + r[2] / 2.0, r[1] + r[3] / 2.0);
-    let finals_before = cdp.eval("window.__volsplat.finalFrames").as_u64().unwrap();
-    cdp.mouse("mousePressed", cx, cy, 1);
-    for k in 1..=12 {
-        cdp.mouse("mouseMoved", cx + 6.0 * k as f64, cy + 2.5 * k as f64, 1);
-        std::thread::sleep(Duration::from_millis(16));
+    /// The window's size, CSS pixels (device scale 1).
+    fn set_size(&mut self, width: u32, height: u32) {
+        self.cdp.call(
+            "Emulation.setDeviceMetricsOverride",
+            json!({"width": width, "height": height, "deviceScaleFactor": 1, "mobile": false}),
+        );
     }
-    cdp.mouse("mouseReleased", cx + 72.0, cy + 30.0, 0);
-    cdp.wait(
-        &format!(
-            "(() => {{ const v = window.__volsplat; const h = v.lastHeader; \
-             return v.finalFrames > {finals_before} && h.quality === 'final' \
-             && h.seq >= v.seq(); }})()"
-        ),
-        "the final frame after the drag",
-    );
-    let previews = cdp
-        .eval("window.__volsplat.previewFrames")
-        .as_u64()
-        .unwrap();
-    let orbit = cdp.eval("JSON.stringify(window.__volsplat.state().request.scene.camera)");
-    assert!(
-        orbit.as_str().unwrap().contains("explicit"),
-        "the drag did not move the camera: {orbit}"
-    );
 
-    // The page's own buttons: save the scene, take the screenshot.
-    cdp.eval("document.getElementById('save-scene').click()");
-    let scene = downloaded(&downloads, "scene.json");
-    cdp.eval("document.getElementById('screenshot').click()");
-    let shot = downloaded(&downloads, "head.png");
-    let rendered = tmp.path().join("render.png");
-    let out = Command::new(env!("CARGO_BIN_EXE_volsplat"))
-        .arg("render")
-        .arg("--scene")
-        .arg(&scene)
-        .arg("-o")
-        .arg(&rendered)
-        .arg("--quiet")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let render_png = std::fs::read(&rendered).unwrap();
-    assert_eq!(
-        std::fs::read(&shot).unwrap(),
-        render_png,
-        "the screenshot button's PNG is not render's file"
-    );
-    let page_png = cdp.eval(
-        "(() => { const b = window.__volsplat.lastFinalPng; let s = ''; \
-         for (const x of b) s += String.fromCharCode(x); return btoa(s); })()",
-    );
-    let page_png = base64::engine::general_purpose::STANDARD
-        .decode(page_png.as_str().unwrap())
-        .unwrap();
-    assert_eq!(
-        decode_png(&page_png),
-        decode_png(&render_png),
-        "the final frame the page received has other pixels than render's file"
-    );
+    /// An element's box: left, top, width, height (CSS pixels).
+    fn rect(&mut self, id: &str) -> [f64; 4] {
+        let v = self.cdp.eval(&format!(
+            "(() => {{ const r = document.getElementById('{id}').getBoundingClientRect(); \
+             return [r.left, r.top, r.width, r.height]; }})()"
+        ));
+        let r: Vec<f64> = v
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        [r[0], r[1], r[2], r[3]]
+    }
 
-    // The view as the browser draws it.
-    let shot = cdp.call(
-        "Page.captureScreenshot",
-        json!({"format": "png", "clip": {"x": r[0], "y": r[1], "width": r[2], "height": r[3],
-               "scale": 1}}),
-    );
-    let view_png = base64::engine::general_purpose::STANDARD
-        .decode(shot["data"].as_str().unwrap())
-        .unwrap();
-    let (w, h, shown) = decode_png(&view_png);
-    let (rw, rh, expect) = decode_png(&render_png);
-    assert_eq!((w, h), (rw, rh));
-    let db = psnr(&shown, &expect);
-    eprintln!("browser view vs render: {db:.1} dB; {previews} previews during the test");
-    assert!(
-        db >= 40.0,
-        "the view in the browser differs from render: {db:.1} dB"
-    );
-    assert!(
-        expect.iter().filter(|&&v| v > 40).count() > expect.len() / 50,
-        "an empty picture proves nothing"
-    );
-    if let Some(path) = std::env::var_os("VOLSPLAT_PAGE_SCREENSHOT") {
-        let page = cdp.call("Page.captureScreenshot", json!({"format": "png"}));
+    /// The stage's size in CSS pixels (= device pixels here).
+    fn stage_size(&mut self) -> (usize, usize) {
+        let v = self.cdp.eval(
+            "(() => { const s = document.getElementById('stage'); \
+             return [s.clientWidth, s.clientHeight]; })()",
+        );
+        (
+            v[0].as_u64().unwrap() as usize,
+            v[1].as_u64().unwrap() as usize,
+        )
+    }
+
+    /// Waits for a final frame newer than `finals` that shows the page's latest event.
+    fn wait_final_after(&mut self, finals: u64, what: &str) {
+        self.cdp.wait(
+            &format!(
+                "(() => {{ const v = window.__volsplat; const h = v.lastHeader; \
+                 return v.finalFrames > {finals} && h.quality === 'final' \
+                 && h.seq >= v.seq(); }})()"
+            ),
+            what,
+        );
+    }
+
+    fn finals(&mut self) -> u64 {
+        self.cdp
+            .eval("window.__volsplat.finalFrames")
+            .as_u64()
+            .unwrap()
+    }
+
+    /// The size of the last final frame, pixels.
+    fn final_size(&mut self) -> (usize, usize) {
+        let h = self.cdp.eval("window.__volsplat.lastHeader");
+        (
+            h["width"].as_u64().unwrap() as usize,
+            h["height"].as_u64().unwrap() as usize,
+        )
+    }
+
+    /// Drags across the view with the mouse (the page sees pointer events) and waits for the
+    /// final frame after the release; returns the previews seen during the drag.
+    fn drag(&mut self) -> u64 {
+        let r = self.rect("view");
+        let (cx, cy) = (r[0] + r[2] / 2.0, r[1] + r[3] / 2.0);
+        let finals = self.finals();
+        let previews = self
+            .cdp
+            .eval("window.__volsplat.previewFrames")
+            .as_u64()
+            .unwrap();
+        self.cdp.mouse("mousePressed", cx, cy, 1);
+        for k in 1..=12 {
+            self.cdp
+                .mouse("mouseMoved", cx + 6.0 * k as f64, cy + 2.5 * k as f64, 1);
+            std::thread::sleep(Duration::from_millis(16));
+        }
+        self.cdp.mouse("mouseReleased", cx + 72.0, cy + 30.0, 0);
+        self.wait_final_after(finals, "the final frame after the drag");
+        let orbit = self
+            .cdp
+            .eval("JSON.stringify(window.__volsplat.state().request.scene.camera)");
+        assert!(
+            orbit.as_str().unwrap().contains("explicit"),
+            "the drag did not move the camera: {orbit}"
+        );
+        self.cdp
+            .eval("window.__volsplat.previewFrames")
+            .as_u64()
+            .unwrap()
+            - previews
+    }
+
+    /// Saves the scene and the screenshot with the page's own buttons, renders the scene with
+    /// `volsplat render --scene`, and checks the screenshot file byte for byte, the final frame
+    /// the page received pixel for pixel, and the view as the browser draws it by PSNR.
+    /// Returns the scene.
+    fn save_and_compare(&mut self, shot_name: &str) -> Value {
+        self.cdp
+            .eval("document.getElementById('save-scene').click()");
+        let scene_path = downloaded(&self.downloads, "scene.json");
+        let scene: Value =
+            serde_json::from_str(&std::fs::read_to_string(&scene_path).unwrap()).unwrap();
+        self.cdp
+            .eval("document.getElementById('screenshot').click()");
+        let shot = downloaded(&self.downloads, shot_name);
+        let rendered = self.tmp.path().join("render.png");
+        let out = Command::new(env!("CARGO_BIN_EXE_volsplat"))
+            .arg("render")
+            .arg("--scene")
+            .arg(&scene_path)
+            .arg("-o")
+            .arg(&rendered)
+            .arg("--quiet")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let render_png = std::fs::read(&rendered).unwrap();
+        assert_eq!(
+            std::fs::read(&shot).unwrap(),
+            render_png,
+            "the screenshot button's PNG is not render's file"
+        );
+        let page_png = self.cdp.eval(
+            "(() => { const b = window.__volsplat.lastFinalPng; let s = ''; \
+             for (const x of b) s += String.fromCharCode(x); return btoa(s); })()",
+        );
+        let page_png = base64::engine::general_purpose::STANDARD
+            .decode(page_png.as_str().unwrap())
+            .unwrap();
+        assert_eq!(
+            decode_png(&page_png),
+            decode_png(&render_png),
+            "the final frame the page received has other pixels than render's file"
+        );
+        // The view as the browser draws it, once the frame-info overlay (which lies on the
+        // picture when it fills the view) has faded.
+        self.cdp.wait(
+            "getComputedStyle(document.getElementById('overlay')).opacity === '0'",
+            "the overlay to fade",
+        );
+        let r = self.rect("view");
+        let shown = self.cdp.call(
+            "Page.captureScreenshot",
+            json!({"format": "png", "clip": {"x": r[0], "y": r[1], "width": r[2],
+                   "height": r[3], "scale": 1}}),
+        );
+        let view_png = base64::engine::general_purpose::STANDARD
+            .decode(shown["data"].as_str().unwrap())
+            .unwrap();
+        let (w, h, shown) = decode_png(&view_png);
+        let (rw, rh, expect) = decode_png(&render_png);
+        assert_eq!((w, h), (rw, rh), "the view is not shown 1:1");
+        let db = psnr(&shown, &expect);
+        eprintln!("browser view vs render ({rw}×{rh}): {db:.1} dB");
+        assert!(
+            db >= 40.0,
+            "the view in the browser differs from render: {db:.1} dB"
+        );
+        assert!(
+            expect.iter().filter(|&&v| v > 40).count() > expect.len() / 50,
+            "an empty picture proves nothing"
+        );
+        // The next downloads get the same names.
+        std::fs::remove_file(&scene_path).unwrap();
+        std::fs::remove_file(&shot).unwrap();
+        scene
+    }
+
+    fn page_screenshot(&mut self, path: &Path) {
+        let page = self
+            .cdp
+            .call("Page.captureScreenshot", json!({"format": "png"}));
         let bytes = base64::engine::general_purpose::STANDARD
             .decode(page["data"].as_str().unwrap())
             .unwrap();
         std::fs::write(path, bytes).unwrap();
     }
-    let _ = browser.kill();
-    let _ = browser.wait();
-    let _ = server.kill();
-    let _ = server.wait();
+}
+
+impl Drop for Page {
+    fn drop(&mut self) {
+        let _ = self.browser.kill();
+        let _ = self.browser.wait();
+        let _ = self.server.kill();
+        let _ = self.server.wait();
+    }
+}
+
+fn enabled() -> bool {
+    if std::env::var_os("VOLSPLAT_BROWSER_TEST").is_none() {
+        eprintln!("skipped: set VOLSPLAT_BROWSER_TEST=1 (and have chromium) to run");
+        return false;
+    }
+    true
+}
+
+/// A fixed `--size`: the view is shown 1:1; a drag, then the screenshot and the saved scene
+/// against `volsplat render --scene`.
+#[test]
+fn a_real_browser_drags_the_view_and_matches_render() {
+    if !enabled() {
+        return;
+    }
+    let mut page = Page::open(
+        &[
+            "--phantom",
+            "head",
+            "--phantom-size",
+            "64,80,72",
+            "--size",
+            "384",
+            "--preset",
+            "ct-bone",
+        ],
+        1300,
+        860,
+    );
+    let r = page.rect("view");
+    assert_eq!((r[2], r[3]), (384.0, 384.0), "the view is shown 1:1");
+    let previews = page.drag();
+    eprintln!("{previews} previews during the drag");
+    let scene = page.save_and_compare("head.png");
+    assert_eq!(
+        (scene["width"].as_u64(), scene["height"].as_u64()),
+        (Some(384), Some(384))
+    );
+    let lod = page.cdp.eval("document.getElementById('lod').textContent");
+    assert!(
+        lod.as_str().unwrap().contains("fixed size"),
+        "the overlay does not say the size is fixed: {lod}"
+    );
+    if let Some(path) = std::env::var_os("VOLSPLAT_PAGE_SCREENSHOT") {
+        page.page_screenshot(Path::new(&path));
+    }
+}
+
+/// Without `--size` the image fills the view (ParaView's and napari's behaviour): the final
+/// frame's size is the stage's in device pixels, at two window sizes, and the screenshot and
+/// saved scene (a MIP through a grey window and a background) are `render --scene`'s.
+#[test]
+fn a_real_browser_fills_the_view_and_matches_render() {
+    if !enabled() {
+        return;
+    }
+    let mut page = Page::open(
+        &[
+            "--phantom",
+            "head",
+            "--phantom-size",
+            "64,80,72",
+            "--preset",
+            "ct-bone",
+            "--background",
+            "0.1,0.1,0.2",
+        ],
+        1400,
+        900,
+    );
+    let stage = page.stage_size();
+    assert!(stage.0 > 900 && stage.1 > 700, "{stage:?}");
+    assert_eq!(
+        page.final_size(),
+        stage,
+        "the first frame does not fill the view"
+    );
+    let r = page.rect("view");
+    assert_eq!(
+        (r[2] as usize, r[3] as usize),
+        stage,
+        "the view is not the stage"
+    );
+    let lod = page.cdp.eval("document.getElementById('lod').textContent");
+    assert!(!lod.as_str().unwrap().contains("fixed"), "{lod}");
+    page.drag();
+    let scene = page.save_and_compare("head.png");
+    assert_eq!(
+        (scene["width"].as_u64(), scene["height"].as_u64()),
+        (Some(stage.0 as u64), Some(stage.1 as u64))
+    );
+    assert_eq!(scene["output"]["background"], json!([0.1, 0.1, 0.2]));
+
+    // A smaller window: the image follows once the resize settles.
+    let finals = page.finals();
+    page.set_size(1000, 700);
+    let small = page.stage_size();
+    assert!(
+        small.0 < stage.0 && small.1 < stage.1,
+        "{small:?} {stage:?}"
+    );
+    page.cdp.wait(
+        &format!(
+            "(() => {{ const v = window.__volsplat; const h = v.lastHeader; \
+             return v.finalFrames > {finals} && h.quality === 'final' \
+             && h.width === {} && h.height === {} && h.seq >= v.seq(); }})()",
+            small.0, small.1
+        ),
+        "the final frame at the new view size",
+    );
+    // MIP through a grey window (the page's window/level): the scene keeps it.
+    page.cdp
+        .eval("document.querySelector('[data-mode=mip]').click()");
+    page.cdp.eval(
+        "(() => { const l = document.getElementById('level'); l.value = 400; \
+         l.dispatchEvent(new Event('input')); })()",
+    );
+    page.wait_final_after(0, "the windowed MIP frame");
+    page.cdp.wait(
+        "(() => { const s = window.__volsplat.state(); return !!(s && s.window); })()",
+        "the window in the page's state",
+    );
+    page.wait_final_after(0, "the final frame of the window");
+    let scene = page.save_and_compare("head.png");
+    assert_eq!(
+        (scene["width"].as_u64(), scene["height"].as_u64()),
+        (Some(small.0 as u64), Some(small.1 as u64))
+    );
+    assert_eq!(scene["mode"], json!("mip"));
+    assert!(scene["output"]["window"].is_array(), "{}", scene["output"]);
+    if let Some(path) = std::env::var_os("VOLSPLAT_PAGE_SCREENSHOT") {
+        let path = PathBuf::from(path);
+        page.page_screenshot(&path.with_extension("fit.png"));
+    }
 }

@@ -69,18 +69,14 @@ fn render_scene(scene: &Path, out: &Path, extra: &[&str]) -> Vec<u8> {
 }
 
 /// The final frame after a drag is the file `volsplat render --scene` writes from the saved
-/// scene, with the same image flags (a MIP through a grey window here).
+/// scene alone: the output flags the viewer started with (a background, sRGB; a MIP through a
+/// grey window) travel in the scene, so `render` needs none of them again.
 #[cfg(unix)]
 #[test]
 fn view_drag_save_render_and_stop() {
-    for (flags, image) in [
-        (vec!["--azimuth", "20"], vec![]),
-        // `render --scene FILE --wl …` checks the window against the --mode flag, not the
-        // scene's mode, so the mode is repeated for render.
-        (
-            vec!["--mode", "mip"],
-            vec!["--mode", "mip", "--wl", "300,1200"],
-        ),
+    for flags in [
+        vec!["--azimuth", "20", "--background", "0.2,0.3,0.4", "--srgb"],
+        vec!["--mode", "mip", "--wl", "300,1200"],
     ] {
         let mut args = vec![
             "--phantom",
@@ -91,7 +87,6 @@ fn view_drag_save_render_and_stop() {
             "80x64",
         ];
         args.extend(&flags);
-        args.extend(image.iter().filter(|f| !flags.contains(f)));
         let (mut child, addr, token) = start(&args);
         assert!(Client::connect(addr, "", None).unwrap_err().contains("403"));
         let mut c = Client::connect(addr, &token, None).unwrap();
@@ -107,10 +102,24 @@ fn view_drag_save_render_and_stop() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("scene.json");
         scene.save(&path).unwrap();
-        let rendered = render_scene(&path, &dir.path().join("r.png"), &image);
+        let rendered = render_scene(&path, &dir.path().join("r.png"), &[]);
         let decode = |b: &[u8]| volsplat_view::replay::decode_rgb("png", b).unwrap();
-        assert_eq!(decode(&png), decode(&rendered), "{flags:?} {image:?}");
-        assert_eq!(c.screenshot(WAIT).unwrap(), rendered, "{flags:?} {image:?}");
+        assert_eq!(decode(&png), decode(&rendered), "{flags:?}");
+        assert_eq!(c.screenshot(WAIT).unwrap(), rendered, "{flags:?}");
+        assert_eq!(
+            scene.output,
+            match flags[1] {
+                "mip" => volsplat::OutputOptions {
+                    window: Some([-300.0, 900.0]),
+                    ..Default::default()
+                },
+                _ => volsplat::OutputOptions {
+                    background: [0.2, 0.3, 0.4],
+                    srgb: true,
+                    ..Default::default()
+                },
+            }
+        );
         let err = interrupt(&mut child);
         assert!(err.contains("stopped"), "{err}");
     }
@@ -134,5 +143,55 @@ fn view_refuses_what_it_cannot_serve() {
         assert!(out.stdout.is_empty(), "printed a URL for {args:?}");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(expect), "{args:?}: {err}");
+    }
+}
+
+/// Without `--size` the image follows the page's view (the size the page gives when it
+/// connects); with `--size`, or a `--scene` (whose request has its size), it stays fixed.
+#[cfg(unix)]
+#[test]
+fn the_image_fills_the_view_unless_a_size_is_given() {
+    use volsplat_view::protocol::ServerMessage;
+    use volsplat_view::replay::Incoming;
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("s.json");
+    let phantom = ["--phantom", "head", "--phantom-size", "40,48,44"];
+    let out = Command::new(bin())
+        .arg("render")
+        .args(phantom)
+        .args(["--size", "72x40", "-q", "-o"])
+        .arg(dir.path().join("s.png"))
+        .arg("--save-scene")
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let scene_arg = ["--scene", scene.to_str().unwrap()];
+    let cases: [(&[&str], bool, (usize, usize)); 3] = [
+        (&phantom, true, (100, 70)),
+        (
+            &[&phantom[..], &["--size", "80x64"]].concat(),
+            false,
+            (80, 64),
+        ),
+        (&scene_arg, false, (72, 40)),
+    ];
+    for (args, fit, size) in cases {
+        let (mut child, addr, token) = start(args);
+        let mut c = Client::connect_sized(addr, &token, None, Some((100, 70))).unwrap();
+        let hello = c
+            .wait_for(WAIT, |m| match m {
+                Incoming::Text(ServerMessage::Hello(h)) => Some((**h).clone()),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(hello.fit, fit, "{args:?}");
+        let (header, _) = c.wait_final(0, WAIT).unwrap();
+        assert_eq!((header.width, header.height), size, "{args:?}");
+        interrupt(&mut child);
     }
 }

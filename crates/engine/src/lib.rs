@@ -31,6 +31,7 @@
 pub mod demo;
 pub mod error;
 pub mod movie;
+pub mod output;
 pub mod renderer;
 pub mod request;
 pub mod scene;
@@ -39,6 +40,7 @@ pub mod write;
 pub mod xray;
 
 pub use error::{EngineError, Result};
+pub use output::OutputOptions;
 pub use renderer::{
     DisplayStats, Output, Preview, Progress, Renderer, Stats, UsedRenderer, render_once,
     renderer_name,

@@ -2,6 +2,7 @@
 //! [`Scene`]. A [`RenderRequest`] is one JSON file ([`RenderRequest::load`], [`RenderRequest::save`]).
 
 use crate::error::{EngineError, Result};
+use crate::output::OutputOptions;
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -596,6 +597,9 @@ pub struct RenderRequest {
     /// Worker threads (`None`: all cores). Output does not depend on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub threads: Option<usize>,
+    /// How the render is written as an image file (background, sRGB, bit depth, grey window).
+    #[serde(default)]
+    pub output: OutputOptions,
 }
 
 impl RenderRequest {
@@ -611,6 +615,7 @@ impl RenderRequest {
             display: DisplayOptions::default(),
             k_contour: None,
             threads: None,
+            output: OutputOptions::default(),
         }
     }
 
@@ -704,6 +709,7 @@ impl RenderRequest {
         }
         self.scene.clipping.validate()?;
         self.scene.camera_orbit().validate()?;
+        self.output.validate(self.mode)?;
         Ok(())
     }
 

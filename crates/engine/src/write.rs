@@ -5,10 +5,14 @@
 //! (decision 0012: linear code values unless `srgb`), or — for X-ray always, and for MIP/MinIP when
 //! a grey window is given — the scalar values through a grey window (X-ray without a window:
 //! 0 to its brightest pixel); `.npy` holds the float32 `H×W×4` image or the `H×W` values.
+//!
+//! The options are the request's own ([`crate::OutputOptions`], `RenderRequest::output`):
+//! [`Output::write`] and [`Output::png_bytes`] take them from the request that was rendered, so
+//! a scene file renders to the same bytes wherever it is rendered.
 
 use crate::error::{EngineError, Result};
 use crate::renderer::Output;
-use crate::request::Mode;
+use crate::request::{Mode, RenderRequest};
 use std::path::Path;
 use volsplat_core::{Image, ScalarImage};
 use volsplat_io::PngSettings;
@@ -68,9 +72,25 @@ pub fn writes_values(has_values: bool, mode: Mode, window: Option<(f32, f32)>) -
 }
 
 impl Output {
-    /// Writes the image (or the values) of a render in `mode` to `path`: [`write_image`].
-    pub fn write(&self, path: &Path, mode: Mode, options: &WriteOptions) -> Result<()> {
-        write_image(path, &self.image, self.values.as_ref(), mode, options)
+    /// Writes the image (or the values) of the render of `request` to `path` as `volsplat
+    /// render -o PATH` writes it: [`write_image`] with the request's mode and output options
+    /// (`request.output`).
+    pub fn write(&self, path: &Path, request: &RenderRequest) -> Result<()> {
+        let options = request.output.write_options()?;
+        write_image(
+            path,
+            &self.image,
+            self.values.as_ref(),
+            request.mode,
+            &options,
+        )
+    }
+
+    /// The bytes [`Output::write`] writes to a `.png` file for `request`, in memory
+    /// ([`encode_png`]): a viewer's screenshot.
+    pub fn png_bytes(&self, request: &RenderRequest) -> Result<Vec<u8>> {
+        let options = request.output.write_options()?;
+        encode_png(&self.image, self.values.as_ref(), request.mode, &options)
     }
 }
 

@@ -8,8 +8,7 @@ use crate::volume::Volume;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 use std::sync::Mutex;
-use volsplat::io::{PngBitDepth, PngSettings};
-use volsplat::{RenderRequest, VolumeSource, WriteOptions};
+use volsplat::{RenderRequest, VolumeSource};
 use volsplat_view::{ViewError, Viewer, ViewerHandle, ViewerSettings};
 
 fn from_view(e: ViewError) -> PyErr {
@@ -31,11 +30,14 @@ pub struct ViewerCore {
 #[pymethods]
 impl ViewerCore {
     /// Starts a viewer on `request_json` (the engine's request; `volume` replaces its volume),
-    /// listening on `host:port` (0: a free port).
+    /// listening on `host:port` (0: a free port). `srgb`, `bits`, `background` and `window`,
+    /// where given, replace the request's output options (its `output`; a scene file's are
+    /// kept otherwise); `fit_view`: the image follows the page's view instead of the
+    /// request's size.
     #[new]
     #[pyo3(signature = (request_json, volume=None, *, host="127.0.0.1".to_string(), port=0,
         allow_remote=false, data_dir=None, target_fps=30.0, target_latency=50.0, srgb=None,
-        bits=8, background=[0.0, 0.0, 0.0], window=None))]
+        bits=None, background=None, window=None, fit_view=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -48,26 +50,37 @@ impl ViewerCore {
         target_fps: f64,
         target_latency: f64,
         srgb: Option<bool>,
-        bits: u32,
-        background: [f32; 3],
+        bits: Option<u32>,
+        background: Option<[f32; 3]>,
         window: Option<(f32, f32)>,
+        fit_view: bool,
     ) -> PyResult<Self> {
-        let request = parse_request(request_json, volume.as_deref())?;
+        let mut request = parse_request(request_json, volume.as_deref())?;
         let memory = matches!(request.scene.volume, VolumeSource::Memory(_));
+        let output = &mut request.output;
+        if let Some(bits) = bits {
+            output.bit_depth = bits;
+        }
+        if let Some(srgb) = srgb {
+            output.srgb = srgb;
+        }
+        if let Some(background) = background {
+            output.background = background;
+        }
+        if let Some((lo, hi)) = window {
+            output.window = Some([lo, hi]);
+        }
+        // Checked here so that a bad option is an error naming it, before any port is bound.
+        request
+            .output
+            .validate(request.mode)
+            .map_err(errors::from_engine)?;
         let mut settings = ViewerSettings {
             host,
             port,
             allow_remote,
             data_dir,
-            display: WriteOptions {
-                png: PngSettings {
-                    bits: PngBitDepth::from_bits(bits)
-                        .ok_or_else(|| invalid(format!("bits: must be 8 or 16, got {bits}")))?,
-                    srgb: srgb.unwrap_or(PngSettings::default().srgb),
-                    background,
-                },
-                window,
-            },
+            fit_view,
             ..ViewerSettings::default()
         };
         settings.session.target_fps = target_fps;
@@ -103,14 +116,16 @@ impl ViewerCore {
     }
 
     /// The scene of the tab that changed last (the starting scene before any did), as the
-    /// engine's request JSON (no `volume` when it is in memory), and its grey window.
+    /// engine's request JSON (no `volume` when it is in memory; its output options included),
+    /// and its grey window (the request's `output.window`).
     fn scene(&self) -> PyResult<(String, Option<(f32, f32)>)> {
         let guard = self.lock();
         let Some(h) = guard.as_ref() else {
             return Err(invalid("the viewer is closed"));
         };
-        let (request, display) = h.scene();
-        Ok((request_json(&request, self.memory)?, display.window))
+        let request = h.scene();
+        let window = request.output.window.map(|[lo, hi]| (lo, hi));
+        Ok((request_json(&request, self.memory)?, window))
     }
 
     /// Stops the server: closes every tab and frees the port. Closing twice does nothing.

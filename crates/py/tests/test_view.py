@@ -90,3 +90,31 @@ def test_bad_settings_are_errors():
         volsplat.view(volsplat.phantom("blobs", grid=16), bits=12)
     with pytest.raises(TypeError):
         volsplat.view(volsplat.phantom("blobs", grid=16), azimut=3)
+
+
+def test_output_options_travel_with_the_scene(tmp_path, cli):
+    """The grey window and background given to view() are the scene's output options, so the
+    saved scene renders on the command line to the file of the viewer's picture."""
+    v = volsplat.view(
+        volsplat.phantom("head", grid=(40, 48, 44)),
+        size=(80, 64),
+        mode="mip",
+        window=(-300.0, 900.0),
+        background=(0.2, 0.3, 0.4),
+    )
+    with v:
+        assert v.window == (-300.0, 900.0)
+        out = v.scene.to_dict()["output"]
+        assert out["window"] == [-300.0, 900.0] and out["background"] == [
+            pytest.approx(0.2),
+            pytest.approx(0.3),
+            pytest.approx(0.4),
+        ]
+        v.scene.save(tmp_path / "scene.json")
+        v.screenshot().save(tmp_path / "py.png", window=v.window)
+        cli("render", "--scene", tmp_path / "scene.json", "-o", tmp_path / "cli.png", "--quiet")
+        assert (tmp_path / "py.png").read_bytes() == (tmp_path / "cli.png").read_bytes()
+    # A scene's own options are kept when view() is not given any.
+    again = volsplat.view(volsplat.Scene.load(tmp_path / "scene.json"))
+    with again:
+        assert again.window == (-300.0, 900.0)

@@ -14,12 +14,14 @@ const S = {
   seq: 0,             // our last event number
   ws: null,
   size: [512, 512],   // the full-quality frame's size
-  fit: false,         // size follows the window
+  fit: false,         // the image follows the view (the server's hello says so; the size menu)
+  maxFit: 2048,       // longest side of a view that follows the page
   lastFinal: null,    // { header, bytes } of the latest final frame
   pendingScreenshot: false,
   frames: [],         // arrival times, for the frame rate
   valuesRange: null,  // MIP/MinIP/X-ray values of the latest final frame
   dragTf: false,
+  pinInfo: false,     // keep the frame-info overlay shown (key f)
 };
 
 // A hook for tests (the browser test reads it; nothing on the page depends on it).
@@ -33,7 +35,11 @@ window.__volsplat = {
 
 function connect() {
   const proto = location.protocol === 'https:' ? 'wss:' : 'ws:';
-  const ws = new WebSocket(proto + '//' + location.host + '/ws' + location.search);
+  // The view's size in device pixels: the server starts at it when the image follows the view
+  // (no --size), so the first frame already fills the window.
+  const [w, h] = fitSize();
+  const ws = new WebSocket(proto + '//' + location.host + '/ws' + location.search +
+    '&view=' + w + 'x' + h);
   ws.binaryType = 'arraybuffer';
   S.ws = ws;
   ws.onopen = () => { setLod('loading…'); progress('load', 0); };
@@ -65,7 +71,21 @@ function onText(text) {
     case 'scene': download(new Blob([JSON.stringify(m.request, null, 2) + '\n'],
       { type: 'application/json' }), 'scene.json'); break;
     case 'note': addNote(m.message); break;
+    // The final frame on screen shows every event up to m.seq (they changed nothing seen);
+    // after the frame itself, which may still be decoding.
+    case 'shown': decoding = decoding.then(() => onShown(m)); break;
   }
+}
+
+function onShown(m) {
+  const hook = window.__volsplat;
+  if (S.lastFinal && S.lastFinal.header.id === m.frame) {
+    S.lastFinal.header.seq = Math.max(S.lastFinal.header.seq, m.seq);
+  }
+  if (hook.lastHeader && hook.lastHeader.id === m.frame) {
+    hook.lastHeader.seq = Math.max(hook.lastHeader.seq, m.seq);
+  }
+  if (S.pendingScreenshot && S.lastFinal && S.lastFinal.header.seq >= S.seq) saveScreenshot();
 }
 
 // Binary: u32 LE header length, header JSON, payload.
@@ -128,18 +148,24 @@ async function showFrame(h, bytes) {
 
 function onHello(h) {
   S.hello = h;
-  $('volume-name').textContent = h.volume;
-  document.title = h.volume + ' — volsplat view';
+  S.fit = !!h.fit;
+  if (h.max_fit_side) S.maxFit = h.max_fit_side;
+  // `built-in \`head\`` reads "built-in head" (baseName() still finds the name).
+  $('volume-name').textContent = h.volume.replace(/`/g, '');
+  $('volume-name').title = h.volume.replace(/`/g, '') + ' — ' + h.dims.join(' × ') + ' voxels';
+  document.title = h.volume.replace(/`/g, '') + ' — volsplat view';
   const sel = $('volume-select');
   sel.hidden = h.volumes.length === 0;
   sel.replaceChildren(...h.volumes.map((n) => new Option(n, n, false, n === h.volume)));
   const preset = $('preset');
   preset.replaceChildren(new Option('(edited)', ''), ...h.presets.map((p) => new Option(p, p)));
   buildCrop();
+  if (!$('clip-on').checked) clipPlane(); // shows where the plane would cut, in mm
   progress(null);
 }
 
 function onState(m) {
+  const first = !S.state;
   S.state = m;
   const r = m.request;
   if (!S.fit) S.size = [r.width, r.height];
@@ -155,6 +181,7 @@ function onState(m) {
   $('preset').value = spec === 'auto' ? 'auto' : (spec.preset || '');
   syncModes(); syncWindow(); syncCrop(); syncClip(); syncQuality(); drawTf();
   $('perspective').checked = !camera().parallel_projection;
+  if (first) followView(); // the stage may have changed size since the page connected
 }
 
 function camera() {
@@ -177,12 +204,23 @@ function syncModes() {
 
 // ---------------------------------------------------------------- overlay, progress, toasts
 
+// The overlay sits on the picture (which fills the view): it fades out 2 s after the final
+// frame, and comes back with the next frame; `f` keeps it shown.
+let overlayTimer = null;
+function showOverlay(fadeLater) {
+  const o = $('overlay');
+  clearTimeout(overlayTimer);
+  o.classList.remove('faded');
+  if (fadeLater && !S.pinInfo) overlayTimer = setTimeout(() => o.classList.add('faded'), 2000);
+}
+
 function setLod(h) {
   const lod = $('lod');
+  showOverlay(typeof h !== 'string' && h.quality === 'final');
   if (typeof h === 'string') { lod.textContent = h; lod.className = ''; return; }
   const fps = S.frames.length;
   if (h.quality === 'final') {
-    lod.textContent = `final ${h.width}×${h.height}`;
+    lod.textContent = `final ${h.width}×${h.height}` + (S.fit ? '' : ' (fixed size)');
     lod.className = '';
   } else {
     const frac = h.scale >= 0.999 ? '1' : '1/' + (1 / h.scale).toFixed(h.scale > 0.3 ? 1 : 0);
@@ -191,8 +229,9 @@ function setLod(h) {
     lod.textContent = `preview ${frac} (${h.width}×${h.height})${slab}${lvl}`;
     lod.className = 'preview';
   }
-  $('timing').textContent =
-    `render ${h.render_ms.toFixed(1)} ms · encode ${h.encode_ms.toFixed(1)} ms · ${fps} fps`;
+  // Frames a second only mean something while previews stream (a drag), not at rest.
+  $('timing').textContent = `render ${h.render_ms.toFixed(1)} ms · encode ` +
+    `${h.encode_ms.toFixed(1)} ms` + (h.quality === 'final' ? '' : ` · ${fps} fps`);
 }
 
 let progressTimer = null;
@@ -246,8 +285,9 @@ function layout() {
   const W = stage.clientWidth;
   const H = stage.clientHeight;
   const [w, h] = [view.width || S.size[0], view.height || S.size[1]];
-  // One image pixel per CSS pixel when it fits, smaller when it does not.
-  const s = Math.min(1, W / w, H / h);
+  // Following the view: the image fills the stage (its pixels are the device's). A fixed
+  // size: one image pixel per CSS pixel when it fits, smaller when it does not.
+  const s = S.fit ? Math.min(W / w, H / h) : Math.min(1, W / w, H / h);
   const cw = Math.max(1, Math.floor(w * s));
   const ch = Math.max(1, Math.floor(h * s));
   view.style.width = cw + 'px';
@@ -256,23 +296,29 @@ function layout() {
   view.style.top = Math.floor((H - ch) / 2) + 'px';
 }
 
+// The stage's size in device pixels, its long side at most S.maxFit (the aspect kept).
 function fitSize() {
   const stage = $('stage');
-  const w = Math.max(64, Math.min(2048, Math.floor(stage.clientWidth)));
-  const h = Math.max(64, Math.min(2048, Math.floor(stage.clientHeight)));
-  return [w, h];
+  const dpr = window.devicePixelRatio || 1;
+  const W = Math.max(16, stage.clientWidth * dpr);
+  const H = Math.max(16, stage.clientHeight * dpr);
+  const k = Math.min(1, S.maxFit / Math.max(W, H));
+  return [Math.max(16, Math.round(W * k)), Math.max(16, Math.round(H * k))];
 }
 
+// When the image follows the view, a new stage size (the window, the browser's zoom) is sent
+// once it has settled: a resize drag would otherwise ask for a frame per step.
 let resizeTimer = null;
-window.addEventListener('resize', () => {
-  layout();
-  if (!S.fit) return;
+function followView() {
   clearTimeout(resizeTimer);
+  if (!S.fit || !S.state) return;
   resizeTimer = setTimeout(() => {
     const [w, h] = fitSize();
-    sendEvent({ type: 'resize', width: w, height: h });
-  }, 150);
-});
+    const r = S.state.request;
+    if (w !== r.width || h !== r.height) sendEvent({ type: 'resize', width: w, height: h });
+  }, 200);
+}
+function onStageResize() { layout(); followView(); }
 
 // ---------------------------------------------------------------- camera input
 
@@ -470,6 +516,7 @@ document.addEventListener('keydown', (e) => {
   else if (k === 'j') send({ type: 'save_scene' });
   else if (k === 't') $('turntable').click();
   else if (k === '?' || k === 'h') $('help').hidden = !$('help').hidden;
+  else if (k === 'f') { S.pinInfo = !S.pinInfo; showOverlay(!S.pinInfo); }
   else if (k === 'Escape') $('help').hidden = true;
   else return;
   e.preventDefault();
@@ -497,6 +544,21 @@ function syncWindow() {
   $('width').value = Math.max(1, Math.round(1000 * (w[1] - w[0]) / span));
   $('level-out').textContent = fmt((w[0] + w[1]) / 2);
   $('width-out').textContent = fmt(w[1] - w[0]);
+  // Say what the sliders do now: MIP and MinIP show the transfer function until a window is
+  // set; X-ray never uses the transfer function.
+  const mode = S.state.request.mode;
+  const xray = mode === 'xray';
+  $('wl-auto').textContent = xray ? 'Auto' : 'Transfer function';
+  $('wl-auto').disabled = !S.state.window;
+  $('wl-hint').textContent = S.state.window ? 'grey window on'
+    : xray ? '0 to the brightest pixel' : 'off: colours of the transfer function';
+  const unused = xray ? 'X-ray integrates the data itself: the transfer function is not used.'
+    : (S.state.window && mode !== 'composite')
+      ? 'A grey window is set: the transfer function is not used (Window / level → Transfer function).'
+      : '';
+  $('tf-section').classList.toggle('unused', !!unused);
+  $('tf-unused').hidden = !unused;
+  $('tf-unused').textContent = unused;
 }
 
 function sendWindow() {
@@ -520,15 +582,18 @@ function fmt(v) {
 // ---------------------------------------------------------------- crop box and clip plane
 
 const cropInputs = [];
+const cropOutputs = [];
 function buildCrop() {
   const box = $('crop');
   box.replaceChildren();
   cropInputs.length = 0;
+  cropOutputs.length = 0;
   for (let k = 0; k < 3; k++) {
     const n = S.hello.dims[k] - 1;
     const label = document.createElement('span');
     label.textContent = 'xyz'[k];
     box.append(label);
+    const out = document.createElement('output');
     for (let j = 0; j < 2; j++) {
       const r = document.createElement('input');
       r.type = 'range'; r.min = 0; r.max = n; r.step = 1; r.value = j ? n : 0;
@@ -538,6 +603,7 @@ function buildCrop() {
           cropInputs[2 * k + (j ? 0 : 1)].value = r.value;
         }
         $('crop-on').checked = true;
+        showCrop();
         sendCrop();
       });
       r.addEventListener('pointerdown', () => sendEvent({ type: 'interaction', active: true }));
@@ -545,6 +611,16 @@ function buildCrop() {
       cropInputs.push(r);
       box.append(r);
     }
+    cropOutputs.push(out);
+    box.append(out);
+  }
+  showCrop();
+}
+
+// The voxels kept per axis, as numbers beside the sliders.
+function showCrop() {
+  for (let k = 0; k < cropOutputs.length; k++) {
+    cropOutputs[k].textContent = cropInputs[2 * k].value + '–' + cropInputs[2 * k + 1].value;
   }
 }
 
@@ -564,6 +640,7 @@ function syncCrop() {
       cropInputs[2 * k + 1].value = crop.max[k];
     }
   }
+  showCrop();
 }
 
 function clipPlane() {
@@ -579,7 +656,8 @@ function clipPlane() {
 
 function sendClip() {
   if (!S.hello) return;
-  const planes = $('clip-on').checked ? [clipPlane()] : [];
+  const plane = clipPlane(); // also shows where it cuts
+  const planes = $('clip-on').checked ? [plane] : [];
   sendEvent({ type: 'set_clip', planes });
 }
 for (const id of ['clip-on', 'clip-axis', 'clip-flip']) $(id).addEventListener('change', sendClip);
@@ -613,7 +691,18 @@ function syncQuality() {
     else el.value = v;
   }
   const [w, h] = [S.state.request.width, S.state.request.height];
-  $('size').value = S.fit ? 'fit' : (w === h && [256, 384, 512, 768, 1024].includes(w) ? String(w) : 'fit');
+  const size = $('size');
+  let fixed = size.querySelector('option[value=fixed]');
+  if (S.fit) {
+    size.value = 'fit';
+  } else if (w === h && [256, 384, 512, 768, 1024].includes(w)) {
+    size.value = String(w);
+  } else {
+    // A size of its own (--size 80x64, a scene file's): shown as it is, not as "fit".
+    if (!fixed) { fixed = new Option('', 'fixed'); size.append(fixed); }
+    fixed.textContent = `${w} × ${h}`;
+    size.value = 'fixed';
+  }
 }
 for (const f of QUALITY) {
   $('q-' + f).addEventListener('change', (e) => {
@@ -624,8 +713,10 @@ for (const f of QUALITY) {
   });
 }
 $('size').addEventListener('change', (e) => {
+  if (e.target.value === 'fixed') return;
   S.fit = e.target.value === 'fit';
   const [w, h] = S.fit ? fitSize() : [+e.target.value, +e.target.value];
+  layout();
   sendEvent({ type: 'resize', width: w, height: h });
 });
 
@@ -633,7 +724,7 @@ $('size').addEventListener('change', (e) => {
 
 const tfCanvas = $('tf');
 const tfc = tfCanvas.getContext('2d');
-const TF = { W: 296, H: 170, plotH: 138, barY: 146, barH: 20, r: 5 };
+const TF = { W: 296, H: 170, plotH: 138, barY: 146, barH: 20, r: 5, pad: 7 };
 let tfDrag = null;   // { kind: 'opacity' | 'color', index, moved }
 
 (function hiDpi() {
@@ -647,10 +738,13 @@ function tfRange() {
   const [lo, hi] = S.hello ? S.hello.value_range : [0, 1];
   return hi > lo ? [lo, hi] : [lo, lo + 1];
 }
-const xOf = (v) => { const [lo, hi] = tfRange(); return ((v - lo) / (hi - lo)) * TF.W; };
-const vOf = (x) => { const [lo, hi] = tfRange(); return lo + (x / TF.W) * (hi - lo); };
-const yOf = (a) => 4 + (1 - a) * (TF.plotH - 8);
-const aOf = (y) => Math.min(1, Math.max(0, 1 - (y - 4) / (TF.plotH - 8)));
+// The value axis keeps TF.pad pixels free at both ends, so the points at the ends of the
+// range are whole circles one can grab; opacity 0 sits clear of the colour stops below.
+const TF_IW = TF.W - 2 * TF.pad;
+const xOf = (v) => { const [lo, hi] = tfRange(); return TF.pad + ((v - lo) / (hi - lo)) * TF_IW; };
+const vOf = (x) => { const [lo, hi] = tfRange(); return lo + ((x - TF.pad) / TF_IW) * (hi - lo); };
+const yOf = (a) => 6 + (1 - a) * (TF.plotH - 18);
+const aOf = (y) => Math.min(1, Math.max(0, 1 - (y - 6) / (TF.plotH - 18)));
 
 function colorAt(v) {
   const c = S.tf.color;
@@ -672,16 +766,16 @@ function drawTf() {
   const h = S.hello.histogram;
   const max = Math.log1p(Math.max(...h));
   tfc.fillStyle = '#39414b';
-  const bw = TF.W / h.length;
+  const bw = TF_IW / h.length;
   for (let i = 0; i < h.length; i++) {
     const t = max > 0 ? Math.log1p(h[i]) / max : 0;
-    tfc.fillRect(i * bw, TF.plotH - t * TF.plotH, Math.ceil(bw), t * TF.plotH);
+    tfc.fillRect(TF.pad + i * bw, TF.plotH - t * TF.plotH, Math.ceil(bw), t * TF.plotH);
   }
   if (!S.tf) return;
   const op = S.tf.scalar_opacity;
   const [lo, hi] = tfRange();
   // Area under the opacity curve in the transfer function's colours.
-  const grad = tfc.createLinearGradient(0, 0, TF.W, 0);
+  const grad = tfc.createLinearGradient(TF.pad, 0, TF.pad + TF_IW, 0);
   for (let i = 0; i <= 32; i++) {
     const v = lo + (i / 32) * (hi - lo);
     grad.addColorStop(i / 32, css(colorAt(v), 0.55));
@@ -710,7 +804,7 @@ function drawTf() {
     tfc.stroke();
   }
   // Colour bar and its stops.
-  const bar = tfc.createLinearGradient(0, 0, TF.W, 0);
+  const bar = tfc.createLinearGradient(TF.pad, 0, TF.pad + TF_IW, 0);
   for (let i = 0; i <= 64; i++) bar.addColorStop(i / 64, css(colorAt(lo + (i / 64) * (hi - lo))));
   tfc.fillStyle = bar;
   tfc.fillRect(0, TF.barY, TF.W, TF.barH);
@@ -796,7 +890,7 @@ tfCanvas.addEventListener('pointermove', (e) => {
   const [x, y] = tfPos(e);
   const list = tfDrag.kind === 'opacity' ? S.tf.scalar_opacity : S.tf.color;
   const p = list[tfDrag.index];
-  p[0] = clampBetween(list, tfDrag.index, vOf(Math.min(TF.W, Math.max(0, x))));
+  p[0] = clampBetween(list, tfDrag.index, vOf(Math.min(TF.pad + TF_IW, Math.max(TF.pad, x))));
   if (tfDrag.kind === 'opacity') p[1] = aOf(y);
   tfDrag.moved = true;
   sendTf();
@@ -871,5 +965,5 @@ $('preset').addEventListener('change', (e) => {
 // ---------------------------------------------------------------- start
 
 window.addEventListener('load', () => { layout(); drawTf(); });
-new ResizeObserver(layout).observe($('stage'));
+new ResizeObserver(onStageResize).observe($('stage'));
 connect();

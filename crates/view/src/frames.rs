@@ -4,7 +4,7 @@
 use crate::error::{Result, ViewError};
 use volsplat::core::{AnyVolume, Histogram};
 use volsplat::io::{PngBitDepth, PngSettings};
-use volsplat::{Mode, Output, WriteOptions};
+use volsplat::{Output, RenderRequest};
 
 /// Default JPEG quality of previews (docs/viewer.md, "Frames": 512² previews at 85 encode in
 /// a few milliseconds and lose less to JPEG than the preview loses to its size).
@@ -13,12 +13,16 @@ pub const DEFAULT_PREVIEW_QUALITY: u8 = 85;
 /// The picture a frame shows as 8-bit RGB, row 0 at the top: exactly the code values of the
 /// 8-bit PNG `volsplat render` writes for it (composite over the background, encoded linear or
 /// sRGB; MIP, MinIP and X-ray values through the grey window, X-ray without one from 0 to its
-/// brightest value), whatever the bit depth of the file the screenshot button saves.
-pub fn display_rgb(out: &Output, mode: Mode, display: &WriteOptions) -> (usize, usize, Vec<u8>) {
+/// brightest value), whatever the bit depth of the file the screenshot button saves. The mode
+/// and the output options are `request`'s, the request `out` was rendered from (a preview's
+/// request carries its final frame's options).
+pub fn display_rgb(out: &Output, request: &RenderRequest) -> (usize, usize, Vec<u8>) {
     let (w, h) = (out.image.width(), out.image.height());
-    let grey = volsplat::writes_values(out.values.is_some(), mode, display.window);
+    let (mode, output) = (request.mode, &request.output);
+    let window = output.window.map(|[lo, hi]| (lo, hi));
+    let grey = volsplat::writes_values(out.values.is_some(), mode, window);
     if let (Some(values), true) = (&out.values, grey) {
-        let (lo, hi) = display.window.unwrap_or_else(|| {
+        let (lo, hi) = window.unwrap_or_else(|| {
             let max = values
                 .values()
                 .iter()
@@ -42,8 +46,8 @@ pub fn display_rgb(out: &Output, mode: Mode, display: &WriteOptions) -> (usize, 
     }
     let settings = PngSettings {
         bits: PngBitDepth::Eight,
-        srgb: display.png.srgb,
-        background: display.png.background,
+        srgb: output.srgb,
+        background: output.background,
     };
     let rgb = volsplat::io::rgb_codes(&out.image, &settings)
         .into_iter()
@@ -53,13 +57,8 @@ pub fn display_rgb(out: &Output, mode: Mode, display: &WriteOptions) -> (usize, 
 }
 
 /// A preview as JPEG at `quality` (1..=100).
-pub fn preview_jpeg(
-    out: &Output,
-    mode: Mode,
-    display: &WriteOptions,
-    quality: u8,
-) -> Result<Vec<u8>> {
-    let (w, h, rgb) = display_rgb(out, mode, display);
+pub fn preview_jpeg(out: &Output, request: &RenderRequest, quality: u8) -> Result<Vec<u8>> {
+    let (w, h, rgb) = display_rgb(out, request);
     let (w16, h16) = match (u16::try_from(w), u16::try_from(h)) {
         (Ok(w), Ok(h)) => (w, h),
         _ => return Err(ViewError::Encode(format!("{w}×{h} is too large for JPEG"))),
@@ -75,8 +74,8 @@ pub fn preview_jpeg(
 /// The final frame as the page receives it: [`display_rgb`]'s code values, lossless, in a PNG
 /// compressed for speed (fdeflate) rather than size: the pixels of `render`'s file, a few
 /// times faster to encode than its bytes (docs/viewer.md, "Frames").
-pub fn final_frame(out: &Output, mode: Mode, display: &WriteOptions) -> Result<Vec<u8>> {
-    let (w, h, rgb) = display_rgb(out, mode, display);
+pub fn final_frame(out: &Output, request: &RenderRequest) -> Result<Vec<u8>> {
+    let (w, h, rgb) = display_rgb(out, request);
     let mut bytes = Vec::with_capacity(rgb.len() / 2 + 1024);
     {
         let mut enc = png::Encoder::new(&mut bytes, w as u32, h as u32);
@@ -91,15 +90,10 @@ pub fn final_frame(out: &Output, mode: Mode, display: &WriteOptions) -> Result<V
     Ok(bytes)
 }
 
-/// The screenshot: exactly the bytes `volsplat render -o FILE.png` writes for the same scene
-/// and image options ([`volsplat::encode_png`]).
-pub fn screenshot_png(out: &Output, mode: Mode, display: &WriteOptions) -> Result<Vec<u8>> {
-    Ok(volsplat::encode_png(
-        &out.image,
-        out.values.as_ref(),
-        mode,
-        display,
-    )?)
+/// The screenshot: exactly the bytes `volsplat render --scene S -o FILE.png` writes for the
+/// saved request `request` (its mode and output options; [`Output::png_bytes`]).
+pub fn screenshot_png(out: &Output, request: &RenderRequest) -> Result<Vec<u8>> {
+    Ok(out.png_bytes(request)?)
 }
 
 /// The smallest and largest finite value of a MIP, MinIP or X-ray frame.
@@ -157,21 +151,26 @@ mod tests {
             ..volsplat::Scene::default()
         };
         let mut renderer = volsplat::Renderer::new();
-        let mut srgb = WriteOptions::default();
-        srgb.png.srgb = true;
-        srgb.png.background = [0.2, 0.3, 0.4];
-        let window = WriteOptions {
-            window: Some((-200.0, 900.0)),
-            ..WriteOptions::default()
+        let plain = volsplat::OutputOptions::default();
+        let srgb = volsplat::OutputOptions {
+            srgb: true,
+            background: [0.2, 0.3, 0.4],
+            ..plain
         };
-        for (mode, display) in [
-            (Mode::Composite, WriteOptions::default()),
+        let window = volsplat::OutputOptions {
+            window: Some([-200.0, 900.0]),
+            ..plain
+        };
+        use volsplat::Mode;
+        for (mode, output) in [
+            (Mode::Composite, plain),
             (Mode::Composite, srgb),
             (Mode::Mip, window),
-            (Mode::Xray, WriteOptions::default()),
+            (Mode::Xray, plain),
         ] {
             let mut req = volsplat::RenderRequest::new(scene.clone(), 40, 30);
             req.mode = mode;
+            req.output = output;
             if mode == Mode::Xray {
                 // Line integrals of Hounsfield units are mostly negative: X-ray a density.
                 req.scene.volume = volsplat::VolumeSource::Phantom {
@@ -181,11 +180,11 @@ mod tests {
             }
             let out = renderer.render(&req, &mut |_| true).unwrap();
             let path = dir.path().join("r.png");
-            volsplat::write_image(&path, &out.image, out.values.as_ref(), mode, &display).unwrap();
+            out.write(&path, &req).unwrap();
             let file = std::fs::read(&path).unwrap();
-            assert_eq!(screenshot_png(&out, mode, &display).unwrap(), file);
+            assert_eq!(screenshot_png(&out, &req).unwrap(), file);
             let (_, _, expect) = crate::replay::decode_rgb("png", &file).unwrap();
-            let frame = final_frame(&out, mode, &display).unwrap();
+            let frame = final_frame(&out, &req).unwrap();
             let (w, h, shown) = crate::replay::decode_rgb("png", &frame).unwrap();
             assert_eq!((w, h), (40, 30));
             assert_eq!(shown, expect, "{mode:?}");

@@ -21,6 +21,9 @@ pub struct RequestHead {
     pub path: String,
     /// The `token` query parameter, if any.
     pub token: Option<String>,
+    /// The `view` query parameter of the WebSocket, `WxH` in pixels (the page's view in device
+    /// pixels), if given and well formed: each side 1 to 5 decimal digits.
+    pub view: Option<(usize, usize)>,
     /// The `Host` header.
     pub host: Option<String>,
     /// The `Origin` header.
@@ -80,21 +83,38 @@ pub fn parse_head(buf: &[u8]) -> Result<Option<RequestHead>, HeadError> {
     };
     let target = req.path.unwrap_or("/");
     let (path, query) = target.split_once('?').unwrap_or((target, ""));
-    let token = query
-        .split('&')
-        .filter_map(|kv| kv.split_once('='))
-        .find(|(k, _)| *k == "token")
-        .map(|(_, v)| v.to_string());
+    let param = |name: &str| {
+        query
+            .split('&')
+            .filter_map(|kv| kv.split_once('='))
+            .find(|(k, _)| *k == name)
+            .map(|(_, v)| v)
+    };
+    let token = param("token").map(str::to_string);
+    let view = param("view").and_then(parse_size);
     let websocket = header("upgrade").is_some_and(|u| u.eq_ignore_ascii_case("websocket"));
     Ok(Some(RequestHead {
         method: req.method.unwrap_or("").to_string(),
         path: path.to_string(),
         token,
+        view,
         host: header("host"),
         origin: header("origin"),
         websocket,
         head_len,
     }))
+}
+
+/// `WxH`, each side 1 to 5 decimal digits and not zero.
+fn parse_size(text: &str) -> Option<(usize, usize)> {
+    let (w, h) = text.split_once('x')?;
+    let side = |v: &str| {
+        (!v.is_empty() && v.len() <= 5 && v.bytes().all(|b| b.is_ascii_digit()))
+            .then(|| v.parse::<usize>().ok())
+            .flatten()
+            .filter(|&n| n > 0)
+    };
+    Some((side(w)?, side(h)?))
 }
 
 /// Which `Host` headers the server answers (against DNS rebinding: a page of another site
@@ -252,6 +272,21 @@ mod tests {
         assert_eq!(h.host.as_deref(), Some("127.0.0.1:8000"));
         assert_eq!(h.head_len, text.len() - 4);
         assert!(!h.websocket);
+        assert_eq!(h.view, None);
+        let sized = |q: &str| head(&format!("GET /ws?token=a&{q} HTTP/1.1\r\n\r\n")).view;
+        assert_eq!(sized("view=1092x806"), Some((1092, 806)));
+        for bad in [
+            "view=0x5",
+            "view=5x",
+            "view=x5",
+            "view=123456x5",
+            "view=-1x5",
+            "view=5x5x5",
+            "view=+5x5",
+            "view=5X5",
+        ] {
+            assert_eq!(sized(bad), None, "{bad}");
+        }
         assert!(matches!(
             parse_head(b"\x00\x01 garbage\r\n\r\n"),
             Err(HeadError::Malformed(_))

@@ -35,5 +35,8 @@ pub mod token;
 mod turntable;
 
 pub use error::{Result, ViewError};
-pub use server::{StopHandle, Viewer, ViewerHandle, ViewerSettings, list_volumes};
+pub use server::{
+    MAX_FIT_SIDE, MAX_PENDING_CONNECTIONS, StopHandle, Viewer, ViewerHandle, ViewerSettings,
+    list_volumes,
+};
 pub use turntable::gif_size;

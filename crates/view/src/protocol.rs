@@ -208,6 +208,14 @@ pub struct Hello {
     pub volumes: Vec<String>,
     /// The frame budget, ms.
     pub budget_ms: f64,
+    /// Whether the image follows the page's view: the page sends `resize` events with its
+    /// view's size in device pixels (each side at most `max_fit_side`). `false`: a fixed size
+    /// (`--size`, a scene file's).
+    #[serde(default)]
+    pub fit: bool,
+    /// Longest side, pixels, of a view that follows the page.
+    #[serde(default)]
+    pub max_fit_side: usize,
 }
 
 /// The scene as the page shows it: sent after every change.
@@ -215,7 +223,7 @@ pub struct Hello {
 pub struct State {
     /// The full-quality request (`render --scene` reads it).
     pub request: volsplat::RenderRequest,
-    /// The grey window of MIP, MinIP and X-ray, if set.
+    /// The grey window of MIP, MinIP and X-ray, if set (the request's `output.window`).
     pub window: Option<[f32; 2]>,
     /// The transfer function in use, as points (data units), for the editor.
     pub transfer_function: Option<volsplat::core::TransferFunction>,
@@ -254,6 +262,15 @@ pub enum ServerMessage {
     Note {
         /// The text.
         message: String,
+    },
+    /// The final frame `frame`, already sent, shows every event up to `seq`: the events since
+    /// it was sent changed nothing that is seen (a click without a drag, a release after the
+    /// final frame, a refused event), so no new frame comes for them.
+    Shown {
+        /// The frame's id.
+        frame: u64,
+        /// The latest event it shows.
+        seq: u64,
     },
 }
 

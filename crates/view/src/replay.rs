@@ -37,6 +37,8 @@ pub enum Incoming {
 pub struct Client {
     ws: WebSocket<TcpStream>,
     seq: u64,
+    /// The last final frame received, its `seq` raised by `shown` messages.
+    last_final: Option<(FrameHeader, Vec<u8>)>,
 }
 
 impl std::fmt::Debug for Client {
@@ -49,7 +51,21 @@ impl Client {
     /// Connects to `ws://addr/ws?token=…`, sending `origin` as the `Origin` header if given.
     /// Errors carry the server's refusal (status and text).
     pub fn connect(addr: SocketAddr, token: &str, origin: Option<&str>) -> Result<Client, String> {
-        let url = format!("ws://{addr}/ws?token={token}");
+        Client::connect_sized(addr, token, origin, None)
+    }
+
+    /// [`Client::connect`] as the page connects when its image follows its view: with the
+    /// view's size in pixels (`&view=WxH`).
+    pub fn connect_sized(
+        addr: SocketAddr,
+        token: &str,
+        origin: Option<&str>,
+        view: Option<(usize, usize)>,
+    ) -> Result<Client, String> {
+        let mut url = format!("ws://{addr}/ws?token={token}");
+        if let Some((w, h)) = view {
+            url.push_str(&format!("&view={w}x{h}"));
+        }
         let mut req = url.into_client_request().map_err(|e| e.to_string())?;
         if let Some(o) = origin {
             let value = o.parse().map_err(|_| format!("bad origin {o}"))?;
@@ -69,7 +85,11 @@ impl Client {
             ),
             other => other.to_string(),
         })?;
-        Ok(Client { ws, seq: 0 })
+        Ok(Client {
+            ws,
+            seq: 0,
+            last_final: None,
+        })
     }
 
     /// Sends a text message as is (tests send malformed ones).
@@ -137,10 +157,21 @@ impl Client {
                 return Err(format!("nothing in {timeout:?}"));
             }
             if let Some(m) = self.recv(left)? {
-                if let Incoming::Frame(h, _) = &m
-                    && h.kind == "frame"
-                {
-                    self.ack(h.id)?;
+                match &m {
+                    Incoming::Frame(h, b) if h.kind == "frame" => {
+                        self.ack(h.id)?;
+                        if h.quality == "final" {
+                            self.last_final = Some((h.clone(), b.clone()));
+                        }
+                    }
+                    Incoming::Text(ServerMessage::Shown { frame, seq }) => {
+                        if let Some((h, _)) = self.last_final.as_mut()
+                            && h.id == *frame
+                        {
+                            h.seq = h.seq.max(*seq);
+                        }
+                    }
+                    _ => {}
                 }
                 if let Some(t) = pick(&m) {
                     return Ok(t);
@@ -158,16 +189,34 @@ impl Client {
         })
     }
 
-    /// Waits for the final frame showing event `seq` or later; returns its header and PNG.
+    /// Waits for the final frame showing event `seq` or later: a new one, or the last one
+    /// received once a `shown` message says it shows `seq` (the events since changed nothing
+    /// that is seen). Returns its header (`seq` raised) and PNG. `seq` 0: the next final frame.
     pub fn wait_final(
         &mut self,
         seq: u64,
         timeout: Duration,
     ) -> Result<(FrameHeader, Vec<u8>), String> {
+        if let Some(last) = self
+            .last_final
+            .as_ref()
+            .filter(|(h, _)| seq > 0 && h.seq >= seq)
+        {
+            return Ok(last.clone());
+        }
+        let mut last = self.last_final.clone();
         self.wait_for(timeout, |m| match m {
-            Incoming::Frame(h, b) if h.quality == "final" && h.seq >= seq => {
-                Some((h.clone(), b.clone()))
+            Incoming::Frame(h, b) if h.quality == "final" => {
+                last = Some((h.clone(), b.clone()));
+                (h.seq >= seq).then(|| (h.clone(), b.clone()))
             }
+            Incoming::Text(ServerMessage::Shown { frame, seq: shows }) => match last.as_mut() {
+                Some((h, b)) if h.id == *frame => {
+                    h.seq = h.seq.max(*shows);
+                    (h.seq >= seq).then(|| (h.clone(), b.clone()))
+                }
+                _ => None,
+            },
             _ => None,
         })
     }

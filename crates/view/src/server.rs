@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 use volsplat::core::AnyVolume;
 use volsplat::session::{Clock, SessionSettings, SystemClock};
-use volsplat::{CameraSpec, RenderRequest, Renderer, TransferSpec, VolumeSource, WriteOptions};
+use volsplat::{CameraSpec, RenderRequest, Renderer, TransferSpec, VolumeSource};
 
 /// How a viewer listens and paces its frames.
 #[derive(Debug, Clone)]
@@ -28,13 +28,26 @@ pub struct ViewerSettings {
     pub data_dir: Option<PathBuf>,
     /// Frame pacing of each tab's session.
     pub session: SessionSettings,
-    /// How frames are shown and written (PNG settings, grey window): `render`'s image flags.
-    pub display: WriteOptions,
     /// JPEG quality of previews, 1..=100.
     pub preview_quality: u8,
     /// Most tabs at once (default 16).
     pub max_tabs: usize,
+    /// Most connections at once that are not (yet) tabs: page loads and request heads being
+    /// read (default [`MAX_PENDING_CONNECTIONS`]). One beyond it is answered 503 and closed at
+    /// once, so idle connections cannot pile up threads; tabs have their own cap.
+    pub max_connections: usize,
+    /// The image follows the page's view (`false`, the default: the request's size, fixed):
+    /// the page sends the size of its view in device pixels (up to [`MAX_FIT_SIDE`] on the
+    /// long side) and the session renders at that size, as ParaView's and napari's views fill
+    /// their window. `volsplat view` sets it unless `--size` or `--scene` gives a size.
+    pub fit_view: bool,
 }
+
+/// Default of [`ViewerSettings::max_connections`].
+pub const MAX_PENDING_CONNECTIONS: usize = 32;
+
+/// Longest side, pixels, of a view that follows the page ([`ViewerSettings::fit_view`]).
+pub const MAX_FIT_SIDE: usize = 2048;
 
 impl Default for ViewerSettings {
     fn default() -> Self {
@@ -44,9 +57,10 @@ impl Default for ViewerSettings {
             allow_remote: false,
             data_dir: None,
             session: SessionSettings::default(),
-            display: WriteOptions::default(),
             preview_quality: crate::frames::DEFAULT_PREVIEW_QUALITY,
             max_tabs: 16,
+            max_connections: MAX_PENDING_CONNECTIONS,
+            fit_view: false,
         }
     }
 }
@@ -64,14 +78,16 @@ pub(crate) struct Shared {
     hosts: HostRule,
     stopping: AtomicBool,
     tabs: AtomicUsize,
+    /// Connections not (yet) tabs: page loads and heads being read.
+    pending: AtomicUsize,
     /// Sockets of open connections, to close them when the server stops.
     open: Mutex<HashMap<u64, Arc<Outgoing>>>,
     next_conn: AtomicUsize,
     histograms: Mutex<HashMap<String, Histogram>>,
     pub(crate) clock: Arc<dyn Clock>,
-    /// The scene and display options of the tab that changed last (the start request before
-    /// any), for library callers ([`ViewerHandle::scene`]).
-    latest: Mutex<(RenderRequest, WriteOptions)>,
+    /// The scene of the tab that changed last (the start request before any), for library
+    /// callers ([`ViewerHandle::scene`]).
+    latest: Mutex<RenderRequest>,
 }
 
 impl Shared {
@@ -108,9 +124,14 @@ impl Shared {
     }
 
     /// The request that opens `name` from the data folder: the start request's settings on
-    /// that volume, with VTK's reset camera and the automatic transfer function. Errors are
-    /// messages for the page (they never name server paths).
-    pub(crate) fn open_request(&self, name: &str) -> std::result::Result<RenderRequest, String> {
+    /// that volume, with VTK's reset camera and the automatic transfer function, at `size`
+    /// (the tab's view) when given. Errors are messages for the page (they never name server
+    /// paths).
+    pub(crate) fn open_request(
+        &self,
+        name: &str,
+        size: Option<(usize, usize)>,
+    ) -> std::result::Result<RenderRequest, String> {
         let Some(dir) = self.settings.data_dir.as_deref() else {
             return Err("this server has no data folder (start it with --data-dir)".into());
         };
@@ -143,12 +164,27 @@ impl Shared {
         req.scene.camera = CameraSpec::default();
         req.scene.transfer_function = TransferSpec::Auto;
         req.scene.clipping = Default::default();
+        if let Some((w, h)) = size {
+            (req.width, req.height) = (w, h);
+        }
         Ok(req)
     }
 
+    /// The request a new tab starts from: the start request, at the page's view size when
+    /// the view follows the page and the page gave a size it may have.
+    pub(crate) fn tab_request(&self, view: Option<(usize, usize)>) -> RenderRequest {
+        let mut req = self.start.clone();
+        if let (true, Some((w, h))) = (self.settings.fit_view, view)
+            && fits(w, h, self.settings.session.max_size)
+        {
+            (req.width, req.height) = (w, h);
+        }
+        req
+    }
+
     /// Records the scene a tab has just changed to.
-    pub(crate) fn set_latest(&self, request: &RenderRequest, display: &WriteOptions) {
-        *self.latest.lock().unwrap_or_else(|e| e.into_inner()) = (request.clone(), display.clone());
+    pub(crate) fn set_latest(&self, request: &RenderRequest) {
+        *self.latest.lock().unwrap_or_else(|e| e.into_inner()) = request.clone();
     }
 
     fn register(&self, out: &Arc<Outgoing>) -> u64 {
@@ -245,14 +281,19 @@ impl Viewer {
                 format!("{} is not a folder", d.display()),
             ));
         }
+        if settings.max_connections == 0 || settings.max_tabs == 0 {
+            return Err(ViewError::settings(
+                "connections",
+                "max_connections and max_tabs must be at least 1",
+            ));
+        }
         let clock: Arc<dyn Clock> = Arc::new(SystemClock::new());
-        let mut probe = volsplat::session::Session::start(
+        let probe = volsplat::session::Session::start(
             request.clone(),
             &mut renderer,
             settings.session,
             Arc::clone(&clock),
         )?;
-        probe.set_display(settings.display.clone())?;
         let listener = TcpListener::bind((ip, settings.port))
             .map_err(|e| ViewError::socket(format!("listening on {ip}:{}", settings.port), e))?;
         let addr = listener
@@ -272,7 +313,7 @@ impl Viewer {
             IpAddr::V4(v4) => v4.to_string(),
         };
         let url = format!("http://{url_host}:{}/?token={}", addr.port(), token.hex());
-        let latest = Mutex::new((probe.request().clone(), probe.display().clone()));
+        let latest = Mutex::new(probe.request().clone());
         Ok(Viewer {
             listener,
             shared: Arc::new(Shared {
@@ -283,6 +324,7 @@ impl Viewer {
                 hosts,
                 stopping: AtomicBool::new(false),
                 tabs: AtomicUsize::new(0),
+                pending: AtomicUsize::new(0),
                 open: Mutex::new(HashMap::new()),
                 next_conn: AtomicUsize::new(1),
                 histograms: Mutex::new(HashMap::new()),
@@ -332,10 +374,22 @@ impl Viewer {
                 break;
             }
             let Ok(stream) = conn else { continue };
+            // Counted before its thread starts, so a flood of connections cannot outrun the
+            // cap; the thread gives the count back once its head is answered (or it becomes a
+            // tab, which `max_tabs` caps).
+            let pending = self.shared.pending.fetch_add(1, Ordering::AcqRel) + 1;
+            if pending > self.shared.settings.max_connections {
+                self.shared.pending.fetch_sub(1, Ordering::AcqRel);
+                busy(stream);
+                continue;
+            }
             let shared = Arc::clone(&self.shared);
-            let _ = std::thread::Builder::new()
+            let spawned = std::thread::Builder::new()
                 .name("volsplat-view-conn".into())
                 .spawn(move || connection(shared, stream));
+            if spawned.is_err() {
+                self.shared.pending.fetch_sub(1, Ordering::AcqRel);
+            }
         }
     }
 
@@ -427,9 +481,9 @@ impl ViewerHandle {
     }
 
     /// The scene of the tab that changed last (the starting scene before any tab did): its
-    /// request, camera explicit, as `volsplat render --scene` reads it, and its display options
-    /// (grey window, PNG settings).
-    pub fn scene(&self) -> (RenderRequest, WriteOptions) {
+    /// request, camera explicit, with its output options (grey window, background, PNG
+    /// encoding), as `volsplat render --scene` reads it.
+    pub fn scene(&self) -> RenderRequest {
         self.shared
             .latest
             .lock()
@@ -440,6 +494,12 @@ impl ViewerHandle {
     /// Number of tabs connected now.
     pub fn tabs(&self) -> usize {
         self.shared.tabs.load(Ordering::Acquire)
+    }
+
+    /// Number of connections now that are not tabs (page loads, heads being read); at most
+    /// [`ViewerSettings::max_connections`].
+    pub fn pending_connections(&self) -> usize {
+        self.shared.pending.load(Ordering::Acquire)
     }
 
     /// Stops the server and waits for its accept loop to end.
@@ -478,8 +538,45 @@ fn parse_host(host: &str) -> Result<IpAddr> {
 /// Time a client has to send its request head.
 const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// One connection: read the head, check it, answer the page or run a tab.
+/// Whether a view of `w × h` pixels may follow the page: each side in `1..=max` and the long
+/// side at most [`MAX_FIT_SIDE`].
+fn fits(w: usize, h: usize, max: usize) -> bool {
+    (1..=max.min(MAX_FIT_SIDE)).contains(&w) && (1..=max.min(MAX_FIT_SIDE)).contains(&h)
+}
+
+/// Answers a connection beyond [`ViewerSettings::max_connections`] with 503 without reading
+/// it, on the accepting thread: a short write to a new socket's empty buffer, which never
+/// waits; the socket is closed at once.
+fn busy(stream: TcpStream) {
+    let mut stream = stream;
+    let _ = stream.set_nonblocking(true);
+    let _ = http::refuse(
+        &mut stream,
+        http::Refused {
+            status: 503,
+            reason: "too many connections; try again",
+        },
+    );
+    let _ = stream.shutdown(std::net::Shutdown::Both);
+}
+
+/// One connection: read the head, check it, answer the page or run a tab. It counts as
+/// pending (see [`Viewer::serve`]) until its head is answered or it becomes a tab.
 fn connection(shared: Arc<Shared>, mut stream: TcpStream) {
+    struct Pending<'a>(Option<&'a Shared>);
+    impl Pending<'_> {
+        fn release(&mut self) {
+            if let Some(s) = self.0.take() {
+                s.pending.fetch_sub(1, Ordering::AcqRel);
+            }
+        }
+    }
+    impl Drop for Pending<'_> {
+        fn drop(&mut self) {
+            self.release();
+        }
+    }
+    let mut pending = Pending(Some(&shared));
     if shared.stopping() {
         return;
     }
@@ -512,12 +609,16 @@ fn connection(shared: Arc<Shared>, mut stream: TcpStream) {
             );
             let _ = http::respond(&mut stream, 200, "text/html; charset=utf-8", &csp, &page);
         }
-        Ok(Route::Socket) => socket(shared, stream, bytes),
+        Ok(Route::Socket) => {
+            pending.release();
+            drop(pending);
+            socket(shared, stream, bytes, head.view)
+        }
     }
 }
 
 /// Accepts the WebSocket (tungstenite answers the handshake) and runs the tab.
-fn socket(shared: Arc<Shared>, stream: TcpStream, head: Vec<u8>) {
+fn socket(shared: Arc<Shared>, stream: TcpStream, head: Vec<u8>, view: Option<(usize, usize)>) {
     let tabs = shared.tabs.fetch_add(1, Ordering::AcqRel) + 1;
     struct Leave<'a>(&'a Shared);
     impl Drop for Leave<'_> {
@@ -547,7 +648,7 @@ fn socket(shared: Arc<Shared>, stream: TcpStream, head: Vec<u8>) {
     let stream_for_ws = SocketStream::new(head, stream, Arc::clone(&out));
     let accepted = tungstenite::accept_with_config(stream_for_ws, Some(config));
     if let Ok(ws) = accepted {
-        let request = shared.start.clone();
+        let request = shared.tab_request(view);
         crate::tab::run(Arc::clone(&shared), ws, Arc::clone(&out), request);
     }
     shared.unregister(conn);

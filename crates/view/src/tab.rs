@@ -37,11 +37,10 @@ enum Command {
     Screenshot,
 }
 
-/// The latest final frame of a tab, for the screenshot button.
+/// The latest final frame of a tab and the request it rendered, for the screenshot button.
 struct LastFinal {
     out: volsplat::Output,
-    mode: volsplat::Mode,
-    display: volsplat::WriteOptions,
+    request: RenderRequest,
 }
 
 #[derive(Default)]
@@ -54,6 +53,18 @@ struct TabState {
     closed: bool,
     commands: Vec<Command>,
     last_final: Option<Arc<LastFinal>>,
+    /// The last frame sent: events that change nothing after it are shown by it.
+    shown: Option<ShownFrame>,
+}
+
+/// A frame as sent: its id, the scene generation it shows, whether it is final, and the
+/// latest event it shows.
+#[derive(Debug, Clone, Copy)]
+struct ShownFrame {
+    id: u64,
+    generation: u64,
+    is_final: bool,
+    seq: u64,
 }
 
 /// One tab's shared state.
@@ -168,7 +179,7 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
             );
             match session.apply(event) {
                 Ok(()) => {
-                    tab.shared.set_latest(session.request(), session.display());
+                    tab.shared.set_latest(session.request());
                     st.seq = st.seq.max(seq);
                     let quiet = camera_move || session.interacting();
                     let state = (!quiet).then(|| state_of(session, st.seq, None));
@@ -179,7 +190,10 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
                     }
                 }
                 Err(e) => {
+                    // A refused event changes nothing: the frame on screen shows it too.
+                    st.seq = st.seq.max(seq);
                     drop(guard);
+                    tab.wake.notify_all();
                     tab.error(Some(seq), e.to_string());
                 }
             }
@@ -221,7 +235,7 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
             tab.lock().commands.push(Command::Screenshot);
             tab.wake.notify_all();
         }
-        ClientMessage::Open { name } => match tab.shared.open_request(&name) {
+        ClientMessage::Open { name } => match tab.shared.open_request(&name, fitted_size(tab)) {
             Ok(request) => {
                 tab.lock().commands.push(Command::Open(Box::new(request)));
                 tab.wake.notify_all();
@@ -231,11 +245,23 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
     }
 }
 
+/// The size of the tab's view when it follows the page ([`crate::ViewerSettings::fit_view`]):
+/// a volume opened from the data folder keeps it.
+fn fitted_size(tab: &Tab) -> Option<(usize, usize)> {
+    if !tab.shared.settings.fit_view {
+        return None;
+    }
+    let st = tab.lock();
+    st.session
+        .as_ref()
+        .map(|s| (s.request().width, s.request().height))
+}
+
 /// The state message of a session.
 fn state_of(session: &Session, seq: u64, tf: Option<TransferFunction>) -> State {
     State {
         request: session.request().clone(),
-        window: session.display().window.map(|(lo, hi)| [lo, hi]),
+        window: session.request().output.window,
         transfer_function: tf,
         seq,
     }
@@ -258,20 +284,30 @@ fn worker(tab: &Tab, request: RenderRequest) {
                 if let Some(c) = pop_command(&mut st) {
                     break Next::Command(c);
                 }
-                let seq = st.seq;
-                let session = match st.session.as_mut() {
-                    Some(s) => s,
-                    None => return,
+                let state = &mut *st;
+                let seq = state.seq;
+                let Some(session) = state.session.as_mut() else {
+                    return;
                 };
                 if let Some(job) = session.next_job() {
                     let go = session.keep_going(&job);
                     let view = [session.request().width, session.request().height];
                     break Next::Job(Box::new(job), Sent { seq, view }, Box::new(go));
                 }
+                let generation = session.generation();
                 let timeout = session
                     .wake_at()
                     .map(|t| t.saturating_sub(tab.shared.clock.now()))
                     .unwrap_or(Duration::from_secs(1));
+                if let Some(sh) = state.shown.as_mut()
+                    && sh.is_final
+                    && sh.generation == generation
+                    && sh.seq < seq
+                {
+                    // Events since the final frame changed nothing: it shows them.
+                    sh.seq = seq;
+                    break Next::Shown(sh.id, seq);
+                }
                 st = tab
                     .wake
                     .wait_timeout(st, timeout.max(Duration::from_millis(1)))
@@ -293,6 +329,7 @@ fn worker(tab: &Tab, request: RenderRequest) {
                 fps,
                 max_size,
             }) => turntable(tab, frames, degrees, fps, max_size),
+            Next::Shown(frame, seq) => tab.send(&ServerMessage::Shown { frame, seq }),
             Next::Job(job, sent, go) => {
                 frame_id += 1;
                 render_and_send(tab, &job, sent, frame_id, go, &mut last_tf);
@@ -306,6 +343,8 @@ type KeepGoing = Box<dyn FnMut(&Progress) -> bool + Send>;
 enum Next {
     Command(Command),
     Job(Box<Job>, Sent, KeepGoing),
+    /// The final frame with this id shows the events up to this seq.
+    Shown(u64, u64),
 }
 
 /// What a frame tells the page beside its image: the latest event it shows and the size of
@@ -335,8 +374,7 @@ fn start_session(tab: &Tab, request: RenderRequest) -> bool {
             tab.shared.settings.session,
             Arc::clone(&tab.shared.clock),
         )
-        .and_then(|mut s| {
-            s.set_display(tab.shared.settings.display.clone())?;
+        .and_then(|s| {
             let vol = renderer.volume(&s.request().scene.volume)?;
             Ok((s, vol))
         })
@@ -373,15 +411,18 @@ fn start_session(tab: &Tab, request: RenderRequest) -> bool {
             .collect(),
         volumes: tab.shared.volume_names(),
         budget_ms: session.settings().budget_ms(),
+        fit: tab.shared.settings.fit_view,
+        max_fit_side: crate::server::MAX_FIT_SIDE.min(session.settings().max_size),
     };
     tab.send(&ServerMessage::Hello(Box::new(hello)));
-    tab.shared.set_latest(session.request(), session.display());
+    tab.shared.set_latest(session.request());
     let mut st = tab.lock();
     let seq = st.seq;
     let state = state_of(&session, seq, None);
     st.session = Some(session);
     st.unacked = None;
     st.last_final = None;
+    st.shown = None;
     drop(st);
     tab.send(&ServerMessage::State(Box::new(state)));
     tab.wake.notify_all();
@@ -437,15 +478,11 @@ fn render_and_send(
         }
     };
     let t1 = Instant::now();
-    let mode = job.request.mode;
     let encoded = match job.kind {
-        JobKind::Final => frames::final_frame(&out, mode, &job.display),
-        JobKind::Preview(_) => frames::preview_jpeg(
-            &out,
-            mode,
-            &job.display,
-            tab.shared.settings.preview_quality,
-        ),
+        JobKind::Final => frames::final_frame(&out, &job.request),
+        JobKind::Preview(_) => {
+            frames::preview_jpeg(&out, &job.request, tab.shared.settings.preview_quality)
+        }
     };
     let bytes = match encoded {
         Ok(b) => b,
@@ -458,6 +495,10 @@ fn render_and_send(
     let (scale, slab_factor, volume_level) = match job.kind {
         JobKind::Preview(p) => (p.scale, p.slab_factor, p.volume_level),
         JobKind::Final => (1.0, 1.0, 0),
+    };
+    // Marked in flight before it is sent: the page may acknowledge it before `send` returns.
+    let Some(seq) = wait_for_ack_then_mark(tab, job, id, sent.seq) else {
+        return finish(tab, job, JobOutcome::Cancelled);
     };
     let header = FrameHeader {
         kind: "frame".into(),
@@ -476,10 +517,6 @@ fn render_and_send(
         values_range: frames::values_range(&out),
         name: None,
     };
-    // Marked in flight before it is sent: the page may acknowledge it before `send` returns.
-    if !wait_for_ack_then_mark(tab, id) {
-        return finish(tab, job, JobOutcome::Cancelled);
-    }
     if tab.out.binary(binary_message(&header, &bytes)).is_err() {
         return finish(tab, job, JobOutcome::Cancelled);
     }
@@ -507,8 +544,7 @@ fn render_and_send(
     if is_final {
         tab.lock().last_final = Some(Arc::new(LastFinal {
             out,
-            mode,
-            display: job.display.clone(),
+            request: job.request.clone(),
         }));
     }
 }
@@ -518,7 +554,7 @@ fn screenshot(tab: &Tab) {
     let Some(last) = tab.lock().last_final.clone() else {
         return tab.error(None, "no full-quality frame yet".into());
     };
-    match frames::screenshot_png(&last.out, last.mode, &last.display) {
+    match frames::screenshot_png(&last.out, &last.request) {
         Ok(bytes) => {
             let header = file_header("screenshot.png", "png");
             let _ = tab.out.binary(binary_message(&header, &bytes));
@@ -548,13 +584,15 @@ fn file_header(name: &str, format: &str) -> FrameHeader {
     }
 }
 
-/// Waits until no frame is in flight, then marks frame `id` as in flight; `false` if the tab
-/// closed meanwhile.
-fn wait_for_ack_then_mark(tab: &Tab, id: u64) -> bool {
+/// Waits until no frame is in flight, then marks frame `id` of `job` as in flight and as the
+/// frame shown; returns the latest event it shows (`None` if the tab closed meanwhile): every
+/// event applied so far when the scene is still the job's (events since the job was made
+/// changed nothing that is seen), else `made_at`, the latest event when the job was made.
+fn wait_for_ack_then_mark(tab: &Tab, job: &Job, id: u64, made_at: u64) -> Option<u64> {
     let mut st = tab.lock();
     while st.unacked.is_some() {
         if st.closed || tab.shared.stopping() {
-            return false;
+            return None;
         }
         st = tab
             .wake
@@ -563,10 +601,18 @@ fn wait_for_ack_then_mark(tab: &Tab, id: u64) -> bool {
             .unwrap_or_else(|e| e.into_inner().0);
     }
     if st.closed {
-        return false;
+        return None;
     }
     st.unacked = Some(id);
-    true
+    let current = st.session.as_ref().is_some_and(|s| s.is_current(job));
+    let seq = if current { st.seq } else { made_at };
+    st.shown = Some(ShownFrame {
+        id,
+        generation: job.generation,
+        is_final: job.is_final(),
+        seq,
+    });
+    Some(seq)
 }
 
 fn finish(tab: &Tab, job: &Job, outcome: JobOutcome) {
@@ -578,17 +624,15 @@ fn finish(tab: &Tab, job: &Job, outcome: JobOutcome) {
 
 /// Renders a turntable of the current scene on the server and sends it as a GIF file.
 fn turntable(tab: &Tab, frames: usize, degrees: f64, fps: f64, max_size: usize) {
-    let Some((request, display, camera)) = tab
+    let Some((request, camera)) = tab
         .lock()
         .session
         .as_ref()
-        .map(|s| (s.request().clone(), s.display().clone(), s.camera().clone()))
+        .map(|s| (s.request().clone(), s.camera().clone()))
     else {
         return;
     };
-    match crate::turntable::render(
-        tab, &request, &display, &camera, frames, degrees, fps, max_size,
-    ) {
+    match crate::turntable::render(tab, &request, &camera, frames, degrees, fps, max_size) {
         Ok(Some(bytes)) => {
             let header = file_header("turntable.gif", "gif");
             let _ = tab.out.binary(binary_message(&header, &bytes));

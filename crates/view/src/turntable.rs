@@ -8,7 +8,7 @@ use crate::tab::Tab;
 use volsplat::core::Camera;
 use volsplat::io::{MovieSettings, MovieWriter};
 use volsplat::movie::{TurnAxis, turntable};
-use volsplat::{CameraSpec, RenderRequest, WriteOptions};
+use volsplat::{CameraSpec, RenderRequest};
 
 /// The GIF's frame size: the view scaled so that its larger side is at most `max_size`.
 pub fn gif_size(width: usize, height: usize, max_size: usize) -> (usize, usize) {
@@ -19,12 +19,12 @@ pub fn gif_size(width: usize, height: usize, max_size: usize) -> (usize, usize) 
     )
 }
 
-/// Renders the turntable and returns the GIF's bytes, or `None` if it was cancelled.
-#[allow(clippy::too_many_arguments)]
+/// Renders the turntable and returns the GIF's bytes, or `None` if it was cancelled. Frames
+/// are shown as the view shows them: the request's background and encoding, MIP, MinIP and
+/// X-ray through its grey window.
 pub(crate) fn render(
     tab: &Tab,
     request: &RenderRequest,
-    display: &WriteOptions,
     camera: &Camera,
     frames: usize,
     degrees: f64,
@@ -35,6 +35,7 @@ pub(crate) fn render(
     let (w, h) = gif_size(request.width, request.height, max_size);
     let dir = tempfile::tempdir().map_err(|e| ViewError::socket("a temporary folder", e))?;
     let path = dir.path().join("turntable.gif");
+    let display = request.output.write_options()?;
     let settings = MovieSettings {
         fps,
         png: display.png.clone(),

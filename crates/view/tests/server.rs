@@ -178,13 +178,7 @@ fn events_give_previews_then_the_final_frame_of_render() {
     scene.save(&path).unwrap();
     let (loaded, _) = RenderRequest::load(&path).unwrap();
     let out = Renderer::new().render(&loaded, &mut |_| true).unwrap();
-    let expect = volsplat::encode_png(
-        &out.image,
-        out.values.as_ref(),
-        loaded.mode,
-        &volsplat::WriteOptions::default(),
-    )
-    .unwrap();
+    let expect = out.png_bytes(&loaded).unwrap();
     let decode = |b: &[u8]| volsplat_view::replay::decode_rgb("png", b).unwrap();
     assert_eq!(
         decode(&png),
@@ -277,7 +271,7 @@ fn two_tabs_watch_one_volume_with_their_own_cameras() {
     let (ra, rb) = (a.scene(WAIT).unwrap(), b.scene(WAIT).unwrap());
     assert_ne!(ra.scene.camera, rb.scene.camera);
     assert_eq!(
-        h.scene().0,
+        h.scene(),
         rb,
         "the handle's scene is the tab that changed last"
     );
@@ -381,4 +375,189 @@ fn a_turntable_gif_is_rendered_on_the_server() {
         n += 1;
     }
     assert_eq!(n, 6);
+}
+
+/// Renders a saved scene as `volsplat render --scene` does: the file read back, a fresh
+/// renderer, the request's own output options.
+fn render_saved(scene: &RenderRequest) -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.json");
+    scene.save(&path).unwrap();
+    let (loaded, warnings) = RenderRequest::load(&path).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let out = Renderer::new().render(&loaded, &mut |_| true).unwrap();
+    out.png_bytes(&loaded).unwrap()
+}
+
+/// Issue 29 follow-up: the saved scene holds the output options (the start request's
+/// background and encoding, the page's grey window), so rendering it gives the screenshot's
+/// bytes; before, a window or background set in the viewer was lost from the scene file.
+#[test]
+fn the_saved_scene_renders_to_the_screenshot_with_its_window_and_background() {
+    let mut start = request(64);
+    start.output.background = [0.3, 0.15, 0.05];
+    start.output.srgb = true;
+    let h = Viewer::bind(start, Renderer::new(), ViewerSettings::default())
+        .unwrap()
+        .spawn()
+        .unwrap();
+    let (mut c, _) = connect(&h);
+    let shot = c.screenshot(WAIT).unwrap();
+    let scene = c.scene(WAIT).unwrap();
+    assert_eq!(scene.output.background, [0.3, 0.15, 0.05]);
+    assert_eq!(render_saved(&scene), shot, "composite over the background");
+    c.event(Event::SetMode {
+        mode: volsplat::Mode::Mip,
+    })
+    .unwrap();
+    let seq = c
+        .event(Event::SetWindow {
+            window: Some([-100.0, 700.0]),
+        })
+        .unwrap();
+    c.wait_final(seq, WAIT).unwrap();
+    let shot = c.screenshot(WAIT).unwrap();
+    let scene = c.scene(WAIT).unwrap();
+    assert_eq!(scene.output.window, Some([-100.0, 700.0]));
+    assert_eq!(h.scene().output.window, Some([-100.0, 700.0]));
+    assert_eq!(render_saved(&scene), shot, "MIP through the window");
+    let mut unwindowed = scene.clone();
+    unwindowed.output.window = None;
+    assert_ne!(
+        render_saved(&unwindowed),
+        shot,
+        "the window changes the file"
+    );
+}
+
+/// Issue 29 follow-up: with `fit_view` the tab starts at the size the page gives in its
+/// WebSocket URL and follows `resize` events; the hello says so. Without it, or for a size
+/// beyond the cap, the request's own size is kept.
+#[test]
+fn the_image_follows_the_view_when_asked() {
+    let fit = ViewerSettings {
+        fit_view: true,
+        ..ViewerSettings::default()
+    };
+    let h = serve(fit);
+    let mut c = Client::connect_sized(h.local_addr(), &h.token(), None, Some((120, 80))).unwrap();
+    let hello = c
+        .wait_for(WAIT, |m| match m {
+            Incoming::Text(ServerMessage::Hello(h)) => Some((**h).clone()),
+            _ => None,
+        })
+        .unwrap();
+    assert!(hello.fit);
+    assert_eq!(hello.max_fit_side, volsplat_view::MAX_FIT_SIDE);
+    let (header, _) = c.wait_final(0, WAIT).unwrap();
+    assert_eq!((header.width, header.height), (120, 80));
+    let seq = c
+        .event(Event::Resize {
+            width: 90,
+            height: 70,
+        })
+        .unwrap();
+    let (header, _) = c.wait_final(seq, WAIT).unwrap();
+    assert_eq!(
+        (header.width, header.height, header.view),
+        (90, 70, [90, 70])
+    );
+    let scene = c.scene(WAIT).unwrap();
+    assert_eq!((scene.width, scene.height), (90, 70));
+    assert_eq!(render_saved(&scene), c.screenshot(WAIT).unwrap());
+    // A size over the cap is not taken: the request's own.
+    let side = volsplat_view::MAX_FIT_SIDE + 1;
+    let mut big =
+        Client::connect_sized(h.local_addr(), &h.token(), None, Some((side, 10))).unwrap();
+    let (header, _) = big.wait_final(0, WAIT).unwrap();
+    assert_eq!((header.width, header.height), (96, 96));
+
+    let fixed = serve(ViewerSettings::default());
+    let mut c =
+        Client::connect_sized(fixed.local_addr(), &fixed.token(), None, Some((120, 80))).unwrap();
+    let hello = c
+        .wait_for(WAIT, |m| match m {
+            Incoming::Text(ServerMessage::Hello(h)) => Some((**h).clone()),
+            _ => None,
+        })
+        .unwrap();
+    assert!(!hello.fit);
+    let (header, _) = c.wait_final(0, WAIT).unwrap();
+    assert_eq!(
+        (header.width, header.height),
+        (96, 96),
+        "a fixed size stays"
+    );
+}
+
+/// Issue 29 follow-up: idle connections (no request head) are capped. Of 100 opened at once
+/// (loopback, a bounded loop), at most `max_connections` hold a thread; the others are
+/// answered 503 at once. Meanwhile an open tab keeps rendering, and once the idle sockets
+/// close the count falls back and the page loads again.
+#[test]
+fn idle_connections_are_capped_and_the_server_goes_on() {
+    let h = serve(ViewerSettings::default());
+    let (mut tab, _) = connect(&h);
+    let addr = h.local_addr();
+    let limit = volsplat_view::MAX_PENDING_CONNECTIONS;
+    let mut idle = Vec::new();
+    for _ in 0..100 {
+        let s = TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        idle.push(s);
+        assert!(h.pending_connections() <= limit);
+    }
+    // Every connection was accepted or refused: the accept loop has seen all 100.
+    let mut refused = 0;
+    for s in idle.iter_mut().skip(limit) {
+        let mut text = String::new();
+        let _ = s.read_to_string(&mut text);
+        refused += text.starts_with("HTTP/1.1 503") as usize;
+    }
+    assert!(
+        refused >= 100 - limit - 2,
+        "{refused} of the connections beyond the cap were answered 503"
+    );
+    assert!(h.pending_connections() <= limit);
+    // The tab renders on through the flood.
+    let seq = tab.event(Event::Orbit { dx: 10.0, dy: 0.0 }).unwrap();
+    tab.wait_final(seq, WAIT).unwrap();
+    drop(idle);
+    let end = std::time::Instant::now() + Duration::from_secs(20);
+    while h.pending_connections() > 0 && std::time::Instant::now() < end {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(
+        h.pending_connections(),
+        0,
+        "closed connections were not let go"
+    );
+    let (status, _, _) = get(addr, &format!("/?token={}", h.token()), "");
+    assert_eq!(status, 200);
+    assert_eq!(h.tabs(), 1);
+}
+
+/// A click on the view without a drag, or a refused event, changes nothing: no new frame
+/// comes, and the server says the final frame on screen shows those events (`shown`), so a
+/// page waiting for "the final frame of my latest event" (the screenshot button) does not wait
+/// forever. Before, the frame's `seq` stayed below the click's and nothing more was sent.
+#[test]
+fn events_that_change_nothing_are_shown_by_the_final_frame() {
+    let h = serve(ViewerSettings::default());
+    let (mut c, _) = connect(&h);
+    let first = c.scene(WAIT).unwrap();
+    c.event(Event::Interaction { active: true }).unwrap();
+    let release = c.event(Event::Interaction { active: false }).unwrap();
+    let (header, _) = c.wait_final(release, WAIT).unwrap();
+    assert!(header.seq >= release);
+    let refused = c.event(Event::Zoom { factor: -1.0 }).unwrap();
+    assert!(error_reply(&mut c).contains("zoom.factor"));
+    let (again, _) = c.wait_final(refused, WAIT).unwrap();
+    assert_eq!(again.id, header.id, "no new frame was rendered for nothing");
+    assert!(again.seq >= refused);
+    assert_eq!(c.scene(WAIT).unwrap(), first, "the scene did not change");
+    // A real change still renders a new frame.
+    let moved = c.event(Event::Orbit { dx: 5.0, dy: 0.0 }).unwrap();
+    let (next, _) = c.wait_final(moved, WAIT).unwrap();
+    assert!(next.id > header.id);
 }

@@ -72,7 +72,8 @@ pub enum Event {
         /// The camera.
         camera: Camera,
     },
-    /// The ray function.
+    /// The ray function. A grey window is kept only where it means the same in the new mode
+    /// (between MIP and MinIP; [`Mode::shares_window_with`]), and dropped otherwise.
     SetMode {
         /// Composite, MIP, MinIP or X-ray.
         mode: Mode,
@@ -82,9 +83,10 @@ pub enum Event {
         /// The new transfer function.
         transfer_function: TransferSpec,
     },
-    /// The grey window of MIP, MinIP and X-ray frames, `[lo, hi]` in the values' units (data
-    /// units; X-ray: data units × world units), or `None` for the default mapping (MIP and
-    /// MinIP through the transfer function, X-ray 0 to its brightest pixel).
+    /// The grey window of MIP, MinIP and X-ray frames (the request's `output.window`),
+    /// `[lo, hi]` in the values' units (data units; X-ray: data units × world units), or `None`
+    /// for the default mapping (MIP and MinIP through the transfer function, X-ray 0 to its
+    /// brightest pixel).
     SetWindow {
         /// `[lo, hi]` with `lo < hi`, or `None`.
         window: Option<[f32; 2]>,

@@ -54,9 +54,8 @@ pub use policy::{Clock, ManualClock, PreviewPlan, SessionSettings, SystemClock};
 
 use crate::error::{EngineError, Result};
 use crate::renderer::{Output, Progress, Renderer};
-use crate::request::{Mode, RenderRequest};
+use crate::request::RenderRequest;
 use crate::scene::CameraSpec;
-use crate::write::WriteOptions;
 use policy::{Budget, plan_cost};
 use std::path::Path;
 use std::sync::Arc;
@@ -82,10 +81,9 @@ pub struct Job {
     pub generation: u64,
     /// Preview or final.
     pub kind: JobKind,
-    /// What to render.
+    /// What to render; its `output` options (grey window, background, PNG encoding) are the
+    /// ones its frame is shown and written with.
     pub request: RenderRequest,
-    /// The grey window and PNG settings its frame is shown and written with.
-    pub display: WriteOptions,
     /// When the job was handed out, on the session's clock.
     pub started: Duration,
 }
@@ -123,7 +121,6 @@ struct Delivered {
 /// A progressive rendering session (see the module docs).
 pub struct Session {
     request: RenderRequest,
-    display: WriteOptions,
     home: Camera,
     grid: Grid,
     settings: SessionSettings,
@@ -187,7 +184,6 @@ impl Session {
         let now = clock.now();
         Ok(Session {
             request,
-            display: WriteOptions::default(),
             home: camera,
             grid,
             settings,
@@ -205,7 +201,8 @@ impl Session {
     }
 
     /// The full-quality request of the current scene (camera explicit): what the final frame
-    /// renders and [`Session::save`] writes.
+    /// renders and [`Session::save`] writes, with the output options (grey window, background,
+    /// PNG encoding) its frames are shown and written with.
     pub fn request(&self) -> &RenderRequest {
         &self.request
     }
@@ -217,21 +214,6 @@ impl Session {
             // `new` and every event keep the camera explicit.
             CameraSpec::Orbit(_) => &self.home,
         }
-    }
-
-    /// How frames are shown and written: PNG settings and the grey window of MIP, MinIP and
-    /// X-ray (what `render --window`, `--background`, `--srgb`, `--bit-depth` set).
-    pub fn display(&self) -> &WriteOptions {
-        &self.display
-    }
-
-    /// Sets how frames are shown and written (a new generation: the frame is sent again).
-    /// Errors if the window is not finite with `lo < hi`, or is given for composite.
-    pub fn set_display(&mut self, display: WriteOptions) -> Result<()> {
-        check_display(&display, self.request.mode)?;
-        self.display = display;
-        self.touch(false);
-        Ok(())
     }
 
     /// The session's settings.
@@ -277,19 +259,16 @@ impl Session {
             return Ok(());
         }
         let mut next = self.request.clone();
-        let mut display = self.display.clone();
-        self.change(&mut next, &mut display, event)?;
+        self.change(&mut next, event)?;
         next.validate()?;
         next.scene.clipping.world_planes(&self.grid)?;
-        check_display(&display, next.mode)?;
         if next.width * next.height != self.request.width * self.request.height {
             let ratio = (next.width * next.height) as f64
                 / (self.request.width * self.request.height) as f64;
             self.budget.resized(ratio);
         }
-        if next != self.request || display != self.display {
+        if next != self.request {
             self.request = next;
-            self.display = display;
             self.touch(continuous);
         }
         Ok(())
@@ -310,13 +289,8 @@ impl Session {
         };
     }
 
-    /// `event` applied to copies of the request and display options.
-    fn change(
-        &self,
-        next: &mut RenderRequest,
-        display: &mut WriteOptions,
-        event: Event,
-    ) -> Result<()> {
+    /// `event` applied to a copy of the request.
+    fn change(&self, next: &mut RenderRequest, event: Event) -> Result<()> {
         let (w, h) = (next.width, next.height);
         let mut camera = self.camera().clone();
         match event {
@@ -351,10 +325,12 @@ impl Session {
             Event::Reset {} => camera = self.home.clone(),
             Event::SetCamera { camera: c } => camera = c,
             Event::SetMode { mode } => {
-                next.mode = mode;
-                if mode == Mode::Composite {
-                    display.window = None;
+                // A window made for MIP means nothing for X-ray's line integrals, and composite
+                // takes none: dropped rather than refusing the mode.
+                if !next.mode.shares_window_with(mode) {
+                    next.output.window = None;
                 }
+                next.mode = mode;
             }
             Event::SetTransferFunction { transfer_function } => {
                 if let crate::TransferSpec::Function(tf) = &transfer_function {
@@ -362,7 +338,7 @@ impl Session {
                 }
                 next.scene.transfer_function = transfer_function;
             }
-            Event::SetWindow { window } => display.window = window.map(|[lo, hi]| (lo, hi)),
+            Event::SetWindow { window } => next.output.window = window,
             Event::SetCrop { crop } => next.scene.clipping.crop = crop,
             Event::SetClip { planes } => next.scene.clipping.planes = planes,
             Event::SetQuality { quality } => next.quality = quality,
@@ -420,7 +396,6 @@ impl Session {
             generation,
             kind,
             request,
-            display: self.display.clone(),
             started: now,
         })
     }
@@ -535,26 +510,6 @@ fn check_drag(dx: f64, dy: f64) -> Result<()> {
             "dx, dy",
             format!("a drag must be finite and within ±{MAX_DRAG_PX} pixels, got ({dx}, {dy})"),
         ));
-    }
-    Ok(())
-}
-
-/// A grey window must be finite with `lo < hi` and needs MIP, MinIP or X-ray.
-fn check_display(display: &WriteOptions, mode: Mode) -> Result<()> {
-    if let Some((lo, hi)) = display.window {
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return Err(EngineError::request(
-                "window",
-                format!("must be finite with lo < hi, got [{lo}, {hi}]"),
-            ));
-        }
-        if mode == Mode::Composite {
-            return Err(EngineError::request(
-                "window",
-                "a grey window applies to MIP, MinIP and X-ray; composite frames take their \
-                 colours from the transfer function",
-            ));
-        }
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! frame against `render` of the saved scene.
 
 use super::*;
-use crate::request::AntialiasChoice;
+use crate::request::{AntialiasChoice, Mode};
 use crate::scene::{CropBox, CropUnits, PhantomKind, Scene, TransferSpec, VolumeSource};
 use volsplat_core::glam::DVec3;
 use volsplat_core::{OrthoProjection, PerspectiveProjection, Preset};
@@ -68,7 +68,7 @@ fn rendered(ms: f64) -> JobOutcome {
 #[test]
 fn refused_events_change_nothing() {
     let (mut s, _) = policy_session();
-    let before = (s.request().clone(), s.generation(), s.display().clone());
+    let before = (s.request().clone(), s.generation());
     let mut bad_tf = Preset::CtBone.transfer_function((0.0, 1000.0));
     bad_tf.scalar_opacity[0][1] = 2.0;
     let refused = [
@@ -126,7 +126,7 @@ fn refused_events_change_nothing() {
     for e in refused {
         assert!(s.apply(e.clone()).is_err(), "{e:?} was accepted");
         assert_eq!(
-            (s.request().clone(), s.generation(), s.display().clone()),
+            (s.request().clone(), s.generation()),
             before,
             "{e:?} changed the session"
         );
@@ -143,13 +143,22 @@ fn refused_events_change_nothing() {
         window: Some([1.0, 3.0]),
     })
     .unwrap();
-    assert_eq!(s.display().window, Some((1.0, 3.0)));
+    assert_eq!(s.request().output.window, Some([1.0, 3.0]));
+    // MinIP shares MIP's units and keeps the window; X-ray's line integrals do not.
+    s.apply(Event::SetMode { mode: Mode::Minip }).unwrap();
+    assert_eq!(s.request().output.window, Some([1.0, 3.0]));
+    s.apply(Event::SetMode { mode: Mode::Xray }).unwrap();
+    assert_eq!(s.request().output.window, None);
+    s.apply(Event::SetWindow {
+        window: Some([1.0, 3.0]),
+    })
+    .unwrap();
     // Back to composite drops the window rather than refusing the mode.
     s.apply(Event::SetMode {
         mode: Mode::Composite,
     })
     .unwrap();
-    assert_eq!(s.display().window, None);
+    assert_eq!(s.request().output.window, None);
 }
 
 /// A drag: previews (one ray per pixel, smaller) while the pointer is held, at most one job
@@ -591,13 +600,7 @@ fn the_final_frame_is_render_of_the_saved_scene_bit_for_bit() {
     assert!(job.is_final());
     let out = s.run(&job, &mut renderer).unwrap();
     s.finished(&job, rendered(out.stats.total_ms));
-    let frame = crate::encode_png(
-        &out.image,
-        out.values.as_ref(),
-        job.request.mode,
-        &job.display,
-    )
-    .unwrap();
+    let frame = out.png_bytes(&job.request).unwrap();
 
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene.json");
@@ -606,14 +609,7 @@ fn the_final_frame_is_render_of_the_saved_scene_bit_for_bit() {
     assert!(warnings.is_empty(), "{warnings:?}");
     let again = Renderer::new().render(&loaded, &mut |_| true).unwrap();
     let png = dir.path().join("render.png");
-    crate::write_image(
-        &png,
-        &again.image,
-        again.values.as_ref(),
-        loaded.mode,
-        &WriteOptions::default(),
-    )
-    .unwrap();
+    again.write(&png, &loaded).unwrap();
     assert_eq!(frame, std::fs::read(&png).unwrap());
     assert!(
         out.image.pixels().iter().any(|px| px[3] > 0.1),
@@ -674,4 +670,66 @@ fn a_render_in_flight_is_cancelled_by_newer_input() {
         "{:?}",
         out.err()
     );
+}
+
+/// Issue 29 follow-up: the output options travel with the scene. A session started with a
+/// background, sRGB and 16 bits, then turned to MIP through a grey window: each final frame's
+/// PNG is the file written from the saved scene read back (before, the saved scene held
+/// neither, and its file had a black background and no window).
+#[test]
+fn output_options_travel_with_the_saved_scene() {
+    let clock = Arc::new(ManualClock::new());
+    let mut renderer = Renderer::new();
+    let mut request = head_request(48);
+    request.output.background = [0.2, 0.35, 0.5];
+    request.output.srgb = true;
+    request.output.bit_depth = 16;
+    let mut s = Session::start(request, &mut renderer, SessionSettings::default(), clock).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut final_png = |s: &mut Session, name: &str| {
+        let job = loop {
+            let job = s.next_job().unwrap();
+            if job.is_final() {
+                break job;
+            }
+            let out = s.run(&job, &mut renderer).unwrap();
+            s.finished(&job, rendered(out.stats.total_ms));
+        };
+        let out = s.run(&job, &mut renderer).unwrap();
+        s.finished(&job, rendered(out.stats.total_ms));
+        let frame = out.png_bytes(&job.request).unwrap();
+        let scene = dir.path().join(format!("{name}.json"));
+        s.save(&scene).unwrap();
+        let (loaded, _) = RenderRequest::load(&scene).unwrap();
+        let png = dir.path().join(format!("{name}.png"));
+        Renderer::new()
+            .render(&loaded, &mut |_| true)
+            .unwrap()
+            .write(&png, &loaded)
+            .unwrap();
+        let file = std::fs::read(&png).unwrap();
+        assert_eq!(frame, file, "{name}");
+        (frame, loaded)
+    };
+    let (composite, loaded) = final_png(&mut s, "composite");
+    assert_eq!(loaded.output.background, [0.2, 0.35, 0.5]);
+    // The background shows: the corner pixel is not black (16-bit RGB, sRGB-encoded).
+    let plain = {
+        let mut r = loaded.clone();
+        r.output = crate::OutputOptions::default();
+        Renderer::new()
+            .render(&r, &mut |_| true)
+            .unwrap()
+            .png_bytes(&r)
+            .unwrap()
+    };
+    assert_ne!(composite, plain);
+    s.apply(Event::SetMode { mode: Mode::Mip }).unwrap();
+    s.apply(Event::SetWindow {
+        window: Some([100.0, 900.0]),
+    })
+    .unwrap();
+    let (_, loaded) = final_png(&mut s, "mip");
+    assert_eq!(loaded.output.window, Some([100.0, 900.0]));
+    assert_eq!(loaded.mode, Mode::Mip);
 }

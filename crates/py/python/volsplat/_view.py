@@ -111,8 +111,8 @@ def view(
     target_fps: float = 30.0,
     target_latency: float = 50.0,
     srgb: Optional[bool] = None,
-    bits: int = 8,
-    background: Sequence[float] = (0.0, 0.0, 0.0),
+    bits: Optional[int] = None,
+    background: Optional[Sequence[float]] = None,
     window: Optional[Tuple[float, float]] = None,
     frame_height: int = 640,
     **options: Any,
@@ -124,8 +124,11 @@ def view(
     ``transfer_function``, ``azimuth``, ``size``, ``mode``, …): they set the starting scene.
     ``host``/``port``/``allow_remote``/``data_dir``/``target_fps``/``target_latency`` are the
     server's (``--host`` …); ``srgb``, ``bits``, ``background`` and ``window`` how frames are
-    shown and the screenshot written (``--srgb`` …). In Jupyter the returned object displays
-    as the page (``frame_height`` pixels high)::
+    shown and the screenshot written (``--srgb`` …; default: the scene's own, else 8-bit linear
+    PNG on black without a window; they are kept in :attr:`Viewer.scene`, so its scene file
+    renders to the screenshot's bytes). Without ``size`` (or a :class:`Scene`,
+    which has one) the image follows the page's view, as ``volsplat view`` without ``--size``.
+    In Jupyter the returned object displays as the page (``frame_height`` pixels high)::
 
         v = volsplat.view("head.nrrd", transfer_function="ct-bone")
         v                      # the page, in the notebook
@@ -137,6 +140,7 @@ def view(
         if volume is None or isinstance(volume, (Volume, Scene)) or _is_path(volume):
             raise InvalidInputError(f"{', '.join(vkw)}: only apply when volume is a numpy array")
         volume = Volume(volume, **vkw)
+    fit_view = "size" not in options and not isinstance(volume, Scene)
     scene = volume.replace(**options) if isinstance(volume, Scene) else Scene(volume, **options)
     request, vol = scene._render_args()
     win = None if window is None else tuple(floats(window, 2, "window"))
@@ -150,8 +154,9 @@ def view(
         target_fps=float(target_fps),
         target_latency=float(target_latency),
         srgb=srgb,
-        bits=int(bits),
-        background=floats(background, 3, "background"),
+        bits=None if bits is None else int(bits),
+        background=None if background is None else floats(background, 3, "background"),
         window=win,
+        fit_view=fit_view,
     )
     return Viewer(core, vol, frame_height)

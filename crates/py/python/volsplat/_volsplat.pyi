@@ -145,9 +145,10 @@ class ViewerCore:
         target_fps: float = 30.0,
         target_latency: float = 50.0,
         srgb: Optional[bool] = None,
-        bits: int = 8,
-        background: Sequence[float] = ...,
+        bits: Optional[int] = None,
+        background: Optional[Sequence[float]] = None,
         window: Optional[Tuple[float, float]] = None,
+        fit_view: bool = False,
     ) -> None: ...
     @property
     def url(self) -> str: ...
