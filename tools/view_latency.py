@@ -312,7 +312,9 @@ def markdown(results, args):
         for k in range(2):
             for tool, reps in tools:
                 r = reps[k]
-                p = [x for x in r["preview_psnr_db"] if math.isfinite(x)] or [float("inf")]
+                # JSON has no infinity: a preview identical to the final frame is null.
+                p = [x for x in r["preview_psnr_db"] if x is not None and math.isfinite(x)]
+                p = p or [float("inf")]
                 rows.append(f"| {e['case']} | {r['recording']} | {tool} | {r['latency_p50_ms']:.0f} | "
                             f"{r['latency_p95_ms']:.0f} | {r['drag_fps']:.0f} | "
                             f"{min(p):.1f} / {sum(p) / len(p):.1f} | {r['release_to_final_ms']:.0f} |")

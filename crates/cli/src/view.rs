@@ -63,7 +63,7 @@ pub struct ServerArgs {
     pub data_dir: Option<PathBuf>,
     /// Frames per second to keep while dragging: previews are sized so that one takes
     /// 1/FPS s on this machine (measured, not guessed).
-    #[arg(long, value_name = "FPS", default_value_t = 30.0)]
+    #[arg(long, value_name = "FPS", default_value_t = 60.0)]
     pub target_fps: f64,
     /// Input-to-frame latency to keep while dragging, ms: previews also aim at a fifth of it
     /// less than half (frames of T ms give a 95th-percentile latency of about 2T).
@@ -72,6 +72,21 @@ pub struct ServerArgs {
     /// JPEG quality of previews, 1..=100 (the final frame is always the lossless PNG).
     #[arg(long, value_name = "Q", default_value_t = volsplat_view::frames::DEFAULT_PREVIEW_QUALITY)]
     pub preview_quality: u8,
+    /// Which volume previews draw: `full` the volume itself, one ray per pixel, with thicker
+    /// slabs for the smallest previews; `auto` the level of the prefiltered pyramid whose
+    /// voxel is about a preview pixel (fewer samples along each ray as well as fewer rays,
+    /// but blurrier; decision 0031, docs/BENCHMARKS.md §22).
+    #[arg(long, value_enum, value_name = "LEVEL", default_value = "full")]
+    pub preview_level: PreviewLevelArg,
+}
+
+/// `--preview-level`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PreviewLevelArg {
+    /// The volume itself.
+    Full,
+    /// The pyramid level that fits the preview's pixels.
+    Auto,
 }
 
 /// The request of `view`/`bench-view`: `render`'s flags (the output flags too: they decide
@@ -137,6 +152,7 @@ fn viewer_settings(s: &ServerArgs, fit_view: bool) -> Result<ViewerSettings> {
     };
     settings.session.target_fps = s.target_fps;
     settings.session.target_latency_ms = s.target_latency;
+    settings.session.pyramid_previews = s.preview_level == PreviewLevelArg::Auto;
     Ok(settings)
 }
 
@@ -298,7 +314,8 @@ pub fn bench_view_cmd(a: BenchViewArgs) -> Result<()> {
             "width": width,
             "height": height,
             "budget_ms": budget_ms,
-        "preview_aim_ms": aim_ms,
+            "preview_aim_ms": aim_ms,
+            "preview_level": if a.server.preview_level == PreviewLevelArg::Auto { "auto" } else { "full" },
             "cores": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
             "replays": reports,
         })

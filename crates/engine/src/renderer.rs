@@ -500,7 +500,11 @@ impl Renderer {
                 "the line at distance k needs the splat-list renderer (perspective or splat_list)",
             ));
         }
-        if !request.quality.level.is_full() && renderer != UsedRenderer::Slab {
+        // `auto` asks for the level that fits where there is a pyramid, and quietly means the
+        // full volume where there is none (previews ask for it whatever the renderer).
+        if matches!(request.quality.level, VolumeLevel::Level(n) if n > 0)
+            && renderer != UsedRenderer::Slab
+        {
             warnings.push(format!(
                 "quality.level {} applies to the image-aligned slab renderer; the {} drew the \
                  full volume",

@@ -199,7 +199,8 @@ pub enum VolumeLevel {
     /// The level whose voxel is about a pixel at the focal point
     /// ([`volsplat_splat::auto_level`]: the coarsest whose smallest spacing is at most √2
     /// pixels); the full level (as [`VolumeLevel::Full`]) when no coarser one qualifies. For
-    /// previews: the cost falls with the pixel count.
+    /// previews: the cost falls with the pixel count. Renderers without a pyramid (sheets,
+    /// splat lists, X-ray) draw the full volume, silently.
     Auto,
     /// Level `n`: the volume low-pass filtered and halved `n` times (past the coarsest level:
     /// the coarsest); 0 is [`VolumeLevel::Full`]. Coarse levels take one ray per pixel.
@@ -313,7 +314,8 @@ pub struct Quality {
     pub preintegrate: PreintegrateChoice,
     /// Image-aligned visibility: which level of the volume's resolution pyramid is drawn
     /// (default [`VolumeLevel::Full`]); `auto` for previews whose cost falls with the pixel
-    /// count (decision 0031). The other renderers draw the full level (with a warning).
+    /// count (decision 0031). The other renderers draw the full level (with a warning for a
+    /// level number above 0).
     pub level: VolumeLevel,
 }
 

@@ -712,12 +712,22 @@ fn auto_level_previews_draw_a_coarse_level_once() {
         "{:?}",
         out.warnings
     );
-    // X-ray is drawn by the sheets, from the full volume.
+    // X-ray is drawn by the sheets, from the full volume: a level number says so ...
     req.mode = Mode::Xray;
     let out = r.render(&req, &mut |_| true).unwrap();
     assert_eq!(out.stats.level, None);
     assert!(
         out.warnings.iter().any(|w| w.contains("full volume")),
+        "{:?}",
+        out.warnings
+    );
+    // ... while `auto` (what the viewer's previews ask for, whatever the renderer) quietly
+    // means the full volume.
+    req.quality.level = VolumeLevel::Auto;
+    let out = r.render(&req, &mut |_| true).unwrap();
+    assert_eq!(out.stats.level, None);
+    assert!(
+        !out.warnings.iter().any(|w| w.contains("level")),
         "{:?}",
         out.warnings
     );

@@ -36,7 +36,7 @@ impl ViewerCore {
     /// request's size.
     #[new]
     #[pyo3(signature = (request_json, volume=None, *, host="127.0.0.1".to_string(), port=0,
-        allow_remote=false, data_dir=None, target_fps=30.0, target_latency=50.0, srgb=None,
+        allow_remote=false, data_dir=None, target_fps=60.0, target_latency=50.0, srgb=None,
         bits=None, background=None, window=None, fit_view=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(

@@ -492,10 +492,15 @@ fn render_and_send(
         }
     };
     let encode_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let (scale, slab_factor, volume_level) = match job.kind {
-        JobKind::Preview(p) => (p.scale, p.slab_factor, p.volume_level),
-        JobKind::Final => (1.0, 1.0, 0),
+    let (scale, slab_factor) = match job.kind {
+        JobKind::Preview(p) => (p.scale, p.slab_factor),
+        JobKind::Final => (1.0, 1.0),
     };
+    // The pyramid level drawn (0: the volume itself, also where the renderer has no pyramid).
+    let volume_level = out
+        .stats
+        .level
+        .map_or(0, |l| u8::try_from(l).unwrap_or(u8::MAX));
     // Marked in flight before it is sent: the page may acknowledge it before `send` returns.
     let Some(seq) = wait_for_ack_then_mark(tab, job, id, sent.seq) else {
         return finish(tab, job, JobOutcome::Cancelled);

@@ -561,3 +561,46 @@ fn events_that_change_nothing_are_shown_by_the_final_frame() {
     let (next, _) = c.wait_final(moved, WAIT).unwrap();
     assert!(next.id > header.id);
 }
+
+/// Previews draw the volume itself unless the session asks for the pyramid; then the frame
+/// header says which level each preview drew, and no note about levels reaches the page.
+#[test]
+fn pyramid_previews_say_their_level() {
+    for pyramid in [false, true] {
+        let mut settings = previewing();
+        settings.session.pyramid_previews = pyramid;
+        let mut h = serve(settings);
+        let (mut c, _) = connect(&h);
+        c.event(Event::Interaction { active: true }).unwrap();
+        let mut levels = Vec::new();
+        for _ in 0..8 {
+            let seq = c.event(Event::Orbit { dx: 6.0, dy: 2.0 }).unwrap();
+            let got = c
+                .wait_for(WAIT, |m| match m {
+                    Incoming::Frame(f, _) if f.seq >= seq => {
+                        Some(Ok((f.quality.clone(), f.volume_level)))
+                    }
+                    Incoming::Text(ServerMessage::Note { message })
+                        if message.contains("level") =>
+                    {
+                        Some(Err(message.clone()))
+                    }
+                    _ => None,
+                })
+                .unwrap();
+            match got {
+                Ok((q, level)) if q == "preview" => levels.push(level),
+                Ok(_) => {}
+                Err(note) => panic!("a note about levels: {note}"),
+            }
+        }
+        assert!(!levels.is_empty(), "no previews while dragging");
+        if pyramid {
+            // The budget (1 ms) shrinks the previews to an eighth of the side: a coarse level.
+            assert!(levels.iter().any(|&l| l >= 1), "{levels:?}");
+        } else {
+            assert!(levels.iter().all(|&l| l == 0), "{levels:?}");
+        }
+        h.stop();
+    }
+}

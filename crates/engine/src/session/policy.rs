@@ -8,7 +8,7 @@
 //! (a multiplicative controller in the logarithm of the cost, with a dead band so the size does
 //! not flicker).
 
-use crate::request::{AntialiasChoice, Mode, RenderRequest};
+use crate::request::{AntialiasChoice, Mode, RenderRequest, VolumeLevel};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -75,8 +75,12 @@ impl Clock for ManualClock {
 /// How a session paces its frames. Times in milliseconds.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SessionSettings {
-    /// Frames per second to keep while input arrives (default 30): the frame budget is
-    /// `1000 / target_fps` ms of render and encoding.
+    /// Frames per second to keep while input arrives (default 60, the rate at which a
+    /// browser sends pointer events): the frame budget is `1000 / target_fps` ms of render
+    /// and encoding. Frames slower than the events come back to back and keep every core
+    /// busy, so that encoding, transport and the page wait for the renderer: at 30 the same
+    /// previews took 17 ms instead of 11 and the 95th-percentile latency doubled (decision
+    /// 0029, docs/BENCHMARKS.md §22).
     pub target_fps: f64,
     /// Share of the frame interval previews aim at (default 0.8), leaving the rest for
     /// transport and jitter.
@@ -106,12 +110,20 @@ pub struct SessionSettings {
     /// Largest view, pixels per side, that [`Event::Resize`](super::Event::Resize) may ask
     /// for (default 4096).
     pub max_size: usize,
+    /// Previews draw the prefiltered pyramid's level whose voxel is about a preview pixel
+    /// ([`VolumeLevel::Auto`], decision 0031): their cost then falls faster than the pixel
+    /// count, and previews keep the final frame's slabs. `false` (the default): the volume
+    /// itself, one ray per pixel, with thicker slabs below half the side. At equal frame
+    /// rates the latter's worst previews measured up to 13 dB closer to the final frame on the
+    /// CT-like head and Colin27 at 512² and 1024², and never further (docs/BENCHMARKS.md
+    /// §22): the level that `auto` picks is blurrier than the preview needs.
+    pub pyramid_previews: bool,
 }
 
 impl Default for SessionSettings {
     fn default() -> Self {
         SessionSettings {
-            target_fps: 30.0,
+            target_fps: 60.0,
             headroom: 0.8,
             target_latency_ms: 50.0,
             rest_delay_ms: 120.0,
@@ -120,6 +132,7 @@ impl Default for SessionSettings {
             max_slab_factor: 4.0,
             stale_preview_budgets: 3.0,
             max_size: 4096,
+            pyramid_previews: false,
         }
     }
 }
@@ -206,11 +219,11 @@ impl SessionSettings {
 
 /// How a preview is reduced from the final frame: the knobs that trade picture for time.
 ///
-/// Today's knobs are the image scale (fewer rays), one ray per pixel (`antialias: none`: no
-/// averaging of sub-pixel rays where the view is minified) and thicker slabs (fewer samples
-/// along each ray). `volume_level` is the seat of a coarser, prefiltered volume of the
-/// out-of-core pyramid (DESIGN.md §5): 0 is the volume itself, and the session asks for no
-/// other level until the renderer has one.
+/// The knobs are the image scale (fewer rays), one ray per pixel (`antialias: none`: no
+/// averaging of sub-pixel rays where the view is minified), the level of the volume's
+/// prefiltered pyramid (decision 0031: with [`SessionSettings::pyramid_previews`], the level
+/// whose voxel is about a preview pixel, so that a smaller preview also takes fewer samples
+/// along each ray) and, without the pyramid, thicker slabs (fewer samples along each ray).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PreviewPlan {
     /// Height of the preview over the height of the final frame, in (0, 1] (the width follows
@@ -222,8 +235,9 @@ pub struct PreviewPlan {
     pub slab_factor: f64,
     /// Anti-aliasing of the preview (`none`: one ray per pixel).
     pub antialias: AntialiasChoice,
-    /// Pyramid level of the volume: 0 the volume itself, n a 2ⁿ× coarser prefiltered one.
-    pub volume_level: u8,
+    /// Which level of the prefiltered pyramid the preview draws ([`VolumeLevel::Auto`]: the
+    /// level whose voxel is about a preview pixel; [`VolumeLevel::Full`]: the volume itself).
+    pub level: VolumeLevel,
 }
 
 impl PreviewPlan {
@@ -232,6 +246,7 @@ impl PreviewPlan {
         let mut r = full.clone();
         (r.width, r.height) = self.size;
         r.quality.antialias = self.antialias;
+        r.quality.level = self.level;
         if self.slab_factor > 1.0 {
             let base = full.quality.slab.unwrap_or_else(|| default_slab_of(full));
             r.quality.slab = Some((base * self.slab_factor).clamp(0.01, 16.0));
@@ -253,7 +268,9 @@ fn default_slab_of(request: &RenderRequest) -> f64 {
 }
 
 /// The preview's cost, in units of a full-size, full-thickness frame without anti-aliasing:
-/// `scale² / slab_factor`. Costs run down to `min_scale² / max_slab_factor`.
+/// `scale² / slab_factor`. Costs run down to `min_scale²` with pyramid previews (whose cost
+/// falls faster than the pixel count: the feedback absorbs it) and to
+/// `min_scale² / max_slab_factor` without.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Budget {
     /// The next preview's cost share.
@@ -316,7 +333,18 @@ impl Budget {
             return;
         }
         let step = ratio.clamp(1.0 / MAX_STEP, MAX_STEP).powf(GAIN);
-        self.cost = (cost * step).clamp(min_cost(s), 1.0);
+        // Too fast: grow from the share kept if that is larger. The side moves in steps, so
+        // the rendered plan's share can lie below the share kept; growing the rendered share
+        // by a step that does not reach the next side would give the same plan for ever
+        // (seen where the cost falls faster than the pixel count, as with pyramid previews).
+        let base = if ratio > 1.0 {
+            self.cost.max(cost)
+        } else {
+            cost
+        };
+        self.cost = (base * step)
+            .clamp(cost / MAX_STEP, cost * MAX_STEP)
+            .clamp(min_cost(s), 1.0);
     }
 
     /// A final frame took `ms`: remember it, and start previews, if they are not measured yet,
@@ -341,13 +369,19 @@ impl Budget {
         }
     }
 
-    /// The plan of the next preview of a `width × height` frame: at least half the side with
+    /// The plan of the next preview of a `width × height` frame. With pyramid previews: the
+    /// side the cost share allows (down to [`SessionSettings::min_scale`]) at the level that
+    /// fits it. Without: at least half the side with
     /// the final frame's slabs; below, [`SessionSettings::preview_slab`]-thick slabs and the
     /// side that the cost share then allows (down to [`SessionSettings::min_scale`]); below
     /// that, thicker slabs still (up to [`SessionSettings::max_slab_factor`]).
     pub(crate) fn plan(&self, width: usize, height: usize, s: &SessionSettings) -> PreviewPlan {
         let (min_scale, c) = (s.min_scale, self.cost);
-        let (scale, slab_factor) = if c >= HALF_SIDE_COST {
+        let (scale, slab_factor) = if s.pyramid_previews {
+            // A coarser level thins the samples along the ray as it thins the pixels: the
+            // side alone follows the budget.
+            (c.sqrt(), 1.0)
+        } else if c >= HALF_SIDE_COST {
             (c.sqrt(), 1.0)
         } else if c >= min_scale * min_scale / s.preview_slab {
             ((c * s.preview_slab).sqrt(), s.preview_slab)
@@ -364,7 +398,11 @@ impl Budget {
             size: (w, h),
             slab_factor,
             antialias: AntialiasChoice::None,
-            volume_level: 0,
+            level: if s.pyramid_previews {
+                VolumeLevel::Auto
+            } else {
+                VolumeLevel::Full
+            },
         }
     }
 }
@@ -373,9 +411,14 @@ impl Budget {
 /// previews take [`SessionSettings::preview_slab`]-thick slabs.
 const HALF_SIDE_COST: f64 = 0.25;
 
-/// The cost share of the smallest, thinnest-sampled preview.
+/// The cost share of the smallest preview (thinnest-sampled without the pyramid).
 fn min_cost(s: &SessionSettings) -> f64 {
-    s.min_scale * s.min_scale / s.max_slab_factor
+    if s.pyramid_previews {
+        // Previews keep the final frame's slabs: the smallest side is the floor.
+        s.min_scale * s.min_scale
+    } else {
+        s.min_scale * s.min_scale / s.max_slab_factor
+    }
 }
 
 /// The cost share of a plan: `scale² / slab_factor`.

@@ -2,7 +2,7 @@
 //! frame against `render` of the saved scene.
 
 use super::*;
-use crate::request::{AntialiasChoice, Mode};
+use crate::request::{AntialiasChoice, Mode, VolumeLevel};
 use crate::scene::{CropBox, CropUnits, PhantomKind, Scene, TransferSpec, VolumeSource};
 use volsplat_core::glam::DVec3;
 use volsplat_core::{OrthoProjection, PerspectiveProjection, Preset};
@@ -34,6 +34,11 @@ fn session(size: usize) -> (Session, Renderer, Arc<ManualClock>) {
 
 /// A session without a volume: a unit box, for the policy alone.
 fn policy_session() -> (Session, Arc<ManualClock>) {
+    policy_session_with(SessionSettings::default())
+}
+
+/// [`policy_session`] with other settings.
+fn policy_session_with(settings: SessionSettings) -> (Session, Arc<ManualClock>) {
     let clock = Arc::new(ManualClock::new());
     let grid = Grid::new(
         [10, 10, 10],
@@ -43,14 +48,7 @@ fn policy_session() -> (Session, Arc<ManualClock>) {
     )
     .unwrap();
     let camera = Camera::reset_to_bounds(DVec3::ZERO, DVec3::splat(9.0), true);
-    let s = Session::new(
-        head_request(400),
-        camera,
-        grid,
-        SessionSettings::default(),
-        clock.clone(),
-    )
-    .unwrap();
+    let s = Session::new(head_request(400), camera, grid, settings, clock.clone()).unwrap();
     (s, clock)
 }
 
@@ -249,13 +247,21 @@ fn a_cheap_final_frame_needs_no_preview() {
 
 /// The budget loop: with a frame cost proportional to the preview's pixels (plus a fixed
 /// part), measured preview times settle inside the dead band around the aim, from above and
-/// from below, on fast and slow machines (the slowest needs thicker slabs).
+/// from below, on fast and slow machines (the slowest needs thicker slabs); with pyramid
+/// previews, whose cost falls as the pixel count to the power 3/2 (a coarser level also thins
+/// the samples along the ray), they settle the same way.
 #[test]
 fn previews_settle_on_the_budget_from_measured_times() {
     let aim = SessionSettings::default().aim_ms();
     // ms for a full-size, full-thickness frame of one ray per pixel: fast and slow machines.
-    for full_ms in [40.0, 300.0, 3000.0] {
-        let (mut s, _) = policy_session();
+    for (full_ms, pyramid) in [40.0, 300.0, 3000.0]
+        .into_iter()
+        .flat_map(|ms| [(ms, false), (ms, true)])
+    {
+        let (mut s, _) = policy_session_with(SessionSettings {
+            pyramid_previews: pyramid,
+            ..SessionSettings::default()
+        });
         let mut times = Vec::new();
         for n in 0..30 {
             s.apply(Event::Interaction { active: true }).unwrap();
@@ -263,7 +269,15 @@ fn previews_settle_on_the_budget_from_measured_times() {
             let job = s.next_job().unwrap();
             let plan = preview_plan(&job);
             let (w, h) = plan.size;
-            let share = (w * h) as f64 / (400.0 * 400.0) / plan.slab_factor;
+            let pixels = (w * h) as f64 / (400.0 * 400.0);
+            let share = if pyramid {
+                assert_eq!(plan.level, VolumeLevel::Auto);
+                assert_eq!(job.request.quality.level, VolumeLevel::Auto);
+                pixels.powf(1.5)
+            } else {
+                assert_eq!(plan.level, VolumeLevel::Full);
+                pixels / plan.slab_factor
+            };
             let ms = 2.0 + full_ms * share;
             s.finished(&job, rendered(ms));
             if n >= 20 {
@@ -274,7 +288,7 @@ fn previews_settle_on_the_budget_from_measured_times() {
         // The scale moves in 1/32 steps of the side: allow one step below the dead band.
         assert!(
             last > aim * 0.6 && last < aim * 1.15,
-            "{full_ms} ms machine: previews settled at {last:.1} ms for an aim of {aim:.1}: \
+            "{full_ms} ms machine, pyramid {pyramid}: previews settled at {last:.1} ms for an aim of {aim:.1}: \
              {times:?}"
         );
         let spread = times.iter().cloned().fold(0.0, f64::max)
@@ -313,7 +327,7 @@ fn one_slow_or_fast_preview_moves_the_next_one_the_right_way() {
 }
 
 /// A final frame is cancelled as soon as the scene moves on; a preview only once it is also
-/// older than three budgets.
+/// older than three budgets (50 ms at 60 frames/s).
 #[test]
 fn stale_finals_cancel_at_once_and_stale_previews_after_three_budgets() {
     let (mut s, clock) = policy_session();
@@ -326,7 +340,9 @@ fn stale_finals_cancel_at_once_and_stale_previews_after_three_budgets() {
     assert!(go(&p));
     s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
     assert!(go(&p), "a young stale preview finishes");
-    clock.advance(99.0);
+    let settings = SessionSettings::default();
+    let limit = settings.budget_ms() * settings.stale_preview_budgets;
+    clock.advance(limit - 1.0);
     assert!(go(&p));
     clock.advance(2.0);
     assert!(!go(&p), "an old stale preview is cancelled");
@@ -334,7 +350,7 @@ fn stale_finals_cancel_at_once_and_stale_previews_after_three_budgets() {
     let next = s.next_job().unwrap();
     preview_plan(&next);
     s.finished(&next, rendered(10.0));
-    clock.advance(20.0); // past the orbit's rest delay
+    clock.advance(settings.rest_delay_ms); // past the orbit's rest delay
     let fin = s.next_job().unwrap();
     assert!(fin.is_final());
     let mut go = s.keep_going(&fin);
@@ -383,10 +399,29 @@ fn a_failed_final_frame_settles_its_generation() {
     assert!(s.next_job().is_some());
 }
 
-/// Too slow for the smallest image: previews keep 1/8 of the side and thicken the slabs,
-/// which the preview request carries.
+/// Too slow for the smallest image: previews keep 1/8 of the side and, without the pyramid,
+/// thicken the slabs, which the preview request carries; with it, they keep the slabs and draw
+/// the level that fits the small image.
 #[test]
 fn the_slowest_previews_thicken_the_slabs() {
+    let (mut s, _) = policy_session_with(SessionSettings {
+        pyramid_previews: true,
+        ..SessionSettings::default()
+    });
+    for _ in 0..12 {
+        s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
+        let job = s.next_job().unwrap();
+        preview_plan(&job);
+        s.finished(&job, rendered(1000.0));
+    }
+    s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
+    let job = s.next_job().unwrap();
+    let plan = preview_plan(&job);
+    assert_eq!((plan.size, plan.slab_factor), ((50, 50), 1.0));
+    assert_eq!(job.request.quality.slab, None);
+    assert_eq!(job.request.quality.level, VolumeLevel::Auto);
+    assert_eq!(s.request().quality.level, VolumeLevel::Full);
+
     let (mut s, _) = policy_session();
     for _ in 0..12 {
         s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
@@ -414,6 +449,7 @@ fn the_slowest_previews_thicken_the_slabs() {
 #[test]
 fn plans_trade_slabs_for_pixels_below_half_the_side() {
     let s = SessionSettings::default();
+    assert!(!s.pyramid_previews);
     let plan = |cost: f64| {
         let b = policy::Budget::with_cost(cost);
         let p = b.plan(512, 512, &s);
@@ -440,6 +476,26 @@ fn plans_trade_slabs_for_pixels_below_half_the_side() {
             "{cost}: {p:?} wastes the budget"
         );
     }
+}
+
+/// With pyramid previews, the side alone follows the cost share (the level follows the
+/// side), down to an eighth of it.
+#[test]
+fn pyramid_plans_follow_the_side_alone() {
+    let s = SessionSettings {
+        pyramid_previews: true,
+        ..SessionSettings::default()
+    };
+    let plan = |cost: f64| {
+        let p = policy::Budget::with_cost(cost).plan(512, 512, &s);
+        assert_eq!((p.slab_factor, p.level), (1.0, VolumeLevel::Auto));
+        p.size.1
+    };
+    assert_eq!(plan(1.0), 512);
+    assert_eq!(plan(0.3), 272); // √0.3 = 0.548 → 17/32
+    assert_eq!(plan(0.2), 224); // √0.2 = 0.447 → 14/32
+    assert_eq!(plan(1.0 / 128.0), 64);
+    assert_eq!(plan(1.0 / 1000.0), 64);
 }
 
 /// A drag to the right turns the camera as VTK's trackball does: `Azimuth(−dx·200/width)`,

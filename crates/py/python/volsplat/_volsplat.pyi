@@ -142,7 +142,7 @@ class ViewerCore:
         port: int = 0,
         allow_remote: bool = False,
         data_dir: Optional[str] = None,
-        target_fps: float = 30.0,
+        target_fps: float = 60.0,
         target_latency: float = 50.0,
         srgb: Optional[bool] = None,
         bits: Optional[int] = None,
