@@ -19,4 +19,5 @@ fi
 "${VOLSPLAT_CHROMIUM:-chromium}" --version
 
 step "view: the page in headless chromium against volsplat render"
-VOLSPLAT_BROWSER_TEST=1 cargo test -p volsplat-cli --test browser -- --nocapture
+# The release profile, as the README's test command: reuses its build (decision 0032).
+VOLSPLAT_BROWSER_TEST=1 cargo test --release -p volsplat-cli --test browser -- --nocapture

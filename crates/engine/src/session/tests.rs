@@ -399,6 +399,20 @@ fn a_failed_final_frame_settles_its_generation() {
     assert!(s.next_job().is_some());
 }
 
+/// A drag on a machine where every preview takes a second; the job and plan of the last one.
+fn slowest_preview(s: &mut Session) -> (Job, PreviewPlan) {
+    for _ in 0..12 {
+        s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
+        let job = s.next_job().unwrap();
+        preview_plan(&job);
+        s.finished(&job, rendered(1000.0));
+    }
+    s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
+    let job = s.next_job().unwrap();
+    let plan = preview_plan(&job);
+    (job, plan)
+}
+
 /// Too slow for the smallest image: previews keep 1/8 of the side and, without the pyramid,
 /// thicken the slabs, which the preview request carries; with it, they keep the slabs and draw
 /// the level that fits the small image.
@@ -408,30 +422,14 @@ fn the_slowest_previews_thicken_the_slabs() {
         pyramid_previews: true,
         ..SessionSettings::default()
     });
-    for _ in 0..12 {
-        s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
-        let job = s.next_job().unwrap();
-        preview_plan(&job);
-        s.finished(&job, rendered(1000.0));
-    }
-    s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
-    let job = s.next_job().unwrap();
-    let plan = preview_plan(&job);
+    let (job, plan) = slowest_preview(&mut s);
     assert_eq!((plan.size, plan.slab_factor), ((50, 50), 1.0));
     assert_eq!(job.request.quality.slab, None);
     assert_eq!(job.request.quality.level, VolumeLevel::Auto);
     assert_eq!(s.request().quality.level, VolumeLevel::Full);
 
     let (mut s, _) = policy_session();
-    for _ in 0..12 {
-        s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
-        let job = s.next_job().unwrap();
-        preview_plan(&job);
-        s.finished(&job, rendered(1000.0));
-    }
-    s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
-    let job = s.next_job().unwrap();
-    let plan = preview_plan(&job);
+    let (job, plan) = slowest_preview(&mut s);
     assert_eq!(plan.slab_factor, 4.0);
     assert_eq!(plan.size, (50, 50));
     // Composite shaded at the voxels: the renderer's own slab is one voxel.
