@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Same-run speed and quality comparison of volsplat against VTK's CPU ray caster
-(`vtkFixedPointVolumeRayCastMapper`), issue 12 item 6 and DESIGN.md §7. Optional; never run in CI.
+(`vtkFixedPointVolumeRayCastMapper`), issue 12 item 6 and docs/design.md §7. Optional; never run in CI.
 
     python3 bench/vs_vtk.py [--bin [LABEL=]target/release/volsplat ...] [--scenes DIR] [--data DIR]
                             [--size 512] [--threads 2] [--frames 5] [--rounds 1] [--only SUBSTR]

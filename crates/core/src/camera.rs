@@ -1,4 +1,4 @@
-//! VTK-compatible cameras (DESIGN.md §3).
+//! VTK-compatible cameras (docs/design.md §3).
 //!
 //! A [`Camera`] holds exactly the numbers a `vtkCamera` holds, so the same JSON file reproduces a
 //! view in volsplat, VTK and ParaView. [`ViewFrame`] is the derived orthonormal camera frame and
@@ -277,7 +277,7 @@ pub struct Orbit {
 }
 
 /// Views of the patient frame (volsplat's world frame is LPS: +x left, +y posterior, +z
-/// superior; DESIGN.md §3), as 3D Slicer's view buttons: the named side faces the viewer, the
+/// superior; docs/design.md §3), as 3D Slicer's view buttons: the named side faces the viewer, the
 /// head up (superior and inferior views: anterior up).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -219,7 +219,7 @@ pub struct CrioTables {
 pub const DEFAULT_TABLE_LEN: usize = 4096;
 
 impl CrioTables {
-    /// Compiles a VTK-style transfer function into the four tables (DESIGN.md §3), lit by VTK's
+    /// Compiles a VTK-style transfer function into the four tables (docs/design.md §3), lit by VTK's
     /// default white two-sided headlight: see [`CrioTables::from_transfer_function_lit`].
     pub fn from_transfer_function(tf: &TransferFunction, table_len: usize) -> Result<Self> {
         Self::from_transfer_function_lit(tf, table_len, vec![Light::headlight()])

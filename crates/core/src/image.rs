@@ -1,4 +1,4 @@
-//! Images and compositing operators (DESIGN.md §3).
+//! Images and compositing operators (docs/design.md §3).
 //!
 //! [`Image`] is RGBA `f32` with premultiplied (associated) colour, row 0 at the top, pixel
 //! `(x, y)` centred at `(x + 0.5, y + 0.5)` in raster coordinates. [`ScalarImage`] holds one

@@ -18,7 +18,7 @@
 //! - [`scenes`]: synthetic stand-ins for the test scenes of Swan et al. 1997, Fig. 7
 //!   (checkerboard sheet, terrain, confocal-like filaments) with matching transfer functions.
 //!
-//! Conventions (DESIGN.md §3): world units are those of the data (usually mm); angles are degrees
+//! Conventions (docs/design.md §3): world units are those of the data (usually mm); angles are degrees
 //! at interfaces and radians inside; images have row 0 at the top and pixel centres at half
 //! integers; colour is premultiplied.
 #![deny(missing_docs)]

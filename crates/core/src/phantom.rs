@@ -11,7 +11,7 @@
 //! - [`MarschnerLobb`]: the Marschner–Lobb test signal (no closed-form line integral).
 //! - [`sample`], [`sample_on_grid`], [`ct_head_volume`]: turning a phantom into a [`Volume`].
 //!
-//! All coordinates are world coordinates (DESIGN.md §3); densities are in the phantom's data
+//! All coordinates are world coordinates (docs/design.md §3); densities are in the phantom's data
 //! units, line integrals in data units × world units.
 
 use crate::error::{CoreError, Result};

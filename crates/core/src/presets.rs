@@ -516,7 +516,7 @@ impl SlicerPreset {
 
 /// Sample counts in equal-width bins over a range of values (data units). Built in one pass
 /// over the samples once the range is known, so a volume streamed in slabs can be counted as
-/// it passes (DESIGN.md §5).
+/// it passes (docs/design.md §5).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Histogram {
     /// Lower edge of bin 0, data units.

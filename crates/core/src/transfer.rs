@@ -1,7 +1,7 @@
 //! Transfer functions in VTK's terms (`vtkVolumeProperty`); built-in presets and the automatic
 //! transfer function are in [`crate::presets`].
 //!
-//! A [`TransferFunction`] is what users write in a transfer-function JSON file (DESIGN.md §3):
+//! A [`TransferFunction`] is what users write in a transfer-function JSON file (docs/design.md §3):
 //! piecewise-linear colour and scalar-opacity points over the data's own units, optional
 //! gradient-opacity points over gradient magnitude (data units per world unit), shading
 //! coefficients, and `scalar_opacity_unit_distance`. It compiles into Westover's four CRIO tables

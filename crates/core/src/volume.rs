@@ -2,7 +2,7 @@
 //!
 //! Voxel `(i, j, k)` has its centre at `origin + D · (i·sx, j·sy, k·sz)` where `D` is the
 //! direction (orientation) matrix whose *columns* are the world directions of the grid's
-//! i, j and k axes (DESIGN.md §3). Data are stored with `i` fastest, then `j`, then `k`.
+//! i, j and k axes (docs/design.md §3). Data are stored with `i` fastest, then `j`, then `k`.
 
 use crate::error::{CoreError, Result};
 use glam::{DMat3, DVec3};
@@ -202,7 +202,7 @@ impl Grid {
         (lo + hi) * 0.5
     }
 
-    /// The axes the next level of a resolution pyramid halves (DESIGN.md §5; decision 0031):
+    /// The axes the next level of a resolution pyramid halves (docs/design.md §5; decision 0031):
     /// those whose spacing is at most twice the smallest spacing, so that anisotropic data
     /// become more isotropic level by level (BigDataViewer's rule, `bdv.export.ProposeMipmaps`
     /// in bigdataviewer-core), and that hold at least [`PYRAMID_MIN_SAMPLES`] samples. All
@@ -217,7 +217,7 @@ impl Grid {
     /// The grid of the level that halves `axes` ([`Volume::halved`]): along a halved axis of
     /// `n` samples, `⌈n/2⌉ + 1` samples at twice the spacing, sample `m` centred on the fine
     /// index `2m − ½` (the centre of the filter's taps `2m − 2 … 2m + 1`), so the origin moves
-    /// back by half a fine spacing along that axis (VTK's world convention, DESIGN.md §3) and the
+    /// back by half a fine spacing along that axis (VTK's world convention, docs/design.md §3) and the
     /// level's first and last samples lie ½ (n even) or 1½ (n odd) fine spacings outside the
     /// fine ones: the level's box covers the fine level's. Other axes are kept as they are.
     pub fn halved(&self, axes: [bool; 3]) -> Result<Grid> {

@@ -5,7 +5,7 @@
 //!
 //! The rendering is an axis-aligned orthographic emission–absorption integral through the voxel
 //! samples, with the opacity looked up in the compiled CRIO opacity table and corrected for the
-//! step (`α' = 1 − (1 − α)^(Δs/unit)`, DESIGN.md §3), front to back. Only opacity matters for
+//! step (`α' = 1 − (1 − α)^(Δs/unit)`, docs/design.md §3), front to back. Only opacity matters for
 //! the silhouette contrast, so colour and shading are left out.
 
 use std::path::Path;

@@ -1,4 +1,4 @@
-//! The one world frame (DESIGN.md §3, decision 0008): readers return grids in **LPS**, DICOM's
+//! The one world frame (docs/design.md §3, decision 0008): readers return grids in **LPS**, DICOM's
 //! and ITK's patient frame (+x towards the patient's left, +y posterior, +z superior). Files in
 //! RAS (NIfTI, NRRD `right-anterior-superior`) or LAS are converted by negating the axes that
 //! differ, which maps both the direction matrix and the origin: `D' = F·D`, `o' = F·o` with

@@ -1,4 +1,4 @@
-//! PNG output of rendered images (DESIGN.md §3: 8-bit sRGB-encoded unless linear is asked for).
+//! PNG output of rendered images (docs/design.md §3: 8-bit sRGB-encoded unless linear is asked for).
 
 use crate::atomic::write_atomic;
 use crate::error::{IoError, Result};

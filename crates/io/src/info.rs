@@ -11,7 +11,7 @@ use std::path::Path;
 pub const VOLUME_INFO_SCHEMA: u32 = 1;
 
 /// What `info` reports about a volume, in world units (usually mm) and the world frame of
-/// DESIGN.md §3 (LPS for anatomical files, decision 0008). Serialises to stable JSON with
+/// docs/design.md §3 (LPS for anatomical files, decision 0008). Serialises to stable JSON with
 /// these field names; floats reload bit-exactly.
 ///
 /// ```json

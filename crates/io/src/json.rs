@@ -1,4 +1,4 @@
-//! Camera and transfer-function JSON files (DESIGN.md §3; the README's "Files" section).
+//! Camera and transfer-function JSON files (docs/design.md §3; the README's "Files" section).
 //!
 //! Both are JSON objects. Unknown top-level fields are ignored with a warning (returned to the
 //! caller, which decides whether to print it); missing required fields and wrong types are errors
@@ -6,7 +6,7 @@
 //! transfer function: every point list in non-decreasing order of value, equal values allowed
 //! for a step).
 //! `//` line comments (outside strings) are removed before parsing, so the annotated examples of
-//! DESIGN.md load as written. Files larger than [`MAX_JSON_BYTES`] are rejected.
+//! docs/design.md load as written. Files larger than [`MAX_JSON_BYTES`] are rejected.
 //!
 //! A transfer-function file may also be a ParaView / VTK colour-map preset, as ParaView's
 //! "Choose Preset → Export" writes it (see [`load_transfer_function_named`]); the command line's
@@ -26,7 +26,7 @@ use volsplat_core::{Camera, TransferFunction};
 /// Largest camera or transfer-function file accepted, in bytes (16 MiB).
 pub const MAX_JSON_BYTES: u64 = 16 << 20;
 
-/// The fields of a camera file (VTK's camera; DESIGN.md §3). `position`, `focal_point`,
+/// The fields of a camera file (VTK's camera; docs/design.md §3). `position`, `focal_point`,
 /// `view_up` and `parallel_projection` are required; `view_angle` and `parallel_scale` default to
 /// VTK's values (30° and 1).
 pub const CAMERA_FIELDS: &[&str] = &[

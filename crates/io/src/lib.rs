@@ -4,7 +4,7 @@
 //! returns a typed [`IoError`] naming the file, the header field and the offending value; no
 //! function panics on file contents, prints, or exits.
 //!
-//! ## Volumes (world space as in DESIGN.md §3: VTK's, in the file's units, usually mm)
+//! ## Volumes (world space as in docs/design.md §3: VTK's, in the file's units, usually mm)
 //!
 //! Anatomical files are returned in **LPS** (DICOM/ITK's patient frame): NIfTI (always RAS) and
 //! NRRD `space: right-anterior-superior` / `left-anterior-superior` are converted by negating the
@@ -53,7 +53,7 @@
 //! - [`encode_png`], [`encode_png_gray`]: the same files' bytes in memory (a server sends them).
 //! - [`write_npy_rgba`], [`write_npy_scalar`], [`read_npy_f32`]: float `.npy` (`'<f4'`).
 //!
-//! ## Scene files (JSON, DESIGN.md §3)
+//! ## Scene files (JSON, docs/design.md §3)
 //!
 //! - [`load_camera`], [`save_camera`]; [`load_transfer_function`], [`save_transfer_function`].
 //!   Unknown fields come back as warnings; `//` comments are allowed.

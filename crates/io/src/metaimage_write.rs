@@ -19,7 +19,7 @@ use volsplat_core::{AnyVolume, Grid, ScalarType};
 /// - `ObjectType = Image`, `NDims = 3`, `BinaryData = True`, `BinaryDataByteOrderMSB = False`
 ///   (little-endian samples, i fastest), `CompressedData` (a zlib stream when `compress`, with
 ///   its `CompressedDataSize`).
-/// - Geometry in volsplat's world frame, LPS (DESIGN.md §3), which is ITK's: `Offset` the world
+/// - Geometry in volsplat's world frame, LPS (docs/design.md §3), which is ITK's: `Offset` the world
 ///   position of voxel (0,0,0); `ElementSpacing` the spacing; `TransformMatrix` the direction,
 ///   its consecutive triples the world directions of the i, j and k axes (ITK's order, as the
 ///   reader takes them); `AnatomicalOrientation` the three letters ITK derives from the

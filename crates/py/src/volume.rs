@@ -7,7 +7,7 @@
 //! Fortran-ordered `(x, y, z)` array (what nibabel usually returns) is the same memory layout
 //! and is copied with one `memcpy` too. Per-axis values (spacing, the columns of `direction`
 //! and of `affine`) are given in the array's axis order; world coordinates (`origin`, the rows
-//! of `direction` and `affine`) are world x, y, z. volsplat's world is LPS (DESIGN.md §3,
+//! of `direction` and `affine`) are world x, y, z. volsplat's world is LPS (docs/design.md §3,
 //! decision 0008). An `affine` follows nibabel: it maps to RAS unless `space="LPS"` is given
 //! (converted to LPS as the NIfTI reader does), and its array is `(x, y, z)` unless `axes=` says
 //! otherwise; `origin`/`direction` follow ITK: LPS unless `space="RAS"`.

@@ -10,7 +10,7 @@
 //! **Radial kernels** (the Gaussian): the ray through raster offset `δ` passes the kernel centre
 //! at lattice distance `ρ = ‖L δ‖`, where `LᵀL = Q = Bᵀ(I − ĝĝᵀ)B`, `B` maps raster offsets to
 //! lattice offsets and `ĝ` is the view direction in lattice space. `L = Λ^{1/2} Uᵀ` comes from the
-//! symmetric eigen-decomposition `Q = U Λ Uᵀ` (DESIGN.md §4.3): the projected ellipse maps
+//! symmetric eigen-decomposition `Q = U Λ Uᵀ` (docs/design.md §4.3): the projected ellipse maps
 //! exactly onto the circle of the generic radial footprint, with no 45° singularity and no shape
 //! error (the thesis's §3.7.4 formulas are inconsistent; §5.4's anisotropy error disappears).
 //!
@@ -18,7 +18,7 @@
 //! entry by splitting the ray at every knot of the piecewise-cubic kernel and integrating each
 //! polynomial piece exactly with 5-point Gauss–Legendre quadrature.
 //!
-//! **Normalisation** (DESIGN.md §4.1): weights are `∫h ds / Δs` where `Δs` is the world path
+//! **Normalisation** (docs/design.md §4.1): weights are `∫h ds / Δs` where `Δs` is the world path
 //! between sheets, so the footprints of one constant sheet sum to the constant (partition of
 //! unity over the projected sheet lattice); multiplying by `Δs` gives the world-space line
 //! integral used by X-ray mode.
@@ -904,7 +904,7 @@ mod tests {
     }
 
     /// Every view, not a few: the footprint is finite, non-negative and keeps partition of
-    /// unity over the projected sheet lattice (DESIGN.md §4.1) for azimuths 0–355° in 5° steps
+    /// unity over the projected sheet lattice (docs/design.md §4.1) for azimuths 0–355° in 5° steps
     /// and odd angles between,
     /// six elevations, square, wide, tall and odd image sizes, and four spacings, with and
     /// without anti-aliasing (the weights are ∫h ds / Δs, so the footprints of a constant sheet

@@ -116,7 +116,7 @@ impl ExtractSettings {
     }
 }
 
-/// One extracted voxel. Plain data (`repr(C)`, no pointers; DESIGN.md §5), 24 bytes.
+/// One extracted voxel. Plain data (`repr(C)`, no pointers; docs/design.md §5), 24 bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplatRecord {
@@ -126,7 +126,7 @@ pub struct SplatRecord {
     pub reserved: u16,
     /// Value in data units.
     pub density: f32,
-    /// World-space gradient, data units per world unit (central differences, DESIGN.md §4.4).
+    /// World-space gradient, data units per world unit (central differences, docs/design.md §4.4).
     pub gradient: [f32; 3],
 }
 

@@ -1,4 +1,4 @@
-//! A resolution pyramid of prefiltered volumes for previews and minified views (DESIGN.md §5,
+//! A resolution pyramid of prefiltered volumes for previews and minified views (docs/design.md §5,
 //! "Multiresolution"; `docs/decisions/0031-prefiltered-pyramid-previews.md`).
 //!
 //! Level 0 is the volume itself; level `l + 1` halves the axes of level `l` that

@@ -4,7 +4,7 @@
 //! reconstruct (footprint table) → visibility (sheet buffer or composite-every-sample), sheet by
 //! sheet in front-to-back or back-to-front order.
 //!
-//! **Parallel and deterministic** (§4.3.2 "multiple independent sheet buffers", DESIGN.md §4.6):
+//! **Parallel and deterministic** (§4.3.2 "multiple independent sheet buffers", docs/design.md §4.6):
 //! the image is cut into fixed bands of scanlines, each owning its slice of the sheet buffer and
 //! of the accumulation buffer. Sheets are processed in batches: the sheets of a batch are
 //! classified in parallel (one thread per sheet, samples in a fixed order, each splat routed to
@@ -811,7 +811,7 @@ pub(crate) fn scale_kept(v: Rgba, k: f32, mode: RenderMode) -> Rgba {
 
 /// World-space gradient at full-resolution voxel `p`: central differences divided by
 /// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
-/// by the direction matrix (DESIGN.md §4.4). Data units per world unit.
+/// by the direction matrix (docs/design.md §4.4). Data units per world unit.
 #[inline]
 pub(crate) fn gradient_at<T: Scalar>(
     data: &[T],
@@ -885,7 +885,7 @@ pub(crate) fn index_gradient<T: Scalar>(
 
 /// Composites the touched columns `tx0..tx1` of one band's sheet buffer into the band's slice
 /// of the accumulation buffer (premultiplied *over*, opacity clamped with colour scaled alike,
-/// DESIGN.md §4.2; or the normalised MIP/MinIP update) and clears them. With `cutoff`, marks the
+/// docs/design.md §4.2; or the normalised MIP/MinIP update) and clears them. With `cutoff`, marks the
 /// 4 × 4 tiles whose pixels all reached that opacity (front-to-back early termination).
 pub(crate) fn composite_band_sheet(
     mode: RenderMode,
@@ -907,7 +907,7 @@ pub(crate) fn composite_band_sheet(
                     if s[3] > 0.0 {
                         let mut src = *s;
                         // Clamp consistently: opacity ≤ 1 with colour scaled alike
-                        // (DESIGN.md §4.2).
+                        // (docs/design.md §4.2).
                         if src[3] > 1.0 {
                             let k = 1.0 / src[3];
                             src = [src[0] * k, src[1] * k, src[2] * k, 1.0];

@@ -1,6 +1,6 @@
 //! # volsplat-testkit
 //!
-//! Dev-only test oracles for volsplat (DESIGN.md §6.5: oracle tests before golden images).
+//! Dev-only test oracles for volsplat (docs/design.md §6.5: oracle tests before golden images).
 //!
 //! - [`reference`](mod@reference): the brute-force ray integrator for orthographic and
 //!   perspective [`Projection`](volsplat_core::Projection)s — X-ray
@@ -18,7 +18,7 @@
 //!   3-D Shepp–Logan phantom, a CT head, Marschner–Lobb; closed-form line integrals; sampling
 //!   into volumes).
 //!
-//! Frames and units follow DESIGN.md §3: world units are the volume's (usually mm), images have
+//! Frames and units follow docs/design.md §3: world units are the volume's (usually mm), images have
 //! row 0 at the top and pixel centres at half integers, colour is premultiplied. Everything is
 //! deterministic: parallel loops (rayon, over image rows) compute each pixel independently.
 #![deny(missing_docs)]

@@ -195,7 +195,7 @@ fn cell(grid: &Grid, p: DVec3) -> ([usize; 3], [f64; 3]) {
 /// World-space gradients of every voxel (data units per world unit), `i` fastest: central
 /// differences divided by `2·spacing` along each grid axis, one-sided differences divided by
 /// `spacing` at the border (zero along an axis with one sample), mapped to world as
-/// `D · g` (DESIGN.md §4.4).
+/// `D · g` (docs/design.md §4.4).
 pub fn voxel_gradients(vol: &Volume<f32>) -> Vec<[f32; 3]> {
     let grid = vol.grid();
     let [nx, ny, nz] = grid.dims;

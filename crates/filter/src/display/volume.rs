@@ -1,7 +1,7 @@
 //! The density field and the per-pixel ray geometry of the Chapter 6 displays (Buchanan §6-0.1,
 //! App. B steps 1–2).
 //!
-//! Frames: *world* coordinates are the volume's (DESIGN.md §3); *index* (texture) coordinates
+//! Frames: *world* coordinates are the volume's (docs/design.md §3); *index* (texture) coordinates
 //! put voxel `(i, j, k)` at the integer point `(i, j, k)` — the texture space of
 //! [`DiscreteTexture`] and of the NIL cells. Lengths given to the displays in *unit lengths* are
 //! multiples of [`DisplayVolume::unit`], the largest world extent of the volume's bounds: the

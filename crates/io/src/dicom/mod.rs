@@ -26,7 +26,7 @@
 //!
 //! # Geometry (PS3.3 §C.7.6.2.1.1, Image Plane Module; world frame LPS)
 //!
-//! DICOM's patient coordinate system is LPS, volsplat's world frame (DESIGN.md §3, decision
+//! DICOM's patient coordinate system is LPS, volsplat's world frame (docs/design.md §3, decision
 //! 0008), so nothing is converted.
 //!
 //! - ImageOrientationPatient (0020,0037) gives the row direction `r` (the direction of

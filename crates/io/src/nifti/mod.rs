@@ -25,7 +25,7 @@
 //!   the grid centred on the world origin).
 //!   A sheared `sform` (axes not orthogonal) falls back to the `qform` when there is one, with a
 //!   note, and is an error otherwise.
-//! - **World frame**: NIfTI's world is RAS+; it is converted to LPS (DESIGN.md §3, decision
+//! - **World frame**: NIfTI's world is RAS+; it is converted to LPS (docs/design.md §3, decision
 //!   0008) by negating x and y of the affine: `D' = diag(−1, −1, 1)·D`, `o' = diag(−1, −1, 1)·o`.
 //! - Spatial units (`xyzt_units`) are kept as written, as nibabel does (no rescaling to mm); metres
 //!   or micrometres draw a note.

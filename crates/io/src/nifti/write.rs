@@ -26,7 +26,7 @@ const VOX_OFFSET: usize = 352;
 ///
 /// - **Samples**: little-endian, in their own type: `datatype` 2 (uint8), 256 (int8),
 ///   512 (uint16), 4 (int16) or 16 (float32); `scl_slope` 1, `scl_inter` 0 (no scaling).
-/// - **Geometry**: volsplat's world frame is LPS (DESIGN.md §3, decision 0008) and NIfTI's is
+/// - **Geometry**: volsplat's world frame is LPS (docs/design.md §3, decision 0008) and NIfTI's is
 ///   RAS+, so x and y are negated: the affine is `diag(−1, −1, 1)·[D·diag(spacing) | origin]`.
 ///   It is written as the `sform` (`srow_x/y/z`, code 1) and as the `qform` (code 1):
 ///   `pixdim[1..=3]` the spacing, `qoffset` the origin, and the quaternion of the rotation

@@ -645,7 +645,7 @@ fn complete_basis(cols: [Option<DVec3>; 3]) -> DMat3 {
 
 /// Writes `volume` as an attached-header NRRD (`NRRD0004`, little-endian, raw or gzip encoding).
 ///
-/// The header records `space: left-posterior-superior` (volsplat's world frame, DESIGN.md §3,
+/// The header records `space: left-posterior-superior` (volsplat's world frame, docs/design.md §3,
 /// so that ITK and 3D Slicer place the volume where volsplat does), `sizes`, `space directions`
 /// (column `c` of the
 /// direction matrix times `spacing[c]`, world units) and `space origin` (world position of voxel
