@@ -45,8 +45,9 @@ impl Mode {
 #[serde(rename_all = "snake_case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum RendererChoice {
-    /// Splatting: the dense sheet renderer for orthographic views, the sparse splat list for
-    /// perspective ones.
+    /// Chosen per request: image-aligned slabs for composite, MIP and MinIP (as visibility
+    /// `auto` says); otherwise splatting, the dense sheet renderer for orthographic views and
+    /// the sparse splat list for perspective ones.
     #[default]
     Auto,
     /// The dense orthographic sheet-buffer renderer (Westover 1991).
@@ -129,7 +130,8 @@ pub enum AntialiasChoice {
     None,
 }
 
-/// Sheet buffers or composite-every-sample (Westover §3.8.1).
+/// How visibility is resolved: chosen per request, Westover's sheet buffers, composite every
+/// sample (Westover §3.8.1), or image-aligned slabs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]

@@ -137,6 +137,25 @@ def test_python_scene_file_on_the_command_line(cli, tmp_path):
     same_bytes(tmp_path / "cli.png", tmp_path / "again.png")
 
 
+def test_a_scene_files_output_options_are_the_default_of_save(cli, tmp_path):
+    """A scene saved with output options (background, sRGB, 16 bits; a grey window for MIP)
+    renders in Python to the bytes `render --scene` writes, without passing them again."""
+    volsplat.Volume(blob(dtype=np.uint16), spacing=(1.5, 1, 1)).save(tmp_path / "v.nrrd")
+    for name, flags in [
+        ("composite", ["--background", "0.2,0.3,0.4", "--srgb", "--bit-depth", "16"]),
+        ("mip", ["--mode", "mip", "--window", "100:2500", "--background", "0.5,0,0"]),
+    ]:
+        scene_file = tmp_path / f"{name}.json"
+        cli("render", tmp_path / "v.nrrd", "--size", "48", *flags,
+            "--save-scene", scene_file, "-o", tmp_path / f"{name}-cli.png", "-q")
+        img = volsplat.Scene.load(scene_file).render()
+        img.save(tmp_path / f"{name}-py.png")
+        same_bytes(tmp_path / f"{name}-cli.png", tmp_path / f"{name}-py.png")
+        assert img.to_png() == (tmp_path / f"{name}-cli.png").read_bytes()
+        # Given options still win over the scene's (the composite scene is 16-bit, the MIP 8).
+        assert img.to_png(bits=8 if name == "composite" else 16) != img.to_png()
+
+
 def test_camera_and_transfer_function_files(cli, tmp_path):
     vol = volsplat.phantom("shepp-logan", 40)
     img = volsplat.render(

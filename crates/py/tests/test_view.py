@@ -111,7 +111,8 @@ def test_output_options_travel_with_the_scene(tmp_path, cli):
             pytest.approx(0.4),
         ]
         v.scene.save(tmp_path / "scene.json")
-        v.screenshot().save(tmp_path / "py.png", window=v.window)
+        # The screenshot keeps the scene's window and background without being told.
+        v.screenshot().save(tmp_path / "py.png")
         cli("render", "--scene", tmp_path / "scene.json", "-o", tmp_path / "cli.png", "--quiet")
         assert (tmp_path / "py.png").read_bytes() == (tmp_path / "cli.png").read_bytes()
     # A scene's own options are kept when view() is not given any.

@@ -505,8 +505,8 @@ class Image:
         path: Any,
         *,
         srgb: Optional[bool] = None,
-        bits: int = 8,
-        background: Sequence[float] = (0.0, 0.0, 0.0),
+        bits: Optional[int] = None,
+        background: Optional[Sequence[float]] = None,
         window: Optional[Tuple[float, float]] = None,
         wl: Optional[Tuple[float, float]] = None,
     ) -> None:
@@ -514,11 +514,13 @@ class Image:
         writers, the same defaults).
 
         ``.png``: RGB composited over ``background`` (linear RGB, ``--background``), holding
-        the linear values (``srgb=True`` applies the sRGB curve, ``--srgb``; ``None`` is the
-        command line's default), 8 or 16 ``bits`` (``--bit-depth``). For ``mode="xray"`` a grey
-        image of the line integrals scaled so the brightest pixel is white; for ``"mip"``,
-        ``"minip"`` and ``"xray"`` a grey ``window=(lo, hi)`` (``--window``) or
-        ``wl=(level, width)`` (``--wl``) maps the values linearly to black…white instead.
+        the linear values (``srgb=True`` applies the sRGB curve, ``--srgb``), 8 or 16 ``bits``
+        (``--bit-depth``). For ``mode="xray"`` a grey image of the line integrals scaled so the
+        brightest pixel is white; for ``"mip"``, ``"minip"`` and ``"xray"`` a grey
+        ``window=(lo, hi)`` (``--window``) or ``wl=(level, width)`` (``--wl``) maps the values
+        linearly to black…white instead. An option not given is the scene's (its ``output``
+        field, as ``volsplat render --scene`` reads it; black, linear, 8 bits and no window
+        unless the scene says otherwise).
         ``.npy``: float32 ``(H, W, 4)`` premultiplied RGBA, or the ``(H, W)`` values for X-ray
         (and for MIP/MinIP with a window). Written atomically.
         """
@@ -528,24 +530,26 @@ class Image:
         self,
         *,
         srgb: Optional[bool] = None,
-        bits: int = 8,
-        background: Sequence[float] = (0.0, 0.0, 0.0),
+        bits: Optional[int] = None,
+        background: Optional[Sequence[float]] = None,
         window: Optional[Tuple[float, float]] = None,
         wl: Optional[Tuple[float, float]] = None,
     ) -> bytes:
-        """The bytes :meth:`save` writes to a ``.png`` file."""
+        """The bytes :meth:`save` writes to a ``.png`` file (the same defaults)."""
         return self._out.png_bytes(**self._png_options(srgb, bits, background, window, wl))
 
-    @staticmethod
     def _png_options(
+        self,
         srgb: Optional[bool],
-        bits: int,
-        background: Sequence[float],
+        bits: Optional[int],
+        background: Optional[Sequence[float]],
         window: Optional[Tuple[float, float]],
         wl: Optional[Tuple[float, float]],
     ) -> Dict[str, Any]:
         if window is not None and wl is not None:
             raise InvalidInputError("give window=(lo, hi) or wl=(level, width), not both")
+        # What is not given comes from the scene's output options (`render --scene`).
+        scene_out = json.loads(self._out.scene_json).get("output") or {}
         win = None
         if window is not None:
             win = tuple(floats(window, 2, "window"))
@@ -557,6 +561,14 @@ class Image:
                 raise InvalidInputError(f"wl: the width must be > 0, got {float(width)}")
             # As the command line computes it, in single precision.
             win = (float(level - np.float32(0.5) * width), float(level + np.float32(0.5) * width))
+        elif scene_out.get("window") is not None:
+            win = tuple(float(v) for v in scene_out["window"])
+        if srgb is None and "srgb" in scene_out:
+            srgb = bool(scene_out["srgb"])
+        if bits is None:
+            bits = scene_out.get("bit_depth", 8)
+        if background is None:
+            background = scene_out.get("background", (0.0, 0.0, 0.0))
         return {
             "srgb": None if srgb is None else bool(srgb),
             "bits": int(bits),
