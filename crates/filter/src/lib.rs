@@ -7,7 +7,7 @@
 //! "F-Bnn"/"A-n" below refer to it.
 //!
 //! ## Modules
-//! - [`texture`]: the [`SolidTexture`](texture::SolidTexture) trait; cosine series (known
+//! - [`texture`]: the [`texture::SolidTexture`] trait; cosine series (known
 //!   spectrum, closed-form box averages), marble (turbulence of band-limited noise), 3-D step,
 //!   constant, and discrete arrays of any size with sample-and-hold or trilinear reconstruction.
 //! - [`scene`]: perspective camera (`volsplat_core::Camera`) over a plane running to the
@@ -22,7 +22,7 @@
 //! - [`nil`]: NIL maps — 1-D and 3-D pyramids of cosine and discrete textures, patch bases
 //!   `M = 1…4`, trigger-point hierarchies, negative levels, normalisation, corrected level
 //!   weighting and transfer-function `D` maps (§4-4, §5-6, App. A–C).
-//! - [`render`]: renders a scene with one [`Technique`](render::Technique).
+//! - [`render`]: renders a scene with one [`render::Technique`].
 //! - [`display`]: Chapter 6 — volume display as filtering: Sabella's display (eq 3.1), the
 //!   linearised display (eq 6.1) by quadrature and by NIL maps, Gaussian slices, the maximum,
 //!   sample-and-filter with a difference of Gaussians, and transfer-function changes through

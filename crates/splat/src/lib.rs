@@ -3,7 +3,7 @@
 //! Westover's splatting (Westover 1991, *Splatting: a parallel, feed-forward volume rendering
 //! algorithm*), orthographic, with the corrections recorded in `docs/papers.md`.
 //!
-//! - [`render`] / [`render_any`]: one frame → [`Rendered`] (premultiplied image, optional float
+//! - [`render()`] / [`render_any`]: one frame → [`Rendered`] (premultiplied image, optional float
 //!   values, [`RenderStats`] per stage like Table 4.02), controlled by [`RenderSettings`]
 //!   ([`RenderMode`] composite / MIP / MinIP / X-ray, [`Visibility`] sheet buffer or
 //!   composite-every-sample, [`Order`] FTB/BTF, kernel, subsampling).

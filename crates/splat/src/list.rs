@@ -16,7 +16,7 @@
 //! offset `δ` passes the voxel at lattice distance `√(δᵀQδ)`, `Q = (z/f)²·Bᵀ(I − ĝĝᵀ)B` with `z`
 //! the eye-space depth, `f` the focal length in pixels, `B = Λ[right, −up]` and `ĝ` the ray in
 //! lattice space (`Λ = lattice_from_world`). The weight comes from the kernel's pre-integrated
-//! radial table ([`Kernel::line_integral_radial`]) scaled per splat: a generic table, scaled.
+//! radial table ([`volsplat_core::Kernel::line_integral_radial`]) scaled per splat: a generic table, scaled.
 //! Condition 3 (every pixel's ray crossing the footprint perpendicularly) is not met, as in
 //! Swan et al.'s implementation; the error is second order in the footprint's angular size.
 //!
@@ -30,7 +30,7 @@
 //! inside the volume. Splats whose centre is closer to the eye plane than the kernel's radius
 //! (or behind it) are clipped, never drawn inverted.
 //!
-//! **Parallel and deterministic**: the band decomposition of [`crate::render`]; output is
+//! **Parallel and deterministic**: the band decomposition of [`mod@crate::render`]; output is
 //! bit-identical for any thread count.
 
 use crate::aa::{footprint_variance, widen};

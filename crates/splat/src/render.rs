@@ -186,7 +186,7 @@ pub struct RenderStats {
     /// Samples that survived culling and were splatted.
     pub splats: u64,
     /// Samples skipped because their whole footprint was already opaque (composite), or because
-    /// they cannot change the projection (MIP/MinIP, [`crate::mipcull`]).
+    /// they cannot change the projection (MIP/MinIP, the `mipcull` module).
     pub splats_terminated: u64,
     /// Perspective only: splats clipped at the near plane (behind or too close to the eye).
     pub splats_clipped: u64,

@@ -8,8 +8,8 @@
 //! *screen* area as eq 6.1 writes it. Filters are masked to the box of voxel centres (the
 //! density is zero outside it, eq 4.2).
 //!
-//! Evaluation goes through the filter's lines ([`super::project::LineFilter`]): the direct
-//! evaluation ([`direct`]) integrates the data along each line clipped to the box; the NIL
+//! Evaluation goes through the filter's lines (`project::LineFilter`): the direct
+//! evaluation (`direct`) integrates the data along each line clipped to the box; the NIL
 //! evaluation projects the filter onto the patches with the same lines. Slices and balls
 //! return `∭Fρ/∭F`; the linearised display returns `τ ∫∬ G e^{−τ(t−t_a)} ρ` with `∬G = 1`, and
 //! the line integral returns `∬ G ∫ ρ dt` (Sabella's optical depth).
