@@ -2,18 +2,10 @@
 //! errors for bad input.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn volsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volsplat"))
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod util;
+use util::{stderr, stdout, volsplat};
 
 fn npy_shape(path: &Path) -> Vec<usize> {
     let bytes = std::fs::read(path).unwrap();
@@ -486,10 +478,6 @@ fn perspective_options_are_checked() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--draw-k"), "{}", stderr(&o));
     assert!(!out.exists());
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 #[test]

@@ -4,16 +4,8 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-fn volsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volsplat"))
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod util;
+use util::{stderr, volsplat};
 
 const SCENE: [&str; 8] = [
     "--phantom-size",

@@ -4,18 +4,10 @@
 //! render as they did.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn volsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volsplat"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod util;
+use util::{stderr, volsplat};
 
 /// `render` with the small blobs phantom and `extra`, writing `out`.
 fn render(extra: &[&str], out: &Path) -> Output {

@@ -5,20 +5,8 @@
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-fn volsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volsplat"))
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
+mod util;
+use util::{stderr, stdout, volsplat};
 
 /// A tiny scene: 16³ blobs, 16 × 16 pixels.
 const TINY: [&str; 6] = ["--phantom", "blobs", "--phantom-size", "16", "--size", "16"];

@@ -3,18 +3,10 @@
 //! error (exit 1), not an abort; an orbit over the pole is a picture.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn volsplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volsplat"))
-        .args(args)
-        .output()
-        .expect("binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod util;
+use util::{stderr, volsplat};
 
 /// Largest 8-bit channel of a PNG.
 fn brightest(path: &Path) -> u8 {

@@ -1075,14 +1075,7 @@ mod tests {
         CrioTables::from_transfer_function(&tf, 1024).unwrap()
     }
 
-    fn camera(grid: &Grid, az: f64, el: f64, parallel: bool) -> Camera {
-        let (lo, hi) = grid.bounds_world();
-        let mut c = Camera::reset_to_bounds(lo, hi, parallel);
-        c.azimuth(az);
-        c.elevation(el);
-        c.orthogonalize_view_up();
-        c
-    }
+    use volsplat_testkit::fixtures::orbit_camera as camera;
 
     fn max_abs_diff(a: &Image, b: &Image) -> f32 {
         a.pixels()

@@ -11,6 +11,7 @@ use volsplat_splat::{
     Antialias, Pyramid, RenderMode, RenderSettings, Rendered, ShadeAt, Visibility, auto_level,
     focal_pixel_size, force_scalar_sampling, render_level,
 };
+use volsplat_testkit::fixtures::orbit_camera as camera;
 use volsplat_testkit::metrics::image_psnr;
 use volsplat_testkit::reference::{ReferenceSettings, reference_composite};
 
@@ -27,15 +28,6 @@ fn blobs(n: usize) -> AnyVolume {
         b(0.2, -0.35, 0.3, 0.13, 0.6),
     ]);
     phantom::sample(&field, [n; 3], 1).unwrap().into()
-}
-
-fn camera(grid: &Grid, az: f64, el: f64, parallel: bool) -> Camera {
-    let (lo, hi) = grid.bounds_world();
-    let mut c = Camera::reset_to_bounds(lo, hi, parallel);
-    c.azimuth(az);
-    c.elevation(el);
-    c.orthogonalize_view_up();
-    c
 }
 
 fn tables(shade: bool) -> CrioTables {

@@ -10,6 +10,7 @@ use volsplat_splat::{
     BrickGrid, ClipPlane, Preintegrate, RenderMode, RenderSettings, Rendered, ShadeAt, SplatError,
     Visibility, render, render_slabs,
 };
+use volsplat_testkit::fixtures::orbit_camera as camera;
 use volsplat_testkit::metrics::image_psnr;
 use volsplat_testkit::reference::{
     ReferenceSettings, reference_composite, reference_minip, reference_mip,
@@ -32,15 +33,6 @@ fn blobs() -> GaussianBlobs {
 
 fn volume(n: usize) -> Volume<f32> {
     phantom::sample(&blobs(), [n; 3], 1).unwrap()
-}
-
-fn camera(grid: &Grid, az: f64, el: f64, parallel: bool) -> Camera {
-    let (lo, hi) = grid.bounds_world();
-    let mut c = Camera::reset_to_bounds(lo, hi, parallel);
-    c.azimuth(az);
-    c.elevation(el);
-    c.orthogonalize_view_up();
-    c
 }
 
 /// Image-aligned slabs, one ray per pixel as the reference integrator casts them (the

@@ -1,0 +1,24 @@
+//! What the command-line tests share (ripgrep's `tests/util.rs`): running the binary built for
+//! the tests and reading what it printed. Each test file takes what it needs (`mod util;`), so
+//! some files leave some helpers unused.
+#![allow(dead_code)]
+
+use std::process::{Command, Output};
+
+/// Runs the `volsplat` binary of this build with `args` and waits for it.
+pub fn volsplat(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_volsplat"))
+        .args(args)
+        .output()
+        .expect("the volsplat binary runs")
+}
+
+/// What a run printed on stderr (lossy UTF-8).
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// What a run printed on stdout (lossy UTF-8).
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
