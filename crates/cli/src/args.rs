@@ -145,7 +145,7 @@ pub struct ViewArgs {
     pub roll: Option<f64>,
     /// Magnification (VTK's Zoom: divides the parallel scale, or the view angle in
     /// perspective) [default: 1].
-    #[arg(long, value_name = "FACTOR")]
+    #[arg(long, value_name = "FACTOR", allow_negative_numbers = true)]
     pub zoom: Option<f64>,
     /// Perspective projection (VTK's default camera) instead of orthographic; switches a
     /// --camera file's camera to perspective too. Drawn with image-aligned slabs where
@@ -164,7 +164,7 @@ pub struct ViewArgs {
     pub view_angle: Option<f64>,
     /// Move the eye towards the focal point, dividing their distance by this factor (VTK's
     /// Dolly; > 1 moves closer) [default: 1].
-    #[arg(long, value_name = "FACTOR")]
+    #[arg(long, value_name = "FACTOR", allow_negative_numbers = true)]
     pub dolly: Option<f64>,
     /// Write the camera actually used to this JSON file.
     #[arg(long, value_name = "FILE")]
@@ -179,7 +179,8 @@ pub struct RenderOptions {
         long,
         value_name = "WxH|N",
         default_value = "512x512",
-        help_heading = "Output"
+        help_heading = "Output",
+        allow_hyphen_values = true
     )]
     pub size: String,
     /// Ray function. xray: the line integral ∫ρ ds; its PNG is scaled so that the brightest
@@ -267,17 +268,21 @@ pub struct RenderOptions {
     )]
     pub depth_cue: Option<String>,
     /// A directional light: direction X,Y,Z towards the light in the camera frame (x right, y up,
-    /// z towards the viewer), optionally followed by colour R,G,B. Repeat for several lights
-    /// (at most 16). Default: one white headlight (0,0,1), as VTK.
+    /// z towards the viewer), optionally followed by colour R,G,B and ambient colour AR,AG,AB
+    /// (what the transfer function's `ambient` multiplies; black unless given, as VTK's
+    /// lights). Repeat for several lights (at most 16). Default: one white headlight (0,0,1)
+    /// with a black ambient colour, as VTK.
     #[arg(
         long,
-        value_name = "X,Y,Z[,R,G,B]",
+        value_name = "X,Y,Z[,R,G,B[,AR,AG,AB]]",
         allow_hyphen_values = true,
         help_heading = "Transfer function",
         hide_short_help = true
     )]
     pub light: Vec<String>,
-    /// Leave out the emission (ambient) term (Westover §3.6.1 switches).
+    /// Leave out the emission term (Westover §3.6.1 switches): unshaded, the colour itself;
+    /// shaded, the transfer function's `ambient` × the lights' ambient colour, which is black
+    /// (no term) unless a --light gives one.
     #[arg(long, help_heading = "Transfer function", hide_short_help = true)]
     pub no_emission: bool,
     /// Leave out the diffuse term.

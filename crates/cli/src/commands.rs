@@ -238,6 +238,29 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
     }
     parse_image_size(&a.options.size, "--size")?;
     check_image_options(&a.image)?;
+    let npy = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    if npy {
+        let png_only: Vec<&str> = [
+            ("bits", "--bit-depth"),
+            ("srgb", "--srgb"),
+            ("background", "--background"),
+        ]
+        .into_iter()
+        .filter(|(id, _)| a.given.iter().any(|g| g == id))
+        .map(|(_, flag)| flag)
+        .collect();
+        if !png_only.is_empty() {
+            say!(
+                "warning: {} only apply to PNG output; {} holds the float image as rendered \
+                 (premultiplied, linear)",
+                png_only.join(", "),
+                a.output.display()
+            );
+        }
+    }
     if let Some(c) = &a.draw_k {
         triple::<f32>(c, "--draw-k")?;
     }

@@ -192,7 +192,8 @@ pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
     })
 }
 
-/// Parses `X,Y,Z[,R,G,B]`: a camera-relative direction towards the light and an optional colour.
+/// Parses `X,Y,Z[,R,G,B[,AR,AG,AB]]`: a camera-relative direction towards the light, an
+/// optional colour and an optional ambient colour.
 fn parse_light(s: &str) -> Result<LightSpec> {
     let v: Vec<f64> = s
         .split(',')
@@ -202,17 +203,14 @@ fn parse_light(s: &str) -> Result<LightSpec> {
                 .map_err(|_| anyhow!("--light: `{p}` is not a number in `{s}`"))
         })
         .collect::<Result<_>>()?;
-    if v.len() != 3 && v.len() != 6 {
-        bail!("--light: expected X,Y,Z or X,Y,Z,R,G,B, got `{s}`");
+    if ![3, 6, 9].contains(&v.len()) {
+        bail!("--light: expected X,Y,Z, X,Y,Z,R,G,B or X,Y,Z,R,G,B,AR,AG,AB, got `{s}`");
     }
-    let color = if v.len() == 6 {
-        [v[3] as f32, v[4] as f32, v[5] as f32]
-    } else {
-        [1.0; 3]
-    };
+    let rgb = |i: usize| [v[i] as f32, v[i + 1] as f32, v[i + 2] as f32];
     let l = LightSpec {
         direction: [v[0], v[1], v[2]],
-        color,
+        color: if v.len() >= 6 { rgb(3) } else { [1.0; 3] },
+        ambient: if v.len() == 9 { rgb(6) } else { [0.0; 3] },
     };
     l.to_light("--light")
         .map_err(|e| anyhow!("{e} (in `{s}`)"))?;

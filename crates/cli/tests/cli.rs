@@ -5,7 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 mod util;
-use util::{stderr, stdout, volsplat};
+use util::{npy_f32, stderr, stdout, volsplat};
 
 fn npy_shape(path: &Path) -> Vec<usize> {
     let bytes = std::fs::read(path).unwrap();
@@ -1193,15 +1193,6 @@ fn png_rgb8(path: &Path) -> (Vec<u8>, Option<u32>) {
 }
 
 /// Reads a float32 `.npy` written by volsplat (little-endian, C order).
-fn npy_f32(path: &Path) -> Vec<f32> {
-    let bytes = std::fs::read(path).unwrap();
-    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
-    bytes[10 + header_len..]
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect()
-}
-
 /// Decision 0012: a PNG holds the linear framebuffer values, as VTK, ParaView and Slicer write
 /// them (code = round(255·v) over a black background), with gAMA 1.0; `--srgb` encodes.
 #[test]

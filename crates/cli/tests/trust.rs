@@ -6,7 +6,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 mod util;
-use util::{stderr, stdout, volsplat};
+use util::{npy_f32, stderr, stdout, volsplat};
 
 /// A tiny scene: 16³ blobs, 16 × 16 pixels.
 const TINY: [&str; 6] = ["--phantom", "blobs", "--phantom-size", "16", "--size", "16"];
@@ -376,4 +376,119 @@ fn info_prints_the_notes_last() {
         "{text}"
     );
     assert!(text.contains("metres"), "{text}");
+}
+
+/// A negative number after a flag that takes a number is that flag's value, refused with the
+/// flag's own message (not clap's advice to write `-- -1`, which would make it the input file).
+#[test]
+fn negative_values_are_the_flags_values() {
+    for (args, want) in [
+        (
+            &["--zoom", "-1"][..],
+            "--zoom: -1.0 must be a positive number",
+        ),
+        (
+            &["--dolly", "-2"][..],
+            "--dolly: -2.0 must be a positive number",
+        ),
+        (&["--size", "-5"][..], "--size: expected WxH"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("x.png");
+        let mut all = vec!["render", "-o", out.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let o = volsplat(&all);
+        assert!(
+            matches!(o.status.code(), Some(1 | 2)),
+            "{args:?}: {}",
+            stderr(&o)
+        );
+        assert!(stderr(&o).contains(want), "{args:?}: {}", stderr(&o));
+        assert!(!out.exists());
+    }
+}
+
+/// PNG options with a `.npy` output change nothing in the file: said, not silently dropped.
+#[test]
+fn png_options_with_npy_output_are_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.npy");
+    let path = out.to_str().unwrap();
+    let o = volsplat(&[
+        "render",
+        "-o",
+        path,
+        "--size",
+        "16",
+        "--bit-depth",
+        "16",
+        "--srgb",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("warning: --bit-depth, --srgb only apply to PNG output"),
+        "{}",
+        stderr(&o)
+    );
+    let o = volsplat(&["render", "-o", path, "--size", "16"]);
+    assert!(!stderr(&o).contains("only apply to PNG"), "{}", stderr(&o));
+}
+
+/// A transfer function's `ambient` multiplies the lights' ambient colour, black for VTK's
+/// default headlight (so the emission term of a shaded render is nothing, as in VTK's CPU ray
+/// caster); a light given with an ambient colour lights it, in the scene file too, and
+/// `--no-emission` takes it away again.
+#[test]
+fn a_lights_ambient_colour_lights_the_ambient_term() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(format!("{name}.npy"));
+        let mut args = vec!["render", "-o", out.to_str().unwrap(), "--size", "32"];
+        args.extend_from_slice(&["--no-diffuse", "--no-specular"]);
+        args.extend_from_slice(extra);
+        let o = volsplat(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        // The brightest colour channel (the image is premultiplied RGBA).
+        npy_f32(&out)
+            .chunks_exact(4)
+            .flat_map(|px| px[..3].to_vec())
+            .fold(0.0f32, f32::max)
+    };
+    let ambient_light = ["--light", "0,0,1,1,1,1,1,1,1"];
+    let dark = run("default", &[]);
+    let lit = run("ambient", &ambient_light);
+    let off = run("off", &[&ambient_light[..], &["--no-emission"]].concat());
+    assert!(dark < 0.02, "{dark}");
+    assert!(lit > 0.1 && lit > 10.0 * dark, "{lit} against {dark}");
+    assert!(off < 0.02, "{off}");
+    let scene = dir.path().join("s.json");
+    let png = dir.path().join("s.png");
+    let o = volsplat(&[
+        "render",
+        "-o",
+        png.to_str().unwrap(),
+        "--size",
+        "16",
+        "--light",
+        "0,0,1,1,1,1,0.5,0.5,0.5",
+        "--save-scene",
+        scene.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(text.contains("\"ambient\""), "{text}");
+    let o = volsplat(&[
+        "render",
+        "-o",
+        png.to_str().unwrap(),
+        "--size",
+        "16",
+        "--light",
+        "0,0,1,1,1,1,1,1",
+    ]);
+    assert!(
+        stderr(&o).contains("X,Y,Z,R,G,B,AR,AG,AB"),
+        "{}",
+        stderr(&o)
+    );
 }

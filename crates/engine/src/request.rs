@@ -906,6 +906,7 @@ mod tests {
         let light = LightSpec {
             direction: [0.0, 0.0, 1.0],
             color: [1.0; 3],
+            ambient: [0.0; 3],
         };
         req.scene.lights = vec![light; MAX_LIGHTS];
         req.validate().unwrap();
@@ -920,6 +921,7 @@ mod tests {
             LightSpec {
                 direction: [0.0; 3],
                 color: [1.0; 3],
+                ambient: [0.0; 3],
             },
         ];
         let e = req.validate().unwrap_err().to_string();
@@ -963,6 +965,7 @@ mod tests {
         req.scene.lights = vec![crate::LightSpec {
             direction: [1.0, 0.0, 0.0],
             color: [1.0; 3],
+            ambient: [0.0; 3],
         }];
         req.scene.transfer_function = crate::TransferSpec::Preset(volsplat_core::Preset::CtBone);
         req.scene.surface_enhance = Some([1.0, 2.0]);

@@ -388,10 +388,20 @@ pub struct LightSpec {
     /// Linear RGB colour (≥ 0; default white).
     #[serde(default = "white")]
     pub color: [f32; 3],
+    /// Linear RGB ambient colour (≥ 0), which a transfer function's `ambient` coefficient
+    /// multiplies (the emission term of shaded composite). Default black, as `vtkLight`'s
+    /// and VTK's default headlight's: then `ambient` changes nothing, as in VTK's CPU ray
+    /// caster.
+    #[serde(default, skip_serializing_if = "is_black")]
+    pub ambient: [f32; 3],
 }
 
 fn white() -> [f32; 3] {
     [1.0; 3]
+}
+
+fn is_black(c: &[f32; 3]) -> bool {
+    c.iter().all(|&x| x == 0.0)
 }
 
 impl LightSpec {
@@ -416,9 +426,19 @@ impl LightSpec {
                 ),
             ));
         }
+        if self.ambient.iter().any(|&c| !(c >= 0.0 && c.is_finite())) {
+            return Err(EngineError::request(
+                field,
+                format!(
+                    "ambient colour components must be finite and ≥ 0, got {:?}",
+                    self.ambient
+                ),
+            ));
+        }
         Ok(Light {
             direction: self.direction,
             color: self.color,
+            ambient_color: self.ambient,
             ..Light::headlight()
         })
     }
@@ -556,7 +576,8 @@ impl Clipping {
             return Err(EngineError::request(
                 "scene.clipping.planes",
                 format!(
-                    "{} clipping planes; at most {MAX_CLIP_PLANES} (each plane is tested for                      every voxel and sample)",
+                    "{} clipping planes; at most {MAX_CLIP_PLANES} (each plane is tested for \
+                     every voxel and sample)",
                     self.planes.len()
                 ),
             ));

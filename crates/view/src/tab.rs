@@ -473,8 +473,27 @@ fn render_and_send(
         Ok(out) => out,
         Err(EngineError::Cancelled) => return finish(tab, job, JobOutcome::Cancelled),
         Err(e) => {
-            tab.error(Some(seq), format!("rendering: {e}"));
-            return finish(tab, job, JobOutcome::Failed);
+            // A refused scene goes back to the last one that rendered (Session::finished),
+            // and the page is told so and shown that scene's state.
+            let restored = {
+                let mut st = tab.lock();
+                let seq_now = st.seq;
+                st.session.as_mut().and_then(|s| {
+                    s.finished(job, JobOutcome::Failed)
+                        .then(|| state_of(s, seq_now, None))
+                })
+            };
+            tab.wake.notify_all();
+            let back = if restored.is_some() {
+                "; the scene is back to the last one that rendered"
+            } else {
+                ""
+            };
+            tab.error(Some(seq), format!("rendering: {e}{back}"));
+            if let Some(state) = restored {
+                tab.send(&ServerMessage::State(Box::new(state)));
+            }
+            return;
         }
     };
     let t1 = Instant::now();

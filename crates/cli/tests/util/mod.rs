@@ -3,6 +3,7 @@
 //! some files leave some helpers unused.
 #![allow(dead_code)]
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs the `volsplat` binary of this build with `args` and waits for it.
@@ -21,4 +22,14 @@ pub fn stderr(o: &Output) -> String {
 /// What a run printed on stdout (lossy UTF-8).
 pub fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// The float32 values of a `.npy` file `volsplat` wrote (little-endian, C order), in order.
+pub fn npy_f32(path: &Path) -> Vec<f32> {
+    let bytes = std::fs::read(path).unwrap();
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    bytes[10 + header_len..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
 }

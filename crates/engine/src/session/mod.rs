@@ -136,6 +136,9 @@ pub struct Session {
     /// Clock time from which the session counts as at rest (no pointer held).
     rest_at: Duration,
     delivered: Option<Delivered>,
+    /// The last request a frame of its own generation rendered from: where a refused render
+    /// returns the scene to.
+    rendered: Option<RenderRequest>,
     in_flight: Option<u64>,
     budget: Budget,
     next_id: u64,
@@ -194,6 +197,7 @@ impl Session {
             interacting: false,
             rest_at: now,
             delivered: None,
+            rendered: None,
             in_flight: None,
             budget: Budget::new(),
             next_id: 1,
@@ -424,13 +428,28 @@ impl Session {
     /// Hands a job back with what became of it. A rendered frame's measured time sizes the
     /// next preview, and the frame counts as shown for its generation; a failed final frame
     /// settles its generation (it is not tried again until the scene changes).
-    pub fn finished(&mut self, job: &Job, outcome: JobOutcome) {
+    ///
+    /// Returns `true` when the scene went back: a job of the current scene failed (the
+    /// renderer refused a combination of options that each checked alone, such as a
+    /// perspective camera with a kernel only the orthographic sheets take, or ran out of
+    /// memory) and an earlier scene of this session rendered, so the session returns to that
+    /// one (a new generation) instead of failing on every later event. The front end then
+    /// shows the restored state.
+    pub fn finished(&mut self, job: &Job, outcome: JobOutcome) -> bool {
         if self.in_flight == Some(job.id) {
             self.in_flight = None;
         }
+        let current = job.generation == self.generation();
         let aim = self.aim_ms();
         match (outcome, &job.kind) {
-            (JobOutcome::Cancelled, _) => return,
+            (JobOutcome::Cancelled, _) => return false,
+            (JobOutcome::Failed, _) if current => {
+                if let Some(good) = self.rendered.clone().filter(|g| *g != self.request) {
+                    self.request = good;
+                    self.touch(false);
+                    return true;
+                }
+            }
             (JobOutcome::Rendered { ms }, JobKind::Preview(plan)) => {
                 self.budget
                     .preview_done(plan_cost(plan), ms, aim, &self.settings);
@@ -444,6 +463,12 @@ impl Session {
             }
             (JobOutcome::Failed, _) => {}
         }
+        if matches!(outcome, JobOutcome::Rendered { .. })
+            && current
+            && self.rendered.as_ref() != Some(&self.request)
+        {
+            self.rendered = Some(self.request.clone());
+        }
         let newer = self
             .delivered
             .is_some_and(|d| d.generation > job.generation);
@@ -453,6 +478,7 @@ impl Session {
                 is_final: job.is_final(),
             });
         }
+        false
     }
 
     /// The progress callback of `job`: `false` (cancel) once the scene has moved on — at once

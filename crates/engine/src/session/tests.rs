@@ -787,3 +787,46 @@ fn output_options_travel_with_the_saved_scene() {
     assert_eq!(loaded.output.window, Some([100.0, 900.0]));
     assert_eq!(loaded.mode, Mode::Mip);
 }
+
+/// Options that check one by one can still make a scene the renderer refuses (a perspective
+/// camera drawn by the splat list with a kernel only the orthographic sheets take): the failed
+/// frame returns the session to the last scene that rendered, so later events render again,
+/// and the saved scene is one `render` draws.
+#[test]
+fn a_refused_scene_returns_to_the_last_one_that_rendered() {
+    let (mut s, mut renderer, _) = session(48);
+    let job = s.next_job().unwrap();
+    let out = s.run(&job, &mut renderer).unwrap();
+    assert!(!s.finished(&job, rendered(out.stats.total_ms)));
+    let good = s.request().clone();
+    let mut camera = s.camera().clone();
+    camera.parallel_projection = false;
+    s.apply(Event::SetCamera { camera }).unwrap();
+    let quality = crate::Quality {
+        kernel: crate::KernelChoice::CatmullRom,
+        visibility: crate::VisibilityChoice::Every,
+        ..s.request().quality
+    };
+    s.apply(Event::SetQuality { quality }).unwrap();
+    let bad = s.request().clone();
+    assert_ne!(bad, good);
+    let generation = s.generation();
+    let job = s.next_job().unwrap();
+    let err = s.run(&job, &mut renderer).unwrap_err();
+    assert!(err.to_string().contains("radial kernel"), "{err}");
+    assert!(s.finished(&job, JobOutcome::Failed), "the scene went back");
+    assert_eq!(s.request(), &good);
+    assert!(
+        s.generation() > generation,
+        "a new frame shows the restored scene"
+    );
+    // Later events render again.
+    s.apply(Event::Orbit { dx: 5.0, dy: 0.0 }).unwrap();
+    let job = s.next_job().unwrap();
+    let out = s.run(&job, &mut renderer).unwrap();
+    assert!(!s.finished(&job, rendered(out.stats.total_ms)));
+    // A failure with nothing rendered before it has nowhere to go back to.
+    let (mut fresh, _) = policy_session();
+    let job = fresh.next_job().unwrap();
+    assert!(!fresh.finished(&job, JobOutcome::Failed));
+}

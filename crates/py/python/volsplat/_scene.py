@@ -75,19 +75,23 @@ def _lights(value: Any) -> List[Dict[str, Any]]:
             d = {"direction": floats(light.get("direction"), 3, name + ".direction")}
             if "color" in light:
                 d["color"] = floats(light["color"], 3, name + ".color")
-            extra = set(light) - {"direction", "color"}
+            if "ambient" in light:
+                d["ambient"] = floats(light["ambient"], 3, name + ".ambient")
+            extra = set(light) - {"direction", "color", "ambient"}
             if extra:
                 raise InvalidInputError(f"{name}: unknown field(s) {sorted(extra)}")
         else:
             v = list(light.tolist() if hasattr(light, "tolist") else light)
-            if len(v) not in (3, 6):
+            if len(v) not in (3, 6, 9):
                 raise InvalidInputError(
-                    f"{name}: expected (x, y, z) or (x, y, z, r, g, b) in the camera frame, "
-                    f"got {light!r}"
+                    f"{name}: expected (x, y, z), (x, y, z, r, g, b) or (x, y, z, r, g, b, ar, "
+                    f"ag, ab) in the camera frame, got {light!r}"
                 )
             d = {"direction": floats(v[:3], 3, name)}
-            if len(v) == 6:
-                d["color"] = floats(v[3:], 3, name + " colour")
+            if len(v) >= 6:
+                d["color"] = floats(v[3:6], 3, name + " colour")
+            if len(v) == 9:
+                d["ambient"] = floats(v[6:9], 3, name + " ambient colour")
         out.append(d)
     return out
 
@@ -124,8 +128,9 @@ class Scene:
       cost falling with the pixel count; or a level number; ``--level``),
       ``order`` (``"ftb"``/``"btf"``),
       ``opacity_cutoff``, ``subsample``, ``list_threshold``; or ``quality={...}``.
-    - ``lights``: directions in the camera frame, ``(x, y, z)`` or ``(x, y, z, r, g, b)``
-      (``--light``); ``shading={"emission":…, "diffuse":…, "specular":…}``;
+    - ``lights``: directions in the camera frame, ``(x, y, z)``, ``(x, y, z, r, g, b)`` or
+      ``(x, y, z, r, g, b, ar, ag, ab)`` with an ambient colour, which the transfer
+      function's ``ambient`` multiplies (black otherwise, as VTK's lights) (``--light``); ``shading={"emission":…, "diffuse":…, "specular":…}``;
       ``surface_enhance=(lo, hi)``; ``depth_cue=(near, far)``; ``k_contour=(r, g, b)``.
     - ``clipping``: a crop box and clipping planes, the scene file's object (``--crop``,
       ``--clip-plane``): ``{"crop": {"min": (x, y, z), "max": (x, y, z), "units": "voxels"},
