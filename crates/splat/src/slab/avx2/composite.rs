@@ -21,7 +21,6 @@ use volsplat_core::Scalar;
 ///
 /// # Safety
 /// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
@@ -227,7 +226,6 @@ pub(super) unsafe fn composite_groups_avx2<T: Scalar>(
 ///
 /// # Safety
 /// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar>(
     ctx: &Ctx<'_, T>,
@@ -279,7 +277,6 @@ pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar>(
 }
 
 /// The sampling and classification of a group of eight samples for [`composite_groups_avx2`].
-#[cfg(target_arch = "x86_64")]
 pub(super) trait Source8<T> {
     /// What [`Source8::sample`] read that [`Source8::src`] uses again.
     type Pre;
@@ -327,7 +324,6 @@ pub(super) trait Source8<T> {
 /// Unshaded classification through the post table: lane `l` does exactly [`Ctx::post_src`]'s
 /// f32 operations (table lookups with paired rows, the path correction with the same polynomial
 /// `exp2`).
-#[cfg(target_arch = "x86_64")]
 pub(in crate::slab) struct PostSource<'a, T> {
     t: &'a PostTable,
     sampler: &'a Sampler8<T>,
@@ -335,7 +331,6 @@ pub(in crate::slab) struct PostSource<'a, T> {
     preint: bool,
 }
 
-#[cfg(target_arch = "x86_64")]
 impl<T: Scalar> Source8<T> for PostSource<'_, T> {
     type Pre = ();
 
@@ -414,7 +409,6 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
 
 /// Which lanes of a segment from table position `tu` to `tv` take the middle entry (shorter
 /// than [`SEGMENT_MIN_ENTRIES`]), the middle position, and `tv − tu`.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn segment_split8(
@@ -442,7 +436,6 @@ fn segment_split8(
 /// exist in both tables.
 ///
 /// [`segment_average`]: crate::slab::tables::segment_average
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
@@ -490,7 +483,6 @@ pub(super) unsafe fn segment_average8<const N: usize, const W: usize, const L: u
 ///
 /// # Safety
 /// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn post_segment8(

@@ -22,7 +22,6 @@ use volsplat_core::Scalar;
 ///
 /// # Safety
 /// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn sample_run_avx2<T: Scalar>(
     ctx: &Ctx<'_, T>,
@@ -64,7 +63,6 @@ pub(super) unsafe fn sample_run_avx2<T: Scalar>(
 ///
 /// # Safety
 /// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn extreme_row_avx2<T: Scalar>(
     ctx: &Ctx<'_, T>,
@@ -146,7 +144,6 @@ pub(super) unsafe fn extreme_row_avx2<T: Scalar>(
 }
 
 /// An 8×8 transpose: lane `l` of output `c` is element `c` of input row `l`.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn transpose8(r: [std::arch::x86_64::__m256; 8]) -> [std::arch::x86_64::__m256; 8] {
@@ -184,7 +181,6 @@ fn transpose8(r: [std::arch::x86_64::__m256; 8]) -> [std::arch::x86_64::__m256; 
 ///
 /// # Safety
 /// The CPU must support AVX2, and every `idx[l] + off` must be a row of `rows`.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn rows8(rows: &[[f32; 8]], idx: &[i32; 8], off: usize) -> [std::arch::x86_64::__m256; 8] {
@@ -206,7 +202,6 @@ unsafe fn rows8(rows: &[[f32; 8]], idx: &[i32; 8], off: usize) -> [std::arch::x8
 /// # Safety
 /// The CPU must support AVX2; the rows read must exist (`i ≤ last`, and `i + 1` too unless
 /// `paired`).
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn interp8(
@@ -237,7 +232,6 @@ unsafe fn interp8(
 }
 
 /// `(p₀q₀ + p₁q₁) + p₂q₂` on eight lanes (the order of the scalar twins' dot products).
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn dot8(
@@ -252,7 +246,6 @@ fn dot8(
 }
 
 /// `v` broadcast to eight lanes per component.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn splat3(v: [f32; 3]) -> [std::arch::x86_64::__m256; 3] {
@@ -269,7 +262,6 @@ fn splat3(v: [f32; 3]) -> [std::arch::x86_64::__m256; 3] {
 ///
 /// [`PostTable::lookup_in`]: crate::slab::tables::PostTable::lookup_in
 /// [`ShadeTable::entry`]: crate::slab::tables::ShadeTable::entry
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn table_pos8(
@@ -289,7 +281,6 @@ fn table_pos8(
 /// `p + f·(q − p)` on eight lanes ([`lerp`]).
 ///
 /// [`lerp`]: crate::slab::math::lerp
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn lerp8(
@@ -303,7 +294,6 @@ fn lerp8(
 
 /// A mask of the first `n` (≤ 8) of eight lanes: the pixels of a partial last group that belong
 /// to the run.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn first_lanes(n: usize) -> std::arch::x86_64::__m256 {
@@ -333,7 +323,6 @@ fn lanes(bits: i32) -> u32 {
 /// [`exp2_neg`] on eight lanes, with the same operations in the same order.
 ///
 /// [`exp2_neg`]: crate::slab::math::exp2_neg
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn exp2_neg8(z: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {

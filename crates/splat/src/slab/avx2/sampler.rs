@@ -11,7 +11,6 @@ use volsplat_core::Scalar;
 /// gathered as 32-bit words holding two corners along x and masked (sign-extended for signed
 /// types), so a group whose last corner lies within 3 bytes of the end of the data is left to
 /// the scalar path.
-#[cfg(target_arch = "x86_64")]
 pub(in crate::slab) struct Sampler8<T> {
     ptr: *const i32,
     kind: volsplat_core::ScalarType,
@@ -33,7 +32,6 @@ pub(in crate::slab) struct Sampler8<T> {
 
 /// Eight lanes' index positions and cells ([`Sampler8::locate`]); the fractions in the cells
 /// are computed only for groups that are sampled ([`Cells8::fractions`]).
-#[cfg(target_arch = "x86_64")]
 pub(in crate::slab) struct Cells8 {
     pub(super) cell: [std::arch::x86_64::__m256i; 3],
     pub(super) pos: [std::arch::x86_64::__m256; 3],
@@ -41,7 +39,6 @@ pub(in crate::slab) struct Cells8 {
     pub(super) xf: std::arch::x86_64::__m256,
 }
 
-#[cfg(target_arch = "x86_64")]
 impl Cells8 {
     /// The fractions in the cells, clamped to [0, 1]: [`Ctx::cell_f32`] lane by lane.
     ///
@@ -61,7 +58,6 @@ impl Cells8 {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
 impl<T: Scalar> Sampler8<T> {
     /// # Safety
     /// The CPU must support AVX2.

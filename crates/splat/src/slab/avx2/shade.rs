@@ -19,7 +19,6 @@ use volsplat_core::Scalar;
 ///
 /// [`shaded_src`]: crate::slab::shade::shaded_src
 /// [`Ctx::gradient_lerp`]: crate::slab::march::Ctx::gradient_lerp
-#[cfg(target_arch = "x86_64")]
 pub(in crate::slab) struct ShadeSource<'a, T> {
     pub(super) t: &'a ShadeTable,
     pub(super) sampler: &'a Sampler8<T>,
@@ -30,7 +29,6 @@ pub(in crate::slab) struct ShadeSource<'a, T> {
     pub(super) safe_base: std::arch::x86_64::__m256i,
 }
 
-#[cfg(target_arch = "x86_64")]
 impl<T: Scalar> ShadeSource<'_, T> {
     /// The mask of lanes whose cell is interior (between 1 and `n − 3` on every axis).
     #[inline]
@@ -51,7 +49,6 @@ impl<T: Scalar> ShadeSource<'_, T> {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
 impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
     /// The rows' first voxels (`base` with lanes that are not interior moved to cell
     /// (1, 1, 1)) and `c[j][k]`: voxels x − 1 … x + 2 of row (y + j, z + k).
@@ -195,7 +192,6 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
 /// [`ShadeAt::Voxels`]: crate::normals::ShadeAt::Voxels
 /// [`composite_groups_avx2`]: super::composite::composite_groups_avx2
 /// [`voxel_shaded_src`]: crate::slab::shade::voxel_shaded_src
-#[cfg(target_arch = "x86_64")]
 pub(in crate::slab) struct VoxelShadeSource<'a, T> {
     pub(super) t: &'a ShadeTable,
     pub(super) vs: &'a VoxelShading,
@@ -218,7 +214,6 @@ pub(in crate::slab) struct VoxelShadeSource<'a, T> {
     pub(super) back_st: [std::arch::x86_64::__m256; 3],
 }
 
-#[cfg(target_arch = "x86_64")]
 impl<T: Scalar> VoxelShadeSource<'_, T> {
     /// [`Ctx::light_cell`] on eight lanes: the linear indices and fractions of the cells
     /// where the segments are lit, `h` of the way back from the samples at `pos`.
@@ -299,7 +294,6 @@ impl<T: Scalar> VoxelShadeSource<'_, T> {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
 impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
     /// The cells' linear indices, the samples' positions and the pixel columns.
     type Pre = (
@@ -403,7 +397,6 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
 ///
 /// # Safety
 /// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn shade_segment8(
@@ -420,7 +413,6 @@ unsafe fn shade_segment8(
 /// `corrected` lanes) and the mask of lanes that contribute.
 ///
 /// [`shaded_src`]: crate::slab::shade::shaded_src
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 pub(in crate::slab) fn shade_terms8(
@@ -452,7 +444,6 @@ pub(in crate::slab) fn shade_terms8(
 /// interpolated index-space gradients `g`.
 ///
 /// [`shaded_src`]: crate::slab::shade::shaded_src
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 pub(in crate::slab) fn shade_light8(
@@ -538,7 +529,6 @@ pub(in crate::slab) fn shade_light8(
 /// ([`premultiplied`]'s operations).
 ///
 /// [`premultiplied`]: crate::slab::shade::premultiplied
-#[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx2")]
 fn premultiplied8(
