@@ -657,7 +657,6 @@ fn shrink_live(lw: &mut (i64, i64), row: &[Rgba], cutoff: f32) -> Option<(i64, i
     (lw.0 <= lw.1).then_some(*lw)
 }
 
-/// The accumulation of a band of rows as four planes of channels ([`Ctx::band_post`]).
 /// How [`Ctx::band_post`] classifies: through the unshaded table, or shaded.
 #[derive(Clone, Copy)]
 pub(super) enum Post<'a> {
@@ -669,6 +668,7 @@ pub(super) enum Post<'a> {
     Voxel(&'a ShadeTable, &'a VoxelShading),
 }
 
+/// The accumulation of a band of rows as four planes of channels ([`Ctx::band_post`]).
 struct BandAcc {
     r: Vec<f32>,
     g: Vec<f32>,

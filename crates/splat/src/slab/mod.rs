@@ -81,7 +81,7 @@
 //! [`VoxelShadeSource`]: avx2::shade::VoxelShadeSource
 //! [`extreme_row_avx2`]: avx2::extreme_row_avx2
 //!
-//! # Where it is
+//! # Code layout
 //!
 //! [`render_slabs`] checks the settings, places the planes and builds the tables; then:
 //!
