@@ -196,44 +196,8 @@ pub fn render_slabs<T: Scalar>(
     progress: &mut dyn FnMut(&Progress) -> bool,
 ) -> Result<Rendered> {
     let t_start = Instant::now();
-    validate(settings)?;
-    if settings.mode == RenderMode::Xray {
-        return Err(SplatError::Setting {
-            name: "mode",
-            value: "xray".into(),
-            expected: "composite, mip or minip with image-aligned slabs (X-ray line integrals \
-                       are exact in the sheet renderers)",
-        });
-    }
-    if settings.subsample != 1 {
-        return Err(SplatError::Setting {
-            name: "subsample",
-            value: settings.subsample.to_string(),
-            expected: "1 with image-aligned slabs (subsampling is the sheet renderers' preview)",
-        });
-    }
-    if settings.order != crate::geometry::Order::FrontToBack {
-        return Err(SplatError::Setting {
-            name: "order",
-            value: "back to front".into(),
-            expected: "front to back: image-aligned slabs composite front to back only",
-        });
-    }
-    if !(settings.slab.is_finite() && (0.01..=16.0).contains(&settings.slab)) {
-        return Err(SplatError::Setting {
-            name: "slab",
-            value: settings.slab.to_string(),
-            expected: "a slab thickness in [0.01, 16] × the smallest voxel spacing",
-        });
-    }
     let grid = volume.grid();
-    if grid.dims.contains(&0) {
-        return Err(SplatError::Setting {
-            name: "volume",
-            value: format!("{:?}", grid.dims),
-            expected: "at least one voxel per axis",
-        });
-    }
+    check_settings(settings, grid.dims)?;
     let owned;
     let bricks = match bricks {
         Some(b) if b.volume_dims == grid.dims => b,
@@ -459,6 +423,50 @@ pub fn render_slabs<T: Scalar>(
         values,
         stats,
     })
+}
+
+/// The settings [`render_slabs`] cannot draw, for a volume of `dims` voxels: those
+/// [`validate`] refuses, X-ray, subsampling, back-to-front order, a slab thickness outside
+/// `[0.01, 16]` and an empty volume.
+fn check_settings(settings: &RenderSettings, dims: [usize; 3]) -> Result<()> {
+    validate(settings)?;
+    if settings.mode == RenderMode::Xray {
+        return Err(SplatError::Setting {
+            name: "mode",
+            value: "xray".into(),
+            expected: "composite, mip or minip with image-aligned slabs (X-ray line integrals \
+                       are exact in the sheet renderers)",
+        });
+    }
+    if settings.subsample != 1 {
+        return Err(SplatError::Setting {
+            name: "subsample",
+            value: settings.subsample.to_string(),
+            expected: "1 with image-aligned slabs (subsampling is the sheet renderers' preview)",
+        });
+    }
+    if settings.order != crate::geometry::Order::FrontToBack {
+        return Err(SplatError::Setting {
+            name: "order",
+            value: "back to front".into(),
+            expected: "front to back: image-aligned slabs composite front to back only",
+        });
+    }
+    if !(settings.slab.is_finite() && (0.01..=16.0).contains(&settings.slab)) {
+        return Err(SplatError::Setting {
+            name: "slab",
+            value: settings.slab.to_string(),
+            expected: "a slab thickness in [0.01, 16] × the smallest voxel spacing",
+        });
+    }
+    if dims.contains(&0) {
+        return Err(SplatError::Setting {
+            name: "volume",
+            value: format!("{dims:?}"),
+            expected: "at least one voxel per axis",
+        });
+    }
+    Ok(())
 }
 
 static FORCE_SCALAR: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
