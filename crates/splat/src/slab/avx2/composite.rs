@@ -1,0 +1,504 @@
+//! The composite kernels' skeleton and the unshaded classification through the post table.
+
+use super::sampler::{Cells8, Sampler8};
+use super::shade::{ShadeSource, VoxelShadeSource};
+use super::{exp2_neg8, first_lanes, interp8, lanes, table_pos8};
+use crate::slab::march::{Counters, Ctx, Post, RowCtx};
+use crate::slab::tables::{PostTable, SEGMENT_MIN_ENTRIES};
+use crate::slab::view::Walk;
+use volsplat_core::Scalar;
+
+/// The skeleton of the composite kernels: pixels `a..=b` of a row, eight at a time, skipping
+/// groups that are opaque or whose cells' bricks have no opacity, sampling the volume
+/// ([`Sampler8`]), computing each lane's slab exponent (`boundary_factor`) and compositing what
+/// `src` returns front to back into the row's channel planes: lane `l` does exactly
+/// [`Ctx::composite_one`]'s f32 operations for pixel `x + l`; the classification `src`
+/// ([`Source8::src`]) gives the premultiplied colours and the lanes that contribute. Groups go
+/// in chunks of four, sampled first and classified after, so that the gathers' cache misses
+/// overlap (`docs/BENCHMARKS.md` §15.3: 9–15 % of the frame). Returns the first pixel not done (`b + 1`, or earlier
+/// where a group's reads would pass the end of the data, or the last pixels of the row where a
+/// group would pass it: those are left to the scalar twin).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[inline]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn composite_groups_avx2<T: Scalar>(
+    ctx: &Ctx<'_, T>,
+    walk: &Walk,
+    sampler: &Sampler8<T>,
+    (a, b): (usize, usize),
+    row: &mut RowCtx<'_>,
+    (post, src): (Post<'_>, &impl Source8<T>),
+    c: &mut Counters,
+) -> usize {
+    use std::arch::x86_64::*;
+    // SAFETY (all intrinsics and calls below): the caller guarantees AVX2; loads and stores
+    // are of pixels x..x + 8 ≤ the row's length.
+    // One byte per brick, padded so that a 4-byte read at the last brick stays inside.
+    let active_bytes = ctx.active_bytes.as_ptr() as *const i32;
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let cutoff = _mm256_set1_ps(ctx.cutoff);
+    let d = row.d;
+    let two_half = 2.0 * row.half;
+    let front = _mm256_set1_ps(d - two_half);
+    let back = _mm256_set1_ps(d + two_half);
+    let d_minus = _mm256_set1_ps(d - row.half);
+    let d_plus = _mm256_set1_ps(d + row.half);
+    let two_half_v = _mm256_set1_ps(two_half);
+    let persp = ctx.view.perspective;
+    let preint = ctx.preint_for(post);
+    let this_plane = _mm256_set1_epi32(row.plane as i32);
+    let next_stamp = _mm256_set1_epi32(row.plane.wrapping_add(1) as i32);
+    let mut x = a;
+    // Groups are taken in chunks: first each group of the chunk is tested and sampled, then each
+    // is classified and composited. The gathers of a chunk's groups then do not wait on one
+    // another's classification, so their cache misses overlap; every pixel still gets exactly
+    // the operations of the one-group-at-a-time loop (the groups hold different pixels).
+    const CHUNK: usize = 4;
+    struct Sampled<P> {
+        x: usize,
+        ar: __m256,
+        live: __m256,
+        frac: [__m256; 3],
+        u: __m256,
+        rho: __m256,
+        pre: P,
+    }
+    let mut chunk: [Option<Sampled<_>>; CHUNK] = std::array::from_fn(|_| None);
+    // The last group of the run may be partial: its lanes past `b` are masked (they read
+    // clamped cells, valid reads, and store what they loaded).
+    loop {
+        let mut filled = 0;
+        // Set where a group's reads would pass the end of the data: the run stops there.
+        let mut stop = None;
+        while filled < CHUNK && x <= b && x + 8 <= row.a.len() {
+            let n = (b - x + 1).min(8);
+            let in_run = first_lanes(n);
+            let ar = unsafe { _mm256_loadu_ps(row.a.as_ptr().add(x)) };
+            let live = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ar, cutoff), in_run);
+            let live_bits = _mm256_movemask_ps(live);
+            if live_bits == 0 {
+                c.terminated += n as u64;
+                x += 8;
+                continue;
+            }
+            let cells = unsafe { sampler.locate(x) };
+            // Lanes whose cell's brick has no opacity under the transfer function contribute
+            // nothing: not sampled where a whole group is in such bricks.
+            let active = if ctx.skip_empty {
+                // (One flag read where the group lies in one brick instead of the gather was
+                // measured: no gain on the CT, 5 % slower on Colin27.)
+                let brick = unsafe { sampler.bricks_of(&cells) };
+                let flags = unsafe { _mm256_i32gather_epi32::<1>(active_bytes, brick) };
+                _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+                    _mm256_and_si256(flags, _mm256_set1_epi32(0xff)),
+                    _mm256_setzero_si256(),
+                ))
+            } else {
+                _mm256_castsi256_ps(_mm256_set1_epi32(-1))
+            };
+            c.terminated += u64::from(n as u32 - lanes(live_bits));
+            let live = _mm256_and_ps(live, active);
+            let live_bits = _mm256_movemask_ps(live);
+            if live_bits == 0 {
+                x += 8;
+                continue;
+            }
+            if unsafe { src.scalar_lanes(&cells, live) } {
+                // The scalar twin takes the group's live lanes (the others are counted above or
+                // contribute nothing); its pixels are none of the chunk's.
+                for l in 0..n {
+                    if live_bits >> l & 1 == 1 {
+                        ctx.composite_one(walk, x + l, row, post, c);
+                    }
+                }
+                x += 8;
+                continue;
+            }
+            let base = unsafe { sampler.base_of(&cells) };
+            let frac = unsafe { cells.fractions() };
+            let Some((rho, pre)) = (unsafe { src.sample(&cells, base, frac) }) else {
+                stop = Some(x);
+                break;
+            };
+            c.samples += u64::from(lanes(live_bits));
+            // Pre-integration: the densities of the plane before where these pixels were sampled
+            // there, then this plane's (in the lanes sampled) for the next ([`Ctx::composite_one`]).
+            let u = if preint {
+                // SAFETY: x + 8 ≤ the row's length, and `prev`, `stamp` are as long as it.
+                let pp = unsafe { row.prev.as_mut_ptr().add(x) };
+                let sp = unsafe { row.stamp.as_mut_ptr().add(x) } as *mut __m256i;
+                let (pv, st) = unsafe { (_mm256_loadu_ps(pp), _mm256_loadu_si256(sp)) };
+                let have = _mm256_castsi256_ps(_mm256_cmpeq_epi32(st, this_plane));
+                unsafe {
+                    _mm256_storeu_ps(pp, _mm256_blendv_ps(pv, rho, live));
+                    _mm256_storeu_si256(
+                        sp,
+                        _mm256_castps_si256(_mm256_blendv_ps(
+                            _mm256_castsi256_ps(st),
+                            _mm256_castsi256_ps(next_stamp),
+                            live,
+                        )),
+                    );
+                }
+                _mm256_blendv_ps(rho, pv, have)
+            } else {
+                rho
+            };
+            chunk[filled] = Some(Sampled {
+                x,
+                ar,
+                live,
+                frac,
+                u,
+                rho,
+                pre,
+            });
+            filled += 1;
+            x += 8;
+        }
+        for g in chunk.iter_mut().take(filled) {
+            let Some(Sampled {
+                x,
+                ar,
+                live,
+                frac,
+                u,
+                rho,
+                pre,
+            }) = g.take()
+            else {
+                continue;
+            };
+            // The slab's exponent (`boundary_factor`, lane by lane).
+            let kf = unsafe { _mm256_loadu_ps(row.kf.as_ptr().add(x)) };
+            let din = unsafe { _mm256_loadu_ps(row.din.as_ptr().add(x)) };
+            let dout = unsafe { _mm256_loadu_ps(row.dout.as_ptr().add(x)) };
+            let lo_cut = _mm256_cmp_ps::<_CMP_LT_OQ>(front, din);
+            let hi_cut = _mm256_cmp_ps::<_CMP_GT_OQ>(back, dout);
+            let cut = _mm256_or_ps(lo_cut, hi_cut);
+            let k = if _mm256_movemask_ps(cut) == 0 {
+                kf
+            } else {
+                let l = _mm256_blendv_ps(d_minus, din, lo_cut);
+                let h = _mm256_blendv_ps(d_plus, dout, hi_cut);
+                let q = _mm256_max_ps(_mm256_div_ps(_mm256_sub_ps(h, l), two_half_v), zero);
+                _mm256_blendv_ps(kf, _mm256_mul_ps(kf, q), cut)
+            };
+            // Lanes that take the path-corrected form.
+            let corrected = if persp || preint {
+                _mm256_castsi256_ps(_mm256_set1_epi32(-1))
+            } else {
+                _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, one)
+            };
+            let (src, contributes) = unsafe { src.src(&pre, frac, u, rho, k, corrected) };
+            let mask = _mm256_and_ps(contributes, live);
+            let bits = _mm256_movemask_ps(mask);
+            if bits != 0 {
+                c.visible += u64::from(lanes(bits));
+                let tr = _mm256_sub_ps(one, ar);
+                let chans: [&mut [f32]; 4] = [&mut *row.r, &mut *row.g, &mut *row.b, &mut *row.a];
+                for (ch, plane) in chans.into_iter().enumerate() {
+                    let p = unsafe { plane.as_mut_ptr().add(x) };
+                    let old = unsafe { _mm256_loadu_ps(p) };
+                    // Masked lanes add a zero (of either sign), which leaves every value an
+                    // accumulation can hold (never −0) bit for bit, so the store needs no blend
+                    // (a blended store compiles to `vmaskmovps`, slow on AMD).
+                    let add = _mm256_mul_ps(tr, _mm256_and_ps(src[ch], mask));
+                    unsafe { _mm256_storeu_ps(p, _mm256_add_ps(old, add)) };
+                }
+            }
+        }
+        if let Some(at) = stop {
+            return at;
+        }
+        if filled == 0 {
+            return x;
+        }
+    }
+}
+
+/// Composite of pixels `a..=b` of a row, eight at a time ([`composite_groups_avx2`]), classified
+/// unshaded through the post table ([`PostSource`]) or shaded ([`ShadeSource`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar>(
+    ctx: &Ctx<'_, T>,
+    walk: &Walk,
+    a: usize,
+    b: usize,
+    row: &mut RowCtx<'_>,
+    post: Post<'_>,
+    c: &mut Counters,
+) -> usize {
+    use std::arch::x86_64::*;
+    // SAFETY (all calls): the caller guarantees AVX2.
+    let sampler = unsafe { Sampler8::new(ctx, walk) };
+    match post {
+        Post::Table(t) => unsafe {
+            let src = PostSource {
+                t,
+                sampler: &sampler,
+                preint: ctx.preint_for(post),
+            };
+            composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c)
+        },
+        // Central differences need a voxel each side of a cell: grids under 4 voxels on an axis
+        // have no interior cell, and take the scalar twin.
+        Post::Shaded(_) if ctx.dims.iter().any(|&n| n < 4) => a,
+        Post::Voxel(t, vs) => {
+            let src = VoxelShadeSource {
+                t,
+                vs,
+                sampler: &sampler,
+                codes: ctx.codes.as_ptr() as *const i32,
+                x_shift: _mm_cvtsi32_si128(16 * ctx.up[0] as i32),
+                preint: ctx.preint_for(post),
+                back_s: row.back_s.map(|v| _mm256_set1_ps(v)),
+                back_st: row.back_st.map(|v| _mm256_set1_ps(v)),
+            };
+            unsafe { composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c) }
+        }
+        Post::Shaded(t) => {
+            let src = ShadeSource {
+                t,
+                sampler: &sampler,
+                inner_max: ctx.dims.map(|n| _mm256_set1_epi32(n as i32 - 3)),
+                safe_base: _mm256_set1_epi32((1 + ctx.stride[1] + ctx.stride[2]) as i32),
+            };
+            unsafe { composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c) }
+        }
+    }
+}
+
+/// The sampling and classification of a group of eight samples for [`composite_groups_avx2`].
+pub(super) trait Source8<T> {
+    /// What [`Source8::sample`] read that [`Source8::src`] uses again.
+    type Pre;
+
+    /// Whether a lane of `live` must take the scalar twin (the kernel cannot read what it
+    /// needs there).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    unsafe fn scalar_lanes(&self, cells: &Cells8, live: std::arch::x86_64::__m256) -> bool;
+
+    /// The trilinear samples in `cells` (linear indices `base`, fractions `frac`), as
+    /// [`Sampler8::sample_at`] computes them, or `None` where a read would pass the end of the
+    /// data.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2; the cells must be the volume's, and no live lane may need
+    /// the scalar twin ([`Source8::scalar_lanes`]).
+    unsafe fn sample(
+        &self,
+        cells: &Cells8,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<(std::arch::x86_64::__m256, Self::Pre)>;
+
+    /// The premultiplied colours of the samples `rho` at fractions `frac` with slab exponents
+    /// `k`, and the mask of lanes that contribute; `corrected` is the mask of lanes whose
+    /// opacity takes the path correction (perspective, `k ≠ 1`, or pre-integration). `u`:
+    /// the densities at the pixels' samples on the plane before (`rho` where there are none),
+    /// read by the sources that pre-integrate ([`Ctx::preint_for`]).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2; `pre` must come from [`Source8::sample`].
+    unsafe fn src(
+        &self,
+        pre: &Self::Pre,
+        frac: [std::arch::x86_64::__m256; 3],
+        u: std::arch::x86_64::__m256,
+        rho: std::arch::x86_64::__m256,
+        k: std::arch::x86_64::__m256,
+        corrected: std::arch::x86_64::__m256,
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256);
+}
+
+/// Unshaded classification through the post table: lane `l` does exactly [`Ctx::post_src`]'s
+/// f32 operations (table lookups with paired rows, the path correction with the same polynomial
+/// `exp2`).
+pub(in crate::slab) struct PostSource<'a, T> {
+    t: &'a PostTable,
+    sampler: &'a Sampler8<T>,
+    /// Classify the segment from `u` to `rho` ([`post_segment8`]).
+    preint: bool,
+}
+
+impl<T: Scalar> Source8<T> for PostSource<'_, T> {
+    type Pre = ();
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn scalar_lanes(&self, _: &Cells8, _: std::arch::x86_64::__m256) -> bool {
+        false
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sample(
+        &self,
+        _: &Cells8,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<(std::arch::x86_64::__m256, ())> {
+        // SAFETY: the caller's guarantees.
+        Some((unsafe { self.sampler.sample_at(base, frac) }?, ()))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn src(
+        &self,
+        _: &(),
+        _: [std::arch::x86_64::__m256; 3],
+        u: std::arch::x86_64::__m256,
+        rho: std::arch::x86_64::__m256,
+        k: std::arch::x86_64::__m256,
+        corrected: std::arch::x86_64::__m256,
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        let t = self.t;
+        let zero = _mm256_setzero_ps();
+        let one = _mm256_set1_ps(1.0);
+        if self.preint {
+            // Every lane is path-corrected ([`Ctx::post_seg_src`]).
+            // SAFETY: the caller guarantees AVX2.
+            let v = unsafe { post_segment8(t, u, rho) };
+            let l = v[3];
+            let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(l, zero);
+            let a = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, l)));
+            let src = [
+                _mm256_mul_ps(v[0], a),
+                _mm256_mul_ps(v[1], a),
+                _mm256_mul_ps(v[2], a),
+                a,
+            ];
+            return (src, ok);
+        }
+        let pos = table_pos8(rho, t.lo, t.scale, t.last);
+        let corrected_bits = _mm256_movemask_ps(corrected);
+        let mut src = [zero; 4];
+        let mut contributes = _mm256_setzero_ps();
+        // SAFETY (interp8): positions are clamped to [0, last], rows of the paired tables.
+        if corrected_bits != 0xff {
+            let v = unsafe { interp8(&t.pairs, pos, true) };
+            src = [v[0], v[1], v[2], v[3]];
+            contributes = _mm256_cmp_ps::<_CMP_GT_OQ>(v[3], zero);
+        }
+        if corrected_bits != 0 {
+            let v = unsafe { interp8(&t.persp_pairs, pos, true) };
+            let l = v[3];
+            let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(l, zero);
+            let a = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, l)));
+            src[0] = _mm256_blendv_ps(src[0], _mm256_mul_ps(v[0], a), corrected);
+            src[1] = _mm256_blendv_ps(src[1], _mm256_mul_ps(v[1], a), corrected);
+            src[2] = _mm256_blendv_ps(src[2], _mm256_mul_ps(v[2], a), corrected);
+            src[3] = _mm256_blendv_ps(src[3], a, corrected);
+            contributes = _mm256_blendv_ps(contributes, ok, corrected);
+        }
+        (src, contributes)
+    }
+}
+
+/// Which lanes of a segment from table position `tu` to `tv` take the middle entry (shorter
+/// than [`SEGMENT_MIN_ENTRIES`]), the middle position, and `tv − tu`.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn segment_split8(
+    tu: std::arch::x86_64::__m256,
+    tv: std::arch::x86_64::__m256,
+) -> (
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+) {
+    use std::arch::x86_64::*;
+    let dt = _mm256_sub_ps(tv, tu);
+    let abs = _mm256_andnot_ps(_mm256_set1_ps(-0.0), dt);
+    let short = _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(SEGMENT_MIN_ENTRIES));
+    let mid = _mm256_mul_ps(_mm256_add_ps(tu, tv), _mm256_set1_ps(0.5));
+    (short, mid, dt)
+}
+
+/// [`segment_average`] on eight lanes: the same f32 operations, the branch as a blend;
+/// `mid_rows` and `integ` are the table's entry rows and integral rows, `paired` as
+/// [`interp8`] reads them.
+///
+/// # Safety
+/// The CPU must support AVX2; for every position in `[0, last]` the rows [`interp8`] reads must
+/// exist in both tables.
+///
+/// [`segment_average`]: crate::slab::tables::segment_average
+#[inline]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn segment_average8<const N: usize, const W: usize, const L: usize>(
+    (lo, scale, last): (f32, f32, f32),
+    u: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+    mid_rows: &[[f32; 8]],
+    integ: &[[f32; 8]],
+    paired: bool,
+) -> [std::arch::x86_64::__m256; N] {
+    use std::arch::x86_64::*;
+    let (w, l) = (W, L);
+    let tu = table_pos8(u, lo, scale, last);
+    let tv = table_pos8(v, lo, scale, last);
+    let (short, mid, dt) = segment_split8(tu, tv);
+    let bits = _mm256_movemask_ps(short);
+    let zero = _mm256_setzero_ps();
+    let mut out = [zero; N];
+    // SAFETY (interp8): the caller's guarantee.
+    if bits != 0 {
+        let m = unsafe { interp8(mid_rows, mid, paired) };
+        out = std::array::from_fn(|c| m[c]);
+    }
+    if bits != 0xff {
+        let a = unsafe { interp8(integ, tu, paired) };
+        let b = unsafe { interp8(integ, tv, paired) };
+        let dl = _mm256_sub_ps(b[w], a[w]);
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), dl);
+        for (c, o) in out.iter_mut().enumerate() {
+            let seg = if c == l {
+                _mm256_div_ps(dl, dt)
+            } else if c == w {
+                zero
+            } else {
+                _mm256_mul_ps(_mm256_sub_ps(b[c], a[c]), inv)
+            };
+            *o = _mm256_blendv_ps(seg, *o, short);
+        }
+    }
+    out
+}
+
+/// [`PostTable::segment`] on eight lanes ([`segment_average8`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn post_segment8(
+    t: &PostTable,
+    u: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+) -> [std::arch::x86_64::__m256; 4] {
+    // SAFETY: the paired tables have a row per position in [0, last].
+    unsafe {
+        segment_average8::<4, 3, 3>(
+            (t.lo, t.scale, t.last),
+            u,
+            v,
+            &t.persp_pairs,
+            &t.integ_pairs,
+            true,
+        )
+    }
+}

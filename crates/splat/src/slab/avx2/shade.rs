@@ -1,0 +1,542 @@
+//! Shaded classification on eight lanes: at the samples, with the central differences
+//! gathered from the volume ([`ShadeSource`]), and at the voxels ([`VoxelShadeSource`]).
+
+use super::composite::{Source8, segment_average8};
+use super::sampler::{Cells8, Sampler8};
+use super::{dot8, exp2_neg8, interp8, lerp8, splat3, table_pos8};
+use crate::normals::VoxelShading;
+use crate::slab::shade::SEGMENT_LIGHT_AT;
+use crate::slab::tables::ShadeTable;
+use volsplat_core::Scalar;
+
+/// Shaded classification ([`shade8`]) with the voxels' central differences gathered from the
+/// volume itself and interpolated in the sample's cell: lane `l` does exactly
+/// [`Ctx::gradient_lerp`]'s and [`shaded_src`]'s f32 operations. A cell's differences read
+/// the 4×4×4 block around it without its edges: four rows of four voxels along x through the
+/// cell's own four (y, z) corners, and eight rows of two beside them (the rows one before and two
+/// after along y and z). So only interior cells (one voxel from every face) are read here;
+/// lanes on the faces take the scalar twin, whose differences are one-sided there.
+///
+/// [`shaded_src`]: crate::slab::shade::shaded_src
+/// [`Ctx::gradient_lerp`]: crate::slab::march::Ctx::gradient_lerp
+pub(in crate::slab) struct ShadeSource<'a, T> {
+    pub(super) t: &'a ShadeTable,
+    pub(super) sampler: &'a Sampler8<T>,
+    /// `n − 3` per axis: the largest interior cell.
+    pub(super) inner_max: [std::arch::x86_64::__m256i; 3],
+    /// The linear index of cell (1, 1, 1), read in place of lanes that are not interior (their
+    /// results are dropped).
+    pub(super) safe_base: std::arch::x86_64::__m256i,
+}
+
+impl<T: Scalar> ShadeSource<'_, T> {
+    /// The mask of lanes whose cell is interior (between 1 and `n − 3` on every axis).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn interior(&self, cells: &Cells8) -> std::arch::x86_64::__m256 {
+        use std::arch::x86_64::*;
+        let zero = _mm256_setzero_si256();
+        let mut m = _mm256_set1_epi32(-1);
+        for ax in 0..3 {
+            let c = cells.cell[ax];
+            let inside = _mm256_andnot_si256(
+                _mm256_cmpgt_epi32(c, self.inner_max[ax]),
+                _mm256_cmpgt_epi32(c, zero),
+            );
+            m = _mm256_and_si256(m, inside);
+        }
+        _mm256_castsi256_ps(m)
+    }
+}
+
+impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
+    /// The rows' first voxels (`base` with lanes that are not interior moved to cell
+    /// (1, 1, 1)) and `c[j][k]`: voxels x − 1 … x + 2 of row (y + j, z + k).
+    type Pre = (
+        std::arch::x86_64::__m256i,
+        [[[std::arch::x86_64::__m256; 4]; 2]; 2],
+    );
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn scalar_lanes(&self, cells: &Cells8, live: std::arch::x86_64::__m256) -> bool {
+        use std::arch::x86_64::*;
+        _mm256_movemask_ps(_mm256_andnot_ps(self.interior(cells), live)) != 0
+    }
+
+    /// The sample from the four central rows (the cell's corners are their voxels x and
+    /// x + 1), which the differences read again.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sample(
+        &self,
+        cells: &Cells8,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<(std::arch::x86_64::__m256, Self::Pre)> {
+        use std::arch::x86_64::*;
+        let base = _mm256_blendv_epi8(
+            self.safe_base,
+            base,
+            _mm256_castps_si256(self.interior(cells)),
+        );
+        let s = self.sampler;
+        let first = _mm256_sub_epi32(base, _mm256_set1_epi32(1));
+        let (y1, z1) = (_mm256_add_epi32(first, s.sy), _mm256_add_epi32(first, s.sz));
+        // SAFETY: interior cells (or cell (1, 1, 1)): voxels x − 1 … x + 2 of rows y, y + 1 and
+        // z, z + 1 lie in the volume.
+        let c = unsafe {
+            [
+                [s.gather4(first), s.gather4(z1)],
+                [s.gather4(y1), s.gather4(_mm256_add_epi32(y1, s.sz))],
+            ]
+        };
+        // Sampler8::sample_at's interpolation of the corners (voxels x and x + 1 of each row).
+        let c00 = lerp8(c[0][0][1], c[0][0][2], frac[0]);
+        let c10 = lerp8(c[1][0][1], c[1][0][2], frac[0]);
+        let c01 = lerp8(c[0][1][1], c[0][1][2], frac[0]);
+        let c11 = lerp8(c[1][1][1], c[1][1][2], frac[0]);
+        let rho = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
+        Some((rho, (base, c)))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn src(
+        &self,
+        pre: &Self::Pre,
+        frac: [std::arch::x86_64::__m256; 3],
+        _: std::arch::x86_64::__m256,
+        rho: std::arch::x86_64::__m256,
+        k: std::arch::x86_64::__m256,
+        corrected: std::arch::x86_64::__m256,
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        let pos = table_pos8(rho, self.t.lo, self.t.scale, self.t.last);
+        // SAFETY: positions are clamped to [0, last], and row last + 1 exists.
+        let v = unsafe { interp8(&self.t.rows, pos, false) };
+        let (v, a, contributes) = shade_terms8(v, k, corrected);
+        if _mm256_movemask_ps(contributes) == 0 {
+            return ([_mm256_setzero_ps(); 4], contributes);
+        }
+        let (base, c) = pre;
+        let s = self.sampler;
+        let (sy, sz) = (s.sy, s.sz);
+        let (ny, nz) = (_mm256_sub_epi32(*base, sy), _mm256_sub_epi32(*base, sz));
+        let (y2, z2) = (
+            _mm256_add_epi32(*base, _mm256_add_epi32(sy, sy)),
+            _mm256_add_epi32(*base, _mm256_add_epi32(sz, sz)),
+        );
+        // SAFETY: as in `sample`; a 4-byte read starting in these rows ends in the data (the
+        // last row read is (y + 2, z + 1) or (y + 1, z + 2), never the grid's last row).
+        let (yo, zo) = unsafe {
+            (
+                // yo[0][k]: row (y − 1, z + k); yo[1][k]: row (y + 2, z + k); voxels x, x + 1.
+                [
+                    [s.gather2(ny), s.gather2(_mm256_add_epi32(ny, sz))],
+                    [s.gather2(y2), s.gather2(_mm256_add_epi32(y2, sz))],
+                ],
+                // zo[j][0]: row (y + j, z − 1); zo[j][1]: row (y + j, z + 2).
+                [
+                    [s.gather2(nz), s.gather2(z2)],
+                    [
+                        s.gather2(_mm256_add_epi32(nz, sy)),
+                        s.gather2(_mm256_add_epi32(z2, sy)),
+                    ],
+                ],
+            )
+        };
+        let half = _mm256_set1_ps(0.5);
+        // The differences along each axis at corner (dx, dy, dz), as `Ctx::gradient_lerp`.
+        let mut d = [[[[_mm256_setzero_ps(); 2]; 2]; 2]; 3];
+        for dy in 0..2 {
+            for dz in 0..2 {
+                for dx in 0..2 {
+                    let r = &c[dy][dz];
+                    let (hi_y, lo_y) = if dy == 0 {
+                        (c[1][dz][dx + 1], yo[0][dz][dx])
+                    } else {
+                        (yo[1][dz][dx], c[0][dz][dx + 1])
+                    };
+                    let (hi_z, lo_z) = if dz == 0 {
+                        (c[dy][1][dx + 1], zo[dy][0][dx])
+                    } else {
+                        (zo[dy][1][dx], c[dy][0][dx + 1])
+                    };
+                    d[0][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(r[dx + 2], r[dx]), half);
+                    d[1][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(hi_y, lo_y), half);
+                    d[2][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(hi_z, lo_z), half);
+                }
+            }
+        }
+        let mut g = [_mm256_setzero_ps(); 3];
+        for (ax, out) in g.iter_mut().enumerate() {
+            let e = &d[ax];
+            let c00 = lerp8(e[0][0][0], e[0][0][1], frac[0]);
+            let c10 = lerp8(e[0][1][0], e[0][1][1], frac[0]);
+            let c01 = lerp8(e[1][0][0], e[1][0][1], frac[0]);
+            let c11 = lerp8(e[1][1][0], e[1][1][1], frac[0]);
+            *out = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
+        }
+        (shade_light8(self.t, &v, a, contributes, g), contributes)
+    }
+}
+
+/// Shaded composite at the voxels ([`ShadeAt::Voxels`]) for [`composite_groups_avx2`]: the
+/// sample as [`Sampler8::sample_at`], the classifier's terms from [`ShadeTable`]
+/// ([`shade_terms8`]), the eight corners' direction codes (four 32-bit gathers, two codes
+/// each along x), their diffuse and specular light gathered from [`VoxelShading`] and
+/// interpolated; lane by lane the f32 operations of [`voxel_shaded_src`]. Every cell can be
+/// read (the codes hold the faces' one-sided differences), so no lane needs the scalar twin.
+///
+/// [`ShadeAt::Voxels`]: crate::normals::ShadeAt::Voxels
+/// [`composite_groups_avx2`]: super::composite::composite_groups_avx2
+/// [`voxel_shaded_src`]: crate::slab::shade::voxel_shaded_src
+pub(in crate::slab) struct VoxelShadeSource<'a, T> {
+    pub(super) t: &'a ShadeTable,
+    pub(super) vs: &'a VoxelShading,
+    pub(super) sampler: &'a Sampler8<T>,
+    /// The codes ([`NormalField::codes`], padded by one code so that a 4-byte read at the
+    /// last voxel stays inside).
+    ///
+    /// [`NormalField::codes`]: crate::normals::NormalField::codes
+    pub(super) codes: *const i32,
+    /// Bits from a corner's code to the next one's along x in a 32-bit word: `16·ux`.
+    pub(super) x_shift: std::arch::x86_64::__m128i,
+    /// Classify the segment from `u` to `rho` ([`shade_segment8`]) and light it at its middle
+    /// ([`VoxelShadeSource::light_cells`]).
+    pub(super) preint: bool,
+    /// [`RowCtx::back_s`], [`RowCtx::back_st`] broadcast.
+    ///
+    /// [`RowCtx::back_s`]: crate::slab::march::RowCtx::back_s
+    /// [`RowCtx::back_st`]: crate::slab::march::RowCtx::back_st
+    pub(super) back_s: [std::arch::x86_64::__m256; 3],
+    pub(super) back_st: [std::arch::x86_64::__m256; 3],
+}
+
+impl<T: Scalar> VoxelShadeSource<'_, T> {
+    /// [`Ctx::light_cell`] on eight lanes: the linear indices and fractions of the cells
+    /// where the segments are lit, `h` of the way back from the samples at `pos`.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    ///
+    /// [`Ctx::light_cell`]: crate::slab::march::Ctx::light_cell
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(in crate::slab) unsafe fn light_cells(
+        &self,
+        pos: &[std::arch::x86_64::__m256; 3],
+        xf: std::arch::x86_64::__m256,
+        h: std::arch::x86_64::__m256,
+    ) -> (std::arch::x86_64::__m256i, [std::arch::x86_64::__m256; 3]) {
+        use std::arch::x86_64::*;
+        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+        let izero = _mm256_setzero_si256();
+        let mut cell = [izero; 3];
+        let mut frac = [zero; 3];
+        for a in 0..3 {
+            let step = _mm256_add_ps(self.back_s[a], _mm256_mul_ps(xf, self.back_st[a]));
+            let q = _mm256_add_ps(pos[a], _mm256_mul_ps(h, step));
+            cell[a] = _mm256_min_epi32(
+                _mm256_max_epi32(_mm256_cvttps_epi32(q), izero),
+                self.sampler.maxc[a],
+            );
+            let d = _mm256_sub_ps(q, _mm256_cvtepi32_ps(cell[a]));
+            frac[a] = _mm256_min_ps(_mm256_max_ps(d, zero), one);
+        }
+        // SAFETY: the caller guarantees AVX2.
+        let base = unsafe {
+            self.sampler.base_of(&Cells8 {
+                cell,
+                pos: *pos,
+                xf,
+            })
+        };
+        (base, frac)
+    }
+
+    /// The diffuse and specular light of plane `p` at the corners' codes `q` (`x` fastest),
+    /// interpolated and scaled ([`voxel_shaded_src`]'s operations).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2; every code must be below [`crate::normals::CODES`].
+    ///
+    /// [`voxel_shaded_src`]: crate::slab::shade::voxel_shaded_src
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn light8(
+        &self,
+        p: usize,
+        q: &[std::arch::x86_64::__m256i; 8],
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> [std::arch::x86_64::__m256; 2] {
+        use std::arch::x86_64::*;
+        let plane = self.vs.plane(p).as_ptr() as *const i32;
+        let mask = _mm256_set1_epi32(0xffff);
+        // SAFETY: codes are u16, and a plane holds CODES = 2^16 words.
+        let w: [__m256i; 8] =
+            std::array::from_fn(|k| unsafe { _mm256_i32gather_epi32::<4>(plane, q[k]) });
+        let tri = |c: [__m256; 8]| {
+            let c00 = lerp8(c[0], c[1], frac[0]);
+            let c10 = lerp8(c[2], c[3], frac[0]);
+            let c01 = lerp8(c[4], c[5], frac[0]);
+            let c11 = lerp8(c[6], c[7], frac[0]);
+            lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2])
+        };
+        let d = tri(w.map(|w| _mm256_cvtepi32_ps(_mm256_and_si256(w, mask))));
+        let s = tri(w.map(|w| _mm256_cvtepi32_ps(_mm256_srli_epi32::<16>(w))));
+        let [sd, ss] = self.vs.scale[p];
+        [
+            _mm256_mul_ps(d, _mm256_set1_ps(sd)),
+            _mm256_mul_ps(s, _mm256_set1_ps(ss)),
+        ]
+    }
+}
+
+impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
+    /// The cells' linear indices, the samples' positions and the pixel columns.
+    type Pre = (
+        std::arch::x86_64::__m256i,
+        [std::arch::x86_64::__m256; 3],
+        std::arch::x86_64::__m256,
+    );
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn scalar_lanes(&self, _: &Cells8, _: std::arch::x86_64::__m256) -> bool {
+        false
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn sample(
+        &self,
+        cells: &Cells8,
+        base: std::arch::x86_64::__m256i,
+        frac: [std::arch::x86_64::__m256; 3],
+    ) -> Option<(std::arch::x86_64::__m256, Self::Pre)> {
+        // SAFETY: the caller's guarantees are sample_at's.
+        unsafe { self.sampler.sample_at(base, frac) }.map(|rho| (rho, (base, cells.pos, cells.xf)))
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn src(
+        &self,
+        pre: &Self::Pre,
+        frac: [std::arch::x86_64::__m256; 3],
+        u: std::arch::x86_64::__m256,
+        rho: std::arch::x86_64::__m256,
+        k: std::arch::x86_64::__m256,
+        corrected: std::arch::x86_64::__m256,
+    ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        // SAFETY (both): the caller guarantees AVX2; positions are clamped to [0, last], and
+        // row last + 1 exists.
+        let v = if self.preint {
+            unsafe { shade_segment8(self.t, u, rho) }
+        } else {
+            let pos = table_pos8(rho, self.t.lo, self.t.scale, self.t.last);
+            unsafe { interp8(&self.t.rows, pos, false) }
+        };
+        let (v, a, contributes) = shade_terms8(v, k, corrected);
+        if _mm256_movemask_ps(contributes) == 0 {
+            return ([_mm256_setzero_ps(); 4], contributes);
+        }
+        let mut col = [v[1], v[2], v[3]];
+        let (diffuse, specular, _) = self.t.switches();
+        if diffuse || specular {
+            let (base, frac) = if self.preint {
+                // Lanes that contribute and whose segment is not one value (`SEGMENT_LIGHT_AT`).
+                let mid = _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(u, rho), contributes);
+                let h = _mm256_and_ps(_mm256_set1_ps(SEGMENT_LIGHT_AT), mid);
+                // SAFETY: the caller guarantees AVX2.
+                unsafe { self.light_cells(&pre.1, pre.2, h) }
+            } else {
+                (pre.0, frac)
+            };
+            let base = &base;
+            let o = self.sampler.offs;
+            let mask = _mm256_set1_epi32(0xffff);
+            let mut q = [_mm256_setzero_si256(); 8];
+            for pair in 0..4 {
+                let idx = _mm256_add_epi32(*base, _mm256_set1_epi32(o[2 * pair]));
+                // SAFETY: `idx` is a voxel of the volume (cells are clamped to the grid), and
+                // the codes hold one more u16 than the volume has voxels.
+                let w = unsafe { _mm256_i32gather_epi32::<2>(self.codes, idx) };
+                q[2 * pair] = _mm256_and_si256(w, mask);
+                q[2 * pair + 1] = _mm256_and_si256(_mm256_srl_epi32(w, self.x_shift), mask);
+            }
+            // SAFETY (light8): codes are u16.
+            let l = if self.vs.chromatic {
+                [0, 1, 2].map(|p| unsafe { self.light8(p, &q, frac) })
+            } else {
+                [unsafe { self.light8(0, &q, frac) }; 3]
+            };
+            if diffuse {
+                for ch in 0..3 {
+                    col[ch] = _mm256_add_ps(col[ch], _mm256_mul_ps(v[4 + ch], l[ch][0]));
+                }
+            }
+            if specular {
+                for ch in 0..3 {
+                    let sc = match self.t.spec_color {
+                        Some(c) => _mm256_set1_ps(c[ch]),
+                        None => v[4 + ch],
+                    };
+                    col[ch] = _mm256_add_ps(col[ch], _mm256_mul_ps(sc, l[ch][1]));
+                }
+            }
+        }
+        (premultiplied8(col, a), contributes)
+    }
+}
+
+/// [`ShadeTable::segment_entry`] on eight lanes ([`segment_average8`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn shade_segment8(
+    t: &ShadeTable,
+    u: std::arch::x86_64::__m256,
+    v: std::arch::x86_64::__m256,
+) -> [std::arch::x86_64::__m256; 8] {
+    // SAFETY: both tables repeat their last row, so row last + 1 exists.
+    unsafe { segment_average8::<8, 0, 7>((t.lo, t.scale, t.last), u, v, &t.rows, &t.integ, false) }
+}
+
+/// The first half of [`shaded_src`] on eight lanes, from the table's entries `v` (at the
+/// samples, or of the segments, [`shade_segment8`]): the opacity (path-corrected in the
+/// `corrected` lanes) and the mask of lanes that contribute.
+///
+/// [`shaded_src`]: crate::slab::shade::shaded_src
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(in crate::slab) fn shade_terms8(
+    v: [std::arch::x86_64::__m256; 8],
+    k: std::arch::x86_64::__m256,
+    corrected: std::arch::x86_64::__m256,
+) -> (
+    [std::arch::x86_64::__m256; 8],
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+) {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let corrected_bits = _mm256_movemask_ps(corrected);
+    let mut a = v[0];
+    let mut contributes = _mm256_cmp_ps::<_CMP_GT_OQ>(v[0], zero);
+    if corrected_bits != 0 {
+        let ac = _mm256_sub_ps(one, exp2_neg8(_mm256_mul_ps(k, v[7])));
+        a = _mm256_blendv_ps(a, ac, corrected);
+        let ok = _mm256_cmp_ps::<_CMP_LT_OQ>(v[7], zero);
+        contributes = _mm256_blendv_ps(contributes, ok, corrected);
+    }
+    (v, a, contributes)
+}
+
+/// The second half of [`shaded_src`] on eight lanes (the conditions as masks): the
+/// premultiplied colours from the entries `v` and opacity `a` of [`shade_terms8`] and the
+/// interpolated index-space gradients `g`.
+///
+/// [`shaded_src`]: crate::slab::shade::shaded_src
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(in crate::slab) fn shade_light8(
+    t: &ShadeTable,
+    v: &[std::arch::x86_64::__m256; 8],
+    a: std::arch::x86_64::__m256,
+    contributes: std::arch::x86_64::__m256,
+    g: [std::arch::x86_64::__m256; 3],
+) -> [std::arch::x86_64::__m256; 4] {
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let [m0, m1, m2] = t.to_world;
+    let (m0, m1, m2) = (splat3(m0), splat3(m1), splat3(m2));
+    // World gradient, component i: (m0ᵢ·g₀ + m1ᵢ·g₁) + m2ᵢ·g₂.
+    let gw = [
+        dot8([m0[0], m1[0], m2[0]], g),
+        dot8([m0[1], m1[1], m2[1]], g),
+        dot8([m0[2], m1[2], m2[2]], g),
+    ];
+    let g2 = dot8(gw, gw);
+    let mut col = [v[1], v[2], v[3]];
+    let lit = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(g2, zero), contributes);
+    if (t.diffuse || t.specular) && _mm256_movemask_ps(lit) != 0 {
+        let inv = _mm256_div_ps(one, _mm256_sqrt_ps(g2));
+        let n = [
+            _mm256_mul_ps(gw[0], inv),
+            _mm256_mul_ps(gw[1], inv),
+            _mm256_mul_ps(gw[2], inv),
+        ];
+        let sign = _mm256_set1_ps(-0.0);
+        let spec_max = _mm256_set1_ps(ShadeTable::SPEC as f32);
+        for light in &t.lights {
+            let lc = splat3(light.color.to_array());
+            let mut ndl = dot8(n, splat3(light.l.to_array()));
+            let mut ndh = dot8(n, splat3(light.h.to_array()));
+            if t.two_sided {
+                let flip = _mm256_cmp_ps::<_CMP_LT_OQ>(ndl, zero);
+                ndl = _mm256_blendv_ps(ndl, _mm256_xor_ps(ndl, sign), flip);
+                ndh = _mm256_blendv_ps(ndh, _mm256_xor_ps(ndh, sign), flip);
+            }
+            let dm = _mm256_and_ps(lit, _mm256_cmp_ps::<_CMP_GT_OQ>(ndl, zero));
+            if _mm256_movemask_ps(dm) == 0 {
+                continue;
+            }
+            if t.diffuse {
+                for ch in 0..3 {
+                    let term = _mm256_mul_ps(_mm256_mul_ps(v[4 + ch], lc[ch]), ndl);
+                    col[ch] = _mm256_add_ps(col[ch], _mm256_and_ps(term, dm));
+                }
+            }
+            let sm = _mm256_and_ps(dm, _mm256_cmp_ps::<_CMP_GT_OQ>(ndh, zero));
+            if t.specular && _mm256_movemask_ps(sm) != 0 {
+                // ShadeTable::spec, lane by lane (masked lanes clamp to a valid entry and are
+                // dropped by the mask).
+                let s = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(ndh, spec_max), zero), spec_max);
+                let i = _mm256_cvttps_epi32(s);
+                let f = _mm256_sub_ps(s, _mm256_cvtepi32_ps(i));
+                let tab = t.spec_pow.as_ptr();
+                // SAFETY: i ∈ [0, SPEC], and spec_pow has SPEC + 2 entries.
+                let (p0, p1) = unsafe {
+                    (
+                        _mm256_i32gather_ps::<4>(tab, i),
+                        _mm256_i32gather_ps::<4>(tab.add(1), i),
+                    )
+                };
+                let p = _mm256_add_ps(p0, _mm256_mul_ps(f, _mm256_sub_ps(p1, p0)));
+                for ch in 0..3 {
+                    let sc = match t.spec_color {
+                        Some(c) => _mm256_set1_ps(c[ch]),
+                        None => v[4 + ch],
+                    };
+                    let term = _mm256_mul_ps(_mm256_mul_ps(sc, lc[ch]), p);
+                    col[ch] = _mm256_add_ps(col[ch], _mm256_and_ps(term, sm));
+                }
+            }
+        }
+    }
+    premultiplied8(col, a)
+}
+
+/// The shaded colour `col` clamped to [0, 1] and multiplied by the opacity `a`, on eight lanes
+/// ([`premultiplied`]'s operations).
+///
+/// [`premultiplied`]: crate::slab::shade::premultiplied
+#[inline]
+#[target_feature(enable = "avx2")]
+fn premultiplied8(
+    col: [std::arch::x86_64::__m256; 3],
+    a: std::arch::x86_64::__m256,
+) -> [std::arch::x86_64::__m256; 4] {
+    use std::arch::x86_64::*;
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    let c = col.map(|c| _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(c, zero), one), a));
+    [c[0], c[1], c[2], a]
+}

@@ -1,0 +1,741 @@
+//! The march through the planes: each band of image rows through every plane, each pixel
+//! sampled, classified and composited front to back (or compared, for MIP and MinIP). The
+//! per-pixel code here is the scalar twin of the AVX2 kernels (`super::avx2`), which take the
+//! runs of eight pixels where the CPU has AVX2.
+
+#[cfg(target_arch = "x86_64")]
+use super::avx2::{composite_run_avx2, extreme_row_avx2, sample_run_avx2};
+use super::math::{exp2_neg, trilinear};
+use super::path::boundary_factor;
+use super::shade::{SEGMENT_LIGHT_AT, shade_opacity, shaded_src, voxel_shaded_src};
+use super::tables::{PostTable, ShadeTable};
+use super::view::{FRAC, View, Walk, clip_linear, to_fixed};
+use crate::bricks::BrickGrid;
+use crate::normals::VoxelShading;
+use crate::render::RenderMode;
+use volsplat_core::glam::{DVec3, Vec3};
+use volsplat_core::image::{Rgba, over_front_to_back};
+use volsplat_core::{FrameClassifier, SampleInput, Scalar};
+
+#[derive(Default, Clone, Copy)]
+pub(super) struct Counters {
+    /// Samples reconstructed.
+    pub(super) samples: u64,
+    /// Samples with non-zero opacity composited (or MIP samples compared).
+    pub(super) visible: u64,
+    /// Samples skipped because the pixel was opaque.
+    pub(super) terminated: u64,
+}
+
+impl Counters {
+    pub(super) fn add(self, o: Counters) -> Counters {
+        Counters {
+            samples: self.samples + o.samples,
+            visible: self.visible + o.visible,
+            terminated: self.terminated + o.terminated,
+        }
+    }
+}
+
+pub(super) struct Ctx<'a, T> {
+    pub(super) data: &'a [T],
+    pub(super) dims: [usize; 3],
+    /// The upper corner of the box the rays cross, in the index space of the view
+    /// ([`drawn_geometry`]): `n − 1`, or 1 along an axis of one sample (its voxel, `[0, 1]`
+    /// there, shifted by half a voxel; every position on it reads the one sample).
+    ///
+    /// [`drawn_geometry`]: super::view::drawn_geometry
+    pub(super) box_hi: [i64; 3],
+    /// Largest cell index per axis (`max(n, 2) − 2`).
+    pub(super) max_cell: [i64; 3],
+    /// Index strides per axis.
+    pub(super) stride: [usize; 3],
+    /// Offset to the next voxel per axis (0 along an axis of one voxel).
+    pub(super) up: [usize; 3],
+    /// Sample eight pixels at a time with AVX2 (the CPU has it, and indices fit in i32).
+    pub(super) simd: bool,
+    /// Per index axis: the world direction of that axis divided by its spacing (a derivative
+    /// per index step becomes a world gradient).
+    pub(super) grad_to_world: [Vec3; 3],
+    pub(super) bricks: &'a BrickGrid,
+    pub(super) active: &'a [bool],
+    /// `active` as bytes, padded with three zero bytes (AVX2 gathers read 4 bytes).
+    pub(super) active_bytes: Vec<u8>,
+    /// MIP: each brick's maximum; MinIP: its minimum (empty otherwise): the one bound of
+    /// `bricks.ranges` that the mode tests, in half the memory.
+    pub(super) extreme_bounds: Vec<f32>,
+    pub(super) skip_empty: bool,
+    pub(super) view: View,
+    pub(super) classifier: &'a FrameClassifier,
+    /// Unshaded, density-indexed classification as one premultiplied table.
+    pub(super) post: Option<&'a PostTable>,
+    /// Shaded, density-indexed classification.
+    pub(super) shaded: Option<&'a ShadeTable>,
+    /// With `shaded`: the lights applied to every direction code, where the voxels are shaded
+    /// ([`ShadeAt::Voxels`]), and the voxels' codes ([`NormalField::codes`]; empty otherwise).
+    ///
+    /// [`ShadeAt::Voxels`]: crate::normals::ShadeAt::Voxels
+    /// [`NormalField::codes`]: crate::normals::NormalField::codes
+    pub(super) voxel: Option<&'a VoxelShading>,
+    pub(super) codes: &'a [u16],
+    /// Pre-integrated classification of the segments between planes
+    /// ([`RenderSettings::preintegrate`]).
+    ///
+    /// [`RenderSettings::preintegrate`]: crate::render::RenderSettings::preintegrate
+    pub(super) preint: bool,
+    pub(super) mode: RenderMode,
+    pub(super) shade: bool,
+    pub(super) cutoff: f32,
+    pub(super) j0: i64,
+    pub(super) n_planes: usize,
+    pub(super) delta: f64,
+    pub(super) dmin: f64,
+    pub(super) depth_scale: f64,
+    pub(super) width: usize,
+    pub(super) clip: Vec<(DVec3, f64)>,
+}
+
+impl<T: Scalar> Ctx<'_, T> {
+    pub(super) fn depth(&self, plane: usize) -> f64 {
+        (self.j0 + plane as i64) as f64 * self.delta
+    }
+
+    /// Row `y` of the plane at depth `d` in 32.32 fixed-point index coordinates (VTK's ray
+    /// caster steps in 15-bit fixed point): integer steps are exact, so a pixel's position is
+    /// the same whichever pixels around it are skipped. The span holds the pixels whose point
+    /// lies in the box the rays cross, `[0, box_hi]` (the voxel centres' box, decision 0023),
+    /// checked in fixed point, so no clamping is needed below 0.
+    pub(super) fn walk(&self, y: usize, d: f64) -> Walk {
+        let (start, step) = self.view.row(y, d);
+        let mut r = (0, self.width as i64 - 1);
+        for a in 0..3 {
+            r = clip_linear(r, start[a], step[a], 0.0, self.box_hi[a] as f64);
+        }
+        let s = [0, 1, 2].map(|a| to_fixed(start[a]));
+        let st = [0, 1, 2].map(|a| to_fixed(step[a]));
+        let inside = |x: i64| {
+            (0..3).all(|a| {
+                let q = s[a] + x * st[a];
+                q >= 0 && q <= self.box_hi[a] << FRAC
+            })
+        };
+        while r.0 <= r.1 && !inside(r.0) {
+            r.0 += 1;
+        }
+        while r.1 >= r.0 && !inside(r.1) {
+            r.1 -= 1;
+        }
+        Walk {
+            s,
+            st,
+            s32: [0, 1, 2].map(|a| start[a] as f32),
+            st32: [0, 1, 2].map(|a| step[a] as f32),
+            span: r,
+        }
+    }
+
+    /// The pixels of row `y` at depth `d` kept by every clipping plane.
+    pub(super) fn clip_span(&self, y: usize, d: f64, r: (i64, i64)) -> (i64, i64) {
+        if self.clip.is_empty() || r.0 > r.1 {
+            return r;
+        }
+        let (p0, dp) = self.view.row_world(y, d);
+        let mut r = r;
+        for &(n, off) in &self.clip {
+            r = clip_linear(r, n.dot(p0) + off, n.dot(dp), 0.0, f64::INFINITY);
+        }
+        r
+    }
+
+    /// Reconstructs the pixels `span` (within `walk.span`) of a row into `out` (NaN elsewhere
+    /// and where the brick is skipped). Returns the number of samples reconstructed.
+    ///
+    /// Runs of pixels in active bricks are sampled at `s + x·st` (f32, per pixel, so a pixel's
+    /// value does not depend on which pixels around it are skipped), eight at a time with AVX2
+    /// where the CPU has it ([`sample_run_avx2`]) and one at a time otherwise; both do the same
+    /// f32 operations in the same order, so they give the same bits.
+    fn sample_row(&self, walk: &Walk, span: (i64, i64), out: &mut [f32]) -> u64 {
+        out.fill(f32::NAN);
+        let mut count = 0;
+        let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+        self.for_each_run(walk, lo, hi, |a, b| {
+            self.sample_run(walk, a, b, out);
+            count += (b - a + 1) as u64;
+        });
+        count
+    }
+
+    /// Samples the pixels `a..=b` of a row (all inside the volume) into `out`.
+    #[inline]
+    fn sample_run(&self, walk: &Walk, a: usize, b: usize, out: &mut [f32]) {
+        #[allow(unused_mut)]
+        let mut x = a;
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+            x = unsafe { sample_run_avx2(self, walk, a, b, out) };
+        }
+        for (x, o) in out.iter_mut().enumerate().take(b + 1).skip(x) {
+            *o = self.sample_scalar(walk, x);
+        }
+    }
+
+    /// The cell of pixel `x` of a row and the fractions in it, from the row's f32 start and step
+    /// (the positions [`sample_run_avx2`] computes lane by lane).
+    #[inline(always)]
+    pub(super) fn cell_f32(&self, walk: &Walk, x: usize) -> ([usize; 3], [f32; 3]) {
+        let xf = x as f32;
+        let mut c = [0usize; 3];
+        let mut f = [0.0f32; 3];
+        for a in 0..3 {
+            let q = walk.s32[a] + xf * walk.st32[a];
+            let i = (q as i32).clamp(0, self.max_cell[a] as i32);
+            c[a] = i as usize;
+            f[a] = (q - i as f32).clamp(0.0, 1.0);
+        }
+        (c, f)
+    }
+
+    /// One sample at pixel `x`: the scalar twin of [`sample_run_avx2`].
+    #[inline(always)]
+    fn sample_scalar(&self, walk: &Walk, x: usize) -> f32 {
+        let (c, f) = self.cell_f32(walk, x);
+        self.sample_cell(c, f)
+    }
+
+    /// The trilinear sample in cell `c` at fractions `f`.
+    #[inline(always)]
+    fn sample_cell(&self, c: [usize; 3], f: [f32; 3]) -> f32 {
+        trilinear(self.data, self.base(c), self.up, f)
+    }
+
+    /// Linear index of voxel `c`.
+    #[inline(always)]
+    pub(super) fn base(&self, c: [usize; 3]) -> usize {
+        c[0] + c[1] * self.stride[1] + c[2] * self.stride[2]
+    }
+
+    /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through every plane.
+    pub(super) fn band(&self, y0: usize, acc: &mut [Rgba]) -> Counters {
+        let w = self.width;
+        let rows = acc.len() / w;
+        match (self.post, self.shaded) {
+            _ if self.mode != RenderMode::Composite => self.band_extreme(y0, rows, acc),
+            (Some(t), _) => self.band_post(y0, rows, acc, Post::Table(t)),
+            (None, Some(t)) => match self.voxel {
+                Some(vs) => self.band_post(y0, rows, acc, Post::Voxel(t, vs)),
+                None => self.band_post(y0, rows, acc, Post::Shaded(t)),
+            },
+            (None, None) => self.band_plain(y0, rows, acc),
+        }
+    }
+
+    /// Unshaded composite through the post-classification table: each run of pixels in active
+    /// bricks is sampled, classified and composited in one pass ([`composite_run_avx2`] eight
+    /// pixels at a time where the CPU has AVX2, [`Ctx::composite_one`] otherwise and for the
+    /// ends of runs; the same f32 operations in the same order, so the same bits). The band's
+    /// accumulation is kept as four planes of channels while it is composited.
+    fn band_post(&self, y0: usize, rows: usize, acc: &mut [Rgba], post: Post<'_>) -> Counters {
+        let w = self.width;
+        let mut c = Counters::default();
+        let mut band = BandAcc {
+            r: vec![0.0; rows * w],
+            g: vec![0.0; rows * w],
+            b: vec![0.0; rows * w],
+            a: vec![0.0; rows * w],
+        };
+        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
+        let kf = self.path_factors(y0, rows);
+        let (din, dout) = self.ray_extents(y0, rows);
+        let half = (0.5 * self.delta) as f32;
+        let preint = self.preint_for(post);
+        let (mut prev, mut stamp) = if preint {
+            (vec![0.0f32; rows * w], vec![u32::MAX; rows * w])
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        for p in 0..self.n_planes {
+            let d = self.depth(p);
+            let mut any_live = false;
+            for (r, live_r) in live.iter_mut().enumerate() {
+                let y = y0 + r;
+                let o = r * w;
+                let Some(lw) = shrink_live_alpha(live_r, &band.a[o..o + w], self.cutoff) else {
+                    continue;
+                };
+                any_live = true;
+                let walk = self.walk(y, d);
+                let span = self.clip_span(y, d, walk.span);
+                let (lo, hi) = (
+                    span.0.max(lw.0).max(walk.span.0),
+                    span.1.min(lw.1).min(walk.span.1),
+                );
+                if lo > hi {
+                    continue;
+                }
+                let (back_s, back_st) = if preint && matches!(post, Post::Voxel(..)) {
+                    let (s0, st0) = self.view.row(y, d - self.delta);
+                    (
+                        [0, 1, 2].map(|a| s0[a] as f32 - walk.s32[a]),
+                        [0, 1, 2].map(|a| st0[a] as f32 - walk.st32[a]),
+                    )
+                } else {
+                    ([0.0; 3], [0.0; 3])
+                };
+                let mut row = RowCtx {
+                    r: &mut band.r[o..o + w],
+                    g: &mut band.g[o..o + w],
+                    b: &mut band.b[o..o + w],
+                    a: &mut band.a[o..o + w],
+                    kf: &kf[o..o + w],
+                    din: &din[o..o + w],
+                    dout: &dout[o..o + w],
+                    d: d as f32,
+                    half,
+                    prev: if preint { &mut prev[o..o + w] } else { &mut [] },
+                    stamp: if preint {
+                        &mut stamp[o..o + w]
+                    } else {
+                        &mut []
+                    },
+                    plane: p as u32,
+                    back_s,
+                    back_st,
+                };
+                let (a, b) = (lo as usize, hi as usize);
+                #[allow(unused_mut)]
+                let mut x = a;
+                #[cfg(target_arch = "x86_64")]
+                if self.simd {
+                    // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+                    x = unsafe { composite_run_avx2(self, &walk, a, b, &mut row, post, &mut c) };
+                }
+                for x in x..=b {
+                    self.composite_one(&walk, x, &mut row, post, &mut c);
+                }
+            }
+            if !any_live {
+                break;
+            }
+        }
+        for (i, px) in acc.iter_mut().enumerate() {
+            *px = [band.r[i], band.g[i], band.b[i], band.a[i]];
+        }
+        c
+    }
+
+    /// Samples, classifies and composites pixel `x` of a row ([`Ctx::band_post`]): the scalar
+    /// twin of [`composite_run_avx2`] and, with `post` shaded, of [`shaded_run_avx2`].
+    #[inline(always)]
+    pub(super) fn composite_one(
+        &self,
+        walk: &Walk,
+        x: usize,
+        row: &mut RowCtx<'_>,
+        post: Post<'_>,
+        c: &mut Counters,
+    ) {
+        if row.a[x] >= self.cutoff {
+            c.terminated += 1;
+            return;
+        }
+        let (cell, f) = self.cell_f32(walk, x);
+        if !self.active[self.bricks.index(cell[0], cell[1], cell[2])] {
+            return;
+        }
+        c.samples += 1;
+        let rho = self.sample_cell(cell, f);
+        let k = boundary_factor(row.kf[x], row.din[x], row.dout[x], row.d, row.half);
+        let preint = self.preint_for(post);
+        // Pre-integration: the density at the pixel's sample on the plane before, or this
+        // sample's where there is none (the segment is then one point).
+        let u = if preint {
+            let u = if row.stamp[x] == row.plane {
+                row.prev[x]
+            } else {
+                rho
+            };
+            row.prev[x] = rho;
+            row.stamp[x] = row.plane + 1;
+            u
+        } else {
+            rho
+        };
+        let corrected = preint || self.view.perspective || k != 1.0;
+        let src = match post {
+            Post::Table(t) if preint => Self::post_seg_src(t.segment(u, rho), k),
+            Post::Table(t) => Self::post_src(t, rho, k, corrected),
+            Post::Shaded(t) => shaded_src(t, rho, self.gradient_lerp(cell, f), k, corrected),
+            Post::Voxel(t, vs) => {
+                let (v, (cell, f)) = if preint {
+                    let v = t.segment_entry(u, rho);
+                    // Lit at the segment's middle (`SEGMENT_LIGHT_AT`).
+                    let h = match shade_opacity(&v, k, corrected) {
+                        Some(_) if u != rho => SEGMENT_LIGHT_AT,
+                        _ => 0.0,
+                    };
+                    (v, self.light_cell(walk, row, x, h))
+                } else {
+                    (t.entry(rho), (cell, f))
+                };
+                let base = self.base(cell);
+                let [ux, uy, uz] = self.up;
+                let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
+                let codes = offs.map(|o| self.codes[base + o]);
+                voxel_shaded_src(t, vs, v, &codes, f, k, corrected)
+            }
+        };
+        let Some(src) = src else {
+            return;
+        };
+        let tr = 1.0 - row.a[x];
+        row.r[x] += tr * src[0];
+        row.g[x] += tr * src[1];
+        row.b[x] += tr * src[2];
+        row.a[x] += tr * src[3];
+        c.visible += 1;
+    }
+
+    /// The premultiplied colour of an unshaded sample of density `rho` with slab exponent `k`
+    /// (`corrected`: `k ≠ 1` or perspective), or `None` where it has no opacity.
+    #[inline(always)]
+    fn post_src(t: &PostTable, rho: f32, k: f32, corrected: bool) -> Option<Rgba> {
+        if corrected {
+            // Colour and log-transmittance per table entry: the path correction is one exp2
+            // (no log2, no division).
+            Self::post_seg_src(t.lookup_in(&t.persp, rho), k)
+        } else {
+            let v = t.lookup(rho);
+            if v[3] <= 0.0 || v[3].is_nan() {
+                return None;
+            }
+            Some(v)
+        }
+    }
+
+    /// The premultiplied colour of `[c_r, c_g, c_b, log2(1 − α)]` (a `persp` entry, or a
+    /// segment's averages, [`PostTable::segment`]) with slab exponent `k`: `c·a` and
+    /// `a = 1 − 2^(k·L)`, or `None` where `L ≥ 0` (no opacity; NaN neither).
+    #[inline(always)]
+    pub(super) fn post_seg_src([cr, cg, cb, l]: Rgba, k: f32) -> Option<Rgba> {
+        // `l < 0` is false for NaN too.
+        (l < 0.0).then(|| {
+            let a = 1.0 - exp2_neg(k * l);
+            [cr * a, cg * a, cb * a, a]
+        })
+    }
+
+    /// Whether the samples of `post` are pre-integrated: asked for ([`RenderSettings::preintegrate`])
+    /// and classified through a density table (unshaded, or shaded at the voxels; shading at
+    /// the samples keeps one point per slab).
+    ///
+    /// [`RenderSettings::preintegrate`]: crate::render::RenderSettings::preintegrate
+    #[inline(always)]
+    pub(super) fn preint_for(&self, post: Post<'_>) -> bool {
+        self.preint && !matches!(post, Post::Shaded(_))
+    }
+
+    /// Calls `f(a, b)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells lie in
+    /// active bricks, consecutive active runs merged (space leaping per row); the whole range
+    /// when nothing is skipped.
+    #[inline]
+    fn for_each_run(&self, walk: &Walk, lo: i64, hi: i64, mut f: impl FnMut(usize, usize)) {
+        if !self.skip_empty {
+            if lo <= hi {
+                f(lo as usize, hi as usize);
+            }
+            return;
+        }
+        let mut pending: Option<(usize, usize)> = None;
+        self.brick_runs(walk, lo, hi, |x, end, brick| {
+            if self.active[brick] {
+                pending = Some(match pending {
+                    Some((a, _)) => (a, end),
+                    None => (x, end),
+                });
+            } else if let Some((a, b)) = pending.take() {
+                f(a, b);
+            }
+        });
+        if let Some((a, b)) = pending {
+            f(a, b);
+        }
+    }
+
+    /// Calls `f(a, b, brick)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells
+    /// lie in one brick, in order.
+    #[inline]
+    fn brick_runs(&self, walk: &Walk, lo: i64, hi: i64, mut f: impl FnMut(usize, usize, usize)) {
+        // Per axis, the first pixel whose cell leaves the current brick along that axis: only
+        // the axis (axes) just crossed is recomputed at the start of a run.
+        let mut next = [i64::MIN; 3];
+        let inv = walk.st.map(|v| {
+            if v == 0 {
+                0.0
+            } else {
+                1.0 / v.unsigned_abs() as f64
+            }
+        });
+        let mut x = lo;
+        while x <= hi {
+            let q = walk.at(x);
+            let (cell, _) = self.cell(q);
+            let mut end = hi;
+            for (a, next_a) in next.iter_mut().enumerate() {
+                if *next_a <= x {
+                    *next_a = x.saturating_add(walk.run_along(a, q[a], cell[a], inv[a]));
+                }
+                end = end.min(*next_a - 1);
+            }
+            let end = end.max(x);
+            f(
+                x as usize,
+                end as usize,
+                self.bricks.index(cell[0], cell[1], cell[2]),
+            );
+            x = end + 1;
+        }
+    }
+
+    /// MIP (MinIP): the largest (smallest) reconstructed value over the planes, kept as one
+    /// plane of values for the band. The planes go coarse to fine ([`coarse_to_fine`]; the
+    /// extreme does not depend on their order): the early, sparse planes give each pixel a
+    /// near-final extreme, and afterwards every group of pixels that its brick cannot beat is
+    /// skipped (exact: a trilinear value lies in its brick's range). The others are sampled and
+    /// compared eight at a time ([`extreme_run_avx2`]) or one at a time
+    /// ([`Ctx::extreme_one`]); the samples are the same bits either way, so is their extreme.
+    fn band_extreme(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
+        let w = self.width;
+        let mip = self.mode == RenderMode::Mip;
+        let mut c = Counters::default();
+        let mut vals = vec![f32::NAN; rows * w];
+        for p in coarse_to_fine(self.n_planes) {
+            let d = self.depth(p);
+            for r in 0..rows {
+                let y = y0 + r;
+                let walk = self.walk(y, d);
+                let span = self.clip_span(y, d, walk.span);
+                let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+                if lo > hi {
+                    continue;
+                }
+                let row = &mut vals[r * w..(r + 1) * w];
+                let (lo, hi) = (lo as usize, hi as usize);
+                #[allow(unused_mut)]
+                let mut x = lo;
+                #[cfg(target_arch = "x86_64")]
+                if self.simd {
+                    // SAFETY: `simd` is set only when the CPU has AVX2 (`render_slabs`).
+                    x = unsafe { extreme_row_avx2(self, &walk, lo, hi, row, mip, &mut c) };
+                }
+                for x in x..=hi {
+                    self.extreme_one(&walk, x, row, mip, &mut c);
+                }
+            }
+        }
+        for (px, &v) in acc.iter_mut().zip(&vals) {
+            px[0] = v;
+        }
+        c
+    }
+
+    /// Pixel `x` of a row ([`Ctx::band_extreme`]): skipped where its cell's brick cannot beat
+    /// the pixel's extreme (exact: a trilinear value lies in its cell's brick's range), sampled
+    /// and compared otherwise. The scalar twin of [`extreme_row_avx2`].
+    #[inline(always)]
+    fn extreme_one(&self, walk: &Walk, x: usize, row: &mut [f32], mip: bool, c: &mut Counters) {
+        let (cell, f) = self.cell_f32(walk, x);
+        let bound = self.extreme_bounds[self.bricks.index(cell[0], cell[1], cell[2])];
+        let cur = row[x];
+        if !cur.is_nan() && if mip { bound <= cur } else { bound >= cur } {
+            return;
+        }
+        c.samples += 1;
+        let v = self.sample_cell(cell, f);
+        if cur.is_nan() || (mip && v > cur) || (!mip && v < cur) {
+            row[x] = v;
+        }
+    }
+
+    /// Composite through the classifier (tables that depend on more than the density, shaded or
+    /// not): each sample is classified, with its gradient where the lights or the tables need
+    /// one, as soon as it is reconstructed.
+    fn band_plain(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
+        let w = self.width;
+        let mut c = Counters::default();
+        let mut line = vec![f32::NAN; w];
+        // Live window of each row (composite): pixels outside it are opaque.
+        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
+        let kf = self.path_factors(y0, rows);
+        let (din, dout) = self.ray_extents(y0, rows);
+        let half = (0.5 * self.delta) as f32;
+        for p in 0..self.n_planes {
+            let d = self.depth(p);
+            let depth01 = ((d - self.dmin) * self.depth_scale).clamp(0.0, 1.0) as f32;
+            let mut any_live = false;
+            for r in 0..rows {
+                let y = y0 + r;
+                let walk = self.walk(y, d);
+                let mut span = self.clip_span(y, d, walk.span);
+                let row_acc = &mut acc[r * w..(r + 1) * w];
+                let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
+                    continue;
+                };
+                any_live = true;
+                span = (span.0.max(lw.0), span.1.min(lw.1));
+                if span.0 > span.1 {
+                    continue;
+                }
+                c.samples += self.sample_row(&walk, span, &mut line);
+                for x in span.0 as usize..=span.1 as usize {
+                    let rho = line[x];
+                    if rho.is_nan() {
+                        continue;
+                    }
+                    let px = &mut row_acc[x];
+                    if px[3] >= self.cutoff {
+                        c.terminated += 1;
+                        continue;
+                    }
+                    // The first and last samples of a ray stand for the path from where the
+                    // ray enters (leaves) the volume or its clipping, not a whole slab: without
+                    // this the cut faces step from plane to plane (wood grain).
+                    let i = r * w + x;
+                    let k = boundary_factor(kf[i], din[i], dout[i], d as f32, half);
+                    if self.classifier.density_opacity(rho) == Some(0.0) {
+                        continue;
+                    }
+                    let gradient = if self.shade {
+                        self.gradient_at(&walk, x)
+                    } else {
+                        Vec3::ZERO
+                    };
+                    let rgba = self.classifier.classify(&SampleInput {
+                        density: rho,
+                        gradient,
+                        depth: depth01,
+                    });
+                    if let Some(rgba) = rgba {
+                        let rgba = self.path_correct(rgba, k);
+                        over_front_to_back(px, rgba);
+                        c.visible += 1;
+                    }
+                }
+            }
+            if !any_live {
+                break;
+            }
+        }
+        c
+    }
+
+    /// The cell (lower corner) holding the fixed-point index position `q` (every component in
+    /// `[0, box_hi]`, as [`Ctx::walk`] guarantees) and the fractions in it. On the last voxel
+    /// plane the cell is the one below with fraction 1 (along an axis of one sample, cell 0).
+    #[inline(always)]
+    fn cell(&self, q: [i64; 3]) -> ([usize; 3], [f32; 3]) {
+        let mut c = [0usize; 3];
+        let mut f = [0.0f32; 3];
+        for a in 0..3 {
+            let i = (q[a] >> FRAC).min(self.max_cell[a]);
+            c[a] = i as usize;
+            f[a] = ((q[a] - (i << FRAC)) >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
+        }
+        (c, f)
+    }
+}
+
+/// Narrows a row's window of live pixels (those below the opacity `cutoff`) from both ends;
+/// `None` once every pixel of the row is opaque.
+fn shrink_live(lw: &mut (i64, i64), row: &[Rgba], cutoff: f32) -> Option<(i64, i64)> {
+    while lw.0 <= lw.1 && row[lw.0 as usize][3] >= cutoff {
+        lw.0 += 1;
+    }
+    while lw.1 >= lw.0 && row[lw.1 as usize][3] >= cutoff {
+        lw.1 -= 1;
+    }
+    (lw.0 <= lw.1).then_some(*lw)
+}
+
+/// How [`Ctx::band_post`] classifies: through the unshaded table, or shaded.
+#[derive(Clone, Copy)]
+pub(super) enum Post<'a> {
+    Table(&'a PostTable),
+    Shaded(&'a ShadeTable),
+    /// Shaded at the voxels, interpolated ([`ShadeAt::Voxels`]).
+    ///
+    /// [`ShadeAt::Voxels`]: crate::normals::ShadeAt::Voxels
+    Voxel(&'a ShadeTable, &'a VoxelShading),
+}
+
+/// The accumulation of a band of rows as four planes of channels ([`Ctx::band_post`]).
+struct BandAcc {
+    r: Vec<f32>,
+    g: Vec<f32>,
+    b: Vec<f32>,
+    a: Vec<f32>,
+}
+
+/// One row of a band being composited through one plane: its channels, and per pixel the path
+/// factor and the depths where the ray enters and leaves the volume ([`Ctx::band_post`]).
+pub(super) struct RowCtx<'a> {
+    pub(super) r: &'a mut [f32],
+    pub(super) g: &'a mut [f32],
+    pub(super) b: &'a mut [f32],
+    pub(super) a: &'a mut [f32],
+    pub(super) kf: &'a [f32],
+    pub(super) din: &'a [f32],
+    pub(super) dout: &'a [f32],
+    /// The plane's eye depth and half the slab thickness (world units).
+    pub(super) d: f32,
+    pub(super) half: f32,
+    /// Pre-integration ([`Ctx::preint`]): per pixel the density sampled at the last plane
+    /// that sampled it, and that plane's index + 1 (`u32::MAX` before any), so that a sample
+    /// knows whether its pixel was sampled on the plane just before; `plane` is this plane's
+    /// index. Empty without pre-integration.
+    pub(super) prev: &'a mut [f32],
+    pub(super) stamp: &'a mut [u32],
+    pub(super) plane: u32,
+    /// Pre-integration shaded at the voxels: the index-space step from this plane's sample of
+    /// pixel `x` to the plane before's, `back_s + x·back_st` (f32; [`Ctx::light_cell`]).
+    pub(super) back_s: [f32; 3],
+    pub(super) back_st: [f32; 3],
+}
+
+/// `0..n` coarse to fine: every 16th, then the odd multiples of 8, of 4, of 2, and the odd
+/// numbers; each number once.
+fn coarse_to_fine(n: usize) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..n).step_by(16).collect();
+    for s in [8, 4, 2, 1] {
+        order.extend((s..n).step_by(2 * s));
+    }
+    order
+}
+
+/// [`shrink_live`] on a row's opacity channel.
+fn shrink_live_alpha(lw: &mut (i64, i64), alpha: &[f32], cutoff: f32) -> Option<(i64, i64)> {
+    while lw.0 <= lw.1 && alpha[lw.0 as usize] >= cutoff {
+        lw.0 += 1;
+    }
+    while lw.1 >= lw.0 && alpha[lw.1 as usize] >= cutoff {
+        lw.1 -= 1;
+    }
+    (lw.0 <= lw.1).then_some(*lw)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coarse_to_fine_visits_every_plane_once() {
+        for n in [0, 1, 2, 15, 16, 17, 100, 613] {
+            let mut order = coarse_to_fine(n);
+            if n > 32 {
+                assert_eq!(&order[..3], &[0, 16, 32]);
+            }
+            order.sort_unstable();
+            assert_eq!(order, (0..n).collect::<Vec<_>>(), "n = {n}");
+        }
+    }
+}
