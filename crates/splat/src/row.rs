@@ -7,7 +7,7 @@
 //! frame ([`crate::footprint::LocatedPlanes`]), and each pixel takes `px[c] + w·v[c]` per channel.
 //! The SIMD version evaluates four weights at once and updates one RGBA pixel per 128-bit
 //! operation; it performs the very same IEEE operations in the same order (no fused multiply–add,
-//! which would round once instead of twice), so [`deposit_row_scalar`] gives the same bits. SSE2
+//! which would round once instead of twice), so `deposit_row_scalar` gives the same bits. SSE2
 //! is part of the x86-64 baseline, so no run-time detection is needed; other targets use the
 //! scalar loop.
 //!

@@ -325,7 +325,8 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 
     /// Samples, classifies and composites pixel `x` of a row ([`Ctx::band_post`]): the scalar
-    /// twin of [`composite_run_avx2`] and, with `post` shaded, of [`shaded_run_avx2`].
+    /// twin of [`composite_run_avx2`] (with `PostSource` unshaded, and with `ShadeSource` when
+    /// `post` is shaded).
     #[inline(always)]
     pub(super) fn composite_one(
         &self,
@@ -502,7 +503,7 @@ impl<T: Scalar> Ctx<'_, T> {
     /// extreme does not depend on their order): the early, sparse planes give each pixel a
     /// near-final extreme, and afterwards every group of pixels that its brick cannot beat is
     /// skipped (exact: a trilinear value lies in its brick's range). The others are sampled and
-    /// compared eight at a time ([`extreme_run_avx2`]) or one at a time
+    /// compared eight at a time (`extreme_row_avx2`) or one at a time
     /// ([`Ctx::extreme_one`]); the samples are the same bits either way, so is their extreme.
     fn band_extreme(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
         let w = self.width;

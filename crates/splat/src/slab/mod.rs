@@ -15,7 +15,7 @@
 //! in Mueller & Crawfis' slicing of each kernel by the slabs it overlaps). Then, per pixel
 //! (Mueller, Möller & Crawfis §3): the transfer function classifies `ρ̂`; where it has opacity
 //! and the lights need it, the gradient is the same kernel's reconstruction of the voxels'
-//! central differences (their "gradient splats", gathered at the sample; [`Ctx::gradient_at`]);
+//! central differences (their "gradient splats", gathered at the sample; `Ctx::gradient_at`);
 //! the lights shade it with the same formula as the other renderers ([`FrameClassifier`]) (or,
 //! with [`ShadeAt::Voxels`], each voxel's gradient is shaded and the light interpolated, the
 //! order of VTK's ray caster: `crate::normals`), and the slab is composited front to
@@ -56,30 +56,22 @@
 //!
 //! Rows of a plane are processed eight pixels at a time where the CPU has AVX2 (runtime
 //! detection; every kernel has a scalar twin doing the same f32 operations in the same order, so
-//! the bits do not depend on the CPU or the thread count): [`Sampler8`] locates the eight cells
+//! the bits do not depend on the CPU or the thread count): `Sampler8` locates the eight cells
 //! and gathers their corners; unshaded composite classifies through a 1024-entry table and
-//! composites into channel planes in the same pass ([`composite_run_avx2`] with
-//! [`PostSource`]); shaded composite does the same with a table of the classifier's terms before
-//! shading ([`ShadeTable`]), the cell's central differences gathered from the volume (the 4×4×4
+//! composites into channel planes in the same pass (`composite_run_avx2` with
+//! `PostSource`); shaded composite does the same with a table of the classifier's terms before
+//! shading (`ShadeTable`), the cell's central differences gathered from the volume (the 4×4×4
 //! block around the cell without its edges: twelve row reads, four of which also give the
-//! sample) and the lights evaluated as masks ([`ShadeSource`], [`shade_light8`]; cells on the
+//! sample) and the lights evaluated as masks (`ShadeSource`, `shade_light8`; cells on the
 //! faces of the grid, whose differences are one-sided, take the scalar twin inside the same
 //! rows); shaded at the voxels ([`ShadeAt::Voxels`], VTK's order, `crate::normals`), it reads
 //! the cell's eight direction codes (four gathers, two codes per word) and their diffuse and
 //! specular light from the frame's table (one gather per corner: two 16-bit halves per word)
-//! and interpolates the light instead ([`VoxelShadeSource`]; every cell, faces included);
-//! MIP/MinIP compare against one plane of values ([`extreme_row_avx2`]). Each group of
+//! and interpolates the light instead (`VoxelShadeSource`; every cell, faces included);
+//! MIP/MinIP compare against one plane of values (`extreme_row_avx2`). Each group of
 //! eight is first tested against its own cells' bricks, and skipped where none can contribute.
 //! Tables that depend on more than the density (gradient-magnitude or depth indexing, a
-//! modulation that is not a constant) take the per-sample classifier ([`Ctx::band_plain`]).
-//!
-//! [`Sampler8`]: avx2::sampler::Sampler8
-//! [`composite_run_avx2`]: avx2::composite_run_avx2
-//! [`PostSource`]: avx2::composite::PostSource
-//! [`ShadeSource`]: avx2::shade::ShadeSource
-//! [`shade_light8`]: avx2::shade::shade_light8
-//! [`VoxelShadeSource`]: avx2::shade::VoxelShadeSource
-//! [`extreme_row_avx2`]: avx2::extreme_row_avx2
+//! modulation that is not a constant) take the per-sample classifier (`Ctx::band_plain`).
 //!
 //! # Code layout
 //!

@@ -40,7 +40,7 @@ pub(super) fn supersampling(
     }
 }
 
-/// Where the anti-aliasing of minified views ([`supersampling`]) turns from fractional rays per
+/// Where the anti-aliasing of minified views (`supersampling`) turns from fractional rays per
 /// pixel to whole ones: pixel sizes of 1.5 voxels and more take `⌈r⌉ × ⌈r⌉` rays.
 pub const WHOLE_RAYS_FROM: f64 = 1.5;
 

@@ -9,7 +9,7 @@ use crate::slab::shade::SEGMENT_LIGHT_AT;
 use crate::slab::tables::ShadeTable;
 use volsplat_core::Scalar;
 
-/// Shaded classification ([`shade8`]) with the voxels' central differences gathered from the
+/// Shaded classification ([`shade_terms8`], [`shade_light8`]) with the voxels' central differences gathered from the
 /// volume itself and interpolated in the sample's cell: lane `l` does exactly
 /// [`Ctx::gradient_lerp`]'s and [`shaded_src`]'s f32 operations. A cell's differences read
 /// the 4×4×4 block around it without its edges: four rows of four voxels along x through the
