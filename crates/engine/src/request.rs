@@ -844,7 +844,22 @@ impl RenderRequest {
         Ok((req, warnings))
     }
 
-    /// Writes the request as pretty JSON, atomically. An in-memory volume cannot be saved.
+    /// This request with a volume file's relative path made absolute (against the current
+    /// folder, without touching the file system): what scene files hold, so that `render
+    /// --scene` reads the same volume from any folder, as ParaView's state files do.
+    pub fn with_absolute_paths(&self) -> RenderRequest {
+        let mut r = self.clone();
+        if let crate::VolumeSource::File { path, .. } = &mut r.scene.volume
+            && path.is_relative()
+            && let Ok(abs) = std::path::absolute(&*path)
+        {
+            *path = abs;
+        }
+        r
+    }
+
+    /// Writes the request as pretty JSON, atomically, with a volume file's path made absolute
+    /// ([`RenderRequest::with_absolute_paths`]). An in-memory volume cannot be saved.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
         if matches!(self.scene.volume, crate::VolumeSource::Memory(_)) {
@@ -853,9 +868,11 @@ impl RenderRequest {
                 "a volume in memory cannot be saved in a scene file; save it as NRRD first",
             ));
         }
-        let text = serde_json::to_string_pretty(self).map_err(|e| EngineError::SceneFile {
-            path: path.to_path_buf(),
-            message: e.to_string(),
+        let text = serde_json::to_string_pretty(&self.with_absolute_paths()).map_err(|e| {
+            EngineError::SceneFile {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            }
         })?;
         volsplat_io::write_bytes_atomic(path, text.as_bytes())?;
         Ok(())
@@ -998,5 +1015,42 @@ mod tests {
             assert!(w.iter().all(|w| !w.contains("transfer_function")), "{w:?}");
             assert!(w[0].starts_with("scene.lights is ignored by mode"), "{w:?}");
         }
+    }
+}
+
+#[cfg(test)]
+mod scene_file_paths {
+    use super::*;
+    use crate::VolumeSource;
+
+    /// A scene file names its volume by an absolute path, so `render --scene` reads the same
+    /// file from any folder; absolute paths and phantoms are kept as they are.
+    #[test]
+    fn scene_files_hold_absolute_volume_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut req = RenderRequest::new(Scene::default(), 8, 8);
+        req.scene.volume = VolumeSource::File {
+            path: "data/head.nrrd".into(),
+            raw: None,
+            frame: 0,
+            array: None,
+            series: None,
+        };
+        let file = dir.path().join("s.json");
+        req.save(&file).unwrap();
+        let (loaded, _) = RenderRequest::load(&file).unwrap();
+        let VolumeSource::File { path, .. } = &loaded.scene.volume else {
+            panic!("{:?}", loaded.scene.volume);
+        };
+        assert!(path.is_absolute(), "{path:?}");
+        assert_eq!(path, &std::env::current_dir().unwrap().join("data/head.nrrd"));
+        // Everything else is the request as it was.
+        assert_eq!(loaded.with_absolute_paths(), req.with_absolute_paths());
+        let abs = dir.path().join("v.nrrd");
+        let mut req2 = req.clone();
+        if let VolumeSource::File { path, .. } = &mut req2.scene.volume {
+            *path = abs.clone();
+        }
+        assert_eq!(req2.with_absolute_paths(), req2);
     }
 }

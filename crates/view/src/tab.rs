@@ -207,7 +207,13 @@ fn on_message(tab: &Tab, bytes: &[u8]) {
             }
         }
         ClientMessage::SaveScene {} => {
-            let request = tab.lock().session.as_ref().map(|s| s.request().clone());
+            // As a scene file holds it: the volume's path absolute, so that `render --scene`
+            // reads it from any folder.
+            let request = tab
+                .lock()
+                .session
+                .as_ref()
+                .map(|s| s.request().with_absolute_paths());
             match request {
                 Some(request) => tab.send(&ServerMessage::Scene {
                     request: Box::new(request),
