@@ -492,3 +492,44 @@ fn a_lights_ambient_colour_lights_the_ambient_term() {
         stderr(&o)
     );
 }
+
+/// An X-ray of data that is negative everywhere (not CT: no DRR offset applies) is black by
+/// its scaling; a note says why and what to give instead.
+#[test]
+fn a_black_xray_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let raw = dir.path().join("neg.raw");
+    let bytes: Vec<u8> = std::iter::repeat_n((-500i16).to_le_bytes(), 512)
+        .flatten()
+        .collect();
+    std::fs::write(&raw, bytes).unwrap();
+    let out = dir.path().join("x.png");
+    let common = [
+        "render",
+        raw.to_str().unwrap(),
+        "--raw-dims",
+        "8,8,8",
+        "--raw-type",
+        "i16",
+        "--mode",
+        "xray",
+        "--size",
+        "16",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    let o = volsplat(&common);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("every line integral is ≤ 0"),
+        "{}",
+        stderr(&o)
+    );
+    let o = volsplat(&[&common[..], &["--xray-offset", "1000"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        !stderr(&o).contains("every line integral"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -950,6 +950,16 @@ impl Renderer {
                 count: bad,
             });
         }
+        if let (Some(v), Mode::Xray, None) = (&values, request.mode, request.output.window) {
+            let brightest = v.values().iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            if brightest <= 0.0 && !v.values().is_empty() {
+                notes.push(format!(
+                    "X-ray: every line integral is ≤ 0 (the brightest is {brightest}): the PNG, \
+                     scaled from 0 to its brightest pixel, is black; give --window LO:HI, or an \
+                     offset that makes the data positive with --xray-offset"
+                ));
+            }
+        }
         stats.renderer = Some(renderer);
         stats.projection = projection;
         stats.load_ms = load_ms;

@@ -1043,7 +1043,10 @@ mod scene_file_paths {
             panic!("{:?}", loaded.scene.volume);
         };
         assert!(path.is_absolute(), "{path:?}");
-        assert_eq!(path, &std::env::current_dir().unwrap().join("data/head.nrrd"));
+        assert_eq!(
+            path,
+            &std::env::current_dir().unwrap().join("data/head.nrrd")
+        );
         // Everything else is the request as it was.
         assert_eq!(loaded.with_absolute_paths(), req.with_absolute_paths());
         let abs = dir.path().join("v.nrrd");
