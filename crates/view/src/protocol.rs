@@ -60,6 +60,9 @@ pub enum ClientMessage {
 pub struct Refusal {
     /// What is wrong, naming the field.
     pub message: String,
+    /// The `seq` of a refused event, where the message is JSON that carries one (so the
+    /// error reply names the event, as for events refused later).
+    pub seq: Option<u64>,
 }
 
 /// Parses a client message: at most [`MAX_MESSAGE_BYTES`], UTF-8 JSON, a known `type`, every
@@ -67,7 +70,19 @@ pub struct Refusal {
 /// the turntable and names without path separators for `open`. Never panics (fuzzed:
 /// `fuzz/fuzz_targets/view_message.rs`).
 pub fn parse_client_message(bytes: &[u8]) -> Result<ClientMessage, Refusal> {
-    let refuse = |message: String| Err(Refusal { message });
+    parse_checked(bytes).map_err(|mut r| {
+        if bytes.len() <= MAX_MESSAGE_BYTES {
+            r.seq = serde_json::from_slice::<serde_json::Value>(bytes)
+                .ok()
+                .filter(|v| v.get("type").and_then(|t| t.as_str()) == Some("event"))
+                .and_then(|v| v.get("seq").and_then(|s| s.as_u64()));
+        }
+        r
+    })
+}
+
+fn parse_checked(bytes: &[u8]) -> Result<ClientMessage, Refusal> {
+    let refuse = |message: String| Err(Refusal { message, seq: None });
     if bytes.len() > MAX_MESSAGE_BYTES {
         return refuse(format!(
             "message of {} bytes; the limit is {MAX_MESSAGE_BYTES}",
@@ -121,19 +136,51 @@ fn strict<T: serde::de::DeserializeOwned>(
     if let Err(e) = parsed {
         return Err(Refusal {
             message: format!("{at}: {e}"),
+            seq: None,
         });
     }
     match unknown.first() {
         Some(path) => Err(Refusal {
-            message: format!("unknown field `{at}.{}`", path.replace(".?", "")),
+            message: format!("unknown field `{at}.{}`", written_path(value, path)),
+            seq: None,
         }),
         None => Ok(()),
     }
 }
 
+/// `path` (serde_ignored's, under `value`) as the page wrote it: serde_ignored marks the
+/// content of an externally tagged enum variant with `?`, which is the variant's key (the one
+/// key of the object there).
+fn written_path(value: &serde_json::Value, path: &str) -> String {
+    let mut at = Some(value);
+    let mut out = Vec::new();
+    for seg in path.split('.') {
+        let here = at;
+        let variant = here
+            .and_then(|v| v.as_object())
+            .filter(|obj| obj.len() == 1)
+            .and_then(|obj| obj.iter().next());
+        match (seg, variant) {
+            ("?", Some((key, inner))) => {
+                out.push(key.clone());
+                at = Some(inner);
+            }
+            ("?", None) => {}
+            _ => {
+                out.push(seg.to_string());
+                at = here.and_then(|v| match seg.parse::<usize>() {
+                    Ok(i) if v.is_array() => v.get(i),
+                    _ => v.get(seg),
+                });
+            }
+        }
+    }
+    out.join(".")
+}
+
 /// The checks serde cannot express.
 fn check(msg: &ClientMessage) -> Result<(), Refusal> {
-    let refuse = |message: String| Err(Refusal { message });
+    let refuse = |message: String| Err(Refusal { message, seq: None });
     match msg {
         ClientMessage::Turntable {
             frames,
@@ -334,6 +381,32 @@ pub fn split_binary(message: &[u8]) -> Option<(FrameHeader, &[u8])> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A refused event names the field by the path the page wrote (no `?` for an enum's
+    /// content) and carries the event's `seq`, as events refused later do; other refused
+    /// messages carry none.
+    #[test]
+    fn refusals_name_the_path_and_the_events_seq() {
+        let r = parse_client_message(
+            br#"{"type":"event","seq":7,"event":{"type":"set_transfer_function",
+                "transfer_function":{"function":{"color":[[0,0,0,0],[1,1,1,1]],
+                "scalar_opacity":[[0,0],[1,1]],"bogus":1}}}}"#,
+        )
+        .unwrap_err();
+        assert_eq!(r.seq, Some(7));
+        assert!(
+            r.message
+                .contains("unknown field `event.transfer_function.function.bogus`"),
+            "{}",
+            r.message
+        );
+        assert!(!r.message.contains('?'), "{}", r.message);
+        let r = parse_client_message(br#"{"type":"event","seq":8,"event":{"type":"nope"}}"#)
+            .unwrap_err();
+        assert_eq!(r.seq, Some(8));
+        let r = parse_client_message(br#"{"type":"screenshot","bogus":1}"#).unwrap_err();
+        assert_eq!(r.seq, None);
+    }
 
     #[test]
     fn events_and_commands_parse() {

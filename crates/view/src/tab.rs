@@ -159,7 +159,7 @@ pub(crate) const WS_MAX: usize = 1 << 20;
 fn on_message(tab: &Tab, bytes: &[u8]) {
     let msg = match parse_client_message(bytes) {
         Ok(m) => m,
-        Err(r) => return tab.error(None, r.message),
+        Err(r) => return tab.error(r.seq, r.message),
     };
     match msg {
         ClientMessage::Event { seq, event } => {
