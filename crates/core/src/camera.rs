@@ -88,6 +88,13 @@ impl Camera {
             }
         }
         let dop = DVec3::from(self.focal_point) - DVec3::from(self.position);
+        if !dop.length().is_finite() {
+            return Err(CoreError::invalid(
+                "position",
+                self.position,
+                "lies too far from focal_point: their distance overflows (world units)",
+            ));
+        }
         if dop.length() < 1e-12 {
             return Err(CoreError::invalid(
                 "position",
@@ -729,6 +736,17 @@ impl Projection {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A camera whose distance to the focal point overflows names the position, not the
+    /// view-up vector (whose check would see a direction of infinities).
+    #[test]
+    fn an_overflowing_distance_blames_the_position() {
+        let mut c = Camera::reset_to_bounds(DVec3::ZERO, DVec3::ONE, true);
+        c.position = [1e308, 1e308, 1e308];
+        c.focal_point = [-1e308, 0.0, 0.0];
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("position") && e.contains("overflows"), "{e}");
+    }
 
     fn approx(a: DVec3, b: DVec3) -> bool {
         (a - b).length() < 1e-9
