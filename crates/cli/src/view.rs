@@ -113,6 +113,9 @@ fn view_request(
         &given.iter().cloned().collect(),
         base,
     )?;
+    if let Some(dir) = data_dir {
+        volsplat_view::check_data_dir(dir).map_err(|e| anyhow::anyhow!("--data-dir {e}"))?;
+    }
     let no_volume_given = input.input.is_none() && input.phantom.is_none() && scene.is_none();
     if let (Some(dir), true) = (data_dir, no_volume_given) {
         let names = volsplat_view::list_volumes(dir);

@@ -195,3 +195,35 @@ fn the_image_fills_the_view_unless_a_size_is_given() {
         interrupt(&mut child);
     }
 }
+
+/// `--data-dir` naming no folder says so (it used to say "no volume files there"), with or
+/// without a volume given.
+#[test]
+fn a_data_dir_that_is_not_a_folder_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("v.nrrd");
+    std::fs::write(&file, "x").unwrap();
+    let none = dir.path().join("none");
+    for (d, expect) in [
+        (&none, "no such folder"),
+        (&file, "is a file, not a folder"),
+    ] {
+        for volume in [&[][..], &["--phantom", "blobs"][..]] {
+            let out = Command::new(bin())
+                .arg("view")
+                .args(volume)
+                .arg("--data-dir")
+                .arg(d)
+                .arg("--no-browser")
+                .output()
+                .unwrap();
+            assert!(!out.status.success());
+            assert!(out.stdout.is_empty(), "printed a URL for {d:?}");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                err.contains(expect) && err.contains("--data-dir") && !err.contains("no volume"),
+                "{volume:?} {d:?}: {err}"
+            );
+        }
+    }
+}

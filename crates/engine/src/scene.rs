@@ -276,7 +276,7 @@ impl VolumeSource {
                     frame: *frame,
                     array: array.clone(),
                     series: series.clone(),
-                    limits: *limits,
+                    limits: limits.clone(),
                 };
                 let loaded = volsplat_io::read_volume_with(path, &options)?;
                 let mut notes = loaded.notes;

@@ -181,6 +181,25 @@ pub enum IoError {
         /// What it is instead: `a directory`, or `a device, FIFO or socket`.
         kind: &'static str,
     },
+    /// A file that a volume file names (a detached header's data file, the `.img` of a `.hdr`,
+    /// a slice of a TIFF folder) lies outside the folder the read is confined to
+    /// ([`crate::Limits::confine_to`]), after following symbolic links: it is not opened.
+    #[error(
+        "{path}: {what} `{value}` lies outside the folder this read is confined to, {folder}",
+        path = .path.display(),
+        folder = .folder.display()
+    )]
+    OutsideFolder {
+        /// The file that names it (the header), or the file itself when it is a link.
+        path: PathBuf,
+        /// Which reference, with the header field as spelled in the format where one names it
+        /// (e.g. ``field `ElementDataFile`: data file``, `image file`).
+        what: String,
+        /// The reference as written (the field's value; truncated to 200 characters).
+        value: String,
+        /// The folder the read is confined to, as the caller gave it.
+        folder: PathBuf,
+    },
     /// A DICOM file that is malformed or cannot be read (the message names the element, byte
     /// offset or frame where known).
     #[error("{path}: DICOM: {message}", path = .path.display())]

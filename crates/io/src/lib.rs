@@ -70,6 +70,9 @@
 //!   declared length within the file, sequences at most 32 deep) before dicom-rs parses it.
 //! - Data and header files must be regular files: devices (`/dev/zero`), FIFOs and sockets are
 //!   refused, and line skipping stops at the end of the file as found.
+//! - [`Limits::confine_to`] (none by default): a volume file inside that folder may open only
+//!   files inside it (its data file, `.img`, slices), after resolving `..` and links; else
+//!   [`IoError::OutsideFolder`]. A viewer serving a folder sets it (decision 0033).
 //! - Camera and transfer-function floats reload bit-exactly (`serde_json`'s `float_roundtrip`).
 //!
 //! ## Writing
@@ -79,6 +82,7 @@
 #![deny(missing_docs)]
 
 mod atomic;
+mod confine;
 pub mod dicom;
 pub mod error;
 mod frame;

@@ -14,7 +14,7 @@ use volsplat_core::volume::MAX_VOXELS;
 /// let small = volsplat_io::Limits { max_voxels: 512 * 512 * 512, ..Default::default() };
 /// assert_eq!(small.voxel_limit(), 1 << 27);
 /// ```
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Limits {
     /// Largest text header (NRRD, MetaImage, `.npy`, VTK XML document) accepted, in bytes.
     /// Default [`crate::MAX_HEADER_BYTES`] (1 MiB); VTK XML files with inline data use
@@ -29,6 +29,17 @@ pub struct Limits {
     pub max_json_bytes: u64,
     /// Largest VTK XML (`.vti`) file read into memory whole, in bytes; default 4 GiB.
     pub max_xml_bytes: u64,
+    /// A folder whose volume files may open only files inside it (`None`, the default: no
+    /// such folder). When the file (or folder) read lies inside it, every further file the
+    /// reader opens for it must lie inside too, after resolving `..` and symbolic links: a
+    /// detached header's data file (NRRD `data file`, MetaImage `ElementDataFile`), the `.img`
+    /// of a NIfTI/Analyze `.hdr`, the slices of a TIFF folder; the file itself must not be a
+    /// link out. Otherwise the read fails with [`crate::IoError::OutsideFolder`] naming the
+    /// header, the field and its value. DICOM scans of a folder skip files that lead out of it
+    /// (and say so in the notes). Files outside the folder are read as without it: the caller
+    /// named them. A viewer that serves a folder to a page sets it to that folder
+    /// (decision 0033).
+    pub confine_to: Option<std::path::PathBuf>,
 }
 
 impl Default for Limits {
@@ -38,6 +49,7 @@ impl Default for Limits {
             max_voxels: MAX_VOXELS,
             max_json_bytes: crate::MAX_JSON_BYTES,
             max_xml_bytes: 4 << 30,
+            confine_to: None,
         }
     }
 }

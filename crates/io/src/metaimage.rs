@@ -25,6 +25,7 @@
 //! Limits as for NRRD: header at most [`crate::MAX_HEADER_BYTES`], voxel count checked against
 //! [`volsplat_core::volume::MAX_VOXELS`] before allocating, payload sizes checked.
 
+use crate::confine::Confinement;
 use crate::error::{IoError, Result, clip};
 use crate::header::{
     LineAction, normalize_words, parse_finite, parse_numbers, read_header, resolve_data_path,
@@ -51,6 +52,7 @@ pub fn read_metaimage(path: impl AsRef<Path>) -> Result<AnyVolume> {
 /// [`read_metaimage`] with caller-set [`Limits`] (header bytes, voxel count).
 pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolume> {
     let path = path.as_ref();
+    let confine = Confinement::of(path, limits)?;
     let header = read_header(path, limits.max_header_bytes, |_, line| {
         let is_data_file = line
             .split_once('=')
@@ -228,7 +230,16 @@ pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<An
                 "LOCAL or a single data file name (LIST and file patterns are not supported)",
             ));
         }
-        (resolve_data_path(path, &df.value), 0)
+        let data = resolve_data_path(path, &df.value);
+        if let Some(c) = &confine {
+            c.check(
+                path,
+                &format!("field `{}`: data file", df.name),
+                &df.value,
+                &data,
+            )?;
+        }
+        (data, 0)
     };
     let spec = PayloadSpec {
         data_path: &data_path,
@@ -465,5 +476,47 @@ mod tests {
         let p = file(dir.path(), "bad.mha", &h, &zlib(&le[..20]));
         let e = read_metaimage(&p).unwrap_err().to_string();
         assert!(e.contains("expected 24 bytes, found 20"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod confinement {
+    use super::*;
+    use crate::confine::tests::{assert_outside, layout};
+
+    /// Issue 29 item 5: a `.mhd` in a folder the read is confined to cannot read a data file
+    /// outside it.
+    #[test]
+    fn confined_reads_refuse_data_files_outside_the_folder() {
+        let l = layout(&[1, 2, 3, 4]);
+        let secret = l.secret.display().to_string();
+        let mut cases = vec![
+            ("inside.raw", true),
+            ("../secret.raw", false),
+            (secret.as_str(), false),
+        ];
+        if cfg!(unix) {
+            cases.push(("link.raw", false));
+        }
+        for (value, inside) in cases {
+            let p = l.data.join("escape.mhd");
+            std::fs::write(
+                &p,
+                format!(
+                    "ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementType = MET_UCHAR\n\
+                     ElementDataFile = {value}\n"
+                ),
+            )
+            .unwrap();
+            let v = read_metaimage(&p).unwrap_or_else(|e| panic!("{value}: {e}"));
+            assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
+            let r = read_metaimage_with(&p, &l.limits);
+            if inside {
+                assert_eq!(r.unwrap().to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
+            } else {
+                let e = r.unwrap_err();
+                assert_outside(&e, "escape.mhd", "`ElementDataFile`", value, &l);
+            }
+        }
     }
 }

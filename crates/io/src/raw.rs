@@ -54,6 +54,7 @@ pub fn read_raw(path: impl AsRef<Path>, spec: &RawSpec) -> Result<AnyVolume> {
 /// [`read_raw`] with caller-set [`Limits`] (voxel count).
 pub fn read_raw_with(path: impl AsRef<Path>, spec: &RawSpec, limits: &Limits) -> Result<AnyVolume> {
     let path = path.as_ref();
+    crate::confine::Confinement::of(path, limits)?;
     let dims_text = format!("{:?}", spec.dims);
     checked_voxel_count(
         path,

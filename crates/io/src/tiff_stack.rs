@@ -46,6 +46,7 @@ pub fn read_tiff(path: impl AsRef<Path>) -> Result<AnyVolume> {
 /// Reads a multi-page TIFF with caller-set limits; notes say where the spacing came from.
 pub fn read_tiff_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    crate::confine::Confinement::of(path, &options.limits)?;
     let mut stack = Stack::default();
     read_pages(path, &mut stack, options, false)?;
     stack.finish(path, Vec::new())
@@ -59,6 +60,13 @@ pub fn read_tiff_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<L
 pub fn read_tiff_dir(dir: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let dir = dir.as_ref();
     let files = tiff_files(dir)?;
+    if let Some(c) = crate::confine::Confinement::of(dir, &options.limits)? {
+        // A slice left out would be a wrong volume: a slice that leads out is an error.
+        for f in &files {
+            let name = f.file_name().unwrap_or_default().to_string_lossy();
+            c.check(dir, "slice", &name, f)?;
+        }
+    }
     if files.is_empty() {
         return Err(IoError::missing(dir, "a .tif or .tiff file in the folder"));
     }
@@ -916,5 +924,35 @@ mod tests {
         let (s, notes) = read(&ij("2"), Some((2, 1)));
         assert_eq!(s, [0.5, 0.5, 2.0]);
         assert!(!notes.iter().any(|n| n.contains("taken as")), "{notes:?}");
+    }
+
+    /// Issue 29 item 5: in a folder the read is confined to, a TIFF slice (or a TIFF file) that
+    /// is a link out of it is refused; a slice left out would make a wrong volume.
+    #[test]
+    #[cfg(unix)]
+    fn confined_reads_refuse_slices_outside_the_folder() {
+        use crate::confine::tests::{assert_outside, layout};
+        let l = layout(&[]);
+        let stack = l.data.join("stack");
+        std::fs::create_dir(&stack).unwrap();
+        let outside = l.root.path().join("outside.tif");
+        write_stack::<colortype::Gray8>(&outside, 2, 1, &[vec![7, 8]], None, None);
+        write_stack::<colortype::Gray8>(&stack.join("s1.tif"), 2, 1, &[vec![1, 2]], None, None);
+        let o = ReadOptions {
+            limits: l.limits.clone(),
+            ..ReadOptions::default()
+        };
+        let v = read_tiff_dir(&stack, &o).unwrap();
+        assert_eq!(v.volume.to_f32().data(), &[1.0, 2.0]);
+        std::os::unix::fs::symlink("../../outside.tif", stack.join("s2.tif")).unwrap();
+        let v = read_tiff_dir(&stack, &ReadOptions::default()).unwrap();
+        assert_eq!(v.volume.to_f32().data(), &[1.0, 2.0, 7.0, 8.0]);
+        let e = read_tiff_dir(&stack, &o).unwrap_err();
+        assert_outside(&e, "stack", "slice", "s2.tif", &l);
+        // A TIFF file that is itself a link out.
+        std::os::unix::fs::symlink("../outside.tif", l.data.join("link.tif")).unwrap();
+        assert!(read_tiff_with(l.data.join("link.tif"), &ReadOptions::default()).is_ok());
+        let e = read_tiff_with(l.data.join("link.tif"), &o).unwrap_err();
+        assert!(matches!(e, IoError::OutsideFolder { .. }), "{e}");
     }
 }

@@ -144,7 +144,7 @@ impl RendererCore {
             Ok(g) => g,
             Err(p) => {
                 let mut g = p.into_inner();
-                *g = volsplat::Renderer::with_limits(self.limits);
+                *g = volsplat::Renderer::with_limits(self.limits.clone());
                 self.inner.clear_poison();
                 g
             }
@@ -163,7 +163,7 @@ impl RendererCore {
             limits.max_voxels = m;
         }
         RendererCore {
-            inner: Mutex::new(volsplat::Renderer::with_limits(limits)),
+            inner: Mutex::new(volsplat::Renderer::with_limits(limits.clone())),
             limits,
         }
     }
@@ -314,7 +314,7 @@ impl RendererCore {
 
     /// Forgets everything kept between frames (volume, tables, splat list, thread pool).
     fn clear(&self, py: Python<'_>) {
-        py.detach(|| self.with_renderer(|r| *r = volsplat::Renderer::with_limits(self.limits)));
+        py.detach(|| self.with_renderer(|r| *r = volsplat::Renderer::with_limits(self.limits.clone())));
     }
 }
 

@@ -909,6 +909,7 @@ fn limits(
         max_header_bytes: max_header_bytes.unwrap_or(d.max_header_bytes),
         max_json_bytes: max_json_bytes.unwrap_or(d.max_json_bytes),
         max_xml_bytes: max_xml_bytes.unwrap_or(d.max_xml_bytes),
+        ..d
     }
 }
 

@@ -37,6 +37,6 @@ mod turntable;
 pub use error::{Result, ViewError};
 pub use server::{
     MAX_FIT_SIDE, MAX_PENDING_CONNECTIONS, StopHandle, Viewer, ViewerHandle, ViewerSettings,
-    list_volumes,
+    check_data_dir, list_volumes,
 };
 pub use turntable::gif_size;

@@ -204,8 +204,26 @@ impl Shared {
     }
 }
 
+/// Why `dir` cannot be a data folder (`--data-dir`): it does not exist, or is not a folder.
+pub fn check_data_dir(dir: &Path) -> std::result::Result<(), String> {
+    match std::fs::metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            Err(format!("{}: no such folder", dir.display()))
+        }
+        Err(e) => Err(format!("{}: cannot be read: {e}", dir.display())),
+        Ok(m) if !m.is_dir() => Err(format!(
+            "{} is a file, not a folder (to view the file, give it as the volume; \
+             --data-dir names the folder whose volume files the page may open)",
+            dir.display()
+        )),
+        Ok(_) => Ok(()),
+    }
+}
+
 /// Regular files of `dir` whose names have a volume extension volsplat reads, sorted; hidden
-/// files and links that leave the folder are left out.
+/// files and links that leave the folder are left out. Files whose headers name a file outside
+/// the folder are listed: opening one is refused with the reader's error (reading every
+/// header at each listing would be slow on large folders).
 pub fn list_volumes(dir: &Path) -> Vec<String> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();
@@ -273,13 +291,17 @@ impl Viewer {
                 ),
             ));
         }
-        if let Some(d) = &settings.data_dir
-            && !d.is_dir()
-        {
-            return Err(ViewError::settings(
-                "--data-dir",
-                format!("{} is not a folder", d.display()),
-            ));
+        if let Some(d) = &settings.data_dir {
+            check_data_dir(d).map_err(|e| ViewError::settings("--data-dir", e))?;
+            // The page chooses the folder's files, so they are untrusted: a volume file there
+            // may open only files there (a header's `data file`, a `.hdr`'s `.img`, the other
+            // slices of a DICOM series), whoever asks the renderer to read it. The volume given
+            // on the command line, outside the folder, is read as without it (decision 0033).
+            let limits = volsplat::io::Limits {
+                confine_to: Some(d.clone()),
+                ..renderer.limits().clone()
+            };
+            renderer = Renderer::with_limits(limits);
         }
         if settings.max_connections == 0 || settings.max_tabs == 0 {
             return Err(ViewError::settings(

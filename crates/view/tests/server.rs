@@ -604,3 +604,132 @@ fn pyramid_previews_say_their_level() {
         h.stop();
     }
 }
+
+/// Issue 29 item 5: a header in the data folder whose data file lies outside it (MetaImage
+/// `ElementDataFile = ../secret.raw`, NRRD `data file: /abs/secret.raw`) is listed, but opening
+/// it is an error reply naming the field: no hello or frame carries the outside bytes, and the
+/// server goes on answering. The volume given at start, outside the folder, reads its own
+/// detached data file as before (the user named it).
+#[test]
+fn data_files_outside_the_data_folder_are_refused() {
+    let root = tempfile::tempdir().unwrap();
+    let data = root.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    std::fs::write(root.path().join("secret.raw"), [200u8, 201, 202, 203]).unwrap();
+    let detached = |data_file: &str| {
+        format!(
+            "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 8 8 8\nencoding: raw\n\
+             data file: {data_file}\n"
+        )
+    };
+    std::fs::write(root.path().join("user.raw"), vec![9u8; 512]).unwrap();
+    std::fs::write(root.path().join("user.nhdr"), detached("user.raw")).unwrap();
+    std::fs::write(
+        data.join("escape.mhd"),
+        "ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementType = MET_UCHAR\n\
+         ElementDataFile = ../secret.raw\n",
+    )
+    .unwrap();
+    let secret = root.path().join("secret.raw");
+    std::fs::write(
+        data.join("escape.nhdr"),
+        format!(
+            "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\n\
+             data file: {}\n",
+            secret.display()
+        ),
+    )
+    .unwrap();
+    let vol = volsplat::make_phantom(PhantomKind::Blobs, Some(&[20]), "grid").unwrap();
+    volsplat::io::write_nrrd(data.join("blobs.nrrd"), &vol, false).unwrap();
+    let mut start = request(48);
+    start.scene.volume = VolumeSource::File {
+        path: root.path().join("user.nhdr"),
+        raw: None,
+        frame: 0,
+        array: None,
+        series: None,
+    };
+    let h = Viewer::bind(
+        start,
+        Renderer::new(),
+        ViewerSettings {
+            data_dir: Some(data.clone()),
+            ..ViewerSettings::default()
+        },
+    )
+    .unwrap()
+    .spawn()
+    .unwrap();
+    let (mut c, hello) = connect(&h);
+    assert_eq!(hello.dims, [8, 8, 8], "the start volume is read unconfined");
+    assert_eq!(hello.volumes, ["blobs.nrrd", "escape.mhd", "escape.nhdr"]);
+    for (name, field, value) in [
+        (
+            "escape.mhd",
+            "`ElementDataFile`",
+            "../secret.raw".to_string(),
+        ),
+        ("escape.nhdr", "`data file`", secret.display().to_string()),
+    ] {
+        c.send(&ClientMessage::Open { name: name.into() }).unwrap();
+        let mut hellos = 0;
+        let message = c
+            .wait_for(WAIT, |m| match m {
+                Incoming::Text(ServerMessage::Hello(_)) => {
+                    hellos += 1;
+                    None
+                }
+                Incoming::Text(ServerMessage::Error { message, .. }) => Some(message.clone()),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(hellos, 0, "{name}: a hello came before the error");
+        for part in [name, field, &format!("`{value}`"), "lies outside"] {
+            assert!(message.contains(part), "{part:?} missing from: {message}");
+        }
+    }
+    // The server still answers, and opens a volume of the folder.
+    c.send(&ClientMessage::Open {
+        name: "blobs.nrrd".into(),
+    })
+    .unwrap();
+    let hello = c
+        .wait_for(WAIT, |m| match m {
+            Incoming::Text(ServerMessage::Hello(h)) => Some((**h).clone()),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(hello.dims, [20, 20, 20]);
+    let (mut c2, hello) = connect(&h);
+    assert_eq!(hello.dims, [8, 8, 8]);
+    c2.send(&ClientMessage::Open {
+        name: "escape.nhdr".into(),
+    })
+    .unwrap();
+    assert!(error_reply(&mut c2).contains("lies outside"));
+}
+
+/// A data folder that does not exist, or a file given as one, is a settings error saying so.
+#[test]
+fn a_missing_or_file_data_folder_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("v.nrrd");
+    std::fs::write(&file, "x").unwrap();
+    for (d, want) in [
+        (dir.path().join("none"), "no such folder"),
+        (file, "is a file, not a folder"),
+    ] {
+        let e = Viewer::bind(
+            request(32),
+            Renderer::new(),
+            ViewerSettings {
+                data_dir: Some(d),
+                ..ViewerSettings::default()
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains(want) && e.contains("--data-dir"), "{e}");
+    }
+}

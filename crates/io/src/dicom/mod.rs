@@ -205,6 +205,7 @@ pub fn read_dicom_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<
             ),
         ));
     }
+    crate::confine::Confinement::of(path, &options.limits)?;
     if path.is_dir() {
         let scan = scan_dir(path, MAX_DEPTH, &options.limits);
         read_scanned(path, scan, options.series.as_deref(), None, &options.limits)
@@ -279,6 +280,7 @@ pub fn read_dicom_files(files: &[PathBuf], options: &ReadOptions) -> Result<Load
     }
     let mut scan = Scan::default();
     for f in files {
+        crate::confine::Confinement::of(f, &options.limits)?;
         match read_header(f, &options.limits)? {
             Header::Image(h) => scan.headers.push(*h),
             Header::Broken(b) => scan.broken.push(*b),
@@ -423,9 +425,23 @@ struct Scan {
 
 /// Scans a folder's DICOM files. A file that cannot be read never stops the scan (issue 28):
 /// it is kept as broken (its series known) or skipped, and only fails the read of its series.
+/// When the read is confined to a folder ([`Limits::confine_to`]), files that lead out of it
+/// (symbolic links) are not read, and a note says how many.
 fn scan_dir(dir: &Path, max_depth: usize, limits: &Limits) -> Scan {
     let mut scan = Scan::default();
+    let confine = match crate::confine::Confinement::of(dir, limits) {
+        Ok(c) => c,
+        Err(e) => {
+            scan.error = Some(e);
+            return scan;
+        }
+    };
+    let mut outside = 0usize;
     let r = visit(dir, 0, max_depth, &mut |p| {
+        if confine.as_ref().is_some_and(|c| !c.contains(p)) {
+            outside += 1;
+            return true;
+        }
         match read_header(p, limits) {
             Ok(Header::Image(h)) if h.series_uid.is_empty() => scan.skipped.push((
                 p.to_path_buf(),
@@ -442,6 +458,13 @@ fn scan_dir(dir: &Path, max_depth: usize, limits: &Limits) -> Scan {
     });
     if let Err(e) = r {
         scan.error = Some(e);
+    }
+    if let (Some(folder), true) = (&limits.confine_to, outside > 0) {
+        scan.notes.push(format!(
+            "{outside} file(s) leading out of {} (symbolic links) were not read: reads there \
+             are confined to it",
+            folder.display()
+        ));
     }
     scan
 }

@@ -854,3 +854,48 @@ fn sub_folders_are_searched_from_a_folder_not_from_a_file() {
     let list = list_dicom_series(dir.path(), &Limits::default()).unwrap();
     assert_eq!(list.len(), 2);
 }
+
+/// Issue 29 item 5: when the read of a DICOM file is confined to its folder, the scan of the
+/// folder reads no file that leads out of it (its series, its description, its pixels), and
+/// says so; unconfined, the links are followed as before.
+#[test]
+#[cfg(unix)]
+fn confined_scans_skip_files_outside_the_folder() {
+    use crate::confine::tests::layout;
+    let l = layout(&[]);
+    Slice::ct(0.0, 0).write(&l.data.join("a.dcm"));
+    let mut b = Slice::ct(2.5, 1);
+    b.instance = 2;
+    b.write(&l.root.path().join("b.dcm"));
+    let mut other = Slice::ct(0.0, 2);
+    other.instance = 3;
+    other.series = "1.2.826.0.1.3680043.2.1125.99".into();
+    other.description = "SECRET".into();
+    other.write(&l.root.path().join("other.dcm"));
+    std::os::unix::fs::symlink("../b.dcm", l.data.join("b.dcm")).unwrap();
+    std::os::unix::fs::symlink("../other.dcm", l.data.join("other.dcm")).unwrap();
+    let open = read_dicom_with(l.data.join("a.dcm"), &opts()).unwrap();
+    assert_eq!(open.volume.grid().dims, [4, 3, 2]);
+    assert!(open.series.iter().any(|s| s.description == "SECRET"));
+    let o = ReadOptions {
+        limits: l.limits.clone(),
+        ..opts()
+    };
+    for given in [l.data.join("a.dcm"), l.data.clone()] {
+        let c = read_dicom_with(&given, &o).unwrap();
+        assert_eq!(c.volume.grid().dims, [4, 3, 1], "{}", given.display());
+        assert_eq!(c.volume.to_f32().data()[0], 1000.0 - 1024.0);
+        assert!(!c.series.iter().any(|s| s.description == "SECRET"));
+        assert!(
+            c.notes.iter().any(|n| n.contains("file(s) leading out of")),
+            "{:?}",
+            c.notes
+        );
+    }
+    let list = list_dicom_series(&l.data, &l.limits).unwrap();
+    assert!(!list.iter().any(|s| s.description == "SECRET"), "{list:?}");
+    // Named one by one, a link out is refused.
+    let e = read_dicom_files(&[l.data.join("a.dcm"), l.data.join("b.dcm")], &o).unwrap_err();
+    assert!(matches!(e, IoError::OutsideFolder { .. }), "{e}");
+    assert!(e.to_string().contains("b.dcm"), "{e}");
+}

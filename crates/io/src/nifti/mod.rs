@@ -75,6 +75,7 @@ pub fn read_nifti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<
     let limits = &options.limits;
     let gz_single = has_suffix(path, ".nii.gz");
     let is_hdr = has_suffix(path, ".hdr") || has_suffix(path, ".hdr.gz");
+    let confine = crate::confine::Confinement::of(path, limits)?;
     crate::limits::require_regular_file(path, "header file")?;
     let bytes = read_prefix(path, has_suffix(path, ".gz"), 540)?;
     let h = Header::parse(path, &bytes, is_hdr)?;
@@ -182,6 +183,10 @@ pub fn read_nifti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<
     })?;
     let (data_path, gz) = if is_hdr {
         let img = image_path(path)?;
+        if let Some(c) = &confine {
+            let name = img.file_name().unwrap_or_default().to_string_lossy();
+            c.check(path, "image file beside the .hdr", &name, &img)?;
+        }
         let gz = has_suffix(&img, ".gz");
         (img, gz)
     } else {

@@ -528,3 +528,31 @@ fn malformed_files_are_clear_errors() {
         l.notes
     );
 }
+
+/// Issue 29 item 5: the `.img` of a `.hdr` in a folder the read is confined to must lie in
+/// it: a `.img` that is a link out of the folder is refused (an Analyze/NIfTI pair names no
+/// file, so a link is the only way out).
+#[test]
+#[cfg(unix)]
+fn confined_reads_refuse_an_image_file_outside_the_folder() {
+    use crate::confine::tests::{assert_outside, layout};
+    let l = layout(&[1, 2, 3, 4]);
+    let mut h = Hdr::new(&[2, 2, 1], 2);
+    h.pair = true;
+    h.vox_offset = 0.0;
+    std::fs::write(l.data.join("in.hdr"), h.bytes()).unwrap();
+    std::fs::copy(&l.secret, l.data.join("in.img")).unwrap();
+    std::fs::write(l.data.join("escape.hdr"), h.bytes()).unwrap();
+    std::os::unix::fs::symlink("../secret.raw", l.data.join("escape.img")).unwrap();
+    let o = ReadOptions {
+        limits: l.limits.clone(),
+        ..ReadOptions::default()
+    };
+    let v = read_nifti_with(l.data.join("in.hdr"), &o).unwrap();
+    assert_eq!(v.volume.to_f32().data(), &[1.0, 2.0, 3.0, 4.0]);
+    // Not confined, the link is followed; confined, it is refused.
+    let v = read_nifti(l.data.join("escape.hdr")).unwrap();
+    assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0]);
+    let e = read_nifti_with(l.data.join("escape.hdr"), &o).unwrap_err();
+    assert_outside(&e, "escape.hdr", "image file", "escape.img", &l);
+}

@@ -38,6 +38,7 @@
 //! allocating); a gzip payload is never inflated past the needed size.
 
 use crate::atomic::{write_atomic, write_err};
+use crate::confine::Confinement;
 use crate::error::{IoError, Result};
 use crate::header::{
     LineAction, normalize_words, parse_finite, parse_numbers, read_header, resolve_data_path,
@@ -79,6 +80,7 @@ pub fn read_nrrd_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolu
 
 /// Reads a NRRD file; also returns notes for the user (e.g. the world-frame conversion).
 pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String>)> {
+    let confine = Confinement::of(path, limits)?;
     let header = read_header(path, limits.max_header_bytes, |n, line| {
         if n > 1 && line.trim().is_empty() {
             LineAction::EndBefore
@@ -283,7 +285,18 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
 
     // data location
     let (data_path, start): (PathBuf, u64) = match get("datafile") {
-        Some(f) => (parse_data_file(path, f)?, 0),
+        Some(f) => {
+            let data = parse_data_file(path, f)?;
+            if let Some(c) = &confine {
+                c.check(
+                    path,
+                    &format!("field `{}`: data file", f.name),
+                    &f.value,
+                    &data,
+                )?;
+            }
+            (data, 0)
+        }
         None => {
             let detached = path
                 .extension()

@@ -909,3 +909,53 @@ fn real_data_colin27() {
         v.to_f32().data().iter().map(|&x| x as f64).sum::<f64>() / v.grid().voxel_count() as f64;
     assert!(mean > 5.0, "mean {mean}");
 }
+
+/// Issue 29 item 5: a detached header in a folder the read is confined to (a viewer's
+/// `--data-dir`) cannot read a file outside it, whichever way its `data file` names it.
+#[test]
+fn confined_reads_refuse_data_files_outside_the_folder() {
+    use crate::confine::tests::{assert_outside, layout};
+    let l = layout(&[1, 2, 3, 4]);
+    let secret = l.secret.display().to_string();
+    let mut cases = vec![
+        ("data file", "inside.raw", true),
+        ("data file", "./inside.raw", true),
+        ("data file", "../secret.raw", false),
+        ("datafile", "../data/../secret.raw", false),
+        ("data file", secret.as_str(), false),
+        ("data file", "../no-such.raw", false),
+    ];
+    if cfg!(unix) {
+        cases.push(("data file", "link.raw", false));
+    }
+    for (field, value, inside) in cases {
+        let header = format!(
+            "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\n{field}: {value}\n"
+        );
+        let p = file(&l.data, "escape.nhdr", &header, b"");
+        if value != "../no-such.raw" {
+            // Not confined, every one reads the bytes (the confinement makes the difference).
+            let v = read_nrrd(&p).unwrap_or_else(|e| panic!("{value}: {e}"));
+            assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
+        }
+        let r = read_nrrd_with(&p, &l.limits);
+        if inside {
+            let v = r.unwrap_or_else(|e| panic!("{value}: {e}"));
+            assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
+        } else {
+            let e = r.unwrap_err();
+            assert_outside(&e, "escape.nhdr", &format!("`{field}`"), value, &l);
+        }
+    }
+    // A file outside the folder (the one a user names) is read as without it.
+    let p = file(
+        l.root.path(),
+        "user.nhdr",
+        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\ndata file: secret.raw\n",
+        b"",
+    );
+    assert_eq!(
+        read_nrrd_with(&p, &l.limits).unwrap().to_f32().data(),
+        &[1.0, 2.0, 3.0, 4.0]
+    );
+}

@@ -55,6 +55,8 @@ pub fn read_vti(path: impl AsRef<Path>) -> Result<AnyVolume> {
 /// result lists the arrays present.
 pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    // A VTK XML image data file names no other file; only a link out of the folder is refused.
+    crate::confine::Confinement::of(path, &options.limits)?;
     crate::limits::require_regular_file(path, "volume file")?;
     let limit = options.limits.max_xml_bytes;
     let file = std::fs::File::open(path).map_err(|e| IoError::os(path, "open", e))?;
