@@ -823,7 +823,9 @@ impl RenderRequest {
         let text =
             std::fs::read_to_string(path).map_err(|e| scene_err(format!("cannot read: {e}")))?;
         let mut warnings = Vec::new();
-        let de = &mut serde_json::Deserializer::from_str(&text);
+        // A byte-order mark (Windows Notepad) is not JSON and says nothing.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+        let de = &mut serde_json::Deserializer::from_str(text);
         // The path of the value that failed (`quality.shade_at`), for errors that serde reports
         // without it (a wrong type, an unknown enum value).
         let mut track = serde_path_to_error::Track::new();
@@ -1055,5 +1057,10 @@ mod scene_file_paths {
             *path = abs.clone();
         }
         assert_eq!(req2.with_absolute_paths(), req2);
+        // A byte-order mark before the JSON (Windows Notepad) reads as the file without it.
+        let text = std::fs::read_to_string(&file).unwrap();
+        let bom = dir.path().join("bom.json");
+        std::fs::write(&bom, format!("\u{feff}{text}")).unwrap();
+        assert_eq!(RenderRequest::load(&bom).unwrap().0, loaded);
     }
 }

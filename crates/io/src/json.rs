@@ -120,6 +120,21 @@ pub fn load_transfer_function_named(
     if is_paraview(&value) {
         return from_paraview(path, &value, name);
     }
+    let paraview_like = |v: &Value| {
+        v.as_object()
+            .is_some_and(|o| o.contains_key("IndexedColors") || o.contains_key("Annotations"))
+    };
+    if matches!(&value, Value::Array(items) if items.iter().any(paraview_like))
+        || paraview_like(&value) && value.get("color").is_none()
+    {
+        return Err(IoError::Json {
+            path: path.to_path_buf(),
+            message: "a ParaView colour-map preset without `RGBPoints` (an indexed or \
+                      categorical map?): only continuous maps, with `RGBPoints`, make a transfer \
+                      function"
+                .into(),
+        });
+    }
     if let Some(name) = name {
         return Err(IoError::Json {
             path: path.to_path_buf(),
@@ -392,7 +407,8 @@ fn load_value(path: &Path, max_bytes: u64) -> Result<Value> {
         path: path.to_path_buf(),
         message: format!("not valid UTF-8: {e}"),
     })?;
-    let text = strip_line_comments(&text);
+    // A byte-order mark, as Windows Notepad writes, is not JSON but says nothing either.
+    let text = strip_line_comments(text.strip_prefix('\u{feff}').unwrap_or(&text));
     serde_json::from_str(&text).map_err(|e| IoError::Json {
         path: path.to_path_buf(),
         message: e.to_string(),
@@ -820,6 +836,23 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("ParaView") && e.contains("tf.json"), "{e}");
+    }
+
+    /// A byte-order mark (Windows Notepad) before the JSON is accepted; a ParaView indexed map
+    /// (no `RGBPoints`) is named as such, not as "expected a JSON object".
+    #[test]
+    fn a_byte_order_mark_is_read_and_indexed_maps_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(dir.path(), "bom.json", &format!("\u{feff}{DESIGN_TF}"));
+        let (tf, _) = load_transfer_function(&p).unwrap();
+        assert!(!tf.color.is_empty());
+        let p = write(
+            dir.path(),
+            "indexed.json",
+            r#"[{"Name":"Indexed","IndexedColors":[1,0,0,0,1,0],"Annotations":["0","a","1","b"]}]"#,
+        );
+        let e = load_transfer_function(&p).unwrap_err().to_string();
+        assert!(e.contains("without `RGBPoints`"), "{e}");
     }
 
     #[test]
