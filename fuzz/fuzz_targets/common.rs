@@ -13,6 +13,7 @@ pub fn limits() -> volsplat_io::Limits {
         max_voxels: 1 << 20,
         max_json_bytes: 1 << 20,
         max_xml_bytes: 4 << 20,
+        confine_to: None,
     }
 }
 
