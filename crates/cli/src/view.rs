@@ -58,7 +58,7 @@ pub struct ServerArgs {
     #[arg(long)]
     pub allow_remote: bool,
     /// A folder whose volume files the page may list and open (read-only, by name; nothing
-    /// outside it). Without INPUT the first of them is shown.
+    /// outside it). Without INPUT the first of them that reads is shown.
     #[arg(long, value_name = "DIR")]
     pub data_dir: Option<PathBuf>,
     /// Frames per second to keep while dragging: previews are sized so that one takes
@@ -170,13 +170,38 @@ pub fn view_cmd(a: ViewCmdArgs) -> Result<()> {
         &a.given,
         a.server.data_dir.as_deref(),
     )?;
-    let label = req.scene.volume.label();
+    // With only --data-dir, the first of its files that reads is shown (a file of the folder
+    // that does not read is said and passed over; the page can still list it).
+    let only_data_dir = a.input.input.is_none() && a.input.phantom.is_none() && a.scene.is_none();
+    let candidates: Vec<std::path::PathBuf> = match (&a.server.data_dir, only_data_dir) {
+        (Some(dir), true) => volsplat_view::list_volumes(dir)
+            .iter()
+            .map(|n| dir.join(n))
+            .collect(),
+        _ => Vec::new(),
+    };
+    let mut req = req;
+    let mut label = req.scene.volume.label();
+    let mut next = 1;
     let bar = crate::progress::Bar::spinner("loading", false);
-    let viewer = Viewer::bind(
-        req,
-        Renderer::with_limits(reader_limits(&a.input)?),
-        viewer_settings(&a.server, fit_view(a.scene.as_deref(), &a.given))?,
-    );
+    let viewer = loop {
+        let bound = Viewer::bind(
+            req.clone(),
+            Renderer::with_limits(reader_limits(&a.input)?),
+            viewer_settings(&a.server, fit_view(a.scene.as_deref(), &a.given))?,
+        );
+        match bound {
+            Err(volsplat_view::ViewError::Engine(e)) if next < candidates.len() => {
+                say!("note: {label}: {e}; showing the next file of --data-dir");
+                if let volsplat::VolumeSource::File { path, .. } = &mut req.scene.volume {
+                    *path = candidates[next].clone();
+                }
+                label = req.scene.volume.label();
+                next += 1;
+            }
+            other => break other,
+        }
+    };
     bar.clear();
     let viewer = viewer
         .map_err(|e| match e {

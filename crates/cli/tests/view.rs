@@ -227,3 +227,48 @@ fn a_data_dir_that_is_not_a_folder_is_named() {
         }
     }
 }
+
+/// With only `--data-dir`, a first file that does not read is said and passed over: the
+/// viewer shows the next one (and fails, naming the file, only when none reads).
+#[cfg(unix)]
+#[test]
+fn a_data_dir_whose_first_file_does_not_read_shows_the_next() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("a_broken.nrrd"),
+        "NRRD0004\ntype: nonsense\n\n",
+    )
+    .unwrap();
+    let good = dir.path().join("b_good.nrrd");
+    let made = Command::new(bin())
+        .args(["phantom", "blobs", "--grid", "16", "-o"])
+        .arg(&good)
+        .output()
+        .unwrap();
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let (mut child, _, _) = start(&["--data-dir", dir.path().to_str().unwrap()]);
+    let err = interrupt(&mut child);
+    assert!(
+        err.contains("a_broken.nrrd") && err.contains("showing the next file"),
+        "{err}"
+    );
+    assert!(err.contains("b_good.nrrd"), "{err}");
+    // Nothing that reads: the last file's error, named.
+    std::fs::remove_file(&good).unwrap();
+    let out = Command::new(bin())
+        .args(["view", "--no-browser", "--data-dir"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(out.stdout.is_empty());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("a_broken.nrrd"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
