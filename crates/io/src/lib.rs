@@ -140,6 +140,9 @@ pub use write::{
 };
 
 #[cfg(test)]
+mod test_volumes;
+
+#[cfg(test)]
 mod tests {
     use super::*;
 

@@ -206,24 +206,7 @@ mod tests {
     use volsplat_core::glam::DVec3;
 
     fn volumes(g: &Grid) -> Vec<AnyVolume> {
-        let n = g.voxel_count();
-        vec![
-            Volume::new(g.clone(), (0..n).map(|i| (i * 7 % 256) as u8).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| i as i8 - 12).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| (i * 2731) as u16).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| i as i16 * -1000 + 5).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| i as f32 * 0.1 - 3.0).collect())
-                .unwrap()
-                .into(),
-        ]
+        crate::test_volumes::every_type(g, 0.1)
     }
 
     /// Every type, `.mha` and `.mhd`, raw and compressed, an oblique grid with spacings and an

@@ -262,7 +262,6 @@ fn header_bytes(path: &Path, grid: &Grid, t: ScalarType) -> Result<Vec<u8>> {
 mod tests {
     use super::*;
     use crate::ReadOptions;
-    use volsplat_core::Volume;
 
     /// The reader's quaternion → matrix (nifti1_io.c `nifti_quatern_to_mat44`: `a² < 1e-7`
     /// is a 180° turn, `a = 0` with `(b, c, d)` normalised), for checking.
@@ -378,24 +377,7 @@ mod tests {
     }
 
     fn volumes(g: &Grid) -> Vec<AnyVolume> {
-        let n = g.voxel_count();
-        vec![
-            Volume::new(g.clone(), (0..n).map(|i| (i * 7 % 256) as u8).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| i as i8 - 12).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| (i * 2731) as u16).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| i as i16 * -1000 + 5).collect())
-                .unwrap()
-                .into(),
-            Volume::new(g.clone(), (0..n).map(|i| i as f32 * 0.25 - 3.0).collect())
-                .unwrap()
-                .into(),
-        ]
+        crate::test_volumes::every_type(g, 0.25)
     }
 
     /// Every sample type, `.nii` and `.nii.gz`, axis-aligned (flips included) and oblique
