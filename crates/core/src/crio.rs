@@ -2,7 +2,8 @@
 //!
 //! Four lookup tables — emission colour, opacity, reflection colour and opacity modulation —
 //! each indexed by a chosen quantity ([`TableIndex`]): density, gradient magnitude or depth.
-//! Per sample (Westover §3.6.1, with the corrections of `research/seed-westover.md` §7.1.10):
+//! Per sample (Westover §3.6.1, with correction 10 of `docs/papers.md`, "where the thesis is
+//! wrong or silent"):
 //!
 //! ```text
 //! I = clamp( E[iₑ] + Σ_lights Lc · ( R[iᵣ]·max(0, N·L) + S·max(0, N·H)^n ) )
