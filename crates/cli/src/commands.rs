@@ -444,7 +444,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     } else {
         let bar = crate::progress::Bar::fraction("render", a.quiet);
         let out = renderer.render(&req, &mut |p| {
-            bar.set_fraction(p.fraction, p.stage);
+            bar.set_fraction(p.fraction, p.stage.as_str());
             stop.signal().is_none()
         });
         bar.clear();
@@ -518,7 +518,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         }
         saved.save(p)?;
     }
-    let stage = renderer_name(out.stats.renderer.unwrap_or(UsedRenderer::Dense));
+    let stage = renderer_name(out.stats.renderer.unwrap_or(UsedRenderer::Sheets));
     write_checked(
         &a.output,
         &out.image,

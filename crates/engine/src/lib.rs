@@ -42,8 +42,8 @@ pub mod xray;
 pub use error::{EngineError, Result};
 pub use output::OutputOptions;
 pub use renderer::{
-    DisplayStats, Output, Preview, Progress, Renderer, Stats, UsedRenderer, render_once,
-    renderer_name,
+    DisplayStats, Output, Preview, Progress, Renderer, SheetAxis, Stage, Stats, UsedRenderer,
+    render_once, renderer_name,
 };
 pub use request::{
     AntialiasChoice, AttenuationChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice,

@@ -45,13 +45,18 @@ impl Mode {
 #[serde(rename_all = "snake_case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum RendererChoice {
-    /// Chosen per request: image-aligned slabs for composite, MIP and MinIP (as visibility
-    /// `auto` says); otherwise splatting, the dense sheet renderer for orthographic views and
-    /// the sparse splat list for perspective ones.
+    /// Chosen per request by the rules of `docs/architecture.md` ("Which renderer draws a
+    /// request"): image-aligned slabs for composite, MIP and MinIP where visibility `auto`
+    /// allows them and always with visibility `image` (X-ray excepted); otherwise splatting,
+    /// the dense sheets for orthographic views and the sparse splat list for perspective ones.
     #[default]
     Auto,
-    /// The dense orthographic sheet-buffer renderer (Westover 1991).
-    Splat,
+    /// Westover's dense orthographic sheet-buffer renderer (Westover 1991); with visibility
+    /// `image` (not X-ray) the image-aligned slabs draw instead. Also read as `splat` and
+    /// `dense`, its earlier names.
+    #[serde(alias = "splat", alias = "dense")]
+    #[cfg_attr(feature = "clap", value(aliases = ["splat", "dense"]))]
+    Sheets,
     /// The sparse splat list (Swan et al. 1997 §5), orthographic or perspective; the list is
     /// kept by the [`crate::Renderer`] across frames.
     SplatList,
@@ -140,7 +145,7 @@ pub enum VisibilityChoice {
     /// (shaded at the voxels, as VTK shades, where the transfer function depends on the density
     /// alone), MIP and MinIP; Westover's sheet buffers for composite shaded at the samples
     /// (`shade_at = samples`) or through gradient-indexed tables, X-ray (exact line integrals),
-    /// successive refinement, the k-contour, an explicit `splat`/`splat_list` renderer, and
+    /// successive refinement, the k-contour, an explicit `sheets`/`splat_list` renderer, and
     /// requests that set a sheet-only option (a kernel other than the Gaussian, subsampling,
     /// back-to-front order, or the `swan-perpendicular`/`ewa` anti-aliasing rules).
     #[default]
@@ -151,7 +156,9 @@ pub enum VisibilityChoice {
     Every,
     /// Image-aligned slabs classified and shaded per pixel after reconstruction (Mueller &
     /// Crawfis 1998; Mueller, Möller & Crawfis 1999): no sheet-axis popping, no pre-classified
-    /// blur. Orthographic and perspective; X-ray keeps the exact sheet renderers.
+    /// blur. Orthographic and perspective, with `renderer` `auto` or `sheets`; X-ray keeps the
+    /// exact sheet renderers, and an explicit `splat_list` draws its sheet buffers. The rows of
+    /// `docs/architecture.md`, "Which renderer draws a request".
     Image,
 }
 
@@ -287,9 +294,10 @@ pub struct Quality {
     pub kernel: KernelChoice,
     /// Anti-aliasing rule.
     pub antialias: AntialiasChoice,
-    /// Sheet buffers or composite-every-sample (dense renderer).
+    /// How visibility is resolved ([`VisibilityChoice`]): `auto` and `image` also pick the
+    /// renderer (`docs/architecture.md`).
     pub visibility: VisibilityChoice,
-    /// Traversal order (dense renderer).
+    /// Traversal order (the sheets and the splat list).
     pub order: OrderChoice,
     /// Front-to-back early termination: pixels at this opacity take no more samples or splats
     /// (> 0; ≥ 1 disables it). The default, [`DEFAULT_OPACITY_CUTOFF`] (1 − 255/32767 ≈

@@ -116,8 +116,11 @@ fn perspective_uses_the_splat_list_and_the_dense_renderer_refuses_it() {
     req.quality.visibility = volsplat::VisibilityChoice::Sheet;
     let out = Renderer::new().render(&req, &mut |_| true).unwrap();
     assert_eq!(out.stats.renderer, Some(UsedRenderer::SplatList));
-    assert_eq!(out.stats.projection, "perspective");
-    req.renderer = RendererChoice::Splat;
+    assert_eq!(
+        out.stats.projection,
+        Some(volsplat::core::ProjectionKind::Perspective)
+    );
+    req.renderer = RendererChoice::Sheets;
     let e = Renderer::new().render(&req, &mut |_| true).unwrap_err();
     assert!(
         matches!(e, EngineError::Request { ref field, .. } if field == "renderer"),
@@ -438,7 +441,7 @@ fn image_visibility_uses_the_slab_renderer_and_keeps_its_bricks() {
         let mut calls = 0;
         let e = Renderer::new()
             .render(&req, &mut |p| {
-                if p.stage == "render" {
+                if p.stage == volsplat::Stage::Render {
                     calls += 1;
                 }
                 calls < 2
@@ -450,7 +453,7 @@ fn image_visibility_uses_the_slab_renderer_and_keeps_its_bricks() {
     req.quality.visibility = VisibilityChoice::Image;
     req.mode = Mode::Xray;
     let out = Renderer::new().render(&req, &mut |_| true).unwrap();
-    assert_eq!(out.stats.renderer, Some(UsedRenderer::Dense));
+    assert_eq!(out.stats.renderer, Some(UsedRenderer::Sheets));
     req.mode = Mode::Composite;
     req.quality.slab = Some(0.0);
     let e = Renderer::new().render(&req, &mut |_| true).unwrap_err();
@@ -477,16 +480,16 @@ fn auto_visibility_keeps_sheets_for_sheet_only_options() {
     assert_eq!(used(&req), Some(UsedRenderer::Slab));
     let mut r = req.clone();
     r.quality.kernel = KernelChoice::Nearest;
-    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    assert_eq!(used(&r), Some(UsedRenderer::Sheets));
     let mut r = req.clone();
     r.quality.subsample = 2;
-    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    assert_eq!(used(&r), Some(UsedRenderer::Sheets));
     let mut r = req.clone();
     r.quality.order = OrderChoice::Btf;
-    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    assert_eq!(used(&r), Some(UsedRenderer::Sheets));
     let mut r = req.clone();
     r.quality.antialias = AntialiasChoice::Ewa;
-    assert_eq!(used(&r), Some(UsedRenderer::Dense));
+    assert_eq!(used(&r), Some(UsedRenderer::Sheets));
     let mut r = req.clone();
     r.quality.antialias = AntialiasChoice::None;
     assert_eq!(used(&r), Some(UsedRenderer::Slab));
@@ -541,11 +544,17 @@ fn slab_thickness_defaults_by_mode() {
             .stats
             .shade_at
     };
-    assert_eq!(shade_at(ShadeAtChoice::Voxels, None), Some("voxels"));
-    assert_eq!(shade_at(ShadeAtChoice::Samples, None), Some("samples"));
+    assert_eq!(
+        shade_at(ShadeAtChoice::Voxels, None),
+        Some(ShadeAtChoice::Voxels)
+    );
+    assert_eq!(
+        shade_at(ShadeAtChoice::Samples, None),
+        Some(ShadeAtChoice::Samples)
+    );
     assert_eq!(
         shade_at(ShadeAtChoice::Voxels, Some([0.01, 0.2])),
-        Some("samples")
+        Some(ShadeAtChoice::Samples)
     );
     assert!(close(
         thickness_at(Mode::Composite, Some(true), None, ShadeAtChoice::Samples),
@@ -743,4 +752,73 @@ fn volsplat_testkit_psnr(a: &volsplat::core::Image, b: &volsplat::core::Image) -
         .sum::<f64>()
         / a.len() as f64;
     10.0 * (1.0 / mse).log10()
+}
+
+/// The sheets and the splat list draw sheet-buffer visibility where `visibility: image`
+/// reaches them (X-ray; the splat list asked for by name): the same bits as `sheet`, and the
+/// slabs are never reached through the sheets. `renderer: sheets` with `image` outside X-ray is
+/// drawn by the slabs, as `auto` draws it, and says so.
+#[test]
+fn image_visibility_reaches_the_sheets_only_as_sheet_buffers() {
+    use volsplat::VisibilityChoice;
+    let render = |renderer, mode, visibility| {
+        let mut req = RenderRequest::new(blobs(24), 32, 32);
+        req.scene.camera = orbit(25.0, 10.0, false);
+        req.renderer = renderer;
+        req.mode = mode;
+        req.quality.visibility = visibility;
+        Renderer::new().render(&req, &mut |_| true).unwrap()
+    };
+    for (renderer, mode, used) in [
+        (RendererChoice::Sheets, Mode::Xray, UsedRenderer::Sheets),
+        (RendererChoice::Auto, Mode::Xray, UsedRenderer::Sheets),
+        (
+            RendererChoice::SplatList,
+            Mode::Composite,
+            UsedRenderer::SplatList,
+        ),
+        (
+            RendererChoice::SplatList,
+            Mode::Xray,
+            UsedRenderer::SplatList,
+        ),
+    ] {
+        let image = render(renderer, mode, VisibilityChoice::Image);
+        let sheet = render(renderer, mode, VisibilityChoice::Sheet);
+        assert_eq!(image.stats.renderer, Some(used), "{renderer:?} {mode:?}");
+        assert_eq!(bits(&image), bits(&sheet), "{renderer:?} {mode:?}");
+    }
+    let sheets = render(
+        RendererChoice::Sheets,
+        Mode::Composite,
+        VisibilityChoice::Image,
+    );
+    let auto = render(
+        RendererChoice::Auto,
+        Mode::Composite,
+        VisibilityChoice::Image,
+    );
+    assert_eq!(sheets.stats.renderer, Some(UsedRenderer::Slab));
+    assert_eq!(bits(&sheets), bits(&auto));
+}
+
+/// `renderer: "sheets"` is also read under its earlier names, and written as `sheets`.
+#[test]
+fn the_sheets_keep_their_earlier_names() {
+    for name in ["sheets", "splat", "dense"] {
+        let r: RendererChoice = serde_json::from_str(&format!("\"{name}\"")).unwrap();
+        assert_eq!(r, RendererChoice::Sheets, "{name}");
+    }
+    assert_eq!(
+        serde_json::to_string(&RendererChoice::Sheets).unwrap(),
+        "\"sheets\""
+    );
+    let mut req = RenderRequest::new(blobs(16), 16, 16);
+    req.quality.visibility = volsplat::VisibilityChoice::Sheet;
+    let out = Renderer::new().render(&req, &mut |_| true).unwrap();
+    let json = serde_json::to_value(&out.stats).unwrap();
+    assert_eq!(json["renderer"], "sheets");
+    assert_eq!(json["projection"], "orthographic");
+    assert!(["i", "j", "k"].contains(&json["sheet_axis"].as_str().unwrap()));
+    assert_eq!(json["antialias"], "area");
 }

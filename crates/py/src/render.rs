@@ -197,7 +197,7 @@ impl RendererCore {
                 let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     self.with_renderer(|r| {
                         r.render(&req, &mut |p| {
-                            lock(&shared.state).progress = Some((p.fraction, p.stage));
+                            lock(&shared.state).progress = Some((p.fraction, p.stage.as_str()));
                             !shared.cancel.load(Ordering::Relaxed)
                         })
                     })

@@ -389,7 +389,7 @@ def test_visibility_and_slab(vol):
     image = volsplat.render(vol, transfer_function=tf, size=48, visibility="image")
     sheet = volsplat.render(vol, transfer_function=tf, size=48, visibility="sheet")
     auto = volsplat.render(vol, transfer_function=tf, size=48)
-    assert image.stats["renderer"] == "slab" and sheet.stats["renderer"] == "dense"
+    assert image.stats["renderer"] == "slab" and sheet.stats["renderer"] == "sheets"
     np.testing.assert_array_equal(auto.rgba, image.rgba)  # unshaded: auto draws slabs
     assert image.rgba[..., 3].max() > 0.05
     thick = volsplat.render(vol, transfer_function=tf, size=48, visibility="image", slab=2.0)
@@ -412,7 +412,7 @@ def test_shade_at(vol):
     samples = volsplat.render(vol, transfer_function=tf, size=48, visibility="image",
                               shade_at="samples")
     sheet_auto = volsplat.render(vol, transfer_function=tf, size=48, shade_at="samples")
-    assert auto.stats["renderer"] == "slab" and sheet_auto.stats["renderer"] == "dense"
+    assert auto.stats["renderer"] == "slab" and sheet_auto.stats["renderer"] == "sheets"
     np.testing.assert_array_equal(auto.rgba, voxels.rgba)
     assert samples.stats["sheet_spacing"] == pytest.approx(0.5)
     assert auto.rgba[..., 3].max() > 0.05

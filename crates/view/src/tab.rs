@@ -467,7 +467,7 @@ fn render_and_send(
             if is_final && last_progress.elapsed() > Duration::from_millis(150) {
                 last_progress = Instant::now();
                 tab.send(&ServerMessage::Progress {
-                    stage: p.stage.into(),
+                    stage: p.stage.as_str().into(),
                     fraction: p.fraction,
                 });
             }

@@ -335,7 +335,7 @@ fn stale_finals_cancel_at_once_and_stale_previews_after_three_budgets() {
     let mut go = s.keep_going(&preview);
     let p = Progress {
         fraction: 0.5,
-        stage: "render",
+        stage: crate::Stage::Render,
     };
     assert!(go(&p));
     s.apply(Event::Orbit { dx: 1.0, dy: 0.0 }).unwrap();
@@ -371,7 +371,7 @@ fn a_release_cancels_the_preview_in_flight() {
     let mut go = s.keep_going(&preview);
     let p = Progress {
         fraction: 0.5,
-        stage: "render",
+        stage: crate::Stage::Render,
     };
     assert!(go(&p));
     s.apply(Event::Interaction { active: false }).unwrap();

@@ -117,7 +117,8 @@ class Scene:
       (``--tf``) or ``None``/``"auto"``.
     - ``width``, ``height`` or ``size=N``/``(W, H)`` (``--size``; default 512×512).
     - ``mode``: ``"composite"`` (default), ``"mip"``, ``"minip"``, ``"xray"`` (``--mode``).
-    - ``renderer``: ``"auto"``, ``"splat"``, ``"splat_list"``, ``"sabella"``, ``"nil"``.
+    - ``renderer``: ``"auto"``, ``"sheets"`` (also ``"splat"``, its earlier name), ``"splat_list"``,
+      ``"sabella"``, ``"nil"``.
     - quality: ``kernel`` (``"gaussian"``, ``"nearest"``, ``"tent"``, ``"bspline"``, …),
       ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``slab`` (image-aligned slab
       thickness in voxels; default ``None``: 1 for composite, 0.5 for MIP, MinIP and shading at
