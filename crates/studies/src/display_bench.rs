@@ -13,8 +13,7 @@ use std::time::Instant;
 use volsplat_core::{AnyVolume, Camera, TransferFunction};
 use volsplat_filter::display::{
     Attenuation, ControlPoints, DisplayImage, DisplayKind, DisplaySettings, DisplayVolume,
-    Evaluator, NilDisplaySettings, QuadratureSettings, SearchRule, build_map,
-    render_display as lib_render,
+    Evaluator, NilDisplaySettings, SearchRule, build_map, render_display as lib_render,
 };
 use volsplat_filter::texture::Reconstruction;
 
@@ -70,26 +69,6 @@ fn downsample2(v: &volsplat_core::Volume<f32>) -> Result<volsplat_core::Volume<f
     })?)
 }
 
-/// The displays as the thesis defines them, for its plates and tables: eq 6.1's unit-density
-/// attenuation, each NIL cell's own fit, cells chosen by the triggers alone, 8 × 8 lines across
-/// the screen filter (the library defaults before decision 0027).
-fn thesis_settings() -> DisplaySettings {
-    let d = DisplaySettings::default();
-    DisplaySettings {
-        attenuation: Attenuation::UnitDensity,
-        nil: NilDisplaySettings {
-            continuous: false,
-            max_cell_width: 0.0,
-            ..d.nil
-        },
-        quadrature: QuadratureSettings {
-            cross_nodes: 8,
-            ..d.quadrature
-        },
-        ..d
-    }
-}
-
 /// The report's section on the default NIL display against Sabella's (issue 28, decision
 /// 0027), with the displays of the fix's steps; returns the section and the images of the
 /// plate `default_nil_vs_sabella.png` (Sabella, the default, the former default).
@@ -109,7 +88,7 @@ fn default_display_section(
     let map = build()?;
     let former = DisplaySettings {
         kind: DisplayKind::Linearised,
-        ..thesis_settings()
+        ..DisplaySettings::thesis()
     };
     let optical = DisplaySettings {
         attenuation: Attenuation::OpticalDepth,
@@ -314,7 +293,7 @@ fn white(img: &DisplayImage) -> f32 {
 /// point-sampled marching, the default NIL display against Sabella's, the linearised display
 /// (NIL against direct quadrature, support refinement, map construction, Plate 6.6, Table 6.2),
 /// splatting on the same view, slices, sample-and-filter and transfer functions through `D`
-/// maps. The plates use the thesis's displays ([`thesis_settings`]); the library defaults have
+/// maps. The plates use the thesis's displays ([`DisplaySettings::thesis`]); the library defaults have
 /// their own section.
 pub fn run(settings: &DisplayBenchSettings) -> Result<Written> {
     let b = Bench::load(settings)?;
@@ -325,7 +304,7 @@ pub fn run(settings: &DisplayBenchSettings) -> Result<Written> {
     default_display(&b, &mut md, &sab)?;
     let lin = DisplaySettings {
         kind: DisplayKind::Linearised,
-        ..thesis_settings()
+        ..DisplaySettings::thesis()
     };
     let linearised = linearised_table(&b, &mut md, &lin)?;
     support_refinement_table(&b, &mut md, &lin, &linearised.direct)?;
@@ -375,7 +354,7 @@ fn header(b: &Bench<'_>, md: &mut String) -> Result<()> {
 /// Sabella's display (Plate 6.1) against its 8×8-ray, 1024-sample self, and the maximum
 /// (Plate 6.2); returns Sabella's image, the reference of the later sections.
 fn sabella_and_maximum(b: &Bench<'_>, md: &mut String) -> Result<DisplayImage> {
-    let base = thesis_settings();
+    let base = DisplaySettings::thesis();
     let sab_s = DisplaySettings {
         kind: DisplayKind::Sabella,
         ..base.clone()
@@ -416,7 +395,7 @@ fn sabella_and_maximum(b: &Bench<'_>, md: &mut String) -> Result<DisplayImage> {
 fn point_sampled_plate(b: &Bench<'_>, md: &mut String, sab: &DisplayImage) -> Result<()> {
     let sab_s = DisplaySettings {
         kind: DisplayKind::Sabella,
-        ..thesis_settings()
+        ..DisplaySettings::thesis()
     };
     writeln!(
         md,
@@ -721,7 +700,7 @@ fn slices(b: &Bench<'_>, md: &mut String) -> Result<()> {
         md,
         "## Slices (§6-2, Plates 6.8, 6.9)\n\nNIL M = 2, tol 2, 3×3×3 triggers in ±2σ × ±2w. Plates: projection.\n\n| width | direct s | NIL project s | MSE | SNR dB | NIL interpolate MSE | fall-backs |\n|---|---|---|---|---|---|---|"
     )?;
-    let base = thesis_settings();
+    let base = DisplaySettings::thesis();
     let map2 = build_map(&b.dv, 2, None, 1 << 28)?;
     for (name, width_u) in [("thick", 0.1), ("thin", 0.01)] {
         let s = DisplaySettings {
@@ -778,7 +757,7 @@ fn slices(b: &Bench<'_>, md: &mut String) -> Result<()> {
 /// Sample-and-filter (§6-3, Plates 6.10–6.14): the search plate and the difference of
 /// Gaussians in both views at two thresholds, NIL against direct.
 fn sample_and_filter(b: &Bench<'_>, md: &mut String) -> Result<()> {
-    let base = thesis_settings();
+    let base = DisplaySettings::thesis();
     let map3 = build_map(&b.dv, 3, None, 1 << 28)?;
     writeln!(
         md,

@@ -304,6 +304,28 @@ fn check(field: &str, ok: bool, value: impl std::fmt::Debug, reason: &str) -> Re
 }
 
 impl DisplaySettings {
+    /// The linearised display as the thesis defines it, which were the defaults before decision
+    /// 0027: eq 6.1's unit-density attenuation ([`Attenuation::UnitDensity`]), each NIL cell's
+    /// own fit (no continuous patches), no cap on the crossed cells' width, and 8 × 8 lines
+    /// across the screen filter; everything else as [`DisplaySettings::default`]. The plates of
+    /// `volsplat display-bench` use it, and the tests that measure what decision 0027 changed.
+    pub fn thesis() -> Self {
+        let d = DisplaySettings::default();
+        DisplaySettings {
+            attenuation: Attenuation::UnitDensity,
+            nil: NilDisplaySettings {
+                continuous: false,
+                max_cell_width: 0.0,
+                ..d.nil
+            },
+            quadrature: QuadratureSettings {
+                cross_nodes: 8,
+                ..d.quadrature
+            },
+            ..d
+        }
+    }
+
     /// Validates every parameter.
     pub fn validate(&self) -> Result<()> {
         let fin = |x: f64| x.is_finite();
