@@ -245,6 +245,10 @@ pub fn build_request(
 /// replaced the scene's transfer function by the new mode's default, or dropped its grey
 /// window. `image` is the output flags (`--background`, `--srgb`, `--bit-depth`,
 /// `--window`/`--wl`; `None` for a command without them, which keeps a scene's).
+///
+/// The flags are applied in groups, in this order (so the first bad flag is the one named):
+/// volume, camera, classification, clipping and cues, size and mode, output, renderer and
+/// quality, display.
 #[allow(clippy::too_many_arguments)]
 pub fn build_request_noted(
     input: &InputArgs,
@@ -261,7 +265,28 @@ pub fn build_request_noted(
     let fresh = base.is_none();
     let set = |id: &str| fresh || given.contains(id);
     let mut req = base.unwrap_or_else(|| RenderRequest::new(Scene::default(), 512, 512));
-    let s = &mut req.scene;
+    apply_volume_flags(&mut req.scene, input, &set)?;
+    apply_camera_flags(&mut req.scene, view)?;
+    apply_classification_flags(&mut req.scene, o, fresh, &set)?;
+    apply_clipping_and_cue_flags(&mut req.scene, o, &set)?;
+    if set("size") {
+        (req.width, req.height) = parse_image_size(&o.size, "--size")?;
+    }
+    if set("mode") {
+        apply_mode_flag(&mut req, o, fresh, given, &mut notes);
+    }
+    if let Some(image) = image {
+        apply_output_flags(&mut req.output, image, &set)?;
+    }
+    apply_renderer_and_quality_flags(&mut req, o, renderer, draw_k, &set)?;
+    if let Some(d) = display {
+        apply_display_flags(&mut req.display, d, &set)?;
+    }
+    Ok((req, notes))
+}
+
+/// The volume source, when any of its flags is given (or without a scene).
+fn apply_volume_flags(s: &mut Scene, input: &InputArgs, set: &dyn Fn(&str) -> bool) -> Result<()> {
     if [
         "input",
         "phantom",
@@ -275,7 +300,12 @@ pub fn build_request_noted(
     {
         s.volume = volume_source(input)?;
     }
-    // Camera: a file replaces the camera; each view flag given sets its orbit field.
+    Ok(())
+}
+
+/// The camera: a `--camera` file replaces the scene's camera; each view flag given sets its
+/// orbit field, which is then checked (the error names the flag).
+fn apply_camera_flags(s: &mut Scene, view: &ViewArgs) -> Result<()> {
     if let Some(path) = &view.camera {
         let (camera, warnings) = volsplat::io::load_camera(path)?;
         for w in warnings {
@@ -320,6 +350,17 @@ pub fn build_request_noted(
         bail!("--{}: {value} {reason}", field.replace('_', "-"));
     }
     orbit.validate()?;
+    Ok(())
+}
+
+/// The classification: `--tf` or `--preset`, the lights (`--light`; without a scene, or
+/// given at least once over one), the shading switches and `--surface-enhance`.
+fn apply_classification_flags(
+    s: &mut Scene,
+    o: &RenderOptions,
+    fresh: bool,
+    set: &dyn Fn(&str) -> bool,
+) -> Result<()> {
     if let Some(path) = &o.tf {
         let (tf, warnings) = volsplat::io::load_transfer_function(path)?;
         for w in warnings {
@@ -356,6 +397,16 @@ pub fn build_request_noted(
             .map(|v| pair(v, ':', "--surface-enhance"))
             .transpose()?;
     }
+    Ok(())
+}
+
+/// Cropping (`--crop` in voxels or `--crop-mm` in world units), clipping planes, the X-ray
+/// offset and depth cueing.
+fn apply_clipping_and_cue_flags(
+    s: &mut Scene,
+    o: &RenderOptions,
+    set: &dyn Fn(&str) -> bool,
+) -> Result<()> {
     if set("crop") || set("crop_mm") {
         s.clipping.crop = match (&o.crop, &o.crop_mm) {
             (Some(c), _) => Some(parse_crop(c, "--crop", volsplat::CropUnits::Voxels)?),
@@ -380,47 +431,65 @@ pub fn build_request_noted(
             .map(|v| pair(v, ':', "--depth-cue"))
             .transpose()?;
     }
-    if set("size") {
-        (req.width, req.height) = parse_image_size(&o.size, "--size")?;
+    Ok(())
+}
+
+/// `--mode` over `req`. Over a scene of another mode (`fresh` false), a transfer function
+/// made for the scene's mode gives way to the new mode's default unless `--tf` or `--preset`
+/// is given, and a grey window in other units is dropped unless `--window` or `--wl` is given;
+/// each is said in `notes`.
+fn apply_mode_flag(
+    req: &mut RenderRequest,
+    o: &RenderOptions,
+    fresh: bool,
+    given: &Given,
+    notes: &mut Vec<String>,
+) {
+    let mode = o.mode;
+    // A scene's transfer function was made for its mode (a MIP's grey ramp looks flat in
+    // composite): another mode without --tf or --preset takes that mode's default.
+    if !fresh
+        && mode != req.mode
+        && o.tf.is_none()
+        && o.preset.is_none()
+        && req.scene.transfer_function != TransferSpec::Auto
+    {
+        notes.push(format!(
+            "--mode {}: the scene's transfer function was made for mode {}; using {}'s \
+             default (auto) instead (give --tf or --preset to choose one)",
+            mode_name(mode),
+            mode_name(req.mode),
+            mode_name(mode)
+        ));
+        req.scene.transfer_function = TransferSpec::Auto;
     }
-    if set("mode") {
-        // A scene's transfer function was made for its mode (a MIP's grey ramp looks flat in
-        // composite): another mode without --tf or --preset takes that mode's default.
-        if !fresh
-            && o.mode != req.mode
-            && o.tf.is_none()
-            && o.preset.is_none()
-            && req.scene.transfer_function != TransferSpec::Auto
-        {
-            notes.push(format!(
-                "--mode {}: the scene's transfer function was made for mode {}; using {}'s \
-                 default (auto) instead (give --tf or --preset to choose one)",
-                mode_name(o.mode),
-                mode_name(req.mode),
-                mode_name(o.mode)
-            ));
-            req.scene.transfer_function = TransferSpec::Auto;
-        }
-        // A scene's grey window was made for its mode's values: another mode without --window
-        // or --wl drops it (MIP and MinIP share units; X-ray's are data × world units).
-        if let Some([lo, hi]) = req.output.window
-            && !req.mode.shares_window_with(o.mode)
-            && !given.contains("window")
-            && !given.contains("wl")
-        {
-            notes.push(format!(
-                "--mode {}: the scene's grey window {lo}:{hi} was made for mode {}; dropped \
-                 (give --window or --wl to set one)",
-                mode_name(o.mode),
-                mode_name(req.mode)
-            ));
-            req.output.window = None;
-        }
-        req.mode = o.mode;
+    // A scene's grey window was made for its mode's values: another mode without --window
+    // or --wl drops it (MIP and MinIP share units; X-ray's are data × world units).
+    if let Some([lo, hi]) = req.output.window
+        && !req.mode.shares_window_with(mode)
+        && !given.contains("window")
+        && !given.contains("wl")
+    {
+        notes.push(format!(
+            "--mode {}: the scene's grey window {lo}:{hi} was made for mode {}; dropped \
+             (give --window or --wl to set one)",
+            mode_name(mode),
+            mode_name(req.mode)
+        ));
+        req.output.window = None;
     }
-    if let Some(image) = image {
-        apply_output_flags(&mut req.output, image, &set)?;
-    }
+    req.mode = mode;
+}
+
+/// The renderer (`--renderer`, `--splat-list`), the quality fields, `--threads` and
+/// `--draw-k`.
+fn apply_renderer_and_quality_flags(
+    req: &mut RenderRequest,
+    o: &RenderOptions,
+    renderer: RendererArg,
+    draw_k: Option<&str>,
+    set: &dyn Fn(&str) -> bool,
+) -> Result<()> {
     if set("renderer") || set("splat_list") {
         req.renderer = match renderer {
             RendererArg::Sabella => RendererChoice::Sabella,
@@ -453,50 +522,57 @@ pub fn build_request_noted(
     if set("draw_k") {
         req.k_contour = draw_k.map(|c| triple::<f32>(c, "--draw-k")).transpose()?;
     }
-    if let Some(d) = display {
-        let t = &mut req.display;
-        if set("dog_sigma") {
-            let sig: Vec<f64> = d
-                .dog_sigma
-                .split(',')
-                .map(|p| p.trim().parse::<f64>())
-                .collect::<std::result::Result<_, _>>()
-                .context("--dog-sigma: expected S1,S2")?;
-            let [a, b] = sig[..] else {
-                bail!("--dog-sigma: expected two numbers S1,S2");
-            };
-            t.dog_sigma = [a, b];
-        }
-        macro_rules! copy {
-            ($($f:ident),*) => { $( if set(stringify!($f)) { t.$f = d.$f.clone(); } )* };
-        }
-        copy!(
-            display,
-            density,
-            control_points,
-            direct,
-            tau,
-            screen_sigma,
-            supersample,
-            samples_per_ray,
-            patch_order,
-            tolerance,
-            trigger_width,
-            trigger_steps,
-            gamma_min,
-            slice_depth,
-            slice_width,
-            rho0,
-            closest,
-            dog_gain,
-            max_map_values,
-            grey,
-            attenuation,
-            continuous_patches,
-            max_cell_width
-        );
+    Ok(())
+}
+
+/// The flags of the Chapter 6 displays (`--renderer sabella|nil`) into the request's display
+/// settings.
+fn apply_display_flags(
+    t: &mut volsplat::DisplayOptions,
+    d: &crate::display::DisplayArgs,
+    set: &dyn Fn(&str) -> bool,
+) -> Result<()> {
+    if set("dog_sigma") {
+        let sig: Vec<f64> = d
+            .dog_sigma
+            .split(',')
+            .map(|p| p.trim().parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .context("--dog-sigma: expected S1,S2")?;
+        let [a, b] = sig[..] else {
+            bail!("--dog-sigma: expected two numbers S1,S2");
+        };
+        t.dog_sigma = [a, b];
     }
-    Ok((req, notes))
+    macro_rules! copy {
+        ($($f:ident),*) => { $( if set(stringify!($f)) { t.$f = d.$f.clone(); } )* };
+    }
+    copy!(
+        display,
+        density,
+        control_points,
+        direct,
+        tau,
+        screen_sigma,
+        supersample,
+        samples_per_ray,
+        patch_order,
+        tolerance,
+        trigger_width,
+        trigger_steps,
+        gamma_min,
+        slice_depth,
+        slice_width,
+        rho0,
+        closest,
+        dog_gain,
+        max_map_values,
+        grey,
+        attenuation,
+        continuous_patches,
+        max_cell_width
+    );
+    Ok(())
 }
 
 /// The output flags into the request's output options: all of them without a scene

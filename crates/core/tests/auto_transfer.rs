@@ -8,22 +8,12 @@
 //! step (`α' = 1 − (1 − α)^(Δs/unit)`, docs/design.md §3), front to back. Only opacity matters for
 //! the silhouette contrast, so colour and shading are left out.
 
-use std::path::Path;
-use std::process::Command;
 use volsplat_core::crio::DEFAULT_TABLE_LEN;
 use volsplat_core::phantom::ct_head_volume;
 use volsplat_core::{
     AnyVolume, AutoTransfer, BackgroundRule, CrioTables, Grid, TransferFunction, Volume,
 };
-
-const BRAINSMALL: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/data/mri_brainsmall.nrrd"
-);
-const COLIN27: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/data/mri_colin27.nhdr"
-);
+use volsplat_testkit::data::{read_u8_nrrd, shared_data};
 
 /// Accumulated opacity of the parallel projection of `vol` along grid axis `axis` (0, 1, 2):
 /// one value per ray, rays over the other two axes.
@@ -271,54 +261,13 @@ fn noisy_mr_phantom_shows_the_head() {
     }
 }
 
-/// Reads an attached- or detached-header 8-bit NRRD of the test data (raw or gzip encoding;
-/// gzip through the `gzip` program). `None`, with a note, when the file or `gzip` is missing.
-fn read_u8_nrrd(path: &str) -> Option<Volume<u8>> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| eprintln!("note: {path}: {e}; skipping"))
-        .ok()?;
-    let end = bytes
-        .windows(2)
-        .position(|w| w == b"\n\n")
-        .map_or(bytes.len(), |p| p + 2);
-    let header = String::from_utf8_lossy(&bytes[..end]).to_string();
-    let field = |name: &str| {
-        header
-            .lines()
-            .find_map(|l| l.strip_prefix(&format!("{name}: ")))
-            .map(str::trim)
-    };
-    assert_eq!(field("type"), Some("uint8"), "{path}");
-    let dims: Vec<usize> = field("sizes")?
-        .split_whitespace()
-        .map(|s| s.parse().unwrap())
-        .collect();
-    let dims = [dims[0], dims[1], dims[2]];
-    let data = match (field("encoding"), field("data file")) {
-        (Some("raw"), None) => bytes[end..].to_vec(),
-        (Some("gzip"), Some(file)) => {
-            let dir = Path::new(path).parent()?;
-            let out = Command::new("gzip")
-                .arg("-dc")
-                .arg(dir.join(file))
-                .output()
-                .map_err(|e| eprintln!("note: gzip: {e}; skipping {path}"))
-                .ok()?;
-            assert!(out.status.success(), "gzip failed on {file}");
-            out.stdout
-        }
-        other => panic!("{path}: unexpected encoding {other:?}"),
-    };
-    Some(Volume::new(Grid::with_dims(dims).unwrap(), data).unwrap())
-}
-
 /// On real MRIs the silhouette comes from a fixed intensity, 40 (between the background noise
 /// and tissue of both 8-bit scans, and independent of the automatic rule): object rays cross at
 /// least 3 samples at or above it, background rays none. `former_is_foggy`: whether the former
 /// default fails the same test (Colin27's background is exactly 0, a masked template, so the
 /// ramp's opacity is 0 there too and its background stays nearly clear).
-fn real_mri(path: &str, name: &str, former_is_foggy: bool) {
-    let Some(mr) = read_u8_nrrd(path) else {
+fn real_mri(file: &str, name: &str, former_is_foggy: bool) {
+    let Some(mr) = read_u8_nrrd(&shared_data(file)) else {
         return;
     };
     let truth = mr.to_f32();
@@ -335,12 +284,12 @@ fn real_mri(path: &str, name: &str, former_is_foggy: bool) {
 
 #[test]
 fn brainsmall_mri_shows_the_head() {
-    real_mri(BRAINSMALL, "brainsmall", true);
+    real_mri("mri_brainsmall.nrrd", "brainsmall", true);
 }
 
 #[test]
 fn colin27_mri_shows_the_head() {
-    real_mri(COLIN27, "colin27", false);
+    real_mri("mri_colin27.nhdr", "colin27", false);
 }
 
 /// The noise-free phantom: air is exactly −1000 HU nearly everywhere, which must not hide the

@@ -5,7 +5,7 @@
 //! half-axis vectors `a_q` (the `V_tan` box of [`crate::scene`]) has the dimensionless
 //! *footprint frequency* `φ = sqrt(Σ_q (f·a_q)²)` (decision A-7): the number of cycles across
 //! one half-width of the footprint, combined over its axes. The clamp factor `C(φ)` multiplies
-//! the component; components with `C = 0` are skipped (F-B08).
+//! the component; components with `C = 0` are skipped (thesis §5-3).
 
 use crate::error::{Result, check_positive};
 use crate::region::OrientedBox;
@@ -21,9 +21,9 @@ pub enum ClampKind {
     Step,
     /// The thesis's quadratic: `C = max(0, 1 − (φ/φ_max)²)` (Plate 5.3).
     Quadratic,
-    /// Norton, Rockwood & Skolmoski's box clamp extended to three footprint axes (F-B07):
+    /// Norton, Rockwood & Skolmoski's box clamp extended to three footprint axes (thesis §4-1):
     /// `C = max(0, 1 − Σ_q (2π f·a_q)²/6)`, i.e. the quadratic with `φ_max = √6/(2π)`
-    /// (the printed condition "< 1" and missing "+" are corrected, digest §2.1). Ignores
+    /// (the printed condition "< 1" and missing "+" are corrected, A-13). Ignores
     /// [`ClampSettings::phi_max`].
     Norton,
 }

@@ -1,4 +1,4 @@
-//! Direct evaluation of the filter integral by quadrature (thesis §4-2, §5-4; F-B09–F-B12).
+//! Direct evaluation of the filter integral by quadrature (thesis §4-2, §5-2, §5-4).
 //!
 //! `I = ∭_V F T / ∭_V F` over an [`OrientedBox`] `V` (decision A-8: the result is normalised,
 //! a filter-weighted average). With [`QuadratureRule::AdaptiveSimpson`] at tolerance `1/255`

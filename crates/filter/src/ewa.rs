@@ -1,5 +1,5 @@
 //! 3-D Elliptical Weighted Average filtering (Greene & Heckbert 1986; thesis §4-3, §5-5,
-//! Figs 4.14–4.16, Plates 5.7/5.8, Table 5.4; F-B13–F-B16).
+//! Figs 4.14–4.16, Plates 5.7/5.8, Table 5.4; Def 17).
 //!
 //! The Gaussian is applied through a pre-computed 1-D table indexed by the squared normalised
 //! radius `ρ²` (the only pre-processing: `n` filter evaluations, `n` floats; Table 5.9).
@@ -36,7 +36,7 @@ pub enum SampleCount {
     Adaptive,
 }
 
-/// Where the Gaussian is centred (Figs 4.15/4.16, Plate 4.1; F-B16).
+/// Where the Gaussian is centred (Figs 4.15/4.16, Plate 4.1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum EwaCentre {
     /// At the ellipse centre (the thesis).

@@ -1,4 +1,4 @@
-//! Filter kernels over an integration region (thesis §4-2, Plates 5.4–5.6; F-B03).
+//! Filter kernels over an integration region (thesis §4-2, Plates 5.4–5.6; eq 6.1, §6-3, App. C).
 //!
 //! Filters are defined in the local coordinates `(s, t, r) ∈ [−1, 1]³` of an
 //! [`OrientedBox`](crate::region::OrientedBox): `s, t` span the footprint (for `V_tan` the

@@ -2,9 +2,10 @@
 //!
 //! Buchanan, *Filtering Volumetric Data* (PhD thesis, UBC; chapters 1–5, appendices A–C): four
 //! ways to evaluate the space-variant 3-D filter integral `I = ∭ F(u,v,w) T(u,v,w)` of a solid
-//! texture over a pixel's footprint, and the Chapter 5 evaluation that compares them. The
-//! digest `research/seed-buchanan.md` rebuilds the thesis's formulas; "digest §n" and
-//! "F-Bnn"/"A-n" below refer to it.
+//! texture over a pixel's footprint, and the Chapter 5 evaluation that compares them. Citations
+//! name the thesis's section (§4-4.2), equation (eq 4.32), figure, table, plate or appendix
+//! (App. A-1); "A-n" are the points where the printed thesis is ambiguous or wrong, each with
+//! the choice made, listed under *Decisions* below (`docs/papers.md` maps the thesis to the code).
 //!
 //! ## Modules
 //! - [`texture`]: the [`texture::SolidTexture`] trait; cosine series (known
@@ -36,7 +37,7 @@
 //! angles in degrees at interfaces (camera), radians inside. Dependencies: `volsplat-core`
 //! (camera, images, volumes), `glam`, `thiserror`, `rayon` (parallel rendering) only.
 //!
-//! ## Decisions (open points A-1…A-21 of the digest, §7)
+//! ## Decisions (open points A-1…A-21)
 //! - **A-1 level weighting**: the printed `w_γ = 2^{γmax−γ}` (text and eq 4.32) is wrong; the
 //!   worked example and the mathematics need the cell extent. We weight numerator and
 //!   denominator by the cell volume `2^{3γ}` ([`nil::LevelWeighting::CellVolume`]). Tests:

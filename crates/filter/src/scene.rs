@@ -1,5 +1,5 @@
 //! Texture scenes: a perspective camera over a textured plane running to the horizon, or a
-//! textured sphere, and the per-pixel filter regions (thesis §4-2, Figs 4.12–4.15; F-B04, F-B05).
+//! textured sphere, and the per-pixel filter regions (thesis §4-2, Figs 4.12–4.15, Table 5.3).
 //!
 //! Scenes are modelled directly in texture space (one world unit = one texture unit). A pixel is
 //! a circle of radius `½·pitch·spread` on the image plane (§3-1). For each pixel the scene gives

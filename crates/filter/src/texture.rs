@@ -208,7 +208,7 @@ impl CosineTexture {
         self.coeffs[(i * self.dims[1] + j) * self.dims[2] + k]
     }
 
-    /// Exact average of the texture over an oriented box (closed form; F-B02). Each product
+    /// Exact average of the texture over an oriented box (closed form; thesis §4-4.5). Each product
     /// of cosines is four plane waves `cos(2π f·p)`, whose average over the box is
     /// `cos(2π f·c) · Π_q sinc(2π f·a_q)`.
     pub fn box_average(&self, b: &OrientedBox) -> f64 {
@@ -297,7 +297,7 @@ impl SolidTexture for CosineTexture {
 
     /// Thesis §5-3 (corrected: `T_ijk` appears once): every plane wave of frequency `f` is
     /// scaled by `C(φ)` with `φ² = Σ_q (f·a_q)²` over the footprint half-axes `a_q`;
-    /// components with `C = 0` are skipped (F-B08).
+    /// components with `C = 0` are skipped (thesis §5-3).
     fn clamped_value(
         &self,
         p: DVec3,

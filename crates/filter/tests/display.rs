@@ -5,11 +5,12 @@ use volsplat_core::{Camera, Grid, Projection, Volume};
 use volsplat_filter::FilterError;
 use volsplat_filter::display::{
     Attenuation, ControlPoints, DisplayKind, DisplaySettings, DisplayVolume, Evaluator,
-    NilDisplaySettings, QuadratureSettings, build_map, render_display,
+    NilDisplaySettings, build_map, render_display,
 };
 use volsplat_filter::nil::TransferBasis;
 use volsplat_filter::texture::Reconstruction;
 use volsplat_testkit::emitter::reference_emitter;
+use volsplat_testkit::fixtures::orbit_camera;
 
 const N: usize = 20;
 
@@ -32,31 +33,9 @@ fn densities(f: impl Fn(usize, usize, usize) -> f64) -> (Grid, Vec<f64>) {
     (grid, d)
 }
 
+/// The view of the `N³` test volume at azimuth 30°, elevation 20°.
 fn camera(parallel: bool) -> Camera {
-    let mut c = Camera::reset_to_bounds(DVec3::ZERO, DVec3::splat((N - 1) as f64), parallel);
-    c.azimuth(30.0);
-    c.elevation(20.0);
-    c.orthogonalize_view_up();
-    c
-}
-
-/// The linearised display as decision 0007 measured it (before decision 0027): eq 6.1's
-/// unit-density attenuation, each cell's own projection, no cap on cell size, 8 × 8 lines.
-fn decision_0007() -> DisplaySettings {
-    DisplaySettings {
-        kind: DisplayKind::Linearised,
-        attenuation: Attenuation::UnitDensity,
-        nil: NilDisplaySettings {
-            continuous: false,
-            max_cell_width: 0.0,
-            ..Default::default()
-        },
-        quadrature: QuadratureSettings {
-            cross_nodes: 8,
-            ..Default::default()
-        },
-        ..Default::default()
-    }
+    orbit_camera(&Grid::with_dims([N, N, N]).unwrap(), 30.0, 20.0, parallel)
 }
 
 /// MSE on the 8-bit scale (255² × the MSE of values in [0, 1], not quantised).
@@ -179,7 +158,7 @@ fn nil_error_falls_with_order_tolerance_and_triggers() {
     let (w, h) = (24, 24);
     // The trigger hierarchy alone decides the cells here (no cap), and each cell keeps its own
     // projection: the properties decision 0007 claims.
-    let base = decision_0007();
+    let base = DisplaySettings::thesis();
     let direct = render_display(
         &vol,
         None,
@@ -264,7 +243,7 @@ fn support_refinement_removes_cell_boundary_lines() {
     let vol = DisplayVolume::new(&grid, &d, Reconstruction::Trilinear).unwrap();
     let cam = Camera::reset_to_bounds(DVec3::ZERO, DVec3::splat((N - 1) as f64), true);
     let (w, h) = (24, 24);
-    let base = decision_0007();
+    let base = DisplaySettings::thesis();
     let direct = render_display(
         &vol,
         None,
@@ -567,4 +546,25 @@ fn bad_input_is_a_typed_error() {
         render_display(&vol, Some(&map), &cam, 4, 4, &nil).is_err(),
         "missing coefficients"
     );
+}
+
+/// The thesis's display (the defaults before decision 0027) differs from today's defaults in
+/// exactly what decision 0027 changed, and is valid.
+#[test]
+fn thesis_settings_are_the_defaults_before_decision_0027() {
+    let (t, d) = (DisplaySettings::thesis(), DisplaySettings::default());
+    t.validate().unwrap();
+    assert_eq!(t.kind, DisplayKind::Linearised);
+    assert_eq!(t.attenuation, Attenuation::UnitDensity);
+    assert_eq!(d.attenuation, Attenuation::OpticalDepth);
+    assert!(!t.nil.continuous && d.nil.continuous);
+    assert!(t.nil.max_cell_width == 0.0 && d.nil.max_cell_width > 0.0);
+    assert_eq!((t.quadrature.cross_nodes, d.quadrature.cross_nodes), (8, 4));
+    let undo = DisplaySettings {
+        attenuation: d.attenuation,
+        nil: d.nil,
+        quadrature: d.quadrature,
+        ..t.clone()
+    };
+    assert_eq!(undo, d);
 }

@@ -11,34 +11,15 @@
 //! - a polynomial fitted over a cell half air, half tissue goes below zero in the air, and
 //!   nothing clamped the display: `nil_display_is_never_negative`.
 
-use std::path::Path;
-use std::process::Command;
 use volsplat_core::glam::DVec3;
-use volsplat_core::{AnyVolume, AutoTransfer, Camera, Grid, Projection, Volume};
+use volsplat_core::{AnyVolume, AutoTransfer, Camera, Grid, Projection};
 use volsplat_filter::display::{
     Attenuation, DisplayImage, DisplayKind, DisplaySettings, DisplayVolume, Evaluator,
-    NilDisplaySettings, QuadratureSettings, build_map, render_display,
+    NilDisplaySettings, build_map, render_display,
 };
 use volsplat_filter::texture::Reconstruction;
+use volsplat_testkit::data::{read_u8_nrrd, shared_data};
 use volsplat_testkit::metrics::psnr;
-
-/// The display settings before decision 0027: eq 6.1's unit-density attenuation, each cell's
-/// own projection, no cap on cell size, 8 × 8 cross-section lines.
-fn former() -> DisplaySettings {
-    DisplaySettings {
-        attenuation: Attenuation::UnitDensity,
-        nil: NilDisplaySettings {
-            continuous: false,
-            max_cell_width: 0.0,
-            ..Default::default()
-        },
-        quadrature: QuadratureSettings {
-            cross_nodes: 8,
-            ..Default::default()
-        },
-        ..Default::default()
-    }
-}
 
 fn volume(dims: [usize; 3], f: impl Fn(f64, f64, f64) -> f64) -> DisplayVolume {
     let grid = Grid::with_dims(dims).unwrap();
@@ -111,7 +92,7 @@ fn sabella(vol: &DisplayVolume, cam: &Camera, size: (usize, usize)) -> Vec<f32> 
 fn against_sabella(vol: &DisplayVolume, cam: &Camera, size: (usize, usize)) -> (f64, f64) {
     let sab = sabella(vol, cam, size);
     let now = render(vol, cam, size, &DisplaySettings::default());
-    let before = render(vol, cam, size, &former());
+    let before = render(vol, cam, size, &DisplaySettings::thesis());
     assert!(now.value.iter().chain(&before.value).all(|v| v.is_finite()));
     (psnr(&now.value, &sab, 1.0), psnr(&before.value, &sab, 1.0))
 }
@@ -142,55 +123,12 @@ fn default_nil_display_matches_sabella_on_an_mri_like_head() {
     }
 }
 
-/// Reads a detached- or attached-header 8-bit NRRD of the shared test data (raw, or gzip through
-/// the `gzip` program); `None`, with a note, when the file or `gzip` is missing.
-fn read_u8_nrrd(path: &str) -> Option<Volume<u8>> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| eprintln!("note: {path}: {e}; skipping"))
-        .ok()?;
-    let end = bytes
-        .windows(2)
-        .position(|w| w == b"\n\n")
-        .map_or(bytes.len(), |p| p + 2);
-    let header = String::from_utf8_lossy(&bytes[..end]).to_string();
-    let field = |name: &str| {
-        header
-            .lines()
-            .find_map(|l| l.strip_prefix(&format!("{name}: ")))
-            .map(str::trim)
-    };
-    assert_eq!(field("type"), Some("uint8"), "{path}");
-    let dims: Vec<usize> = field("sizes")?
-        .split_whitespace()
-        .map(|s| s.parse().unwrap())
-        .collect();
-    let data = match (field("encoding"), field("data file")) {
-        (Some("raw"), None) => bytes[end..].to_vec(),
-        (Some("gzip"), Some(file)) => {
-            let out = Command::new("gzip")
-                .arg("-dc")
-                .arg(Path::new(path).parent()?.join(file))
-                .output()
-                .map_err(|e| eprintln!("note: gzip: {e}; skipping {path}"))
-                .ok()?;
-            assert!(out.status.success(), "gzip failed on {file}");
-            out.stdout
-        }
-        other => panic!("{path}: unexpected encoding {other:?}"),
-    };
-    Some(Volume::new(Grid::with_dims([dims[0], dims[1], dims[2]]).unwrap(), data).unwrap())
-}
-
 #[test]
 fn default_nil_display_matches_sabella_on_the_shared_mri() {
     // Colin27 (181×217×181, the kind of MRI issue 28 measured), its densities the automatic
     // transfer function's opacity as the engine takes them, averaged 2×2×2 to keep the test
     // short (the engine's own fallback for maps over the memory budget).
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/mri_colin27.nhdr"
-    );
-    let Some(mr) = read_u8_nrrd(path) else {
+    let Some(mr) = read_u8_nrrd(&shared_data("mri_colin27.nhdr")) else {
         return;
     };
     let tf = AutoTransfer::from_volume(&AnyVolume::from(mr.clone())).transfer_function;
@@ -295,7 +233,7 @@ fn continuous_patches_leave_no_seams_at_cell_faces() {
         (ratios, p)
     };
     // Each cell's own fit: seams at the faces of its 16-voxel cells (two triggers each).
-    let (dg, dg_psnr) = case("former", sparse(former()));
+    let (dg, dg_psnr) = case("former", sparse(DisplaySettings::thesis()));
     assert!(dg[4] > 4.0, "the former fit should show seams: {dg:?}");
     // The same hierarchy with continuous patches: no seams at any level.
     let cg_settings = |s: DisplaySettings| DisplaySettings {
@@ -305,7 +243,7 @@ fn continuous_patches_leave_no_seams_at_cell_faces() {
         },
         ..s
     };
-    let (cg, _) = case("continuous", sparse(cg_settings(former())));
+    let (cg, _) = case("continuous", sparse(cg_settings(DisplaySettings::thesis())));
     assert!(cg.iter().all(|&r| r < 1.3), "{cg:?}");
     // The defaults (continuous, cells no wider than 1.5 tubes: 2 voxels here): no seams either,
     // and far closer to the exact filter than the former fit.
@@ -384,12 +322,12 @@ fn nil_display_is_never_negative() {
     for m in 2..=4 {
         let map = build_map(&vol, m, None, 1 << 26).unwrap();
         for (name, s) in [
-            ("former", former()),
+            ("former", DisplaySettings::thesis()),
             (
                 "former, optical depth",
                 DisplaySettings {
                     attenuation: Attenuation::OpticalDepth,
-                    ..former()
+                    ..DisplaySettings::thesis()
                 },
             ),
             ("defaults", DisplaySettings::default()),

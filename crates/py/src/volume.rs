@@ -490,6 +490,193 @@ fn target_type(kind: u8, itemsize: usize, native: bool) -> Option<(ScalarType, b
     }
 }
 
+/// `array` as a numpy array: itself if it is one, else `numpy.asarray(array)`.
+fn numpy_array<'py>(
+    np: &Bound<'py, PyModule>,
+    array: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match array.cast::<PyUntypedArray>() {
+        Ok(a) => a.clone().into_any(),
+        Err(_) => np.call_method1("asarray", (array,)).map_err(|e| {
+            invalid(format!(
+                "array: expected a 3-D numpy array (or something numpy.asarray accepts): {e}"
+            ))
+        })?,
+    })
+}
+
+/// The shape of a 3-D array with at least one sample per axis; otherwise an error that says
+/// what to do with a 2-D slice or a 4-D series.
+fn checked_shape(untyped: &Bound<'_, PyUntypedArray>, axes: Axes) -> PyResult<[usize; 3]> {
+    let shape_v = untyped.shape().to_vec();
+    if shape_v.len() != 3 {
+        let hint = match shape_v.len() {
+            2 => "; for a single slice add an axis, e.g. array[np.newaxis]",
+            4 => "; choose one volume of a 4-D array, e.g. array[0] or array[..., 0]",
+            _ => "",
+        };
+        return Err(invalid(format!(
+            "array: expected a 3-D array ({} order), got {} dimensions with shape \
+             {shape_v:?}{hint}",
+            axes.name(),
+            shape_v.len()
+        )));
+    }
+    if shape_v.contains(&0) {
+        return Err(invalid(format!(
+            "array: every axis needs at least one sample, got shape {shape_v:?}"
+        )));
+    }
+    Ok([shape_v[0], shape_v[1], shape_v[2]])
+}
+
+/// A numpy array's dtype as the constructor needs it.
+struct SourceType {
+    /// numpy's name of the dtype (`descr.str`, e.g. `<f8`).
+    name: String,
+    /// numpy's kind character (`b'u'`, `b'i'`, `b'f'`, `b'b'`, …).
+    kind: u8,
+    /// Bytes per sample.
+    itemsize: usize,
+    /// Whether the samples are in the machine's byte order.
+    native: bool,
+    /// The name of the dtype's Python type, for the error message of an unsupported dtype.
+    type_name: String,
+}
+
+impl SourceType {
+    /// The dtype of `untyped`.
+    fn of(untyped: &Bound<'_, PyUntypedArray>) -> PyResult<Self> {
+        let descr = untyped.dtype();
+        Ok(SourceType {
+            name: descr.str()?.extract()?,
+            kind: descr.kind(),
+            itemsize: descr.itemsize(),
+            native: descr.is_native_byteorder().unwrap_or(true),
+            type_name: descr
+                .typeobj()
+                .name()
+                .map(|n| n.to_string())
+                .unwrap_or_default(),
+        })
+    }
+
+    /// The engine type of the volume (`dtype=` if given, else the one this dtype maps to) and
+    /// whether numpy must convert the array first.
+    fn target(&self, dtype: Option<&str>) -> PyResult<(ScalarType, bool)> {
+        let mapped = target_type(self.kind, self.itemsize, self.native);
+        match dtype {
+            Some(name) => {
+                let t = parse_scalar_type(name)?;
+                let same = mapped == Some((t, false));
+                Ok((t, !same))
+            }
+            None => mapped.ok_or_else(|| {
+                invalid(format!(
+                    "array: unsupported dtype {} ({}); volumes hold uint8, int8, uint16, \
+                     int16 or float32, and other real types (bool, float64, int32, …) are \
+                     converted to float32",
+                    self.name, self.type_name
+                ))
+            }),
+        }
+    }
+}
+
+/// `arr` converted by numpy to `target`'s dtype, refusing what would change values silently:
+/// an explicit integer `dtype=` (`explicit`) must hold every value exactly, and a finite
+/// float beyond the float32 range must not become an infinity.
+fn convert_array<'py>(
+    py: Python<'py>,
+    np: &Bound<'py, PyModule>,
+    arr: &Bound<'py, PyAny>,
+    source: &SourceType,
+    target: ScalarType,
+    explicit: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let src_name = &source.name;
+    if !matches!(source.kind, b'u' | b'i' | b'f' | b'b') {
+        return Err(invalid(format!(
+            "array: cannot convert dtype {src_name} to {}",
+            numpy_name(target)
+        )));
+    }
+    let converted = arr.call_method1("astype", (numpy_name(target),))?;
+    if explicit && target != ScalarType::F32 {
+        // An explicit integer type must hold every value exactly.
+        let same: bool = np
+            .call_method1("array_equal", (&converted, arr))?
+            .extract()?;
+        if !same {
+            return Err(invalid(format!(
+                "dtype={:?}: the array ({src_name}) holds values that {} cannot \
+                 represent exactly (out of range or fractional)",
+                numpy_name(target),
+                numpy_name(target)
+            )));
+        }
+    }
+    if target == ScalarType::F32 && source.kind == b'f' {
+        // A finite value beyond the float32 range would become an infinity, which the
+        // engine clamps to the finite range: a silently wrong value. Name it instead.
+        let overflow = np.call_method1(
+            "logical_and",
+            (
+                np.call_method1("isinf", (&converted,))?,
+                np.call_method1("isfinite", (arr,))?,
+            ),
+        )?;
+        if overflow.call_method0("any")?.extract::<bool>()? {
+            let first = np.call_method1("argwhere", (&overflow,))?.get_item(0)?;
+            let index: Vec<usize> = first.call_method0("tolist")?.extract()?;
+            let value = arr.get_item(pyo3::types::PyTuple::new(py, &index)?)?;
+            return Err(invalid(format!(
+                "array: the sample at index {index:?} ({value}) is outside the float32 \
+                 range; scale the data first"
+            )));
+        }
+    }
+    Ok(converted)
+}
+
+/// The engine volume of `arr`'s samples (already of `target`'s dtype) on `grid`;
+/// `converted_from` names the source dtype in a float32 error after a conversion.
+fn typed_volume(
+    grid: Grid,
+    arr: &Bound<'_, PyAny>,
+    axes: Axes,
+    target: ScalarType,
+    converted_from: Option<&str>,
+) -> PyResult<AnyVolume> {
+    Ok(match target {
+        ScalarType::U8 => CoreVolume::new(grid, samples::<u8>(arr, axes)?)
+            .map_err(errors::from_core)?
+            .into(),
+        ScalarType::I8 => CoreVolume::new(grid, samples::<i8>(arr, axes)?)
+            .map_err(errors::from_core)?
+            .into(),
+        ScalarType::U16 => CoreVolume::new(grid, samples::<u16>(arr, axes)?)
+            .map_err(errors::from_core)?
+            .into(),
+        ScalarType::I16 => CoreVolume::new(grid, samples::<i16>(arr, axes)?)
+            .map_err(errors::from_core)?
+            .into(),
+        ScalarType::F32 => CoreVolume::new(grid, samples::<f32>(arr, axes)?)
+            .map_err(|e| {
+                invalid(format!(
+                    "array: {e}{}",
+                    match converted_from {
+                        Some(src_name) => {
+                            format!(" (after conversion from {src_name} to float32)")
+                        }
+                        None => String::new(),
+                    }
+                ))
+            })?
+            .into(),
+    })
+}
+
 #[pymethods]
 impl Volume {
     /// A volume from a 3-D numpy array (see the class documentation).
@@ -515,136 +702,33 @@ impl Volume {
             None => Axes::Zyx,
         };
         let np = py.import("numpy")?;
-        let mut arr = match array.cast::<PyUntypedArray>() {
-            Ok(a) => a.clone().into_any(),
-            Err(_) => np.call_method1("asarray", (array,)).map_err(|e| {
-                invalid(format!(
-                    "array: expected a 3-D numpy array (or something numpy.asarray accepts): {e}"
-                ))
-            })?,
-        };
+        let arr = numpy_array(&np, array)?;
         let untyped = arr
             .cast::<PyUntypedArray>()
             .map_err(|_| invalid("array: expected a numpy array"))?;
-        let shape_v = untyped.shape().to_vec();
-        if shape_v.len() != 3 {
-            let hint = match shape_v.len() {
-                2 => "; for a single slice add an axis, e.g. array[np.newaxis]",
-                4 => "; choose one volume of a 4-D array, e.g. array[0] or array[..., 0]",
-                _ => "",
-            };
-            return Err(invalid(format!(
-                "array: expected a 3-D array ({} order), got {} dimensions with shape \
-                 {shape_v:?}{hint}",
-                axes.name(),
-                shape_v.len()
-            )));
-        }
-        if shape_v.contains(&0) {
-            return Err(invalid(format!(
-                "array: every axis needs at least one sample, got shape {shape_v:?}"
-            )));
-        }
-        let shape = [shape_v[0], shape_v[1], shape_v[2]];
-        let descr = untyped.dtype();
-        let src_name: String = descr.str()?.extract()?;
-        let (kind, itemsize) = (descr.kind(), descr.itemsize());
-        let native = descr.is_native_byteorder().unwrap_or(true);
-        let (target, convert) = match dtype {
-            Some(name) => {
-                let t = parse_scalar_type(name)?;
-                let same = target_type(kind, itemsize, native) == Some((t, false));
-                (t, !same)
-            }
-            None => target_type(kind, itemsize, native).ok_or_else(|| {
-                invalid(format!(
-                    "array: unsupported dtype {src_name} ({}); volumes hold uint8, int8, uint16, \
-                     int16 or float32, and other real types (bool, float64, int32, …) are \
-                     converted to float32",
-                    descr
-                        .typeobj()
-                        .name()
-                        .map(|n| n.to_string())
-                        .unwrap_or_default()
-                ))
-            })?,
-        };
+        let shape = checked_shape(untyped, axes)?;
+        let source = SourceType::of(untyped)?;
+        let (target, convert) = source.target(dtype)?;
         let grid = grid_for(py, shape, axes, spacing, origin, direction, affine, space)?;
         let mut notes = Vec::new();
-        if convert {
-            if !matches!(kind, b'u' | b'i' | b'f' | b'b') {
-                return Err(invalid(format!(
-                    "array: cannot convert dtype {src_name} to {}",
-                    numpy_name(target)
-                )));
-            }
-            let converted = arr.call_method1("astype", (numpy_name(target),))?;
-            if dtype.is_some() && target != ScalarType::F32 {
-                // An explicit integer type must hold every value exactly.
-                let same: bool = np
-                    .call_method1("array_equal", (&converted, &arr))?
-                    .extract()?;
-                if !same {
-                    return Err(invalid(format!(
-                        "dtype={:?}: the array ({src_name}) holds values that {} cannot \
-                         represent exactly (out of range or fractional)",
-                        numpy_name(target),
-                        numpy_name(target)
-                    )));
-                }
-            }
-            if target == ScalarType::F32 && kind == b'f' {
-                // A finite value beyond the float32 range would become an infinity, which the
-                // engine clamps to the finite range: a silently wrong value. Name it instead.
-                let overflow = np.call_method1(
-                    "logical_and",
-                    (
-                        np.call_method1("isinf", (&converted,))?,
-                        np.call_method1("isfinite", (&arr,))?,
-                    ),
-                )?;
-                if overflow.call_method0("any")?.extract::<bool>()? {
-                    let first = np.call_method1("argwhere", (&overflow,))?.get_item(0)?;
-                    let index: Vec<usize> = first.call_method0("tolist")?.extract()?;
-                    let value = arr.get_item(pyo3::types::PyTuple::new(py, &index)?)?;
-                    return Err(invalid(format!(
-                        "array: the sample at index {index:?} ({value}) is outside the float32 \
-                         range; scale the data first"
-                    )));
-                }
-            }
+        let arr = if convert {
+            let converted = convert_array(py, &np, &arr, &source, target, dtype.is_some())?;
             notes.push(format!(
-                "converted {src_name} to {} (one pass over the array)",
+                "converted {} to {} (one pass over the array)",
+                source.name,
                 numpy_name(target)
             ));
-            arr = converted;
-        }
-        let data: AnyVolume = match target {
-            ScalarType::U8 => CoreVolume::new(grid, samples::<u8>(&arr, axes)?)
-                .map_err(errors::from_core)?
-                .into(),
-            ScalarType::I8 => CoreVolume::new(grid, samples::<i8>(&arr, axes)?)
-                .map_err(errors::from_core)?
-                .into(),
-            ScalarType::U16 => CoreVolume::new(grid, samples::<u16>(&arr, axes)?)
-                .map_err(errors::from_core)?
-                .into(),
-            ScalarType::I16 => CoreVolume::new(grid, samples::<i16>(&arr, axes)?)
-                .map_err(errors::from_core)?
-                .into(),
-            ScalarType::F32 => CoreVolume::new(grid, samples::<f32>(&arr, axes)?)
-                .map_err(|e| {
-                    invalid(format!(
-                        "array: {e}{}",
-                        if convert {
-                            format!(" (after conversion from {src_name} to float32)")
-                        } else {
-                            String::new()
-                        }
-                    ))
-                })?
-                .into(),
+            converted
+        } else {
+            arr
         };
+        let data = typed_volume(
+            grid,
+            &arr,
+            axes,
+            target,
+            convert.then_some(source.name.as_str()),
+        )?;
         // NaN (a masked background, as nibabel gives SPM's output) and infinities were replaced
         // once, by the engine's rule (decision 0030): say so, as a note and a warning.
         if let Some(note) = data.non_finite_note() {
@@ -997,8 +1081,8 @@ pub fn load(
 /// `volsplat` wrapper). An error only if a warning filter turns it into one.
 fn warn_user(py: Python<'_>, message: &str, stacklevel: i32) -> PyResult<()> {
     let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
-    let text = std::ffi::CString::new(message.replace('\0', " "))
-        .map_err(|e| invalid(e.to_string()))?;
+    let text =
+        std::ffi::CString::new(message.replace('\0', " ")).map_err(|e| invalid(e.to_string()))?;
     PyErr::warn(py, category.as_any(), &text, stacklevel)
 }
 

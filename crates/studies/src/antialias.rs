@@ -531,14 +531,56 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
         rayon::current_num_threads()
     )?;
 
-    // Fig. 7a–b: the checkerboard.
+    let checkerboard = fig7_checkerboard(&a.out, &mut md)?;
+    fig7_terrain(&a.out, &mut md)?;
+    fig7_filaments(&a.out, &mut md)?;
+    orthographic_minification(&mut md)?;
+    // (i′) a real MRI shown small (issue 12 item 4).
+    mri_minification(&mut md, &a.data)?;
+    perspective_checkerboard(&mut md, &checkerboard)?;
+    flicker(&mut md, &checkerboard, a.frames)?;
+    writeln!(md, "\n## Energy of far-away X-ray images\n")?;
+    writeln!(
+        md,
+        "Checked by `crates/splat/tests/antialias.rs` (far_away_xray_keeps_its_energy_when_splats_grow) \
+         and `list.rs` (orthographic_minification_conserves_x_ray_energy_with_swan), for swan, \
+         ewa and area: the image's integral stays within 1 % of the volume's mass when \
+         anti-aliasing enlarges the splats.\n"
+    )?;
+    writeln!(md, "Total time: {:.1} s.", t0.elapsed().as_secs_f64())?;
+    let report = a.out.join("README.md");
+    volsplat_io::write_bytes_atomic(&report, md.as_bytes())
+        .with_context(|| format!("writing {}", report.display()))?;
+    Ok(Written {
+        report,
+        markdown: md,
+        images: 3,
+    })
+}
+
+/// The checkerboard scene of Fig. 7a–b, which the perspective and flicker measurements reuse.
+struct Checkerboard {
+    /// Sheet size, voxels.
+    nx: usize,
+    /// Sheet size, voxels.
+    ny: usize,
+    /// Its classification.
+    tables: CrioTables,
+    /// The splat list of the paper's sheet.
+    list: SplatList,
+    /// [`checkerboard_camera`].
+    camera: Camera,
+}
+
+/// Fig. 7a–b: the checkerboard sheet, `fig7-checkerboard.png` and its section.
+fn fig7_checkerboard(out: &Path, md: &mut String) -> Result<Checkerboard> {
     let (nx, ny, sq) = scenes::CHECKERBOARD_PAPER;
     let cb_tables = CrioTables::from_transfer_function(&scenes::checkerboard_tf(), 1024)?;
     let sheet = scenes::checkerboard_sheet(nx, ny, sq)?;
     let cb = SplatList::build(&sheet, &cb_tables, &ExtractSettings::default())?;
     let cb_cam = checkerboard_camera(nx, ny);
     let (t_none, t_swan) = figure(
-        &a.out.join("fig7-checkerboard.png"),
+        &out.join("fig7-checkerboard.png"),
         &cb,
         &cb_cam,
         &cb_tables,
@@ -555,7 +597,17 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
         cb.len()
     )?;
 
-    // Fig. 7c–d: terrain.
+    Ok(Checkerboard {
+        nx,
+        ny,
+        tables: cb_tables,
+        list: cb,
+        camera: cb_cam,
+    })
+}
+
+/// Fig. 7c–d: the terrain, `fig7-terrain.png` and its section.
+fn fig7_terrain(out: &Path, md: &mut String) -> Result<()> {
     let [tx, ty, tz] = scenes::TERRAIN_PAPER;
     let terrain = scenes::terrain(tx, ty, tz, 1)?;
     let t_tables = CrioTables::from_transfer_function(&scenes::terrain_tf(), 1024)?;
@@ -569,7 +621,7 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
         parallel_scale: 1.0,
     };
     let (t_none, t_swan) = figure(
-        &a.out.join("fig7-terrain.png"),
+        &out.join("fig7-terrain.png"),
         &tl,
         &t_cam,
         &t_tables,
@@ -584,7 +636,11 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
         tl.len()
     )?;
 
-    // Fig. 7e–f: a dense volume finer than the image.
+    Ok(())
+}
+
+/// Fig. 7e–f: dense fibres finer than the image, `fig7-filaments.png` and its section.
+fn fig7_filaments(out: &Path, md: &mut String) -> Result<()> {
     let [fx, fy, fz] = scenes::FILAMENTS_PAPER;
     let fil = scenes::filaments(fx, fy, fz, 1)?;
     let f_tables = CrioTables::from_transfer_function(&scenes::filaments_tf(), 1024)?;
@@ -595,7 +651,7 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
     f_cam.orthogonalize_view_up();
     f_cam.azimuth(20.0);
     let (t_none, t_swan) = figure(
-        &a.out.join("fig7-filaments.png"),
+        &out.join("fig7-filaments.png"),
         &fl,
         &f_cam,
         &f_tables,
@@ -610,7 +666,12 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
         fl.len()
     )?;
 
-    // (i) orthographic minification.
+    Ok(())
+}
+
+/// The orthographic minification table ([`minification_error`]) for every rule, both
+/// renderers, at 2 to 8 voxels per pixel.
+fn orthographic_minification(md: &mut String) -> Result<()> {
     writeln!(md, "## Aliasing under orthographic minification\n")?;
     writeln!(
         md,
@@ -658,10 +719,13 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
         }
     }
 
-    // (i′) a real MRI shown small (issue 12 item 4).
-    mri_minification(&mut md, &a.data)?;
+    Ok(())
+}
 
-    // (ii) perspective checkerboard against a supersampled reference.
+/// The perspective checkerboard ([`perspective_errors`]) with 10×10 and 2×2 squares against
+/// the 8× supersampled reference.
+fn perspective_checkerboard(md: &mut String, c: &Checkerboard) -> Result<()> {
+    let (nx, ny, cb_tables, cb_cam) = (c.nx, c.ny, &c.tables, &c.camera);
     writeln!(md, "\n## Aliasing in the perspective checkerboard\n")?;
     writeln!(
         md,
@@ -673,13 +737,13 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
     )?;
     for square in [10usize, 2] {
         let sheet = scenes::checkerboard_sheet(nx, ny, square)?;
-        let list = SplatList::build(&sheet, &cb_tables, &ExtractSettings::default())?;
+        let list = SplatList::build(&sheet, cb_tables, &ExtractSettings::default())?;
         let base = RenderSettings {
             width: 270,
             height: 157,
             ..RenderSettings::default()
         };
-        let (k, conv, errs) = perspective_errors(&list, &cb_cam, &cb_tables, &base, 8)?;
+        let (k, conv, errs) = perspective_errors(&list, cb_cam, cb_tables, &base, 8)?;
         writeln!(
             md,
             "**{square}×{square} squares** (k = {k:.1} voxels; reference converged on {:.0} % \
@@ -708,11 +772,16 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
         writeln!(md)?;
     }
 
-    // Temporal flicker.
+    Ok(())
+}
+
+/// The flicker of a `frames`-frame dolly ([`temporal_highpass`]) for every rule.
+fn flicker(md: &mut String, c: &Checkerboard, frames: usize) -> Result<()> {
+    let (cb, cb_tables, cb_cam) = (&c.list, &c.tables, &c.camera);
     writeln!(
         md,
         "## Flicker of a {}-frame dolly towards the horizon\n",
-        a.frames
+        frames
     )?;
     writeln!(
         md,
@@ -730,29 +799,12 @@ pub fn write_figures(a: &AaFiguresSettings) -> Result<Written> {
             antialias: aa,
             ..RenderSettings::default()
         };
-        let e = temporal_highpass(&cb, &cb_cam, &cb_tables, &s, a.frames.max(3), 1.5)?;
+        let e = temporal_highpass(cb, cb_cam, cb_tables, &s, frames.max(3), 1.5)?;
         if aa == Antialias::None {
             none_e = e;
         }
         writeln!(md, "| {} | {e:.3e} | {:.2} |", aa.name(), e / none_e)?;
     }
 
-    // Energy.
-    writeln!(md, "\n## Energy of far-away X-ray images\n")?;
-    writeln!(
-        md,
-        "Checked by `crates/splat/tests/antialias.rs` (far_away_xray_keeps_its_energy_when_splats_grow) \
-         and `list.rs` (orthographic_minification_conserves_x_ray_energy_with_swan), for swan, \
-         ewa and area: the image's integral stays within 1 % of the volume's mass when \
-         anti-aliasing enlarges the splats.\n"
-    )?;
-    writeln!(md, "Total time: {:.1} s.", t0.elapsed().as_secs_f64())?;
-    let report = a.out.join("README.md");
-    volsplat_io::write_bytes_atomic(&report, md.as_bytes())
-        .with_context(|| format!("writing {}", report.display()))?;
-    Ok(Written {
-        report,
-        markdown: md,
-        images: 3,
-    })
+    Ok(())
 }

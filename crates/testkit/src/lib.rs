@@ -14,6 +14,8 @@
 //!   premultiplied [`Image`](volsplat_core::Image) into comparable channels
 //!   ([`image_rgb_over`], [`image_psnr`], [`luminance`]).
 //! - [`fixtures`](mod@fixtures): the shaded transfer function shared by the oracle tests.
+//! - [`data`](mod@data): the shared test data (`shared/data`): its paths and an 8-bit NRRD
+//!   reader for the crates below `volsplat-io`.
 //! - [`phantom`](mod@phantom): re-export of [`volsplat_core::phantom`] (Gaussian blobs, the
 //!   3-D Shepp–Logan phantom, a CT head, Marschner–Lobb; closed-form line integrals; sampling
 //!   into volumes).
@@ -23,6 +25,7 @@
 //! deterministic: parallel loops (rayon, over image rows) compute each pixel independently.
 #![deny(missing_docs)]
 
+pub mod data;
 pub mod emitter;
 pub mod fixtures;
 pub mod metrics;

@@ -24,12 +24,12 @@
 //! ## Units and frames
 //! Lengths (`τ`'s inverse, slice width, DoG σ's, trigger steps) are in *unit lengths*: the
 //! largest world extent of the volume ([`DisplayVolume::unit`]), since the thesis normalises its
-//! volume to the unit cube (digest A-17). The screen filter is a Gaussian with standard
+//! volume to the unit cube (A-17 below). The screen filter is a Gaussian with standard
 //! deviation `screen_sigma_px` pixels, truncated at 3σ, over screen area (divided by `σ(t)²`
 //! under perspective). Rays come from [`volsplat_core::Projection::ray`] through pixel centres
 //! `(x + ½, y + ½)`, so orthographic and perspective cameras both work. Images: row 0 at the top.
 //!
-//! ## Decisions (digest §7, A-15 …; decisions 0007, 0027; `docs/nil-display/report.md`)
+//! ## Decisions (open points A-15 …; decisions 0007, 0027; `docs/nil-display/report.md`)
 //! - **Sabella's attenuation by default** (decision 0027, [`Attenuation`]): eq 3.1's integrand is
 //!   an exact derivative, so Sabella's display is `1 − e^{−τX}` of the line integral `X`, a
 //!   linear filter the NIL map evaluates without linearising. eq 6.1's unit density from the
@@ -304,6 +304,28 @@ fn check(field: &str, ok: bool, value: impl std::fmt::Debug, reason: &str) -> Re
 }
 
 impl DisplaySettings {
+    /// The linearised display as the thesis defines it, which were the defaults before decision
+    /// 0027: eq 6.1's unit-density attenuation ([`Attenuation::UnitDensity`]), each NIL cell's
+    /// own fit (no continuous patches), no cap on the crossed cells' width, and 8 × 8 lines
+    /// across the screen filter; everything else as [`DisplaySettings::default`]. The plates of
+    /// `volsplat display-bench` use it, and the tests that measure what decision 0027 changed.
+    pub fn thesis() -> Self {
+        let d = DisplaySettings::default();
+        DisplaySettings {
+            attenuation: Attenuation::UnitDensity,
+            nil: NilDisplaySettings {
+                continuous: false,
+                max_cell_width: 0.0,
+                ..d.nil
+            },
+            quadrature: QuadratureSettings {
+                cross_nodes: 8,
+                ..d.quadrature
+            },
+            ..d
+        }
+    }
+
     /// Validates every parameter.
     pub fn validate(&self) -> Result<()> {
         let fin = |x: f64| x.is_finite();

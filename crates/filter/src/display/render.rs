@@ -48,16 +48,25 @@ struct Pixel {
     channels: [f64; 4],
 }
 
-pub(crate) fn render(
+/// The checked inputs of one render: whether it evaluates by NIL maps, the NIL map's channel
+/// count (1 without a transfer basis) and the transfer coefficients `b_l` the channels are
+/// summed with (`[1]` for one channel, §4-4.3).
+struct Inputs {
+    uses_nil: bool,
+    channels: usize,
+    coeffs: Vec<f64>,
+}
+
+/// Checks the settings, the image size and that `map` fits `vol` and `s`: a NIL display needs
+/// a map of this volume, a map with a transfer basis needs as many coefficients as functions
+/// and cannot serve sample-and-filter.
+fn check_inputs(
     vol: &DisplayVolume,
     map: Option<&DiscreteNilMap>,
-    camera: &Camera,
     width: usize,
     height: usize,
     s: &DisplaySettings,
-    progress: &mut dyn FnMut(f64) -> bool,
-) -> Result<DisplayImage> {
-    let start = Instant::now();
+) -> Result<Inputs> {
     s.validate()?;
     if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
         return Err(FilterError::invalid(
@@ -110,68 +119,118 @@ pub(crate) fn render(
     } else {
         vec![1.0]
     };
-    let proj = Projection::new(camera, width, height)?;
-    let rays = Rays { proj };
-    let sigma_of = |ray: &PixelRay| match proj {
-        Projection::Ortho(_) => Sigma {
-            a: s.screen_sigma_px * rays.pixel_size(ray, 1.0),
-            b: 0.0,
-        },
-        Projection::Perspective(_) => Sigma {
-            a: 0.0,
-            b: s.screen_sigma_px * proj.pixel_size_at(1.0) * ray.cos,
-        },
-    };
-    let unit = vol.unit();
-    let tau = s.tau / unit;
-    // Sabella's attenuation: the linearised display's value is `1 − e^{−τX}` of the line
-    // integral `X` (Attenuation::OpticalDepth).
-    let optical_tau = (s.kind == DisplayKind::Linearised
-        && s.attenuation == Attenuation::OpticalDepth)
-        .then_some(tau);
-    let step = s.quadrature.step * vol.min_spacing();
-    let cross = composite_nodes(-TRUNC, TRUNC, s.quadrature.cross_nodes / 4, 4);
-    let projector = map.map(|m| Projector::new(*m.basis()));
-    // Continuous patches (decision 0027): shared node values per level, built on first use.
-    let grids = match (map, &projector) {
-        (Some(m), Some(p)) if s.nil.continuous && s.nil.control == ControlPoints::Project => {
-            let exact0 = m.transfer().is_none()
-                && m.texture().reconstruction() == crate::texture::Reconstruction::Trilinear;
-            Some(NodeGrids::new(
-                m,
-                p,
-                vol.dims().map(|n| (n - 1) as f64),
-                exact0,
-            ))
-        }
-        _ => None,
-    };
-    let prepare = |sc: &mut Scratch| {
-        if sc.cross.is_empty() {
-            sc.cross.clone_from(&cross);
-        }
-    };
-    let slice_depths = {
-        let (lo, hi) = {
-            let d = vol.dims().map(|n| (n - 1) as f64);
-            let mut lo = f64::INFINITY;
-            let mut hi = f64::NEG_INFINITY;
-            for c in 0..8 {
-                let p = DVec3::new(
-                    if c & 1 == 1 { d[0] } else { 0.0 },
-                    if c & 2 == 2 { d[1] } else { 0.0 },
-                    if c & 4 == 4 { d[2] } else { 0.0 },
-                );
-                let depth = proj.raster_from_world(vol.world_from_index(p)).z;
-                lo = lo.min(depth);
-                hi = hi.max(depth);
-            }
-            (lo, hi)
-        };
-        lo + s.slice_depth * (hi - lo)
-    };
+    Ok(Inputs {
+        uses_nil,
+        channels,
+        coeffs,
+    })
+}
 
-    let pixel = |x: usize, y: usize, sc: &mut Scratch, st: &mut DisplayStats| -> Pixel {
+/// What every pixel of one render shares: the volume, map and settings, the camera's rays and
+/// the quantities derived from the settings once per render.
+struct PixelKernel<'a> {
+    vol: &'a DisplayVolume,
+    map: Option<&'a DiscreteNilMap>,
+    s: &'a DisplaySettings,
+    proj: Projection,
+    rays: Rays,
+    /// The volume's unit length (world units per unit of the thesis's unit cube).
+    unit: f64,
+    /// `τ` per world unit.
+    tau: f64,
+    /// Sabella's attenuation: the linearised display's value is `1 − e^{−τX}` of the line
+    /// integral `X` (`Attenuation::OpticalDepth`); `None` for the other displays.
+    optical_tau: Option<f64>,
+    /// Step of direct quadrature along a ray, world units.
+    step: f64,
+    /// Cross-section nodes of the screen filter's quadrature.
+    cross: Vec<(f64, f64)>,
+    projector: Option<&'a Projector>,
+    /// Continuous patches (decision 0027): shared node values per level, built on first use.
+    grids: Option<NodeGrids<'a>>,
+    /// Screen depth of the slice plane (`DisplayKind::Slice`), raster units.
+    slice_depths: f64,
+    coeffs: Vec<f64>,
+}
+
+impl<'a> PixelKernel<'a> {
+    /// The per-render quantities of `s` for `camera` at `width × height`; `projector` is the
+    /// map's projection operator (borrowed by the continuous patches' node grids).
+    fn new(
+        vol: &'a DisplayVolume,
+        map: Option<&'a DiscreteNilMap>,
+        projector: Option<&'a Projector>,
+        camera: &Camera,
+        (width, height): (usize, usize),
+        s: &'a DisplaySettings,
+        coeffs: Vec<f64>,
+    ) -> Result<Self> {
+        let proj = Projection::new(camera, width, height)?;
+        let rays = Rays { proj };
+        let unit = vol.unit();
+        let tau = s.tau / unit;
+        let optical_tau = (s.kind == DisplayKind::Linearised
+            && s.attenuation == Attenuation::OpticalDepth)
+            .then_some(tau);
+        let step = s.quadrature.step * vol.min_spacing();
+        let cross = composite_nodes(-TRUNC, TRUNC, s.quadrature.cross_nodes / 4, 4);
+        let grids = match (map, projector) {
+            (Some(m), Some(p)) if s.nil.continuous && s.nil.control == ControlPoints::Project => {
+                let exact0 = m.transfer().is_none()
+                    && m.texture().reconstruction() == crate::texture::Reconstruction::Trilinear;
+                Some(NodeGrids::new(
+                    m,
+                    p,
+                    vol.dims().map(|n| (n - 1) as f64),
+                    exact0,
+                ))
+            }
+            _ => None,
+        };
+        let slice_depths = slice_depth(vol, &proj, s.slice_depth);
+        Ok(PixelKernel {
+            vol,
+            map,
+            s,
+            proj,
+            rays,
+            unit,
+            tau,
+            optical_tau,
+            step,
+            cross,
+            projector,
+            grids,
+            slice_depths,
+            coeffs,
+        })
+    }
+
+    /// The screen filter's scale along `ray`: constant in an orthographic view, growing with
+    /// the distance in a perspective one.
+    fn sigma_of(&self, ray: &PixelRay) -> Sigma {
+        let s = self.s;
+        match self.proj {
+            Projection::Ortho(_) => Sigma {
+                a: s.screen_sigma_px * self.rays.pixel_size(ray, 1.0),
+                b: 0.0,
+            },
+            Projection::Perspective(_) => Sigma {
+                a: 0.0,
+                b: s.screen_sigma_px * self.proj.pixel_size_at(1.0) * ray.cos,
+            },
+        }
+    }
+
+    /// Fills the scratch's cross-section nodes on first use.
+    fn prepare(&self, sc: &mut Scratch) {
+        if sc.cross.is_empty() {
+            sc.cross.clone_from(&self.cross);
+        }
+    }
+
+    /// Pixel `(x, y)` of the display, its stats added to `st`.
+    fn pixel(&self, x: usize, y: usize, sc: &mut Scratch, st: &mut DisplayStats) -> Pixel {
         let fallbacks_before = st.fallbacks;
         let mut px = Pixel {
             fell_back: false,
@@ -181,156 +240,278 @@ pub(crate) fn render(
             channels: [0.0; 4],
         };
         let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
-        match s.kind {
-            DisplayKind::Sabella | DisplayKind::Maximum => {
-                let t0 = Instant::now();
-                let n = s.supersample;
-                let (mut inten, mut mx) = (0.0, 0.0);
-                for sy in 0..n {
-                    for sx in 0..n {
-                        let fx = x as f64 + (sx as f64 + 0.5) / n as f64;
-                        let fy = y as f64 + (sy as f64 + 0.5) / n as f64;
-                        if let Some(ray) = rays.ray(vol, fx, fy) {
-                            st.rays += 1;
-                            let (i, m) = sabella_ray(vol, &ray, tau, s.samples_per_ray);
-                            inten += i;
-                            mx += m;
-                        }
-                    }
-                }
-                let k = (n * n) as f64;
-                let (inten, mx) = (tau * inten / k, mx / k);
-                (px.value, px.green) = match s.kind {
-                    DisplayKind::Sabella => (inten as f32, mx as f32),
-                    _ => (mx as f32, mx as f32),
-                };
-                st.march_s += t0.elapsed().as_secs_f64();
-            }
+        match self.s.kind {
+            DisplayKind::Sabella | DisplayKind::Maximum => self.marched(x, y, st, &mut px),
             DisplayKind::Linearised | DisplayKind::Slice => {
-                let Some(ray) = rays.ray(vol, cx, cy) else {
+                if !self.filtered(cx, cy, sc, st, &mut px) {
                     return px;
-                };
-                st.rays += 1;
-                let sigma = sigma_of(&ray);
-                let (filter, scale) = if s.kind == DisplayKind::Linearised {
-                    match s.attenuation {
-                        Attenuation::UnitDensity => {
-                            (PixelFilter::Linearised { ray, sigma, tau }, 1.0)
-                        }
-                        Attenuation::OpticalDepth => {
-                            (PixelFilter::LineIntegral { ray, sigma }, 1.0)
-                        }
-                    }
-                } else {
-                    let tc = slice_depths / ray.cos.max(1e-12);
-                    (
-                        PixelFilter::Slice {
-                            ray,
-                            sigma,
-                            tc,
-                            w: s.slice_width * unit,
-                        },
-                        1.0,
-                    )
-                };
-                let ch = match (s.evaluator, map, &projector) {
-                    (Evaluator::Nil, Some(map), Some(proj)) => {
-                        prepare(sc);
-                        nil_eval(
-                            vol,
-                            map,
-                            proj,
-                            grids.as_ref(),
-                            &filter,
-                            &[&filter],
-                            s,
-                            sc,
-                            st,
-                        )
-                        .pop()
-                        .unwrap_or_default()
-                    }
-                    _ => {
-                        let t0 = Instant::now();
-                        let v = direct(vol, &filter, step, &cross);
-                        st.evaluation_s += t0.elapsed().as_secs_f64();
-                        v.map_or_else(Vec::new, |v| vec![v])
-                    }
-                };
-                px.scale = scale;
-                for (o, c) in px.channels.iter_mut().zip(&ch) {
-                    *o = *c;
                 }
-                // A density is never negative, nor is a display of one: the clamp catches what
-                // a patch of order M ≥ 3 (or discontinuous patches) can still overshoot.
-                let v = (scale * ch.iter().zip(&coeffs).map(|(c, b)| c * b).sum::<f64>()).max(0.0);
-                px.value = match optical_tau {
-                    Some(tau) => 1.0 - (-tau * v).exp(),
-                    None => v,
-                } as f32;
-                px.green = px.value;
             }
             DisplayKind::Search | DisplayKind::SampleFilter => {
-                let Some(ray) = rays.ray(vol, cx, cy) else {
+                if !self.searched(cx, cy, sc, st, &mut px) {
                     return px;
-                };
-                st.rays += 1;
-                let t0 = Instant::now();
-                let hit = search(vol, &ray, s.rho0, s.search, s.samples_per_ray);
-                st.search_s += t0.elapsed().as_secs_f64();
-                let Some(t) = hit else {
-                    return px;
-                };
-                let c = ray.o + ray.d * t;
-                if s.kind == DisplayKind::Search {
-                    px.value = vol.density(c) as f32;
-                } else {
-                    let f1 = PixelFilter::Ball {
-                        c,
-                        s: s.dog_sigma[0] * unit,
-                    };
-                    let f2 = PixelFilter::Ball {
-                        c,
-                        s: s.dog_sigma[1] * unit,
-                    };
-                    let (a, b) = match (s.evaluator, map, &projector) {
-                        (Evaluator::Nil, Some(map), Some(proj)) => {
-                            prepare(sc);
-                            let r = nil_eval(
-                                vol,
-                                map,
-                                proj,
-                                grids.as_ref(),
-                                &f2,
-                                &[&f1, &f2],
-                                s,
-                                sc,
-                                st,
-                            );
-                            let g = |i: usize| r.get(i).and_then(|c| c.first()).copied();
-                            (g(0), g(1))
-                        }
-                        _ => {
-                            let t0 = Instant::now();
-                            let a = direct(vol, &f1, step, &cross);
-                            let b = direct(vol, &f2, step, &cross);
-                            st.evaluation_s += t0.elapsed().as_secs_f64();
-                            (a, b)
-                        }
-                    };
-                    let resp = a.unwrap_or(0.0) - b.unwrap_or(0.0);
-                    px.scale = resp;
-                    px.value = (0.5 + s.dog_gain * resp).clamp(0.0, 1.0) as f32;
                 }
-                px.green = px.value;
             }
         }
         px.fell_back = st.fallbacks != fallbacks_before;
         px
-    };
+    }
 
-    // Rows in blocks, so that `progress` hears from the render about 20 times; every pixel is
-    // computed independently, so the blocks change nothing in the image.
+    /// Sabella's display and the maximum (§6-1, eq 3.1): `supersample²` rays through pixel
+    /// `(x, y)`, each marched by [`sabella_ray`], averaged.
+    fn marched(&self, x: usize, y: usize, st: &mut DisplayStats, px: &mut Pixel) {
+        let (s, tau) = (self.s, self.tau);
+        let t0 = Instant::now();
+        let n = s.supersample;
+        let (mut inten, mut mx) = (0.0, 0.0);
+        for sy in 0..n {
+            for sx in 0..n {
+                let fx = x as f64 + (sx as f64 + 0.5) / n as f64;
+                let fy = y as f64 + (sy as f64 + 0.5) / n as f64;
+                if let Some(ray) = self.rays.ray(self.vol, fx, fy) {
+                    st.rays += 1;
+                    let (i, m) = sabella_ray(self.vol, &ray, tau, s.samples_per_ray);
+                    inten += i;
+                    mx += m;
+                }
+            }
+        }
+        let k = (n * n) as f64;
+        let (inten, mx) = (tau * inten / k, mx / k);
+        (px.value, px.green) = match s.kind {
+            DisplayKind::Sabella => (inten as f32, mx as f32),
+            _ => (mx as f32, mx as f32),
+        };
+        st.march_s += t0.elapsed().as_secs_f64();
+    }
+
+    /// The linearised display (eq 6.1) and slices (§6-2) at the pixel centre `(cx, cy)`: the
+    /// pixel's tube filter evaluated by NIL maps or direct quadrature, its channels summed with
+    /// the transfer coefficients. `false` if the ray misses the volume (the pixel stays blank).
+    fn filtered(
+        &self,
+        cx: f64,
+        cy: f64,
+        sc: &mut Scratch,
+        st: &mut DisplayStats,
+        px: &mut Pixel,
+    ) -> bool {
+        let (vol, s) = (self.vol, self.s);
+        let Some(ray) = self.rays.ray(vol, cx, cy) else {
+            return false;
+        };
+        st.rays += 1;
+        let sigma = self.sigma_of(&ray);
+        let (filter, scale) = if s.kind == DisplayKind::Linearised {
+            match s.attenuation {
+                Attenuation::UnitDensity => (
+                    PixelFilter::Linearised {
+                        ray,
+                        sigma,
+                        tau: self.tau,
+                    },
+                    1.0,
+                ),
+                Attenuation::OpticalDepth => (PixelFilter::LineIntegral { ray, sigma }, 1.0),
+            }
+        } else {
+            let tc = self.slice_depths / ray.cos.max(1e-12);
+            (
+                PixelFilter::Slice {
+                    ray,
+                    sigma,
+                    tc,
+                    w: s.slice_width * self.unit,
+                },
+                1.0,
+            )
+        };
+        let ch = match (s.evaluator, self.map, self.projector) {
+            (Evaluator::Nil, Some(map), Some(proj)) => {
+                self.prepare(sc);
+                nil_eval(
+                    vol,
+                    map,
+                    proj,
+                    self.grids.as_ref(),
+                    &filter,
+                    &[&filter],
+                    s,
+                    sc,
+                    st,
+                )
+                .pop()
+                .unwrap_or_default()
+            }
+            _ => {
+                let t0 = Instant::now();
+                let v = direct(vol, &filter, self.step, &self.cross);
+                st.evaluation_s += t0.elapsed().as_secs_f64();
+                v.map_or_else(Vec::new, |v| vec![v])
+            }
+        };
+        px.scale = scale;
+        for (o, c) in px.channels.iter_mut().zip(&ch) {
+            *o = *c;
+        }
+        // A density is never negative, nor is a display of one: the clamp catches what
+        // a patch of order M ≥ 3 (or discontinuous patches) can still overshoot.
+        let v = (scale * ch.iter().zip(&self.coeffs).map(|(c, b)| c * b).sum::<f64>()).max(0.0);
+        px.value = match self.optical_tau {
+            Some(tau) => 1.0 - (-tau * v).exp(),
+            None => v,
+        } as f32;
+        px.green = px.value;
+        true
+    }
+
+    /// Search and sample-and-filter (§6-3) at the pixel centre `(cx, cy)`: the density where
+    /// the ray meets `ρ₀`, or the difference of Gaussians there (NIL or direct). `false` if the
+    /// ray misses the volume or never meets `ρ₀` (the pixel stays blank).
+    fn searched(
+        &self,
+        cx: f64,
+        cy: f64,
+        sc: &mut Scratch,
+        st: &mut DisplayStats,
+        px: &mut Pixel,
+    ) -> bool {
+        let (vol, s) = (self.vol, self.s);
+        let Some(ray) = self.rays.ray(vol, cx, cy) else {
+            return false;
+        };
+        st.rays += 1;
+        let t0 = Instant::now();
+        let hit = search(vol, &ray, s.rho0, s.search, s.samples_per_ray);
+        st.search_s += t0.elapsed().as_secs_f64();
+        let Some(t) = hit else {
+            return false;
+        };
+        let c = ray.o + ray.d * t;
+        if s.kind == DisplayKind::Search {
+            px.value = vol.density(c) as f32;
+        } else {
+            let f1 = PixelFilter::Ball {
+                c,
+                s: s.dog_sigma[0] * self.unit,
+            };
+            let f2 = PixelFilter::Ball {
+                c,
+                s: s.dog_sigma[1] * self.unit,
+            };
+            let (a, b) = match (s.evaluator, self.map, self.projector) {
+                (Evaluator::Nil, Some(map), Some(proj)) => {
+                    self.prepare(sc);
+                    let r = nil_eval(
+                        vol,
+                        map,
+                        proj,
+                        self.grids.as_ref(),
+                        &f2,
+                        &[&f1, &f2],
+                        s,
+                        sc,
+                        st,
+                    );
+                    let g = |i: usize| r.get(i).and_then(|c| c.first()).copied();
+                    (g(0), g(1))
+                }
+                _ => {
+                    let t0 = Instant::now();
+                    let a = direct(vol, &f1, self.step, &self.cross);
+                    let b = direct(vol, &f2, self.step, &self.cross);
+                    st.evaluation_s += t0.elapsed().as_secs_f64();
+                    (a, b)
+                }
+            };
+            let resp = a.unwrap_or(0.0) - b.unwrap_or(0.0);
+            px.scale = resp;
+            px.value = (0.5 + s.dog_gain * resp).clamp(0.0, 1.0) as f32;
+        }
+        px.green = px.value;
+        true
+    }
+}
+
+/// Raster depth of the slice plane: `fraction` of the way from the nearest to the farthest
+/// corner of the volume's box of voxel centres.
+fn slice_depth(vol: &DisplayVolume, proj: &Projection, fraction: f64) -> f64 {
+    let (lo, hi) = {
+        let d = vol.dims().map(|n| (n - 1) as f64);
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for c in 0..8 {
+            let p = DVec3::new(
+                if c & 1 == 1 { d[0] } else { 0.0 },
+                if c & 2 == 2 { d[1] } else { 0.0 },
+                if c & 4 == 4 { d[2] } else { 0.0 },
+            );
+            let depth = proj.raster_from_world(vol.world_from_index(p)).z;
+            lo = lo.min(depth);
+            hi = hi.max(depth);
+        }
+        (lo, hi)
+    };
+    lo + fraction * (hi - lo)
+}
+
+/// The Chapter 6 display of `vol` seen by `camera` at `width × height` (App. B): checks the
+/// inputs, computes every pixel ([`PixelKernel::pixel`]) in parallel row blocks that report to
+/// `progress`, and gathers the image, the NIL fallbacks, the transfer cache and the stats.
+pub(crate) fn render(
+    vol: &DisplayVolume,
+    map: Option<&DiscreteNilMap>,
+    camera: &Camera,
+    width: usize,
+    height: usize,
+    s: &DisplaySettings,
+    progress: &mut dyn FnMut(f64) -> bool,
+) -> Result<DisplayImage> {
+    let start = Instant::now();
+    let Inputs {
+        uses_nil,
+        channels,
+        coeffs,
+    } = check_inputs(vol, map, width, height, s)?;
+    let projector = map.map(|m| Projector::new(*m.basis()));
+    let kernel = PixelKernel::new(
+        vol,
+        map,
+        projector.as_ref(),
+        camera,
+        (width, height),
+        s,
+        coeffs,
+    )?;
+    let rows = render_rows(&kernel, width, height, progress)?;
+    let keep_channels = uses_nil && s.kind != DisplayKind::SampleFilter;
+    let cache = TransferCache {
+        channels,
+        tau: kernel.optical_tau,
+        scale: Vec::new(),
+        values: Vec::new(),
+    };
+    let mut image = gather(
+        rows,
+        width,
+        height,
+        s,
+        uses_nil,
+        keep_channels.then_some(cache),
+    );
+    image.stats.total_s = start.elapsed().as_secs_f64();
+    Ok(image)
+}
+
+/// Every pixel's value and the stats of each row, rows in blocks so that `progress` hears from
+/// the render about 20 times; every pixel is computed independently, so the blocks change
+/// nothing in the image.
+fn render_rows(
+    kernel: &PixelKernel<'_>,
+    width: usize,
+    height: usize,
+    progress: &mut dyn FnMut(f64) -> bool,
+) -> Result<Vec<(Vec<Pixel>, DisplayStats)>> {
     let block = (height / 20).max(4 * rayon::current_num_threads()).max(1);
     let mut rows: Vec<(Vec<Pixel>, DisplayStats)> = Vec::with_capacity(height);
     for y0 in (0..height).step_by(block) {
@@ -338,25 +519,38 @@ pub(crate) fn render(
         rows.par_extend((y0..y1).into_par_iter().map(|y| {
             let mut sc = Scratch::default();
             let mut st = DisplayStats::default();
-            let row = (0..width).map(|x| pixel(x, y, &mut sc, &mut st)).collect();
+            let row = (0..width)
+                .map(|x| kernel.pixel(x, y, &mut sc, &mut st))
+                .collect();
             (row, st)
         }));
         if !progress(y1 as f64 / height as f64) {
             return Err(FilterError::Cancelled);
         }
     }
+    Ok(rows)
+}
+
+/// The display image of the rendered rows: values (and Sabella's maximum as `green`), the
+/// fallback flags of a NIL display, the channels into `cache` where it is kept (§6-4), the
+/// stats summed in row order (`total_s` left for the caller).
+fn gather(
+    rows: Vec<(Vec<Pixel>, DisplayStats)>,
+    width: usize,
+    height: usize,
+    s: &DisplaySettings,
+    uses_nil: bool,
+    mut cache: Option<TransferCache>,
+) -> DisplayImage {
     let mut stats = DisplayStats::default();
     let n = width * height;
     let mut value = Vec::with_capacity(n);
     let mut green = Vec::with_capacity(n);
     let mut fallback = Vec::with_capacity(if uses_nil { n } else { 0 });
-    let keep_channels = uses_nil && s.kind != DisplayKind::SampleFilter;
-    let mut cache = TransferCache {
-        channels,
-        tau: optical_tau,
-        scale: Vec::with_capacity(if keep_channels { n } else { 0 }),
-        values: Vec::with_capacity(if keep_channels { n * channels } else { 0 }),
-    };
+    if let Some(c) = &mut cache {
+        c.scale.reserve_exact(n);
+        c.values.reserve_exact(n * c.channels);
+    }
     for (row, st) in rows {
         stats.add(&st);
         for p in row {
@@ -365,23 +559,22 @@ pub(crate) fn render(
             if uses_nil {
                 fallback.push(p.fell_back);
             }
-            if keep_channels {
-                cache.scale.push(p.scale);
-                cache.values.extend_from_slice(&p.channels[..channels]);
+            if let Some(c) = &mut cache {
+                c.scale.push(p.scale);
+                c.values.extend_from_slice(&p.channels[..c.channels]);
             }
         }
     }
-    stats.total_s = start.elapsed().as_secs_f64();
     stats.pixels = n as u64;
-    Ok(DisplayImage {
+    DisplayImage {
         width,
         height,
         value,
         green: (s.kind == DisplayKind::Sabella).then_some(green),
-        cache: keep_channels.then_some(cache),
+        cache,
         fallback,
         stats,
-    })
+    }
 }
 
 /// eq 3.1 along one ray with `k` midpoint samples, exact for a density constant on each

@@ -5,7 +5,8 @@
 //! put voxel `(i, j, k)` at the integer point `(i, j, k)` — the texture space of
 //! [`DiscreteTexture`] and of the NIL cells. Lengths given to the displays in *unit lengths* are
 //! multiples of [`DisplayVolume::unit`], the largest world extent of the volume's bounds: the
-//! thesis normalises its volume to the unit cube (digest A-17, the `√3` bound of App. B).
+//! thesis normalises its volume to the unit cube (open point A-17 of the
+//! display module's decisions; the `√3` bound of App. B).
 
 use crate::error::{FilterError, Result};
 use crate::texture::{DiscreteTexture, Reconstruction, SolidTexture};

@@ -1,5 +1,5 @@
 //! Per-axis cell weights for discrete textures (thesis App. A-1; eqs A.8, A.15, A.18–A.22,
-//! corrected per digest §2.4.10).
+//! corrected as listed under A-13 in the crate documentation).
 //!
 //! A level-`γ` cell `m` covers `[2^γ·m, 2^γ·(m+1))` texels along an axis. Its moments
 //! `C_i = ∫₀¹ B_i(t) T̄(2^γ(m + t)) dt` are linear in the samples; this module lists, for one

@@ -1,4 +1,4 @@
-//! Patch bases: Lagrange interpolating polynomials on `[0, 1]` (thesis §4-4.5, eq 4.28; F-B17).
+//! Patch bases: Lagrange interpolating polynomials on `[0, 1]` (thesis §4-4.5, eq 4.28).
 //!
 //! Nodes (decision A-2): `M = 1` the cell centre ½; `M = 2` {0, 1}; `M = 3` {0, ½, 1};
 //! `M = 4` {0, ⅓, ⅔, 1}. Control points are filter values at the nodes.

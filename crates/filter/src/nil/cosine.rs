@@ -1,9 +1,9 @@
-//! Analytic NIL maps of cosine-series textures (thesis §4-4.4–§4-4.6, eqs 4.25–4.27, 4.31;
-//! F-B29, F-B30).
+//! Analytic NIL maps of cosine-series textures (thesis §4-4.4–§4-4.6, eqs 4.25–4.27,
+//! 4.31).
 //!
 //! Per axis, `𝒳^{γ,m}_{r,i} = ∫₀¹ B_i(t) cos(2π r 2^γ (m + t)) dt` is computed exactly from
 //! the monomial moments `∫₀¹ tᵖ e^{iαt} dt` with `α = 2π r 2^γ` and the cell's phase — the
-//! corrected form of the printed negative-level formula (digest §2.4.9: no spurious "2t", sum
+//! corrected form of the printed negative-level formula (A-13: no spurious "2t" in §4-4.6's `F_1`, sum
 //! over `p` restored; `r = 0` gives `B̄_i`). For `γ ≥ 0` the cell is a whole number of periods
 //! and the value does not depend on `m` (one cell per positive level); negative levels are
 //! computed on demand. The 3-D cell is the separable product

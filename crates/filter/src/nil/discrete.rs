@@ -1,4 +1,4 @@
-//! NIL maps of discrete textures (thesis App.; §4-4.3; F-B18–F-B20, F-B24, F-B31–F-B33).
+//! NIL maps of discrete textures (thesis App.; §4-4.3, eqs 4.19–4.24).
 //!
 //! Levels `γ = 0..=γ_max` are pre-computed by separable contraction of the samples with per-axis
 //! cell weights (A.15/A.16 for sample-and-hold, A.22/A.29 in separable form for trilinear).
@@ -260,7 +260,7 @@ impl DiscreteNilMap {
         })
     }
 
-    /// Number of stored f64 values (F-B20: `M³·Σ_γ Π_q phases_q(γ)` per channel).
+    /// Number of stored f64 values (thesis §5-6: `M³·Σ_γ Π_q phases_q(γ)` per channel).
     pub fn stored_values(&self) -> usize {
         self.levels
             .iter()

@@ -1,5 +1,5 @@
 //! Trigger points, approximating hierarchies and normalised, level-weighted NIL evaluation
-//! (thesis §4-4, Fig 4.19, eqs 4.13–4.16, 4.24, 4.32 corrected; F-B21–F-B27).
+//! (thesis §4-4, Fig 4.19, eqs 4.13–4.16, 4.24, 4.32 corrected).
 
 use super::NilSource;
 use crate::error::{FilterError, Result};
@@ -10,7 +10,7 @@ use glam::DVec3;
 /// How cells of different levels are weighted (thesis §4-4.2, eq 4.32).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum LevelWeighting {
-    /// Corrected (decision A-1, digest §2.4.4): weight = cell volume `2^{3γ}`, so that
+    /// Corrected (open point A-1; thesis §4-4.2, Fig 4.22): weight = cell volume `2^{3γ}`, so that
     /// `Σ_cells 2^{3γ} Σ b·C` is the exact integral of the patch-approximated filter times the
     /// texture. Default.
     CellVolume,
@@ -78,7 +78,7 @@ impl NilSettings {
     }
 }
 
-/// `n³` trigger points uniformly (cell-centred) in a box (thesis §4-4.8; decision A-3, F-B27).
+/// `n³` trigger points uniformly (cell-centred) in a box (thesis §4-4.8; open point A-3).
 pub fn box_triggers(region: &OrientedBox, n: usize) -> Vec<DVec3> {
     let c = |k: usize| -1.0 + (2 * k + 1) as f64 / n as f64;
     let mut out = Vec::with_capacity(n * n * n);

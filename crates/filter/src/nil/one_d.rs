@@ -263,8 +263,8 @@ mod tests {
     }
 
     /// With the corrected weight, a filter that is a polynomial patch on every cell gives the
-    /// exact filtered integral of the reconstructed signal, even over mixed levels (digest
-    /// §2.4.4); the printed weight does not.
+    /// exact filtered integral of the reconstructed signal, even over mixed levels (A-1;
+    /// thesis §4-4.2); the printed weight does not.
     #[test]
     fn corrected_weighting_is_exact_over_mixed_levels() {
         let samples: Vec<f64> = (0..16).map(|i| ((i * 7) % 5) as f64 / 4.0).collect();
