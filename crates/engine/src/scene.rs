@@ -261,7 +261,8 @@ impl VolumeSource {
                     big_endian: r.big_endian,
                     header_bytes: r.header_bytes,
                 };
-                let v = volsplat_io::read_raw_with(path, &spec, limits)?;
+                let options = volsplat_io::ReadOptions::default().with_limits(limits.clone());
+                let v = volsplat_io::read_raw_with(path, &spec, &options)?.volume;
                 let notes = v.non_finite_note().into_iter().collect();
                 (Arc::new(v), notes)
             }

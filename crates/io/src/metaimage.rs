@@ -32,6 +32,7 @@ use crate::header::{
 };
 use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
+use crate::{LoadedVolume, ReadOptions};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
@@ -43,15 +44,25 @@ struct Field {
     value: String,
 }
 
-/// Reads a MetaImage volume (`.mha` or `.mhd`). See the [module documentation](self) for the
-/// keys understood, conversions and limits. Errors name the file, the key and its value.
+/// Reads a MetaImage volume (`.mha` or `.mhd`) with default [`ReadOptions`]. See the
+/// [module documentation](self) for the keys understood, conversions and limits. Errors name
+/// the file, the key and its value.
 pub fn read_metaimage(path: impl AsRef<Path>) -> Result<AnyVolume> {
-    read_metaimage_with(path, &Limits::default())
+    read_metaimage_with(path, &ReadOptions::default()).map(|l| l.volume)
 }
 
-/// [`read_metaimage`] with caller-set [`Limits`] (header bytes, voxel count).
-pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolume> {
+/// [`read_metaimage`] with [`ReadOptions`]: its [`Limits`] (header bytes, voxel count,
+/// confinement) apply; a MetaImage file holds one volume, so a `frame` other than 0, an
+/// `array` or a `series` is an error. The reader has no notes of its own.
+pub fn read_metaimage_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    options.refuse_all_but_limits(path, "MetaImage")?;
+    let volume = read_metaimage_file(path, &options.limits)?;
+    Ok(LoadedVolume::single(volume, "MetaImage", Vec::new()))
+}
+
+/// Reads a MetaImage file within `limits`.
+fn read_metaimage_file(path: &Path, limits: &Limits) -> Result<AnyVolume> {
     let confine = Confinement::of(path, limits)?;
     let header = read_header(path, limits.max_header_bytes, |_, line| {
         let is_data_file = line
@@ -510,7 +521,8 @@ mod confinement {
             .unwrap();
             let v = read_metaimage(&p).unwrap_or_else(|e| panic!("{value}: {e}"));
             assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
-            let r = read_metaimage_with(&p, &l.limits);
+            let r = read_metaimage_with(&p, &ReadOptions::default().with_limits(l.limits.clone()))
+                .map(|l| l.volume);
             if inside {
                 assert_eq!(r.unwrap().to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
             } else {

@@ -45,6 +45,7 @@ use crate::header::{
 };
 use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload, write_samples_le};
+use crate::{LoadedVolume, ReadOptions};
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -65,21 +66,28 @@ struct Field {
     value: String,
 }
 
-/// Reads a NRRD volume (attached `.nrrd` or detached `.nhdr` header) into a runtime-typed volume.
+/// Reads a NRRD volume (attached `.nrrd` or detached `.nhdr` header) into a runtime-typed volume,
+/// with default [`ReadOptions`].
 ///
 /// World space is LPS for RAS/LAS files, else the file's space as written (see the [module documentation](self) for the
 /// fields, conversions and limits). Errors name the file, the header field and its value.
 pub fn read_nrrd(path: impl AsRef<Path>) -> Result<AnyVolume> {
-    read_nrrd_with(path, &Limits::default())
+    read_nrrd_with(path, &ReadOptions::default()).map(|l| l.volume)
 }
 
-/// [`read_nrrd`] with caller-set [`Limits`] (header bytes, voxel count).
-pub fn read_nrrd_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolume> {
-    read_nrrd_impl(path.as_ref(), limits).map(|(v, _)| v)
+/// [`read_nrrd`] with [`ReadOptions`]: its [`Limits`] (header bytes, voxel count, confinement)
+/// apply; a NRRD file holds one volume, so a `frame` other than 0, an `array` or a `series`
+/// is an error. The notes say how the world frame was taken (RAS/LAS converted to LPS, or
+/// no `space` field and the axes taken as LPS).
+pub fn read_nrrd_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
+    let path = path.as_ref();
+    options.refuse_all_but_limits(path, "NRRD")?;
+    let (volume, notes) = read_nrrd_file(path, &options.limits)?;
+    Ok(LoadedVolume::single(volume, "NRRD", notes))
 }
 
 /// Reads a NRRD file; also returns notes for the user (e.g. the world-frame conversion).
-pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String>)> {
+fn read_nrrd_file(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String>)> {
     let confine = Confinement::of(path, limits)?;
     let header = read_header(path, limits.max_header_bytes, |n, line| {
         if n > 1 && line.trim().is_empty() {

@@ -55,6 +55,8 @@ pub fn read_vti(path: impl AsRef<Path>) -> Result<AnyVolume> {
 /// result lists the arrays present.
 pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    options.refuse_series(path)?;
+    options.refuse_frame(path)?;
     // A VTK XML image data file names no other file; only a link out of the folder is refused.
     crate::confine::Confinement::of(path, &options.limits)?;
     crate::limits::require_regular_file(path, "volume file")?;
