@@ -98,20 +98,20 @@ pub(crate) enum ByteSkip {
 #[derive(Debug, Clone)]
 pub(crate) struct PayloadSpec<'a> {
     /// The file holding the data.
-    pub data_path: &'a Path,
+    pub(crate) data_path: &'a Path,
     /// Byte offset in `data_path` where the data region starts (after an attached header).
-    pub start: u64,
+    pub(crate) start: u64,
     /// Lines to skip from `start` (in the file's bytes, before decompression).
-    pub line_skip: u64,
+    pub(crate) line_skip: u64,
     /// Bytes to skip after the lines.
-    pub byte_skip: ByteSkip,
+    pub(crate) byte_skip: ByteSkip,
     /// The header field that set `byte_skip`, for error messages.
-    pub skip_field: &'a str,
-    pub encoding: Encoding,
-    pub file_type: FileType,
-    pub big_endian: bool,
+    pub(crate) skip_field: &'a str,
+    pub(crate) encoding: Encoding,
+    pub(crate) file_type: FileType,
+    pub(crate) big_endian: bool,
     /// Headerless raw files: the data must end exactly where the samples end.
-    pub exact: bool,
+    pub(crate) exact: bool,
 }
 
 /// Reads the payload described by `spec` into a volume on `grid`.

@@ -52,7 +52,7 @@ pub fn read_raw(path: impl AsRef<Path>, spec: &RawSpec) -> Result<AnyVolume> {
     read_raw_with(path, spec, &ReadOptions::default()).map(|l| l.volume)
 }
 
-/// [`read_raw`] with [`ReadOptions`]: its [`Limits`](crate::Limits) (voxel count,
+/// [`read_raw`] with [`ReadOptions`]: its [`Limits`] (voxel count,
 /// confinement) apply; a raw file holds one volume, so a `frame` other than 0, an `array` or a
 /// `series` is an error. The result's format is `raw`, with no notes.
 ///

@@ -17,8 +17,9 @@ const SUPPORTED: &str = ".nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr (+ .img),
      .tif, .tiff, .dcm or any DICOM file, a folder of DICOM or TIFF files (a headerless raw file: \
      give its layout with --raw-dims X,Y,Z, --raw-type and --raw-spacing)";
 
-/// The volume file formats, as told by the file name.
+/// The volume file formats, as told by the file name (`#[non_exhaustive]`: more may come).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum VolumeFormat {
     /// NRRD, `.nrrd` or `.nhdr` ([`crate::read_nrrd`]).
     Nrrd,
@@ -69,8 +70,19 @@ impl VolumeFormat {
     }
 }
 
-/// What [`read_volume_with`] should read, and within which limits.
+/// What [`read_volume_with`] (and every `read_*_with` reader) should read, and within which
+/// limits. Other crates build it from [`ReadOptions::default`] with the `with_*` methods (the
+/// struct is `#[non_exhaustive]`: a new option is not a breaking change); its fields can be
+/// read and set.
+///
+/// ```
+/// let options = volsplat_io::ReadOptions::default()
+///     .with_frame(1)
+///     .with_limits(volsplat_io::Limits::default().with_max_voxels(1 << 20));
+/// assert_eq!((options.frame, options.limits.max_voxels), (1, 1 << 20));
+/// ```
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct ReadOptions {
     /// Limits against untrusted input (header bytes, voxel count, ...).
     pub limits: Limits,
@@ -116,6 +128,26 @@ impl ReadOptions {
     /// These options with `limits` in place of the current limits.
     pub fn with_limits(mut self, limits: Limits) -> Self {
         self.limits = limits;
+        self
+    }
+
+    /// These options with [`ReadOptions::frame`] set (0-based).
+    pub fn with_frame(mut self, frame: usize) -> Self {
+        self.frame = frame;
+        self
+    }
+
+    /// These options with [`ReadOptions::array`] set (a VTK point-data array's name; `None`:
+    /// the active scalars, else the first array).
+    pub fn with_array(mut self, array: Option<String>) -> Self {
+        self.array = array;
+        self
+    }
+
+    /// These options with [`ReadOptions::series`] set (a DICOM SeriesInstanceUID or a unique
+    /// SeriesNumber; `None`: the only series, or the given file's).
+    pub fn with_series(mut self, series: Option<String>) -> Self {
+        self.series = series;
         self
     }
 
@@ -427,6 +459,30 @@ mod tests {
             "{:?}",
             l.notes
         );
+    }
+
+    /// Issue 30 item 4: `ReadOptions` is `#[non_exhaustive]`; the `with_*` methods set each
+    /// field and nothing else.
+    #[test]
+    fn read_options_builders_set_one_field_each() {
+        let limits = Limits::default().with_max_voxels(5);
+        let o = ReadOptions::default()
+            .with_frame(2)
+            .with_array(Some("a".into()))
+            .with_series(Some("7".into()))
+            .with_limits(limits.clone());
+        assert_eq!(
+            o,
+            ReadOptions {
+                limits,
+                frame: 2,
+                array: Some("a".into()),
+                series: Some("7".into()),
+            }
+        );
+        let back = o.with_array(None).with_series(None).with_frame(0);
+        assert_eq!(back.limits.max_voxels, 5);
+        assert_eq!(back.with_limits(Limits::default()), ReadOptions::default());
     }
 
     #[test]

@@ -41,31 +41,31 @@ pub(super) struct Walked {
     /// The transfer syntax UID the data set is read with (trailing NUL and spaces removed): the
     /// file meta group's, or implicit/explicit VR little endian where the data set is written
     /// in the other one ([`Walked::vr_mismatch`]).
-    pub ts_uid: String,
+    pub(super) ts_uid: String,
     /// The transfer syntax name from dicom-rs's registry.
-    pub ts_name: String,
+    pub(super) ts_name: String,
     /// MediaStorageSOPClassUID (0002,0002) of the file meta group (empty if absent).
-    pub media_sop_class: String,
+    pub(super) media_sop_class: String,
     /// The data set is written in the other VR encoding than the meta group declares (explicit
     /// VR declared, implicit written, or the reverse); it is read as written, as pydicom does.
     /// Holds the declared UID.
-    pub vr_mismatch: Option<String>,
+    pub(super) vr_mismatch: Option<String>,
     /// The top-level Pixel Data (7FE0,0010) element's declared length ([`UNDEFINED`] when
     /// encapsulated) and where its value starts in the file; `None` when the walk ended
     /// before it. For a deflated data set, the position is in the inflated stream.
-    pub pixel: Option<(u32, u64)>,
+    pub(super) pixel: Option<(u32, u64)>,
     /// Whether the data set is deflated (PS3.5 §A.5).
-    pub deflated: bool,
+    pub(super) deflated: bool,
 }
 
 /// The image size a data set's top level declares, as read by the walk (not validated).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub(super) struct Declared {
-    pub rows: Option<u16>,
-    pub cols: Option<u16>,
-    pub samples: Option<u16>,
-    pub bits_allocated: Option<u16>,
-    pub frames: Option<u64>,
+    pub(super) rows: Option<u16>,
+    pub(super) cols: Option<u16>,
+    pub(super) samples: Option<u16>,
+    pub(super) bits_allocated: Option<u16>,
+    pub(super) frames: Option<u64>,
 }
 
 impl Declared {
