@@ -8,13 +8,11 @@ use std::sync::OnceLock;
 
 /// Limits small enough that a valid-looking header cannot ask for much memory.
 pub fn limits() -> volsplat_io::Limits {
-    volsplat_io::Limits {
-        max_header_bytes: 64 << 10,
-        max_voxels: 1 << 20,
-        max_json_bytes: 1 << 20,
-        max_xml_bytes: 4 << 20,
-        confine_to: None,
-    }
+    volsplat_io::Limits::default()
+        .with_max_header_bytes(64 << 10)
+        .with_max_voxels(1 << 20)
+        .with_max_json_bytes(1 << 20)
+        .with_max_xml_bytes(4 << 20)
 }
 
 /// The default voxel limit (2³⁴) with the small header and XML limits: a small input that
@@ -22,24 +20,15 @@ pub fn limits() -> volsplat_io::Limits {
 /// `-malloc_limit_mb` turns any allocation sized from a header alone into a finding (issue 28
 /// §2: a `.vti` LZ4 header declaring 2⁴⁰-byte blocks allocated 32 GiB).
 pub fn wide_limits() -> volsplat_io::Limits {
-    volsplat_io::Limits {
-        max_voxels: volsplat_io::Limits::default().max_voxels,
-        ..limits()
-    }
+    limits().with_max_voxels(volsplat_io::Limits::default().max_voxels)
 }
 
 pub fn wide_options() -> volsplat_io::ReadOptions {
-    volsplat_io::ReadOptions {
-        limits: wide_limits(),
-        ..Default::default()
-    }
+    volsplat_io::ReadOptions::default().with_limits(wide_limits())
 }
 
 pub fn options() -> volsplat_io::ReadOptions {
-    volsplat_io::ReadOptions {
-        limits: limits(),
-        ..Default::default()
-    }
+    volsplat_io::ReadOptions::default().with_limits(limits())
 }
 
 fn dir() -> &'static Path {

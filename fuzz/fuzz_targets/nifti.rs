@@ -15,7 +15,7 @@ fuzz_target!(|data: &[u8]| {
     common::with_file(name, body, |p| {
         let o = common::options();
         let _ = volsplat_io::read_nifti_with(p, &o);
-        let o = volsplat_io::ReadOptions { frame: 1, ..o };
+        let o = o.with_frame(1);
         let _ = volsplat_io::read_nifti_with(p, &o);
         let _ = volsplat_io::read_nifti_with(p, &common::wide_options());
     });

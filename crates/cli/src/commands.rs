@@ -565,12 +565,11 @@ fn load_info(a: &InputArgs) -> Result<(String, volsplat::io::LoadedVolume)> {
         false,
     ) = (&source, a.raw_dims.is_some())
     {
-        let options = volsplat::io::ReadOptions {
-            limits,
-            frame: a.frame,
-            array: a.array.clone(),
-            series: a.series.clone(),
-        };
+        let options = volsplat::io::ReadOptions::default()
+            .with_limits(limits)
+            .with_frame(a.frame)
+            .with_array(a.array.clone())
+            .with_series(a.series.clone());
         let loaded = volsplat::io::read_volume_with(path, &options)?;
         return Ok((path.display().to_string(), loaded));
     }

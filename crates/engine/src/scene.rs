@@ -261,7 +261,8 @@ impl VolumeSource {
                     big_endian: r.big_endian,
                     header_bytes: r.header_bytes,
                 };
-                let v = volsplat_io::read_raw_with(path, &spec, limits)?;
+                let options = volsplat_io::ReadOptions::default().with_limits(limits.clone());
+                let v = volsplat_io::read_raw_with(path, &spec, &options)?.volume;
                 let notes = v.non_finite_note().into_iter().collect();
                 (Arc::new(v), notes)
             }
@@ -272,12 +273,11 @@ impl VolumeSource {
                 array,
                 series,
             } => {
-                let options = volsplat_io::ReadOptions {
-                    frame: *frame,
-                    array: array.clone(),
-                    series: series.clone(),
-                    limits: limits.clone(),
-                };
+                let options = volsplat_io::ReadOptions::default()
+                    .with_frame(*frame)
+                    .with_array(array.clone())
+                    .with_series(series.clone())
+                    .with_limits(limits.clone());
                 let loaded = volsplat_io::read_volume_with(path, &options)?;
                 let mut notes = loaded.notes;
                 if loaded.frames > 1 {

@@ -308,10 +308,7 @@ fn the_renderers_reader_limits_reach_the_reader() {
         ..Scene::default()
     };
     let req = RenderRequest::new(scene, 16, 16);
-    let limits = volsplat::io::Limits {
-        max_voxels: 10_000,
-        ..Default::default()
-    };
+    let limits = volsplat::io::Limits::default().with_max_voxels(10_000);
     let mut small = Renderer::with_limits(limits);
     let e = small.render(&req, &mut |_| true).unwrap_err();
     let msg = e.to_string();

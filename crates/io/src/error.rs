@@ -12,6 +12,7 @@ use volsplat_core::CoreError;
 
 /// Everything that can go wrong while reading or writing files.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum IoError {
     /// An operating-system I/O operation failed (open, read, write, rename, ...).
     #[error("{path}: {op} failed: {error}", path = .path.display())]

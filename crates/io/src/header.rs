@@ -24,11 +24,11 @@ pub(crate) enum LineAction {
 /// A header split into lines.
 pub(crate) struct HeaderText {
     /// `(1-based line number, text without the line terminator)`.
-    pub lines: Vec<(usize, String)>,
+    pub(crate) lines: Vec<(usize, String)>,
     /// Byte offset just past the header (where attached data start).
-    pub end: u64,
+    pub(crate) end: u64,
     /// Whether the header was ended by the classifier (`false`: it ran to the end of the file).
-    pub terminated: bool,
+    pub(crate) terminated: bool,
 }
 
 /// Reads lines from the start of `path` until `classify` ends the header or the file ends.

@@ -7,6 +7,7 @@ use volsplat_core::{Image, ScalarImage};
 
 /// Bits per channel of a PNG file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[non_exhaustive]
 pub enum PngBitDepth {
     /// 8 bits per channel (code values 0–255).
     #[default]

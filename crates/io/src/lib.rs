@@ -43,7 +43,9 @@
 //!   writes it (LPS, `AnatomicalOrientation`), exact.
 //! - [`write_npy_volume`]: the samples only, shape (z, y, x).
 //!
-//! Each reader has a `*_with` form taking caller-set [`Limits`] (or [`ReadOptions`]).
+//! Each volume reader has a `*_with` form of one shape, `read_*_with(path, &ReadOptions) ->
+//! LoadedVolume` ([`read_raw_with`] takes its [`RawSpec`] before the options; decision 0034),
+//! that refuses the options its format cannot honour.
 //!
 //! ## Images (premultiplied linear RGBA `f32`, row 0 at the top)
 //!
@@ -80,6 +82,7 @@
 //! Every writer is atomic: it writes a temporary file in the target's directory and renames it
 //! over the target; on error the temporary file is removed and an existing target is untouched.
 #![deny(missing_docs)]
+#![warn(unreachable_pub)]
 
 mod atomic;
 mod confine;

@@ -9,12 +9,16 @@ use volsplat_core::volume::MAX_VOXELS;
 /// image-rs's `Limits`). [`Limits::default`] holds the crate's historical constants; a caller
 /// (the CLI's one flag, say) may raise or lower them.
 ///
+/// Other crates build it from [`Limits::default`] with the `with_*` methods (the struct is
+/// `#[non_exhaustive]`: a new limit is not a breaking change); its fields can be read and set.
+///
 /// ```
 /// // At most 512³ voxels, other limits as by default.
-/// let small = volsplat_io::Limits { max_voxels: 512 * 512 * 512, ..Default::default() };
+/// let small = volsplat_io::Limits::default().with_max_voxels(512 * 512 * 512);
 /// assert_eq!(small.voxel_limit(), 1 << 27);
 /// ```
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct Limits {
     /// Largest text header (NRRD, MetaImage, `.npy`, VTK XML document) accepted, in bytes.
     /// Default [`crate::MAX_HEADER_BYTES`] (1 MiB); VTK XML files with inline data use
@@ -58,6 +62,38 @@ impl Limits {
     /// The effective voxel limit: `max_voxels`, but never above the core's [`MAX_VOXELS`].
     pub fn voxel_limit(&self) -> u128 {
         self.max_voxels.min(MAX_VOXELS)
+    }
+
+    /// These limits with [`Limits::max_header_bytes`] set (bytes).
+    pub fn with_max_header_bytes(mut self, bytes: usize) -> Self {
+        self.max_header_bytes = bytes;
+        self
+    }
+
+    /// These limits with [`Limits::max_voxels`] set (samples; capped at
+    /// [`volsplat_core::volume::MAX_VOXELS`] by [`Limits::voxel_limit`]).
+    pub fn with_max_voxels(mut self, voxels: u128) -> Self {
+        self.max_voxels = voxels;
+        self
+    }
+
+    /// These limits with [`Limits::max_json_bytes`] set (bytes).
+    pub fn with_max_json_bytes(mut self, bytes: u64) -> Self {
+        self.max_json_bytes = bytes;
+        self
+    }
+
+    /// These limits with [`Limits::max_xml_bytes`] set (bytes).
+    pub fn with_max_xml_bytes(mut self, bytes: u64) -> Self {
+        self.max_xml_bytes = bytes;
+        self
+    }
+
+    /// These limits with reads confined to `folder` ([`Limits::confine_to`]; `None`: not
+    /// confined).
+    pub fn with_confine_to(mut self, folder: Option<std::path::PathBuf>) -> Self {
+        self.confine_to = folder;
+        self
     }
 }
 
@@ -164,6 +200,35 @@ mod tests {
         };
         let e = checked_voxel_count(p, "sizes", "v", &[2, 3, 4], &small).unwrap_err();
         assert!(e.to_string().contains("exceeds the limit 10"), "{e}");
+    }
+
+    /// Issue 30 item 4: `Limits` is `#[non_exhaustive]`; the `with_*` methods set each field
+    /// and nothing else.
+    #[test]
+    fn builders_set_one_field_each() {
+        let d = Limits::default();
+        let l = d
+            .clone()
+            .with_max_header_bytes(10)
+            .with_max_voxels(20)
+            .with_max_json_bytes(30)
+            .with_max_xml_bytes(40)
+            .with_confine_to(Some("/data".into()));
+        assert_eq!(
+            l,
+            Limits {
+                max_header_bytes: 10,
+                max_voxels: 20,
+                max_json_bytes: 30,
+                max_xml_bytes: 40,
+                confine_to: Some("/data".into()),
+            }
+        );
+        assert_eq!(
+            d.clone().with_max_voxels(7).max_header_bytes,
+            d.max_header_bytes
+        );
+        assert_eq!(l.with_confine_to(None).confine_to, None);
     }
 
     #[test]

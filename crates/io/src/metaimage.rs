@@ -32,6 +32,7 @@ use crate::header::{
 };
 use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
+use crate::{LoadedVolume, ReadOptions};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
@@ -43,15 +44,29 @@ struct Field {
     value: String,
 }
 
-/// Reads a MetaImage volume (`.mha` or `.mhd`). See the [module documentation](self) for the
-/// keys understood, conversions and limits. Errors name the file, the key and its value.
+/// Reads a MetaImage volume (`.mha` or `.mhd`) with default [`ReadOptions`]. See the
+/// [module documentation](self) for the keys understood, conversions and limits. Errors name
+/// the file, the key and its value.
 pub fn read_metaimage(path: impl AsRef<Path>) -> Result<AnyVolume> {
-    read_metaimage_with(path, &Limits::default())
+    read_metaimage_with(path, &ReadOptions::default()).map(|l| l.volume)
 }
 
-/// [`read_metaimage`] with caller-set [`Limits`] (header bytes, voxel count).
-pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolume> {
+/// [`read_metaimage`] with [`ReadOptions`]: its [`Limits`] (header bytes, voxel count,
+/// confinement) apply; a MetaImage file holds one volume, so a `frame` other than 0, an
+/// `array` or a `series` is an error. The reader has no notes of its own.
+pub fn read_metaimage_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    options.refuse_all_but_limits(path, "MetaImage")?;
+    let volume = read_metaimage_file(path, &options.limits)?;
+    Ok(LoadedVolume::single(volume, "MetaImage", Vec::new()))
+}
+
+/// Reads a MetaImage file within `limits`.
+///
+/// The steps: the header's `Key = Value` lines (up to `ElementDataFile`), the grid's size
+/// (checked against the voxel limit), the samples' type, byte order and encoding, the grid,
+/// `HeaderSize`, where the data lie; then the payload.
+fn read_metaimage_file(path: &Path, limits: &Limits) -> Result<AnyVolume> {
     let confine = Confinement::of(path, limits)?;
     let header = read_header(path, limits.max_header_bytes, |_, line| {
         let is_data_file = line
@@ -63,8 +78,42 @@ pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<An
             LineAction::Keep
         }
     })?;
-    let mut fields: HashMap<String, Field> = HashMap::new();
-    for (n, text) in &header.lines {
+    let fields = parse_fields(path, &header.lines)?;
+    if !header.terminated {
+        return Err(IoError::missing(path, "ElementDataFile"));
+    }
+    let dims = parse_dims(path, &fields, limits)?;
+    let samples = Samples::parse(path, &fields)?;
+    let grid = geometry(path, &fields, dims)?;
+    let (header_skip, from_end) = header_size(path, &fields, samples.encoding)?;
+    let (data_path, start) = data_location(path, &fields, confine.as_ref(), header.end)?;
+    let spec = PayloadSpec {
+        data_path: &data_path,
+        // MetaIO skips HeaderSize bytes of the file itself, before any decompression.
+        start: start.saturating_add(header_skip),
+        line_skip: 0,
+        byte_skip: if from_end {
+            ByteSkip::FromEnd
+        } else {
+            ByteSkip::Bytes(0)
+        },
+        skip_field: "HeaderSize",
+        encoding: samples.encoding,
+        file_type: samples.file_type,
+        big_endian: samples.big_endian,
+        exact: false,
+    };
+    read_payload(&spec, grid)
+}
+
+/// The header's keys, by lower-case name.
+type Fields = HashMap<String, Field>;
+
+/// The `Key = Value` lines of the header (blank lines and `#` comments skipped); a key given
+/// twice is an error naming both lines.
+fn parse_fields(path: &Path, lines: &[(usize, String)]) -> Result<Fields> {
+    let mut fields = Fields::new();
+    for (n, text) in lines {
         let t = text.trim();
         if t.is_empty() || t.starts_with('#') {
             continue;
@@ -98,18 +147,25 @@ pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<An
             },
         );
     }
-    if !header.terminated {
-        return Err(IoError::missing(path, "ElementDataFile"));
-    }
-    let get = |k: &str| fields.get(k);
-    let require = |k: &str, name: &str| get(k).ok_or_else(|| IoError::missing(path, name));
+    Ok(fields)
+}
 
-    if let Some(f) = get("objecttype")
+/// The key `canon` (lower case), or an error saying that `name` is missing.
+fn require<'f>(path: &Path, fields: &'f Fields, canon: &str, name: &str) -> Result<&'f Field> {
+    fields
+        .get(canon)
+        .ok_or_else(|| IoError::missing(path, name))
+}
+
+/// `ObjectType` (must be `Image` if given), `NDims` (must be 3) and `DimSize`, checked against
+/// the voxel limit; `ElementNumberOfChannels` must be 1.
+fn parse_dims(path: &Path, fields: &Fields, limits: &Limits) -> Result<[usize; 3]> {
+    if let Some(f) = fields.get("objecttype")
         && !f.value.eq_ignore_ascii_case("image")
     {
         return Err(IoError::unsupported(path, &f.name, &f.value, "Image"));
     }
-    let nd = require("ndims", "NDims")?;
+    let nd = require(path, fields, "ndims", "NDims")?;
     if nd.value.trim() != "3" {
         return Err(IoError::field(
             path,
@@ -118,12 +174,12 @@ pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<An
             "only 3-D volumes are supported (NDims must be 3)",
         ));
     }
-    let ds = require("dimsize", "DimSize")?;
+    let ds = require(path, fields, "dimsize", "DimSize")?;
     let sizes: [u64; 3] = parse_numbers(path, &ds.name, &ds.value, "a whole number ≥ 1", |t| {
         t.parse::<u64>().ok().filter(|&v| v > 0)
     })?;
     let dims = checked_dims(path, &ds.name, &ds.value, sizes, limits)?;
-    if let Some(f) = get("elementnumberofchannels")
+    if let Some(f) = fields.get("elementnumberofchannels")
         && f.value.trim() != "1"
     {
         return Err(IoError::unsupported(
@@ -133,67 +189,92 @@ pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<An
             "1 (scalar volumes only)",
         ));
     }
-    let et = require("elementtype", "ElementType")?;
-    let file_type = match et.value.trim().to_ascii_uppercase().as_str() {
-        "MET_UCHAR" => FileType::U8,
-        "MET_CHAR" => FileType::I8,
-        "MET_USHORT" => FileType::U16,
-        "MET_SHORT" => FileType::I16,
-        "MET_FLOAT" => FileType::F32,
-        "MET_INT" | "MET_LONG" => FileType::I32,
-        "MET_UINT" | "MET_ULONG" => FileType::U32,
-        "MET_DOUBLE" => FileType::F64,
-        _ => {
-            return Err(IoError::unsupported(
-                path,
-                &et.name,
-                &et.value,
-                "MET_UCHAR, MET_CHAR, MET_USHORT, MET_SHORT, MET_FLOAT; converted to float: \
-                 MET_INT, MET_UINT, MET_LONG, MET_ULONG, MET_DOUBLE",
-            ));
-        }
-    };
-    let boolean = |f: &Field| -> Result<bool> {
-        match normalize_words(&f.value).as_str() {
-            "true" | "1" => Ok(true),
-            "false" | "0" => Ok(false),
-            _ => Err(IoError::field(
-                path,
-                &f.name,
-                &f.value,
-                "must be True or False",
-            )),
-        }
-    };
-    let big_endian = match get("elementbyteordermsb").or(get("binarydatabyteordermsb")) {
-        Some(f) => boolean(f)?,
-        None => false,
-    };
-    let binary = match get("binarydata") {
-        Some(f) => boolean(f)?,
-        None => true,
-    };
-    let compressed = match get("compresseddata") {
-        Some(f) => boolean(f)?,
-        None => false,
-    };
-    let encoding = match (binary, compressed) {
-        (true, false) => Encoding::Raw,
-        (true, true) => Encoding::ZlibOrGzip,
-        (false, false) => Encoding::Ascii,
-        (false, true) => {
-            return Err(IoError::unsupported(
-                path,
-                "CompressedData",
-                "True",
-                "uncompressed text data only (BinaryData = False with CompressedData = True)",
-            ));
-        }
-    };
+    Ok(dims)
+}
 
-    let grid = geometry(path, &fields, dims)?;
+/// How the samples are stored: `ElementType`, the byte order and the encoding.
+struct Samples {
+    file_type: FileType,
+    /// `ElementByteOrderMSB` (or `BinaryDataByteOrderMSB`) is true.
+    big_endian: bool,
+    /// Raw, text (`BinaryData = False`) or compressed (`CompressedData = True`).
+    encoding: Encoding,
+}
 
-    let (header_skip, from_end) = match get("headersize") {
+impl Samples {
+    /// The keys `ElementType`, `ElementByteOrderMSB` / `BinaryDataByteOrderMSB`, `BinaryData`
+    /// and `CompressedData`, checked.
+    fn parse(path: &Path, fields: &Fields) -> Result<Self> {
+        let et = require(path, fields, "elementtype", "ElementType")?;
+        let file_type = match et.value.trim().to_ascii_uppercase().as_str() {
+            "MET_UCHAR" => FileType::U8,
+            "MET_CHAR" => FileType::I8,
+            "MET_USHORT" => FileType::U16,
+            "MET_SHORT" => FileType::I16,
+            "MET_FLOAT" => FileType::F32,
+            "MET_INT" | "MET_LONG" => FileType::I32,
+            "MET_UINT" | "MET_ULONG" => FileType::U32,
+            "MET_DOUBLE" => FileType::F64,
+            _ => {
+                return Err(IoError::unsupported(
+                    path,
+                    &et.name,
+                    &et.value,
+                    "MET_UCHAR, MET_CHAR, MET_USHORT, MET_SHORT, MET_FLOAT; converted to float: \
+                     MET_INT, MET_UINT, MET_LONG, MET_ULONG, MET_DOUBLE",
+                ));
+            }
+        };
+        let get = |k: &str| fields.get(k);
+        let boolean = |f: &Field| -> Result<bool> {
+            match normalize_words(&f.value).as_str() {
+                "true" | "1" => Ok(true),
+                "false" | "0" => Ok(false),
+                _ => Err(IoError::field(
+                    path,
+                    &f.name,
+                    &f.value,
+                    "must be True or False",
+                )),
+            }
+        };
+        let big_endian = match get("elementbyteordermsb").or(get("binarydatabyteordermsb")) {
+            Some(f) => boolean(f)?,
+            None => false,
+        };
+        let binary = match get("binarydata") {
+            Some(f) => boolean(f)?,
+            None => true,
+        };
+        let compressed = match get("compresseddata") {
+            Some(f) => boolean(f)?,
+            None => false,
+        };
+        let encoding = match (binary, compressed) {
+            (true, false) => Encoding::Raw,
+            (true, true) => Encoding::ZlibOrGzip,
+            (false, false) => Encoding::Ascii,
+            (false, true) => {
+                return Err(IoError::unsupported(
+                    path,
+                    "CompressedData",
+                    "True",
+                    "uncompressed text data only (BinaryData = False with CompressedData = True)",
+                ));
+            }
+        };
+        Ok(Samples {
+            file_type,
+            big_endian,
+            encoding,
+        })
+    }
+}
+
+/// `HeaderSize`: the bytes of the data file to skip, and whether the samples are the file's
+/// last bytes (`-1`, uncompressed binary data only).
+fn header_size(path: &Path, fields: &Fields, encoding: Encoding) -> Result<(u64, bool)> {
+    let (header_skip, from_end) = match fields.get("headersize") {
         Some(f) => match f.value.trim().parse::<i64>() {
             Ok(-1) => (0u64, true),
             Ok(v) if v >= 0 => (v as u64, false),
@@ -216,51 +297,43 @@ pub fn read_metaimage_with(path: impl AsRef<Path>, limits: &Limits) -> Result<An
             "-1 (data at the end of the file) is only allowed for uncompressed binary data",
         ));
     }
-
-    let df = require("elementdatafile", "ElementDataFile")?;
-    let (data_path, start): (PathBuf, u64) = if df.value.eq_ignore_ascii_case("LOCAL") {
-        (path.to_path_buf(), header.end)
-    } else {
-        let first = df.value.split_whitespace().next().unwrap_or("");
-        if first.eq_ignore_ascii_case("LIST") || df.value.contains('%') || df.value.is_empty() {
-            return Err(IoError::unsupported(
-                path,
-                &df.name,
-                &df.value,
-                "LOCAL or a single data file name (LIST and file patterns are not supported)",
-            ));
-        }
-        let data = resolve_data_path(path, &df.value);
-        if let Some(c) = &confine {
-            c.check(
-                path,
-                &format!("field `{}`: data file", df.name),
-                &df.value,
-                &data,
-            )?;
-        }
-        (data, 0)
-    };
-    let spec = PayloadSpec {
-        data_path: &data_path,
-        // MetaIO skips HeaderSize bytes of the file itself, before any decompression.
-        start: start.saturating_add(header_skip),
-        line_skip: 0,
-        byte_skip: if from_end {
-            ByteSkip::FromEnd
-        } else {
-            ByteSkip::Bytes(0)
-        },
-        skip_field: "HeaderSize",
-        encoding,
-        file_type,
-        big_endian,
-        exact: false,
-    };
-    read_payload(&spec, grid)
+    Ok((header_skip, from_end))
 }
 
-fn geometry(path: &Path, fields: &HashMap<String, Field>, dims: [usize; 3]) -> Result<Grid> {
+/// Where the samples lie: after the header (`ElementDataFile = LOCAL`, from `header_end`), or
+/// in the named data file beside the header (inside the confinement folder, if any).
+fn data_location(
+    path: &Path,
+    fields: &Fields,
+    confine: Option<&Confinement>,
+    header_end: u64,
+) -> Result<(PathBuf, u64)> {
+    let df = require(path, fields, "elementdatafile", "ElementDataFile")?;
+    if df.value.eq_ignore_ascii_case("LOCAL") {
+        return Ok((path.to_path_buf(), header_end));
+    }
+    let first = df.value.split_whitespace().next().unwrap_or("");
+    if first.eq_ignore_ascii_case("LIST") || df.value.contains('%') || df.value.is_empty() {
+        return Err(IoError::unsupported(
+            path,
+            &df.name,
+            &df.value,
+            "LOCAL or a single data file name (LIST and file patterns are not supported)",
+        ));
+    }
+    let data = resolve_data_path(path, &df.value);
+    if let Some(c) = confine {
+        c.check(
+            path,
+            &format!("field `{}`: data file", df.name),
+            &df.value,
+            &data,
+        )?;
+    }
+    Ok((data, 0))
+}
+
+fn geometry(path: &Path, fields: &Fields, dims: [usize; 3]) -> Result<Grid> {
     let first = |keys: &[&str]| keys.iter().find_map(|k| fields.get(*k));
     let spacing = match first(&["elementspacing", "elementsize"]) {
         Some(f) => parse_numbers(path, &f.name, &f.value, "a positive finite number", |t| {
@@ -510,7 +583,8 @@ mod confinement {
             .unwrap();
             let v = read_metaimage(&p).unwrap_or_else(|e| panic!("{value}: {e}"));
             assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
-            let r = read_metaimage_with(&p, &l.limits);
+            let r = read_metaimage_with(&p, &ReadOptions::default().with_limits(l.limits.clone()))
+                .map(|l| l.volume);
             if inside {
                 assert_eq!(r.unwrap().to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
             } else {

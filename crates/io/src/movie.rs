@@ -27,6 +27,7 @@ pub const VIDEO_EXTENSIONS: &[&str] = &["mp4", "webm", "mkv", "mov", "avi"];
 
 /// How a movie is stored.
 #[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum MovieFormat {
     /// One PNG per frame; `pattern`'s file name holds one printf-style `%0Nd` for the frame
     /// number (from 0).

@@ -98,37 +98,88 @@ pub(crate) enum ByteSkip {
 #[derive(Debug, Clone)]
 pub(crate) struct PayloadSpec<'a> {
     /// The file holding the data.
-    pub data_path: &'a Path,
+    pub(crate) data_path: &'a Path,
     /// Byte offset in `data_path` where the data region starts (after an attached header).
-    pub start: u64,
+    pub(crate) start: u64,
     /// Lines to skip from `start` (in the file's bytes, before decompression).
-    pub line_skip: u64,
+    pub(crate) line_skip: u64,
     /// Bytes to skip after the lines.
-    pub byte_skip: ByteSkip,
+    pub(crate) byte_skip: ByteSkip,
     /// The header field that set `byte_skip`, for error messages.
-    pub skip_field: &'a str,
-    pub encoding: Encoding,
-    pub file_type: FileType,
-    pub big_endian: bool,
+    pub(crate) skip_field: &'a str,
+    pub(crate) encoding: Encoding,
+    pub(crate) file_type: FileType,
+    pub(crate) big_endian: bool,
     /// Headerless raw files: the data must end exactly where the samples end.
-    pub exact: bool,
+    pub(crate) exact: bool,
 }
 
 /// Reads the payload described by `spec` into a volume on `grid`.
+///
+/// The steps: the bytes needed (checked to fit in memory), the data file opened at the
+/// payload (after `start` and the line skip), then the samples read by encoding and decoded.
 pub(crate) fn read_payload(spec: &PayloadSpec<'_>, grid: Grid) -> Result<AnyVolume> {
     let path = spec.data_path;
+    let needed = needed_bytes(spec, &grid)?;
+    let data = open_at_payload(spec)?;
+    match spec.encoding {
+        Encoding::Raw => {
+            let bytes = read_raw_samples(spec, data, needed)?;
+            decode(bytes, spec.file_type, spec.big_endian, grid, path)
+        }
+        Encoding::Gzip | Encoding::ZlibOrGzip => {
+            let bytes = read_compressed_samples(spec, data.file, needed)?;
+            decode(bytes, spec.file_type, spec.big_endian, grid, path)
+        }
+        Encoding::Ascii => {
+            let skip = byte_skip_forward(spec)?;
+            let mut reader = BufReader::new(data.file);
+            let skipped = std::io::copy(&mut (&mut reader).take(skip), &mut std::io::sink())
+                .map_err(|e| IoError::os(path, "read", e))?;
+            if skipped < skip {
+                return Err(IoError::Truncated {
+                    path: path.to_path_buf(),
+                    what: format!("text payload (within `{}`)", spec.skip_field),
+                    expected: skip,
+                    actual: skipped,
+                    unit: "bytes",
+                });
+            }
+            let count = grid.voxel_count() as u64;
+            let values = read_ascii(&mut reader, count, spec.file_type, path)?;
+            decode_values(values, spec.file_type, grid, path)
+        }
+    }
+}
+
+/// The bytes of samples `grid` needs in the file's type; an error unless they fit in `usize`.
+fn needed_bytes(spec: &PayloadSpec<'_>, grid: &Grid) -> Result<u64> {
     let count = grid.voxel_count() as u128;
     let needed128 = count * spec.file_type.size_bytes() as u128;
-    let needed = u64::try_from(needed128)
+    u64::try_from(needed128)
         .ok()
         .filter(|&n| usize::try_from(n).is_ok())
         .ok_or_else(|| IoError::TooLarge {
-            path: path.to_path_buf(),
+            path: spec.data_path.to_path_buf(),
             what: "payload size in bytes".into(),
             value: needed128,
             limit: usize::MAX as u128,
-        })?;
+        })
+}
 
+/// The data file, positioned at the payload.
+struct OpenPayload {
+    file: File,
+    /// The file's size in bytes, as found when it was opened.
+    file_len: u64,
+    /// Where the payload begins: `start` plus the skipped lines (before any byte skip).
+    pos: u64,
+}
+
+/// Opens the data file (a regular file only), checks that `start` lies within it and skips
+/// `line_skip` lines from there (never past the end of the file as found).
+fn open_at_payload(spec: &PayloadSpec<'_>) -> Result<OpenPayload> {
+    let path = spec.data_path;
     crate::limits::require_regular_file(path, "data file")?;
     let mut file = File::open(path).map_err(|e| IoError::os(path, "open data file", e))?;
     let file_len = file
@@ -157,161 +208,160 @@ pub(crate) fn read_payload(spec: &PayloadSpec<'_>, grid: Grid) -> Result<AnyVolu
     } else {
         spec.start
     };
+    Ok(OpenPayload {
+        file,
+        file_len,
+        pos,
+    })
+}
 
-    match spec.encoding {
-        Encoding::Raw => {
-            let offset = match spec.byte_skip {
-                ByteSkip::Bytes(b) => pos.saturating_add(b),
-                ByteSkip::FromEnd => {
-                    if file_len.saturating_sub(pos) < needed {
-                        return Err(IoError::Truncated {
-                            path: path.to_path_buf(),
-                            what: format!(
-                                "raw payload at the end of the file (`{} = -1`), after byte {pos}",
-                                spec.skip_field
-                            ),
-                            expected: needed,
-                            actual: file_len.saturating_sub(pos),
-                            unit: "bytes",
-                        });
-                    }
-                    file_len - needed
-                }
-            };
-            let available = file_len.saturating_sub(offset);
-            if spec.exact && available != needed {
+/// The `needed` bytes of an uncompressed payload: after the byte skip, or the file's last
+/// bytes (`ByteSkip::FromEnd`). The file's size is checked before anything is allocated; a
+/// headerless raw file (`exact`) must end where the samples end.
+fn read_raw_samples(spec: &PayloadSpec<'_>, data: OpenPayload, needed: u64) -> Result<Vec<u8>> {
+    let path = spec.data_path;
+    let OpenPayload {
+        mut file,
+        file_len,
+        pos,
+    } = data;
+    let offset = match spec.byte_skip {
+        ByteSkip::Bytes(b) => pos.saturating_add(b),
+        ByteSkip::FromEnd => {
+            if file_len.saturating_sub(pos) < needed {
+                return Err(IoError::Truncated {
+                    path: path.to_path_buf(),
+                    what: format!(
+                        "raw payload at the end of the file (`{} = -1`), after byte {pos}",
+                        spec.skip_field
+                    ),
+                    expected: needed,
+                    actual: file_len.saturating_sub(pos),
+                    unit: "bytes",
+                });
+            }
+            file_len - needed
+        }
+    };
+    let available = file_len.saturating_sub(offset);
+    if spec.exact && available != needed {
+        return Err(IoError::SizeMismatch {
+            path: path.to_path_buf(),
+            expected: offset.saturating_add(needed),
+            actual: file_len,
+            detail: format!("{offset} header bytes + {needed} sample bytes"),
+        });
+    }
+    if available < needed {
+        return Err(IoError::Truncated {
+            path: path.to_path_buf(),
+            what: format!("raw payload starting at byte {offset}"),
+            expected: needed,
+            actual: available,
+            unit: "bytes",
+        });
+    }
+    file.seek(SeekFrom::Start(offset))
+        .map_err(|e| IoError::os(path, "seek", e))?;
+    // `needed` fits in usize (checked by `needed_bytes`) and the file holds at least that much.
+    // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
+    let mut bytes = Vec::new();
+    bytes.try_reserve_exact(needed as usize).map_err(|_| {
+        let oom = std::io::ErrorKind::OutOfMemory.into();
+        IoError::os(path, "allocate the raw payload", oom)
+    })?;
+    // Into the reserved capacity (no zero-filling pass; `take` keeps it from growing).
+    let got = (&mut file)
+        .take(needed)
+        .read_to_end(&mut bytes)
+        .map_err(|e| IoError::os(path, "read raw payload", e))?;
+    if (got as u64) < needed {
+        return Err(IoError::Truncated {
+            path: path.to_path_buf(),
+            what: format!("raw payload starting at byte {offset}"),
+            expected: needed,
+            actual: got as u64,
+            unit: "bytes",
+        });
+    }
+    Ok(bytes)
+}
+
+/// The `needed` bytes of a gzip (or, for [`Encoding::ZlibOrGzip`], zlib) payload after the
+/// byte skip, decompressed into a buffer that grows with the data and never past `needed`;
+/// one more byte is read to check the stream's end (and, for `exact` files, that it ends there).
+fn read_compressed_samples(spec: &PayloadSpec<'_>, file: File, needed: u64) -> Result<Vec<u8>> {
+    let path = spec.data_path;
+    let skip = byte_skip_forward(spec)?;
+    let mut reader = BufReader::new(file);
+    let what = spec.encoding.label();
+    let mut decoder: Box<dyn Read> = if spec.encoding == Encoding::Gzip {
+        Box::new(MultiGzDecoder::new(reader))
+    } else {
+        let head = reader
+            .fill_buf()
+            .map_err(|e| IoError::os(path, "read", e))?;
+        if head.starts_with(&[0x1f, 0x8b]) {
+            Box::new(MultiGzDecoder::new(reader))
+        } else {
+            Box::new(ZlibDecoder::new(reader))
+        }
+    };
+    let skipped = read_capped(&mut decoder, skip, &mut std::io::sink(), path, what)?;
+    if skipped < skip {
+        return Err(IoError::Truncated {
+            path: path.to_path_buf(),
+            what: format!("{what} (within `{}`)", spec.skip_field),
+            expected: skip.saturating_add(needed),
+            actual: skipped,
+            unit: "bytes",
+        });
+    }
+    let mut out = BoundedVec {
+        vec: Vec::new(),
+        limit: needed as usize,
+    };
+    let got = read_capped(&mut decoder, needed, &mut out, path, what)?;
+    if got < needed {
+        return Err(IoError::Truncated {
+            path: path.to_path_buf(),
+            what: if skip == 0 {
+                format!("{what} (decompressed)")
+            } else {
+                format!("{what} (decompressed, after skipping {skip} bytes)")
+            },
+            expected: needed,
+            actual: got,
+            unit: "bytes",
+        });
+    }
+    // One more byte: reaching the end checks the stream's trailer (CRC); extra data is an error
+    // only for headerless raw files, where the size is the only check we have.
+    let mut one = [0u8; 1];
+    match read_retrying(&mut decoder, &mut one) {
+        Ok(0) => {}
+        Ok(_) => {
+            if spec.exact {
                 return Err(IoError::SizeMismatch {
                     path: path.to_path_buf(),
-                    expected: offset.saturating_add(needed),
-                    actual: file_len,
-                    detail: format!("{offset} header bytes + {needed} sample bytes"),
+                    expected: skip + needed,
+                    actual: skip + needed + 1,
+                    detail: format!(
+                        "decompressed: {skip} header bytes + {needed} sample bytes; \
+                         the stream holds at least one byte more"
+                    ),
                 });
             }
-            if available < needed {
-                return Err(IoError::Truncated {
-                    path: path.to_path_buf(),
-                    what: format!("raw payload starting at byte {offset}"),
-                    expected: needed,
-                    actual: available,
-                    unit: "bytes",
-                });
-            }
-            file.seek(SeekFrom::Start(offset))
-                .map_err(|e| IoError::os(path, "seek", e))?;
-            // `needed` fits in usize (checked above) and the file holds at least that much.
-            // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
-            let mut bytes = Vec::new();
-            bytes.try_reserve_exact(needed as usize).map_err(|_| {
-                let oom = std::io::ErrorKind::OutOfMemory.into();
-                IoError::os(path, "allocate the raw payload", oom)
-            })?;
-            // Into the reserved capacity (no zero-filling pass; `take` keeps it from growing).
-            let got = (&mut file)
-                .take(needed)
-                .read_to_end(&mut bytes)
-                .map_err(|e| IoError::os(path, "read raw payload", e))?;
-            if (got as u64) < needed {
-                return Err(IoError::Truncated {
-                    path: path.to_path_buf(),
-                    what: format!("raw payload starting at byte {offset}"),
-                    expected: needed,
-                    actual: got as u64,
-                    unit: "bytes",
-                });
-            }
-            decode(bytes, spec.file_type, spec.big_endian, grid, path)
         }
-        Encoding::Gzip | Encoding::ZlibOrGzip => {
-            let skip = byte_skip_forward(spec)?;
-            let mut reader = BufReader::new(file);
-            let what = spec.encoding.label();
-            let mut decoder: Box<dyn Read> = if spec.encoding == Encoding::Gzip {
-                Box::new(MultiGzDecoder::new(reader))
-            } else {
-                let head = reader
-                    .fill_buf()
-                    .map_err(|e| IoError::os(path, "read", e))?;
-                if head.starts_with(&[0x1f, 0x8b]) {
-                    Box::new(MultiGzDecoder::new(reader))
-                } else {
-                    Box::new(ZlibDecoder::new(reader))
-                }
-            };
-            let skipped = read_capped(&mut decoder, skip, &mut std::io::sink(), path, what)?;
-            if skipped < skip {
-                return Err(IoError::Truncated {
-                    path: path.to_path_buf(),
-                    what: format!("{what} (within `{}`)", spec.skip_field),
-                    expected: skip.saturating_add(needed),
-                    actual: skipped,
-                    unit: "bytes",
-                });
-            }
-            let mut out = BoundedVec {
-                vec: Vec::new(),
-                limit: needed as usize,
-            };
-            let got = read_capped(&mut decoder, needed, &mut out, path, what)?;
-            let bytes = out.vec;
-            if got < needed {
-                return Err(IoError::Truncated {
-                    path: path.to_path_buf(),
-                    what: if skip == 0 {
-                        format!("{what} (decompressed)")
-                    } else {
-                        format!("{what} (decompressed, after skipping {skip} bytes)")
-                    },
-                    expected: needed,
-                    actual: got,
-                    unit: "bytes",
-                });
-            }
-            // One more byte: reaching the end checks the stream's trailer (CRC); extra data is
-            // an error only for headerless raw files, where the size is the only check we have.
-            let mut one = [0u8; 1];
-            match read_retrying(&mut decoder, &mut one) {
-                Ok(0) => {}
-                Ok(_) => {
-                    if spec.exact {
-                        return Err(IoError::SizeMismatch {
-                            path: path.to_path_buf(),
-                            expected: skip + needed,
-                            actual: skip + needed + 1,
-                            detail: format!(
-                                "decompressed: {skip} header bytes + {needed} sample bytes; \
-                                 the stream holds at least one byte more"
-                            ),
-                        });
-                    }
-                }
-                Err(e) => {
-                    return Err(IoError::Decompress {
-                        path: path.to_path_buf(),
-                        what: format!("{what} (stream trailer after the samples)"),
-                        error: e,
-                    });
-                }
-            }
-            decode(bytes, spec.file_type, spec.big_endian, grid, path)
-        }
-        Encoding::Ascii => {
-            let skip = byte_skip_forward(spec)?;
-            let mut reader = BufReader::new(file);
-            let skipped = std::io::copy(&mut (&mut reader).take(skip), &mut std::io::sink())
-                .map_err(|e| IoError::os(path, "read", e))?;
-            if skipped < skip {
-                return Err(IoError::Truncated {
-                    path: path.to_path_buf(),
-                    what: format!("text payload (within `{}`)", spec.skip_field),
-                    expected: skip,
-                    actual: skipped,
-                    unit: "bytes",
-                });
-            }
-            let values = read_ascii(&mut reader, count as u64, spec.file_type, path)?;
-            decode_values(values, spec.file_type, grid, path)
+        Err(e) => {
+            return Err(IoError::Decompress {
+                path: path.to_path_buf(),
+                what: format!("{what} (stream trailer after the samples)"),
+                error: e,
+            });
         }
     }
+    Ok(out.vec)
 }
 
 fn byte_skip_forward(spec: &PayloadSpec<'_>) -> Result<u64> {

@@ -3,6 +3,7 @@
 use crate::error::{IoError, Result};
 use crate::limits::{Limits, checked_voxel_count};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
+use crate::{LoadedVolume, ReadOptions};
 use std::path::Path;
 use volsplat_core::glam::DMat3;
 use volsplat_core::{AnyVolume, Grid, ScalarType};
@@ -48,12 +49,29 @@ impl RawSpec {
 /// [`volsplat_core::volume::MAX_VOXELS`] and the grid validated before any sample memory is
 /// allocated.
 pub fn read_raw(path: impl AsRef<Path>, spec: &RawSpec) -> Result<AnyVolume> {
-    read_raw_with(path, spec, &Limits::default())
+    read_raw_with(path, spec, &ReadOptions::default()).map(|l| l.volume)
 }
 
-/// [`read_raw`] with caller-set [`Limits`] (voxel count).
-pub fn read_raw_with(path: impl AsRef<Path>, spec: &RawSpec, limits: &Limits) -> Result<AnyVolume> {
+/// [`read_raw`] with [`ReadOptions`]: its [`Limits`] (voxel count,
+/// confinement) apply; a raw file holds one volume, so a `frame` other than 0, an `array` or a
+/// `series` is an error. The result's format is `raw`, with no notes.
+///
+/// The layout `spec` is an argument of its own, before the options, rather than a field of
+/// [`ReadOptions`]: no raw file can be read without it, and every field of [`ReadOptions`] has
+/// a default that suits every reader (decision 0034).
+pub fn read_raw_with(
+    path: impl AsRef<Path>,
+    spec: &RawSpec,
+    options: &ReadOptions,
+) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    options.refuse_all_but_limits(path, "raw")?;
+    let volume = read_raw_file(path, spec, &options.limits)?;
+    Ok(LoadedVolume::single(volume, "raw", Vec::new()))
+}
+
+/// Reads a raw file laid out as `spec` says, within `limits`.
+fn read_raw_file(path: &Path, spec: &RawSpec, limits: &Limits) -> Result<AnyVolume> {
     crate::confine::Confinement::of(path, limits)?;
     let dims_text = format!("{:?}", spec.dims);
     checked_voxel_count(
@@ -239,6 +257,7 @@ mod tests {
             ..Limits::default()
         };
         let spec2 = RawSpec::new([2, 2, 2], ScalarType::U8);
+        let small = ReadOptions::default().with_limits(small);
         let e = read_raw_with(&p, &spec2, &small).unwrap_err().to_string();
         assert!(e.contains("exceeds the limit 7"), "{e}");
         let e = read_raw(&p, &spec).unwrap_err().to_string();

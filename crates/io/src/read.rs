@@ -17,8 +17,9 @@ const SUPPORTED: &str = ".nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr (+ .img),
      .tif, .tiff, .dcm or any DICOM file, a folder of DICOM or TIFF files (a headerless raw file: \
      give its layout with --raw-dims X,Y,Z, --raw-type and --raw-spacing)";
 
-/// The volume file formats, as told by the file name.
+/// The volume file formats, as told by the file name (`#[non_exhaustive]`: more may come).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum VolumeFormat {
     /// NRRD, `.nrrd` or `.nhdr` ([`crate::read_nrrd`]).
     Nrrd,
@@ -69,8 +70,19 @@ impl VolumeFormat {
     }
 }
 
-/// What [`read_volume_with`] should read, and within which limits.
+/// What [`read_volume_with`] (and every `read_*_with` reader) should read, and within which
+/// limits. Other crates build it from [`ReadOptions::default`] with the `with_*` methods (the
+/// struct is `#[non_exhaustive]`: a new option is not a breaking change); its fields can be
+/// read and set.
+///
+/// ```
+/// let options = volsplat_io::ReadOptions::default()
+///     .with_frame(1)
+///     .with_limits(volsplat_io::Limits::default().with_max_voxels(1 << 20));
+/// assert_eq!((options.frame, options.limits.max_voxels), (1, 1 << 20));
+/// ```
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct ReadOptions {
     /// Limits against untrusted input (header bytes, voxel count, ...).
     pub limits: Limits,
@@ -112,8 +124,85 @@ pub struct LoadedVolume {
     pub notes: Vec<String>,
 }
 
+impl ReadOptions {
+    /// These options with `limits` in place of the current limits.
+    pub fn with_limits(mut self, limits: Limits) -> Self {
+        self.limits = limits;
+        self
+    }
+
+    /// These options with [`ReadOptions::frame`] set (0-based).
+    pub fn with_frame(mut self, frame: usize) -> Self {
+        self.frame = frame;
+        self
+    }
+
+    /// These options with [`ReadOptions::array`] set (a VTK point-data array's name; `None`:
+    /// the active scalars, else the first array).
+    pub fn with_array(mut self, array: Option<String>) -> Self {
+        self.array = array;
+        self
+    }
+
+    /// These options with [`ReadOptions::series`] set (a DICOM SeriesInstanceUID or a unique
+    /// SeriesNumber; `None`: the only series, or the given file's).
+    pub fn with_series(mut self, series: Option<String>) -> Self {
+        self.series = series;
+        self
+    }
+
+    /// Refuses [`ReadOptions::series`] for a reader of anything but DICOM.
+    pub(crate) fn refuse_series(&self, path: &Path) -> Result<()> {
+        if self.series.is_some() {
+            return Err(IoError::invalid_argument(
+                path,
+                "series",
+                "choosing a series applies to DICOM folders and files only",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Refuses [`ReadOptions::array`] for a reader of anything but VTK `.vti` (`format` names
+    /// the reader's format in the message).
+    pub(crate) fn refuse_array(&self, path: &Path, format: &str) -> Result<()> {
+        if self.array.is_some() {
+            return Err(IoError::invalid_argument(
+                path,
+                "array",
+                format!("choosing an array applies to VTK .vti files only, not to {format}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Refuses a [`ReadOptions::frame`] other than 0 for a file that holds one volume.
+    pub(crate) fn refuse_frame(&self, path: &Path) -> Result<()> {
+        if self.frame != 0 {
+            return Err(IoError::invalid_argument(
+                path,
+                "frame",
+                format!(
+                    "frame {} requested, but the file holds 1 frame (0)",
+                    self.frame
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Refuses every option but the limits: for the readers of one volume without named
+    /// arrays or series (NRRD, MetaImage, raw).
+    pub(crate) fn refuse_all_but_limits(&self, path: &Path, format: &str) -> Result<()> {
+        self.refuse_series(path)?;
+        self.refuse_array(path, format)?;
+        self.refuse_frame(path)
+    }
+}
+
 impl LoadedVolume {
-    fn single(volume: AnyVolume, format: &str, notes: Vec<String>) -> Self {
+    /// One volume of a single-volume format, with no arrays or series.
+    pub(crate) fn single(volume: AnyVolume, format: &str, notes: Vec<String>) -> Self {
         LoadedVolume {
             volume,
             format: format.into(),
@@ -149,47 +238,14 @@ pub fn read_volume_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result
     Ok(loaded)
 }
 
-/// [`read_volume_with`] by format, before the notes every format shares.
+/// [`read_volume_with`] by format, before the notes every format shares. Each reader refuses
+/// the options that do not apply to its format.
 fn read_any(path: &Path, options: &ReadOptions) -> Result<LoadedVolume> {
-    let dicom = |path: &Path| -> Result<LoadedVolume> {
-        if options.array.is_some() {
-            return Err(IoError::invalid_argument(
-                path,
-                "array",
-                "choosing an array applies to VTK .vti files only, not to DICOM",
-            ));
-        }
-        crate::dicom::read_dicom_with(path, options)
-    };
-    if options.series.is_some()
-        && !path.is_dir()
-        && VolumeFormat::from_path(path).is_some_and(|f| f != VolumeFormat::Dicom)
-    {
-        return Err(IoError::invalid_argument(
-            path,
-            "series",
-            "choosing a series applies to DICOM folders and files only",
-        ));
-    }
     if path.is_dir() && crate::tiff_stack::tiff_files(path)?.is_empty() {
         if crate::dicom::dir_has_dicom(path)? {
-            return dicom(path);
+            return crate::dicom::read_dicom_with(path, options);
         }
     } else if path.is_dir() {
-        if options.series.is_some() {
-            return Err(IoError::invalid_argument(
-                path,
-                "series",
-                "choosing a series applies to DICOM folders and files only",
-            ));
-        }
-        if options.array.is_some() || options.frame != 0 {
-            return Err(IoError::invalid_argument(
-                path,
-                "array/frame",
-                "a folder of TIFF slices has one volume and no named arrays",
-            ));
-        }
         return crate::tiff_stack::read_tiff_dir(path, options);
     }
     let Some(format) = VolumeFormat::from_path(path) else {
@@ -201,7 +257,7 @@ fn read_any(path: &Path, options: &ReadOptions) -> Result<LoadedVolume> {
             });
         }
         if crate::dicom::is_dicom_file(path) {
-            return dicom(path);
+            return crate::dicom::read_dicom_with(path, options);
         }
         return Err(IoError::UnsupportedFormat {
             path: path.to_path_buf(),
@@ -212,47 +268,13 @@ fn read_any(path: &Path, options: &ReadOptions) -> Result<LoadedVolume> {
             supported: SUPPORTED.into(),
         });
     };
-    if options.array.is_some() && format != VolumeFormat::Vti {
-        return Err(IoError::invalid_argument(
-            path,
-            "array",
-            format!(
-                "choosing an array applies to VTK .vti files only, not to {}",
-                format.name()
-            ),
-        ));
-    }
-    let single_frame = |path: &Path| -> Result<()> {
-        if options.frame != 0 {
-            return Err(IoError::invalid_argument(
-                path,
-                "frame",
-                format!(
-                    "frame {} requested, but the file holds 1 frame (0)",
-                    options.frame
-                ),
-            ));
-        }
-        Ok(())
-    };
     match format {
-        VolumeFormat::Nrrd => {
-            single_frame(path)?;
-            let (v, notes) = crate::nrrd::read_nrrd_impl(path, &options.limits)?;
-            Ok(LoadedVolume::single(v, "NRRD", notes))
-        }
-        VolumeFormat::MetaImage => {
-            single_frame(path)?;
-            let v = crate::read_metaimage_with(path, &options.limits)?;
-            Ok(LoadedVolume::single(v, "MetaImage", Vec::new()))
-        }
+        VolumeFormat::Nrrd => crate::read_nrrd_with(path, options),
+        VolumeFormat::MetaImage => crate::read_metaimage_with(path, options),
         VolumeFormat::Nifti => crate::read_nifti_with(path, options),
-        VolumeFormat::Vti => {
-            single_frame(path)?;
-            crate::read_vti_with(path, options)
-        }
+        VolumeFormat::Vti => crate::read_vti_with(path, options),
         VolumeFormat::Tiff => crate::read_tiff_with(path, options),
-        VolumeFormat::Dicom => dicom(path),
+        VolumeFormat::Dicom => crate::dicom::read_dicom_with(path, options),
     }
 }
 
@@ -350,6 +372,117 @@ mod tests {
                 l.notes
             );
         }
+    }
+
+    /// Issue 30 item 4: every reader has the one shape `read_*_with(path, &ReadOptions) ->
+    /// LoadedVolume`, refuses the options its format cannot honour itself (as the dispatcher
+    /// did for it), and reports format and notes as through the dispatcher.
+    #[test]
+    fn every_reader_has_one_shape_and_refuses_what_does_not_apply() {
+        let dir = tempfile::tempdir().unwrap();
+        let nrrd = dir.path().join("v.nrrd");
+        std::fs::write(
+            &nrrd,
+            b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 1 1\nencoding: raw\n\n\x01\x02",
+        )
+        .unwrap();
+        let mha = dir.path().join("v.mha");
+        let mut bytes = b"ObjectType = Image\nNDims = 3\nDimSize = 2 1 1\n\
+            ElementType = MET_UCHAR\nElementDataFile = LOCAL\n"
+            .to_vec();
+        bytes.extend([1u8, 2]);
+        std::fs::write(&mha, bytes).unwrap();
+        let raw = dir.path().join("v.raw");
+        std::fs::write(&raw, [1u8, 2]).unwrap();
+        let spec = crate::RawSpec::new([2, 1, 1], volsplat_core::ScalarType::U8);
+        type Reader<'a> = Box<dyn Fn(&ReadOptions) -> Result<LoadedVolume> + 'a>;
+        let readers: [(&str, Reader); 3] = [
+            ("NRRD", Box::new(|o| crate::read_nrrd_with(&nrrd, o))),
+            (
+                "MetaImage",
+                Box::new(|o| crate::read_metaimage_with(&mha, o)),
+            ),
+            ("raw", Box::new(|o| crate::read_raw_with(&raw, &spec, o))),
+        ];
+        for (format, read) in &readers {
+            let l = read(&ReadOptions::default()).unwrap();
+            assert_eq!(l.format, *format);
+            assert_eq!((l.frames, l.frame), (1, 0));
+            assert_eq!(l.volume.to_f32().data(), &[1.0, 2.0], "{format}");
+            let small = Limits {
+                max_voxels: 1,
+                ..Limits::default()
+            };
+            let e = read(&ReadOptions::default().with_limits(small)).unwrap_err();
+            assert!(
+                e.to_string().contains("exceeds the limit 1"),
+                "{format}: {e}"
+            );
+            let o = ReadOptions {
+                frame: 1,
+                ..ReadOptions::default()
+            };
+            let e = read(&o).unwrap_err().to_string();
+            assert!(e.contains("frame 1") && e.contains("holds 1 frame"), "{e}");
+            let o = ReadOptions {
+                array: Some("a".into()),
+                ..ReadOptions::default()
+            };
+            let e = read(&o).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!(".vti files only, not to {format}")),
+                "{e}"
+            );
+            let o = ReadOptions {
+                series: Some("1".into()),
+                ..ReadOptions::default()
+            };
+            let e = read(&o).unwrap_err().to_string();
+            assert!(e.contains("series applies to DICOM"), "{e}");
+        }
+        // Through the dispatcher, the same volume and notes as from the reader.
+        for p in [&nrrd, &mha] {
+            let direct = match VolumeFormat::from_path(p) {
+                Some(VolumeFormat::Nrrd) => crate::read_nrrd_with(p, &ReadOptions::default()),
+                _ => crate::read_metaimage_with(p, &ReadOptions::default()),
+            }
+            .unwrap();
+            assert_eq!(
+                read_volume_with(p, &ReadOptions::default()).unwrap(),
+                direct
+            );
+        }
+        // The NRRD reader's own note (no `space` field) comes with its result.
+        let l = crate::read_nrrd_with(&nrrd, &ReadOptions::default()).unwrap();
+        assert!(
+            l.notes.iter().any(|n| n.contains("no `space` field")),
+            "{:?}",
+            l.notes
+        );
+    }
+
+    /// Issue 30 item 4: `ReadOptions` is `#[non_exhaustive]`; the `with_*` methods set each
+    /// field and nothing else.
+    #[test]
+    fn read_options_builders_set_one_field_each() {
+        let limits = Limits::default().with_max_voxels(5);
+        let o = ReadOptions::default()
+            .with_frame(2)
+            .with_array(Some("a".into()))
+            .with_series(Some("7".into()))
+            .with_limits(limits.clone());
+        assert_eq!(
+            o,
+            ReadOptions {
+                limits,
+                frame: 2,
+                array: Some("a".into()),
+                series: Some("7".into()),
+            }
+        );
+        let back = o.with_array(None).with_series(None).with_frame(0);
+        assert_eq!(back.limits.max_voxels, 5);
+        assert_eq!(back.with_limits(Limits::default()), ReadOptions::default());
     }
 
     #[test]

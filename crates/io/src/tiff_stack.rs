@@ -46,6 +46,8 @@ pub fn read_tiff(path: impl AsRef<Path>) -> Result<AnyVolume> {
 /// Reads a multi-page TIFF with caller-set limits; notes say where the spacing came from.
 pub fn read_tiff_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    options.refuse_series(path)?;
+    options.refuse_array(path, "TIFF")?;
     crate::confine::Confinement::of(path, &options.limits)?;
     let mut stack = Stack::default();
     read_pages(path, &mut stack, options, false)?;
@@ -59,6 +61,14 @@ pub fn read_tiff_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<L
 /// [`read_tiff`].
 pub fn read_tiff_dir(dir: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let dir = dir.as_ref();
+    options.refuse_series(dir)?;
+    if options.array.is_some() || options.frame != 0 {
+        return Err(IoError::invalid_argument(
+            dir,
+            "array/frame",
+            "a folder of TIFF slices has one volume and no named arrays",
+        ));
+    }
     let files = tiff_files(dir)?;
     if let Some(c) = crate::confine::Confinement::of(dir, &options.limits)? {
         // A slice left out would be a wrong volume: a slice that leads out is an error.

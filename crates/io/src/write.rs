@@ -15,6 +15,7 @@ const SUPPORTED: &str = ".nrrd, .nii, .nii.gz, .mha, .mhd (with a .raw or .zraw 
 
 /// The formats [`write_volume`] writes, as told by the output's file name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum VolumeWriteFormat {
     /// `.nrrd`: NRRD with an attached header, `space: left-posterior-superior`
     /// ([`crate::write_nrrd`]).

@@ -988,13 +988,11 @@ fn limits(
     max_xml_bytes: Option<u64>,
 ) -> volsplat::io::Limits {
     let d = volsplat::io::Limits::default();
-    volsplat::io::Limits {
-        max_voxels: max_voxels.unwrap_or(d.max_voxels),
-        max_header_bytes: max_header_bytes.unwrap_or(d.max_header_bytes),
-        max_json_bytes: max_json_bytes.unwrap_or(d.max_json_bytes),
-        max_xml_bytes: max_xml_bytes.unwrap_or(d.max_xml_bytes),
-        ..d
-    }
+    d.clone()
+        .with_max_voxels(max_voxels.unwrap_or(d.max_voxels))
+        .with_max_header_bytes(max_header_bytes.unwrap_or(d.max_header_bytes))
+        .with_max_json_bytes(max_json_bytes.unwrap_or(d.max_json_bytes))
+        .with_max_xml_bytes(max_xml_bytes.unwrap_or(d.max_xml_bytes))
 }
 
 /// Reads a volume file (the formats of the command line). See `volsplat.load`.
@@ -1056,12 +1054,11 @@ pub fn load(
         v.notes = notes;
         return Ok(v);
     }
-    let options = volsplat::io::ReadOptions {
-        frame,
-        array,
-        series,
-        limits,
-    };
+    let options = volsplat::io::ReadOptions::default()
+        .with_frame(frame)
+        .with_array(array)
+        .with_series(series)
+        .with_limits(limits);
     let loaded = py
         .detach(|| volsplat::io::read_volume_with(&path, &options))
         .map_err(errors::from_io)?;

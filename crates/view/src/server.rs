@@ -297,10 +297,7 @@ impl Viewer {
             // may open only files there (a header's `data file`, a `.hdr`'s `.img`, the other
             // slices of a DICOM series), whoever asks the renderer to read it. The volume given
             // on the command line, outside the folder, is read as without it (decision 0033).
-            let limits = volsplat::io::Limits {
-                confine_to: Some(d.clone()),
-                ..renderer.limits().clone()
-            };
+            let limits = renderer.limits().clone().with_confine_to(Some(d.clone()));
             renderer = Renderer::with_limits(limits);
         }
         if settings.max_connections == 0 || settings.max_tabs == 0 {

@@ -84,11 +84,11 @@ fn check_size(
 pub(super) struct JpegFrame {
     /// The SOF marker's low byte: 0xC0 baseline, 0xC1 extended, 0xC2 progressive, 0xC3
     /// lossless; others hierarchical or arithmetic-coded.
-    pub marker: u8,
-    pub precision: u8,
-    pub height: u16,
-    pub width: u16,
-    pub components: u8,
+    pub(super) marker: u8,
+    pub(super) precision: u8,
+    pub(super) height: u16,
+    pub(super) width: u16,
+    pub(super) components: u8,
 }
 
 /// The frame header of a JPEG stream, read without decoding: markers from SOI to the first

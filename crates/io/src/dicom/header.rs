@@ -74,47 +74,47 @@ pub(super) const PALETTE_DATA: [Attr; 3] = [
 /// The geometry and value transform of one frame, as found (validated later).
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct FrameGeom {
-    pub ipp: Option<[f64; 3]>,
-    pub iop: Option<[f64; 6]>,
+    pub(super) ipp: Option<[f64; 3]>,
+    pub(super) iop: Option<[f64; 6]>,
     /// PixelSpacing as stored: [between rows, between columns].
-    pub pixel_spacing: Option<[f64; 2]>,
+    pub(super) pixel_spacing: Option<[f64; 2]>,
     /// RescaleSlope (times DoseGridScaling for RT Dose).
-    pub slope: f64,
-    pub intercept: f64,
+    pub(super) slope: f64,
+    pub(super) intercept: f64,
 }
 
 /// What a scan keeps of one image file.
 #[derive(Debug, Clone)]
 pub(super) struct FileHeader {
-    pub path: PathBuf,
+    pub(super) path: PathBuf,
     /// SeriesInstanceUID; empty when the file has none (then it is read only when given alone).
-    pub series_uid: String,
+    pub(super) series_uid: String,
     /// SOPInstanceUID; empty when absent. Copies of one instance in a folder are read once.
-    pub sop_uid: String,
-    pub series_number: Option<i64>,
-    pub description: String,
-    pub modality: String,
-    pub ts_uid: String,
-    pub ts_name: String,
-    pub rows: u16,
-    pub cols: u16,
-    pub samples: Option<u16>,
-    pub photometric: String,
-    pub bits_allocated: Option<u16>,
-    pub bits_stored: Option<u16>,
-    pub high_bit: Option<u16>,
-    pub pixel_representation: Option<u16>,
-    pub float_pixels: bool,
-    pub frames: u32,
+    pub(super) sop_uid: String,
+    pub(super) series_number: Option<i64>,
+    pub(super) description: String,
+    pub(super) modality: String,
+    pub(super) ts_uid: String,
+    pub(super) ts_name: String,
+    pub(super) rows: u16,
+    pub(super) cols: u16,
+    pub(super) samples: Option<u16>,
+    pub(super) photometric: String,
+    pub(super) bits_allocated: Option<u16>,
+    pub(super) bits_stored: Option<u16>,
+    pub(super) high_bit: Option<u16>,
+    pub(super) pixel_representation: Option<u16>,
+    pub(super) float_pixels: bool,
+    pub(super) frames: u32,
     /// One entry per frame.
-    pub geom: Vec<FrameGeom>,
-    pub thickness: Option<f64>,
-    pub spacing_between: Option<f64>,
-    pub tilt: Option<f64>,
+    pub(super) geom: Vec<FrameGeom>,
+    pub(super) thickness: Option<f64>,
+    pub(super) spacing_between: Option<f64>,
+    pub(super) tilt: Option<f64>,
     /// PALETTE COLOR: whether the palette is grey (red = green = blue); `None` otherwise.
-    pub grey_palette: Option<bool>,
+    pub(super) grey_palette: Option<bool>,
     /// Notes about this file (read as written, attributes repaired), for the series' notes.
-    pub notes: Vec<String>,
+    pub(super) notes: Vec<String>,
 }
 
 /// What reading a file's header found.
@@ -131,11 +131,11 @@ pub(super) enum Header {
 #[derive(Debug)]
 pub(super) struct BrokenFile {
     /// SeriesInstanceUID, empty if none.
-    pub series: String,
+    pub(super) series: String,
     /// SOPInstanceUID, empty if none.
-    pub sop: String,
-    pub path: PathBuf,
-    pub error: IoError,
+    pub(super) sop: String,
+    pub(super) path: PathBuf,
+    pub(super) error: IoError,
 }
 
 /// The most bytes of one DICOM file read into memory.
@@ -148,13 +148,13 @@ pub(super) fn file_cap(limits: &Limits) -> u64 {
 
 /// A file's bytes from its `DICM` magic on.
 pub(super) struct Loaded {
-    pub bytes: Vec<u8>,
+    pub(super) bytes: Vec<u8>,
     /// Whether the whole file was read (not a prefix).
-    pub whole: bool,
+    pub(super) whole: bool,
     /// Where `DICM` starts in the file (128, or 0 without a preamble).
-    pub offset: u64,
+    pub(super) offset: u64,
     /// The file's length in bytes.
-    pub file_len: u64,
+    pub(super) file_len: u64,
 }
 
 /// Reads `path` from its `DICM` magic on: the first `prefix` bytes, or all of it. `None` when
@@ -330,8 +330,8 @@ pub(super) fn read_header(path: &Path, limits: &Limits) -> Result<Header> {
 /// values stored with VR UN.
 #[derive(Clone, Copy)]
 pub(super) struct Ctx<'a> {
-    pub path: &'a Path,
-    pub big_endian: bool,
+    pub(super) path: &'a Path,
+    pub(super) big_endian: bool,
 }
 
 /// VRs whose values are text (PS3.5 §6.2).

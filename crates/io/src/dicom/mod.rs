@@ -195,6 +195,7 @@ pub fn read_dicom(path: impl AsRef<Path>) -> Result<AnyVolume> {
 /// ([`LoadedVolume::series`]) and the UID read ([`LoadedVolume::series_uid`]).
 pub fn read_dicom_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    options.refuse_array(path, "DICOM")?;
     if options.frame != 0 {
         return Err(IoError::invalid_argument(
             path,
@@ -271,6 +272,7 @@ pub fn read_dicom_files(files: &[PathBuf], options: &ReadOptions) -> Result<Load
             "no DICOM files given",
         ));
     };
+    options.refuse_array(first, "DICOM")?;
     if options.frame != 0 {
         return Err(IoError::invalid_argument(
             first,

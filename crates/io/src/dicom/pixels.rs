@@ -64,18 +64,18 @@ impl PixelCoding {
 /// The layout of stored values (PS3.3 §C.7.6.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) struct PixelFormat {
-    pub rows: u16,
-    pub cols: u16,
+    pub(super) rows: u16,
+    pub(super) cols: u16,
     /// 8, 16 or 32.
-    pub bits_allocated: u16,
+    pub(super) bits_allocated: u16,
     /// 1 ..= bits_allocated.
-    pub bits_stored: u16,
+    pub(super) bits_stored: u16,
     /// bits_stored − 1 ..= bits_allocated − 1.
-    pub high_bit: u16,
+    pub(super) high_bit: u16,
     /// Pixel Representation 1: two's complement.
-    pub signed: bool,
+    pub(super) signed: bool,
     /// PALETTE COLOR with a grey palette: stored values are indices into it.
-    pub palette: bool,
+    pub(super) palette: bool,
 }
 
 impl PixelFormat {

@@ -41,31 +41,31 @@ pub(super) struct Walked {
     /// The transfer syntax UID the data set is read with (trailing NUL and spaces removed): the
     /// file meta group's, or implicit/explicit VR little endian where the data set is written
     /// in the other one ([`Walked::vr_mismatch`]).
-    pub ts_uid: String,
+    pub(super) ts_uid: String,
     /// The transfer syntax name from dicom-rs's registry.
-    pub ts_name: String,
+    pub(super) ts_name: String,
     /// MediaStorageSOPClassUID (0002,0002) of the file meta group (empty if absent).
-    pub media_sop_class: String,
+    pub(super) media_sop_class: String,
     /// The data set is written in the other VR encoding than the meta group declares (explicit
     /// VR declared, implicit written, or the reverse); it is read as written, as pydicom does.
     /// Holds the declared UID.
-    pub vr_mismatch: Option<String>,
+    pub(super) vr_mismatch: Option<String>,
     /// The top-level Pixel Data (7FE0,0010) element's declared length ([`UNDEFINED`] when
     /// encapsulated) and where its value starts in the file; `None` when the walk ended
     /// before it. For a deflated data set, the position is in the inflated stream.
-    pub pixel: Option<(u32, u64)>,
+    pub(super) pixel: Option<(u32, u64)>,
     /// Whether the data set is deflated (PS3.5 §A.5).
-    pub deflated: bool,
+    pub(super) deflated: bool,
 }
 
 /// The image size a data set's top level declares, as read by the walk (not validated).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub(super) struct Declared {
-    pub rows: Option<u16>,
-    pub cols: Option<u16>,
-    pub samples: Option<u16>,
-    pub bits_allocated: Option<u16>,
-    pub frames: Option<u64>,
+    pub(super) rows: Option<u16>,
+    pub(super) cols: Option<u16>,
+    pub(super) samples: Option<u16>,
+    pub(super) bits_allocated: Option<u16>,
+    pub(super) frames: Option<u64>,
 }
 
 impl Declared {
@@ -632,6 +632,11 @@ fn walk_dataset(
 }
 
 /// [`walk_dataset`], recording into `found` as it goes (kept when the walk fails).
+///
+/// One token per step, as the parser reads them ([`DataSetWalk`]): first the sequences and
+/// items whose defined length has been reached are closed; then, by state, an item header
+/// inside a sequence, a fragment of encapsulated pixel data, the value of the element whose
+/// header was just read, or the next element header.
 fn walk_dataset_into(
     path: &Path,
     bytes: &[u8],
@@ -640,196 +645,286 @@ fn walk_dataset_into(
     until_pixel: bool,
     found: &mut Found,
 ) -> Result<()> {
-    let mut w = Walker {
-        c: Cur {
-            b: bytes,
-            pos: 0,
-            be: enc.big_endian,
+    let mut walk = DataSetWalk {
+        w: Walker {
+            c: Cur {
+                b: bytes,
+                pos: 0,
+                be: enc.big_endian,
+            },
+            logical: 0,
+            path,
+            base,
         },
-        logical: 0,
-        path,
-        base,
+        enc,
+        until_pixel,
+        stack: Vec::new(),
+        in_sequence: false,
+        last_header: None,
+        check_pending: false,
+        offset_table_next: false,
     };
-    let mut stack: Vec<Token> = Vec::new();
-    let mut in_sequence = false;
-    let mut last_header: Option<(Tag, VR, u32)> = None;
-    let mut check_pending = false;
-    let mut offset_table_next = false;
-    let too_deep = |w: &Walker<'_>| {
-        w.fail(format!(
+    loop {
+        if walk.check_pending && walk.close_ended()? {
+            continue;
+        }
+        let step = if walk.in_sequence {
+            walk.item_header()?
+        } else if let Some(item) = walk.pixel_item() {
+            walk.pixel_fragment(item)?
+        } else if let Some(header) = walk.last_header.take() {
+            walk.element_value(header, found)?
+        } else {
+            walk.element_header(found)?
+        };
+        if step == Step::End {
+            return Ok(());
+        }
+    }
+}
+
+/// Whether the walk goes on after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    /// More tokens to read.
+    Next,
+    /// The end of the data (or, with `until_pixel`, of the elements before Pixel Data).
+    End,
+}
+
+/// The state of [`walk_dataset_into`]: the parser's token stack and what it expects next.
+struct DataSetWalk<'a> {
+    w: Walker<'a>,
+    enc: Enc,
+    /// Stop at the first top-level element at or after Pixel Data.
+    until_pixel: bool,
+    /// The open sequences and items, outermost first (at most [`MAX_NESTING`]).
+    stack: Vec<Token>,
+    /// An item header is expected (inside a sequence, between its items).
+    in_sequence: bool,
+    /// The element header just read, whose value comes next.
+    last_header: Option<(Tag, VR, u32)>,
+    /// A sequence or item of defined length may have ended: check before the next token.
+    check_pending: bool,
+    /// The next pixel data fragment is the basic offset table.
+    offset_table_next: bool,
+}
+
+impl DataSetWalk<'_> {
+    fn too_deep(&self) -> IoError {
+        self.w.fail(format!(
             "sequences nest deeper than {} levels",
             MAX_NESTING / 2
         ))
-    };
-    loop {
-        if check_pending {
-            if let Some(top) = stack.last().copied()
-                && top.len != UNDEFINED
-            {
-                let end = top.base + top.len as u64;
-                if end == w.logical {
-                    stack.pop();
-                    in_sequence = top.kind == Kind::Item;
-                    continue;
-                }
-                if end < w.logical {
-                    return Err(w.fail(format!(
-                        "a sequence or item of {} bytes ends inside an element",
-                        top.len
-                    )));
-                }
-            }
-            check_pending = false;
-        }
-        if in_sequence {
-            // An item header: (FFFE,E000) item, (FFFE,E00D) item end, (FFFE,E0DD) sequence end.
-            let Some((tag, len)) = w.item_header() else {
-                return Ok(());
-            };
-            match (tag.0, tag.1) {
-                (0xFFFE, 0xE000) => {
-                    in_sequence = false;
-                    let Some(parent) = stack.last().copied() else {
-                        return Err(w.fail("item outside a sequence".into()));
-                    };
-                    if stack.len() >= MAX_NESTING {
-                        return Err(too_deep(&w));
-                    }
-                    stack.push(Token {
-                        kind: Kind::Item,
-                        pixel: parent.pixel,
-                        len,
-                        base: w.logical,
-                    });
-                    if len == 0 {
-                        check_pending = true;
-                    }
-                }
-                (0xFFFE, 0xE00D) => {
-                    stack.pop();
-                    in_sequence = true;
-                    check_pending = true;
-                }
-                (0xFFFE, 0xE0DD) => {
-                    stack.pop();
-                    in_sequence = false;
-                    check_pending = true;
-                }
-                _ => {
-                    return Err(w.fail(format!("expected an item tag (FFFE,E000), found {tag}")));
-                }
-            }
-        } else if let Some(top) = stack.last().copied()
-            && top.kind == Kind::Item
-            && top.pixel
+    }
+
+    /// Closes the innermost sequence or item if its defined length ends here (`true`: check
+    /// again); an element that runs past its end is an error. Clears `check_pending` otherwise.
+    fn close_ended(&mut self) -> Result<bool> {
+        if let Some(top) = self.stack.last().copied()
+            && top.len != UNDEFINED
         {
-            // The basic offset table or a fragment of encapsulated pixel data (PS3.5 §A.4).
-            if top.len == UNDEFINED {
-                return Err(w.fail("pixel data fragment of undefined length".into()));
+            let end = top.base + top.len as u64;
+            if end == self.w.logical {
+                self.stack.pop();
+                self.in_sequence = top.kind == Kind::Item;
+                return Ok(true);
             }
-            if offset_table_next {
-                offset_table_next = false;
-                w.value(PIXEL_DATA, top.len, top.len & !3)?;
-                // The parser advances by the u32 values read, not by the length.
-                w.logical -= (top.len & 3) as u64;
-            } else {
-                w.value(PIXEL_DATA, top.len, top.len)?;
+            if end < self.w.logical {
+                return Err(self.w.fail(format!(
+                    "a sequence or item of {} bytes ends inside an element",
+                    top.len
+                )));
             }
-            check_pending = true;
-        } else if let Some((tag, vr, len)) = last_header.take() {
-            if tag == PIXEL_DATA && len == UNDEFINED {
-                if stack.len() + 2 > MAX_NESTING {
-                    return Err(too_deep(&w));
-                }
-                stack.push(Token {
-                    kind: Kind::Sequence,
-                    pixel: true,
-                    len: UNDEFINED,
-                    base: w.logical,
-                });
-                let Some((itag, ilen)) = w.item_header() else {
-                    return Err(w.fail("encapsulated pixel data is truncated".into()));
+        }
+        self.check_pending = false;
+        Ok(false)
+    }
+
+    /// An item header inside a sequence: (FFFE,E000) item, (FFFE,E00D) item end, (FFFE,E0DD)
+    /// sequence end.
+    fn item_header(&mut self) -> Result<Step> {
+        let Some((tag, len)) = self.w.item_header() else {
+            return Ok(Step::End);
+        };
+        match (tag.0, tag.1) {
+            (0xFFFE, 0xE000) => {
+                self.in_sequence = false;
+                let Some(parent) = self.stack.last().copied() else {
+                    return Err(self.w.fail("item outside a sequence".into()));
                 };
-                match (itag.0, itag.1) {
-                    (0xFFFE, 0xE000) => {
-                        in_sequence = false;
-                        stack.push(Token {
-                            kind: Kind::Item,
-                            pixel: true,
-                            len: ilen,
-                            base: w.logical,
-                        });
-                        if ilen == 0 {
-                            check_pending = true;
-                        } else {
-                            offset_table_next = true;
-                        }
-                    }
-                    (0xFFFE, 0xE0DD) => {
-                        stack.pop();
-                        in_sequence = false;
-                    }
-                    _ => {
-                        return Err(w.fail(format!(
-                            "expected the basic offset table item (FFFE,E000) in encapsulated \
-                             pixel data, found {itag}"
-                        )));
-                    }
+                if self.stack.len() >= MAX_NESTING {
+                    return Err(self.too_deep());
                 }
-            } else {
-                if stack.is_empty()
-                    && tag.0 == 0x0028
-                    && let Some(v) = w.c.b.get(w.c.pos..w.c.pos + len as usize)
-                {
-                    found.capture(tag, v, enc.big_endian);
-                }
-                let read = if len == 0 { 0 } else { consumed(vr, len) };
-                w.value(tag, len, read)?;
-                check_pending = true;
-            }
-        } else {
-            let before = w.c.pos;
-            let Some((tag, vr, len)) = element_header(&mut w.c, enc, path, base)? else {
-                return Ok(());
-            };
-            w.logical += (w.c.pos - before) as u64;
-            if stack.is_empty() && tag == PIXEL_DATA {
-                found.pixel = Some((len, w.at()));
-            }
-            // Item and delimitation tags (group FFFE) sort after Pixel Data but are not data
-            // elements: the parser's `read_until` never stops at them (found by fuzzing: a
-            // stray item delimiter at the top level ended this walk while the parser read on
-            // into a 2.4 GB value).
-            if until_pixel && stack.is_empty() && tag >= PIXEL_DATA && tag.0 != 0xFFFE {
-                return Ok(());
-            }
-            if vr == VR::SQ || (len == UNDEFINED && !(tag == PIXEL_DATA || tag == ITEM_END)) {
-                // A sequence: explicit SQ, or any other element of undefined length (the
-                // parser reads those as sequences too, PS3.5 §7.5.1 and §6.2.2 note 4).
-                if stack.len() >= MAX_NESTING {
-                    return Err(too_deep(&w));
-                }
-                in_sequence = true;
-                stack.push(Token {
-                    kind: Kind::Sequence,
-                    pixel: false,
+                self.stack.push(Token {
+                    kind: Kind::Item,
+                    pixel: parent.pixel,
                     len,
-                    base: w.logical,
+                    base: self.w.logical,
                 });
                 if len == 0 {
-                    check_pending = true;
+                    self.check_pending = true;
                 }
-            } else if tag == ITEM_END {
-                // An item delimiter where an element is expected: ends the item (ignored at
-                // the top level).
-                if !stack.is_empty() {
-                    in_sequence = true;
-                    stack.pop();
-                    check_pending = true;
-                }
-            } else {
-                last_header = Some((tag, vr, len));
+            }
+            (0xFFFE, 0xE00D) => {
+                self.stack.pop();
+                self.in_sequence = true;
+                self.check_pending = true;
+            }
+            (0xFFFE, 0xE0DD) => {
+                self.stack.pop();
+                self.in_sequence = false;
+                self.check_pending = true;
+            }
+            _ => {
+                return Err(self
+                    .w
+                    .fail(format!("expected an item tag (FFFE,E000), found {tag}")));
             }
         }
+        Ok(Step::Next)
+    }
+
+    /// The innermost token when it is an item of encapsulated pixel data.
+    fn pixel_item(&self) -> Option<Token> {
+        self.stack
+            .last()
+            .copied()
+            .filter(|top| top.kind == Kind::Item && top.pixel)
+    }
+
+    /// The basic offset table or a fragment of encapsulated pixel data (PS3.5 §A.4), the
+    /// value of `item`.
+    fn pixel_fragment(&mut self, item: Token) -> Result<Step> {
+        if item.len == UNDEFINED {
+            return Err(self
+                .w
+                .fail("pixel data fragment of undefined length".into()));
+        }
+        if self.offset_table_next {
+            self.offset_table_next = false;
+            self.w.value(PIXEL_DATA, item.len, item.len & !3)?;
+            // The parser advances by the u32 values read, not by the length.
+            self.w.logical -= (item.len & 3) as u64;
+        } else {
+            self.w.value(PIXEL_DATA, item.len, item.len)?;
+        }
+        self.check_pending = true;
+        Ok(Step::Next)
+    }
+
+    /// The value of the element whose header was just read: encapsulated pixel data open a
+    /// sequence and its basic offset table item; any other value is skipped (a top-level image
+    /// attribute of group 0028 recorded in `found`).
+    fn element_value(&mut self, (tag, vr, len): (Tag, VR, u32), found: &mut Found) -> Result<Step> {
+        if tag == PIXEL_DATA && len == UNDEFINED {
+            return self.encapsulated_pixel_data();
+        }
+        let w = &mut self.w;
+        if self.stack.is_empty()
+            && tag.0 == 0x0028
+            && let Some(v) = w.c.b.get(w.c.pos..w.c.pos + len as usize)
+        {
+            found.capture(tag, v, self.enc.big_endian);
+        }
+        let read = if len == 0 { 0 } else { consumed(vr, len) };
+        w.value(tag, len, read)?;
+        self.check_pending = true;
+        Ok(Step::Next)
+    }
+
+    /// Pixel Data of undefined length: a sequence of fragments, opened by the basic offset
+    /// table item (or closed at once by a sequence delimiter).
+    fn encapsulated_pixel_data(&mut self) -> Result<Step> {
+        if self.stack.len() + 2 > MAX_NESTING {
+            return Err(self.too_deep());
+        }
+        self.stack.push(Token {
+            kind: Kind::Sequence,
+            pixel: true,
+            len: UNDEFINED,
+            base: self.w.logical,
+        });
+        let Some((itag, ilen)) = self.w.item_header() else {
+            return Err(self.w.fail("encapsulated pixel data is truncated".into()));
+        };
+        match (itag.0, itag.1) {
+            (0xFFFE, 0xE000) => {
+                self.in_sequence = false;
+                self.stack.push(Token {
+                    kind: Kind::Item,
+                    pixel: true,
+                    len: ilen,
+                    base: self.w.logical,
+                });
+                if ilen == 0 {
+                    self.check_pending = true;
+                } else {
+                    self.offset_table_next = true;
+                }
+            }
+            (0xFFFE, 0xE0DD) => {
+                self.stack.pop();
+                self.in_sequence = false;
+            }
+            _ => {
+                return Err(self.w.fail(format!(
+                    "expected the basic offset table item (FFFE,E000) in encapsulated \
+                     pixel data, found {itag}"
+                )));
+            }
+        }
+        Ok(Step::Next)
+    }
+
+    /// The next element header: opens a sequence (explicit SQ, or any other element of
+    /// undefined length), ends an item at a stray item delimiter, or leaves the header for
+    /// [`DataSetWalk::element_value`]. Records where top-level Pixel Data start.
+    fn element_header(&mut self, found: &mut Found) -> Result<Step> {
+        let before = self.w.c.pos;
+        let Some((tag, vr, len)) =
+            element_header(&mut self.w.c, self.enc, self.w.path, self.w.base)?
+        else {
+            return Ok(Step::End);
+        };
+        self.w.logical += (self.w.c.pos - before) as u64;
+        if self.stack.is_empty() && tag == PIXEL_DATA {
+            found.pixel = Some((len, self.w.at()));
+        }
+        // Item and delimitation tags (group FFFE) sort after Pixel Data but are not data
+        // elements: the parser's `read_until` never stops at them (found by fuzzing: a
+        // stray item delimiter at the top level ended this walk while the parser read on
+        // into a 2.4 GB value).
+        if self.until_pixel && self.stack.is_empty() && tag >= PIXEL_DATA && tag.0 != 0xFFFE {
+            return Ok(Step::End);
+        }
+        if vr == VR::SQ || (len == UNDEFINED && !(tag == PIXEL_DATA || tag == ITEM_END)) {
+            // A sequence: explicit SQ, or any other element of undefined length (the
+            // parser reads those as sequences too, PS3.5 §7.5.1 and §6.2.2 note 4).
+            if self.stack.len() >= MAX_NESTING {
+                return Err(self.too_deep());
+            }
+            self.in_sequence = true;
+            self.stack.push(Token {
+                kind: Kind::Sequence,
+                pixel: false,
+                len,
+                base: self.w.logical,
+            });
+            if len == 0 {
+                self.check_pending = true;
+            }
+        } else if tag == ITEM_END {
+            // An item delimiter where an element is expected: ends the item (ignored at
+            // the top level).
+            if !self.stack.is_empty() {
+                self.in_sequence = true;
+                self.stack.pop();
+                self.check_pending = true;
+            }
+        } else {
+            self.last_header = Some((tag, vr, len));
+        }
+        Ok(Step::Next)
     }
 }

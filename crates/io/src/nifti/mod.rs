@@ -72,6 +72,8 @@ pub fn read_nifti(path: impl AsRef<Path>) -> Result<AnyVolume> {
 /// the file holds and carries notes (geometry source, scaling, conversions).
 pub fn read_nifti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
+    options.refuse_series(path)?;
+    options.refuse_array(path, "NIfTI")?;
     let limits = &options.limits;
     let gz_single = has_suffix(path, ".nii.gz");
     let is_hdr = has_suffix(path, ".hdr") || has_suffix(path, ".hdr.gz");

@@ -45,6 +45,7 @@ use crate::header::{
 };
 use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload, write_samples_le};
+use crate::{LoadedVolume, ReadOptions};
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -65,21 +66,33 @@ struct Field {
     value: String,
 }
 
-/// Reads a NRRD volume (attached `.nrrd` or detached `.nhdr` header) into a runtime-typed volume.
+/// Reads a NRRD volume (attached `.nrrd` or detached `.nhdr` header) into a runtime-typed volume,
+/// with default [`ReadOptions`].
 ///
 /// World space is LPS for RAS/LAS files, else the file's space as written (see the [module documentation](self) for the
 /// fields, conversions and limits). Errors name the file, the header field and its value.
 pub fn read_nrrd(path: impl AsRef<Path>) -> Result<AnyVolume> {
-    read_nrrd_with(path, &Limits::default())
+    read_nrrd_with(path, &ReadOptions::default()).map(|l| l.volume)
 }
 
-/// [`read_nrrd`] with caller-set [`Limits`] (header bytes, voxel count).
-pub fn read_nrrd_with(path: impl AsRef<Path>, limits: &Limits) -> Result<AnyVolume> {
-    read_nrrd_impl(path.as_ref(), limits).map(|(v, _)| v)
+/// [`read_nrrd`] with [`ReadOptions`]: its [`Limits`] (header bytes, voxel count, confinement)
+/// apply; a NRRD file holds one volume, so a `frame` other than 0, an `array` or a `series`
+/// is an error. The notes say how the world frame was taken (RAS/LAS converted to LPS, or
+/// no `space` field and the axes taken as LPS).
+pub fn read_nrrd_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
+    let path = path.as_ref();
+    options.refuse_all_but_limits(path, "NRRD")?;
+    let (volume, notes) = read_nrrd_file(path, &options.limits)?;
+    Ok(LoadedVolume::single(volume, "NRRD", notes))
 }
 
 /// Reads a NRRD file; also returns notes for the user (e.g. the world-frame conversion).
-pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String>)> {
+///
+/// The steps: the header's lines (up to the first blank line), its fields, the grid's size
+/// (checked against the voxel limit before anything else), the samples' type, encoding and
+/// byte order, the world grid (converted to LPS), the skips, where the data lie; then the
+/// payload.
+fn read_nrrd_file(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String>)> {
     let confine = Confinement::of(path, limits)?;
     let header = read_header(path, limits.max_header_bytes, |n, line| {
         if n > 1 && line.trim().is_empty() {
@@ -88,7 +101,34 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
             LineAction::Keep
         }
     })?;
-    let mut lines = header.lines.iter();
+    let fields = parse_fields(path, &header.lines)?;
+    let dims = parse_dims(path, &fields, limits)?;
+    let samples = Samples::parse(path, &fields)?;
+    let mut notes = Vec::new();
+    let grid = world_grid(path, &fields, dims, &mut notes)?;
+    let skips = Skips::parse(path, &fields, samples.encoding)?;
+    let (data_path, start) = data_location(path, &fields, confine.as_ref(), header.end)?;
+    let spec = PayloadSpec {
+        data_path: &data_path,
+        start,
+        line_skip: skips.line_skip,
+        byte_skip: skips.byte_skip,
+        skip_field: skips.skip_field,
+        encoding: samples.encoding,
+        file_type: samples.file_type,
+        big_endian: samples.big_endian,
+        exact: false,
+    };
+    Ok((read_payload(&spec, grid)?, notes))
+}
+
+/// The header's fields by canonical name ([`canonical_field`]).
+type Fields = HashMap<String, Field>;
+
+/// Checks the magic line and collects the fields of the header's other lines: `#` comments
+/// and `key:=value` pairs are skipped, a field given twice is an error naming both lines.
+fn parse_fields(path: &Path, lines: &[(usize, String)]) -> Result<Fields> {
+    let mut lines = lines.iter();
     match lines.next() {
         Some((_, magic)) if is_nrrd_magic(magic) => {}
         Some((n, magic)) => {
@@ -108,8 +148,7 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
             });
         }
     }
-
-    let mut fields: HashMap<String, Field> = HashMap::new();
+    let mut fields = Fields::new();
     for (n, text) in lines {
         if text.starts_with('#') || text.trim().is_empty() {
             continue;
@@ -155,11 +194,19 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
             },
         );
     }
-    let get = |canon: &str| fields.get(canon);
-    let require = |canon: &str, name: &str| get(canon).ok_or_else(|| IoError::missing(path, name));
+    Ok(fields)
+}
 
-    // dimension
-    let dim = require("dimension", "dimension")?;
+/// The field `canon` (canonical name), or an error saying that `name` is missing.
+fn require<'f>(path: &Path, fields: &'f Fields, canon: &str, name: &str) -> Result<&'f Field> {
+    fields
+        .get(canon)
+        .ok_or_else(|| IoError::missing(path, name))
+}
+
+/// `dimension` (must be 3) and `sizes`, checked against the voxel limit.
+fn parse_dims(path: &Path, fields: &Fields, limits: &Limits) -> Result<[usize; 3]> {
+    let dim = require(path, fields, "dimension", "dimension")?;
     let d: usize = dim
         .value
         .parse()
@@ -172,9 +219,7 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
             "only 3-D volumes are supported (dimension must be 3)",
         ));
     }
-
-    // sizes, checked against the voxel limit before anything else.
-    let sizes_f = require("sizes", "sizes")?;
+    let sizes_f = require(path, fields, "sizes", "sizes")?;
     let sizes: [u64; 3] = parse_numbers(
         path,
         &sizes_f.name,
@@ -182,52 +227,74 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
         "a whole number ≥ 1",
         |t| t.parse::<u64>().ok().filter(|&v| v > 0),
     )?;
-    let dims = checked_dims(path, &sizes_f.name, &sizes_f.value, sizes, limits)?;
+    checked_dims(path, &sizes_f.name, &sizes_f.value, sizes, limits)
+}
 
-    // type
-    let type_f = require("type", "type")?;
-    let file_type = parse_type(&type_f.value)
-        .ok_or_else(|| IoError::unsupported(path, &type_f.name, &type_f.value, SUPPORTED_TYPES))?;
+/// How the samples are stored: `type`, `encoding` and `endian`.
+struct Samples {
+    file_type: FileType,
+    encoding: Encoding,
+    /// `endian: big`; `endian` is required for multi-byte binary types.
+    big_endian: bool,
+}
 
-    // encoding
-    let enc_f = require("encoding", "encoding")?;
-    let encoding = match normalize_words(&enc_f.value).as_str() {
-        "raw" => Encoding::Raw,
-        "gzip" | "gz" => Encoding::Gzip,
-        "ascii" | "text" | "txt" => Encoding::Ascii,
-        _ => {
-            return Err(IoError::unsupported(
-                path,
-                &enc_f.name,
-                &enc_f.value,
-                SUPPORTED_ENCODINGS,
-            ));
-        }
-    };
-
-    // endian
-    let big_endian = match get("endian") {
-        Some(f) => match normalize_words(&f.value).as_str() {
-            "little" => false,
-            "big" => true,
+impl Samples {
+    /// The fields `type`, `encoding` and `endian`, checked.
+    fn parse(path: &Path, fields: &Fields) -> Result<Self> {
+        let type_f = require(path, fields, "type", "type")?;
+        let file_type = parse_type(&type_f.value).ok_or_else(|| {
+            IoError::unsupported(path, &type_f.name, &type_f.value, SUPPORTED_TYPES)
+        })?;
+        let enc_f = require(path, fields, "encoding", "encoding")?;
+        let encoding = match normalize_words(&enc_f.value).as_str() {
+            "raw" => Encoding::Raw,
+            "gzip" | "gz" => Encoding::Gzip,
+            "ascii" | "text" | "txt" => Encoding::Ascii,
             _ => {
-                return Err(IoError::field(
+                return Err(IoError::unsupported(
                     path,
-                    &f.name,
-                    &f.value,
-                    "must be `little` or `big`",
+                    &enc_f.name,
+                    &enc_f.value,
+                    SUPPORTED_ENCODINGS,
                 ));
             }
-        },
-        None if file_type.size_bytes() > 1 && encoding != Encoding::Ascii => {
-            return Err(IoError::missing(path, "endian"));
-        }
-        None => false,
-    };
+        };
+        let big_endian = match fields.get("endian") {
+            Some(f) => match normalize_words(&f.value).as_str() {
+                "little" => false,
+                "big" => true,
+                _ => {
+                    return Err(IoError::field(
+                        path,
+                        &f.name,
+                        &f.value,
+                        "must be `little` or `big`",
+                    ));
+                }
+            },
+            None if file_type.size_bytes() > 1 && encoding != Encoding::Ascii => {
+                return Err(IoError::missing(path, "endian"));
+            }
+            None => false,
+        };
+        Ok(Samples {
+            file_type,
+            encoding,
+            big_endian,
+        })
+    }
+}
 
-    let grid = parse_geometry(path, &fields, dims)?;
-    let mut notes = Vec::new();
-    let grid = match fields.get("space") {
+/// The grid in LPS: [`parse_geometry`], then RAS/LAS `space`s converted (decision 0008); a
+/// file without `space` is kept as written, with a note that its axes are taken as LPS.
+fn world_grid(
+    path: &Path,
+    fields: &Fields,
+    dims: [usize; 3],
+    notes: &mut Vec<String>,
+) -> Result<Grid> {
+    let grid = parse_geometry(path, fields, dims)?;
+    Ok(match fields.get("space") {
         Some(f) => {
             let space = normalize_words(&f.value);
             let (grid, note) = crate::frame::to_lps(path, &space, grid)?;
@@ -242,52 +309,80 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
             );
             grid
         }
-    };
+    })
+}
 
-    // skips
-    let line_skip = match get("lineskip") {
-        Some(f) => f
-            .value
-            .parse::<u64>()
-            .map_err(|_| IoError::field(path, &f.name, &f.value, "not a whole number ≥ 0"))?,
-        None => 0,
-    };
-    let (byte_skip, skip_field) = match get("byteskip") {
-        Some(f) => {
-            let v: i64 = f
+/// `line skip` and `byte skip`.
+struct Skips<'f> {
+    /// Lines of the data file to skip (before decompression).
+    line_skip: u64,
+    /// Bytes to skip after them (after decompression), or `-1`: the data end the file.
+    byte_skip: ByteSkip,
+    /// The `byte skip` field as spelled, for messages.
+    skip_field: &'f str,
+}
+
+impl<'f> Skips<'f> {
+    /// The skips, checked: `byte skip: -1` only with raw encoding.
+    fn parse(path: &Path, fields: &'f Fields, encoding: Encoding) -> Result<Self> {
+        let line_skip = match fields.get("lineskip") {
+            Some(f) => f
                 .value
-                .parse()
-                .map_err(|_| IoError::field(path, &f.name, &f.value, "not a whole number"))?;
-            let skip = match v {
-                -1 => ByteSkip::FromEnd,
-                v if v >= 0 => ByteSkip::Bytes(v as u64),
-                _ => {
-                    return Err(IoError::field(
-                        path,
-                        &f.name,
-                        &f.value,
-                        "must be ≥ 0, or -1 for data at the end of the file",
-                    ));
-                }
-            };
-            (skip, f.name.as_str())
+                .parse::<u64>()
+                .map_err(|_| IoError::field(path, &f.name, &f.value, "not a whole number ≥ 0"))?,
+            None => 0,
+        };
+        let (byte_skip, skip_field) = match fields.get("byteskip") {
+            Some(f) => {
+                let v: i64 = f
+                    .value
+                    .parse()
+                    .map_err(|_| IoError::field(path, &f.name, &f.value, "not a whole number"))?;
+                let skip = match v {
+                    -1 => ByteSkip::FromEnd,
+                    v if v >= 0 => ByteSkip::Bytes(v as u64),
+                    _ => {
+                        return Err(IoError::field(
+                            path,
+                            &f.name,
+                            &f.value,
+                            "must be ≥ 0, or -1 for data at the end of the file",
+                        ));
+                    }
+                };
+                (skip, f.name.as_str())
+            }
+            None => (ByteSkip::Bytes(0), "byte skip"),
+        };
+        if byte_skip == ByteSkip::FromEnd && encoding != Encoding::Raw {
+            return Err(IoError::field(
+                path,
+                skip_field,
+                "-1",
+                "-1 (data at the end of the file) is only allowed with raw encoding",
+            ));
         }
-        None => (ByteSkip::Bytes(0), "byte skip"),
-    };
-    if byte_skip == ByteSkip::FromEnd && encoding != Encoding::Raw {
-        return Err(IoError::field(
-            path,
+        Ok(Skips {
+            line_skip,
+            byte_skip,
             skip_field,
-            "-1",
-            "-1 (data at the end of the file) is only allowed with raw encoding",
-        ));
+        })
     }
+}
 
-    // data location
-    let (data_path, start): (PathBuf, u64) = match get("datafile") {
+/// Where the samples lie: the `data file` (inside the confinement folder, if any) from its
+/// start, or this file after the header (`header_end` bytes); a detached `.nhdr` header needs a
+/// `data file`.
+fn data_location(
+    path: &Path,
+    fields: &Fields,
+    confine: Option<&Confinement>,
+    header_end: u64,
+) -> Result<(PathBuf, u64)> {
+    match fields.get("datafile") {
         Some(f) => {
             let data = parse_data_file(path, f)?;
-            if let Some(c) = &confine {
+            if let Some(c) = confine {
                 c.check(
                     path,
                     &format!("field `{}`: data file", f.name),
@@ -295,7 +390,7 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
                     &data,
                 )?;
             }
-            (data, 0)
+            Ok((data, 0))
         }
         None => {
             let detached = path
@@ -304,22 +399,9 @@ pub(crate) fn read_nrrd_impl(path: &Path, limits: &Limits) -> Result<(AnyVolume,
             if detached {
                 return Err(IoError::missing(path, "data file"));
             }
-            (path.to_path_buf(), header.end)
+            Ok((path.to_path_buf(), header_end))
         }
-    };
-
-    let spec = PayloadSpec {
-        data_path: &data_path,
-        start,
-        line_skip,
-        byte_skip,
-        skip_field,
-        encoding,
-        file_type,
-        big_endian,
-        exact: false,
-    };
-    Ok((read_payload(&spec, grid)?, notes))
+    }
 }
 
 fn is_nrrd_magic(line: &str) -> bool {
@@ -380,7 +462,7 @@ fn parse_data_file(path: &Path, f: &Field) -> Result<PathBuf> {
 }
 
 /// The number of world dimensions from `space` / `space dimension`, if given.
-fn space_dimension(path: &Path, fields: &HashMap<String, Field>) -> Result<Option<usize>> {
+fn space_dimension(path: &Path, fields: &Fields) -> Result<Option<usize>> {
     let mut dim = None;
     if let Some(f) = fields.get("space") {
         let d = match normalize_words(&f.value).as_str() {
@@ -514,7 +596,7 @@ fn split_vectors(value: &str) -> Vec<String> {
 }
 
 /// Builds the grid from `space directions`, `spacings` and `space origin`.
-fn parse_geometry(path: &Path, fields: &HashMap<String, Field>, dims: [usize; 3]) -> Result<Grid> {
+fn parse_geometry(path: &Path, fields: &Fields, dims: [usize; 3]) -> Result<Grid> {
     // Validates `space` / `space dimension` (3-D only). Without either, `space directions` are
     // still accepted as 3-vectors (lenient; Teem requires a space).
     space_dimension(path, fields)?;

@@ -529,13 +529,17 @@ fn overflowing_sizes_are_an_error_naming_the_field() {
         max_voxels: 63,
         ..Limits::default()
     };
-    let e = read_nrrd_with(&p, &small).unwrap_err().to_string();
+    let e = read_nrrd_with(&p, &ReadOptions::default().with_limits(small.clone()))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("exceeds the limit 63"), "{e}");
     let small = Limits {
         max_header_bytes: 20,
         ..Limits::default()
     };
-    let e = read_nrrd_with(&p, &small).unwrap_err().to_string();
+    let e = read_nrrd_with(&p, &ReadOptions::default().with_limits(small.clone()))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("header size"), "{e}");
 }
 
@@ -617,7 +621,7 @@ fn missing_space_is_noted_as_lps() {
     let dir = tempfile::tempdir().unwrap();
     let h = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 1 1\nencoding: raw\n\n";
     let p = file(dir.path(), "n.nrrd", h, &[1, 2]);
-    let (_, notes) = read_nrrd_impl(&p, &Limits::default()).unwrap();
+    let notes = read_nrrd_with(&p, &ReadOptions::default()).unwrap().notes;
     assert!(
         notes
             .iter()
@@ -626,20 +630,24 @@ fn missing_space_is_noted_as_lps() {
     );
     let h = h.replace("dimension: 3\n", "dimension: 3\nspace dimension: 3\n");
     let p = file(dir.path(), "d.nrrd", &h, &[1, 2]);
-    let (_, notes) = read_nrrd_impl(&p, &Limits::default()).unwrap();
+    let notes = read_nrrd_with(&p, &ReadOptions::default()).unwrap().notes;
     assert!(
         notes.iter().any(|n| n.contains("no `space` field")),
         "{notes:?}"
     );
     let h = h.replace("space dimension: 3", "space: LPS");
     let p = file(dir.path(), "l.nrrd", &h, &[1, 2]);
-    let (_, notes) = read_nrrd_impl(&p, &Limits::default()).unwrap();
+    let notes = read_nrrd_with(&p, &ReadOptions::default()).unwrap().notes;
     assert!(notes.is_empty(), "{notes:?}");
     // What write_nrrd writes reads back without the note.
     let v = read_nrrd(&p).unwrap();
     let q = dir.path().join("w.nrrd");
     write_nrrd(&q, &v, false).unwrap();
-    let (back, notes) = read_nrrd_impl(&q, &Limits::default()).unwrap();
+    let LoadedVolume {
+        volume: back,
+        notes,
+        ..
+    } = read_nrrd_with(&q, &ReadOptions::default()).unwrap();
     assert!(notes.is_empty(), "{notes:?}");
     assert_eq!(back, v);
 }
@@ -651,8 +659,13 @@ fn ras_space_is_converted_to_lps() {
     let h = "NRRD0004\ntype: uint8\ndimension: 3\nspace: right-anterior-superior\n\
              sizes: 2 1 1\nspace directions: (0.5,0,0) (0,2,0) (0,0,3)\n\
              space origin: (10,20,30)\nencoding: raw\n\n";
-    let (v, notes) =
-        read_nrrd_impl(&file(dir.path(), "r.nrrd", h, &[1, 2]), &Limits::default()).unwrap();
+    let LoadedVolume {
+        volume: v, notes, ..
+    } = read_nrrd_with(
+        file(dir.path(), "r.nrrd", h, &[1, 2]),
+        &ReadOptions::default(),
+    )
+    .unwrap();
     let g = v.grid();
     assert_eq!(g.origin, [-10.0, -20.0, 30.0]);
     assert_eq!(g.spacing, [0.5, 2.0, 3.0]);
@@ -938,7 +951,8 @@ fn confined_reads_refuse_data_files_outside_the_folder() {
             let v = read_nrrd(&p).unwrap_or_else(|e| panic!("{value}: {e}"));
             assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
         }
-        let r = read_nrrd_with(&p, &l.limits);
+        let r = read_nrrd_with(&p, &ReadOptions::default().with_limits(l.limits.clone()))
+            .map(|l| l.volume);
         if inside {
             let v = r.unwrap_or_else(|e| panic!("{value}: {e}"));
             assert_eq!(v.to_f32().data(), &[1.0, 2.0, 3.0, 4.0], "{value}");
@@ -955,7 +969,11 @@ fn confined_reads_refuse_data_files_outside_the_folder() {
         b"",
     );
     assert_eq!(
-        read_nrrd_with(&p, &l.limits).unwrap().to_f32().data(),
+        read_nrrd_with(&p, &ReadOptions::default().with_limits(l.limits.clone()))
+            .unwrap()
+            .volume
+            .to_f32()
+            .data(),
         &[1.0, 2.0, 3.0, 4.0]
     );
 }

@@ -26,16 +26,16 @@ const RATIO_SLACK: u64 = 1024;
 
 /// How a binary array block is laid out (VTK's `vtkXMLDataElement` binary formats).
 pub(super) struct Layout<'a> {
-    pub path: &'a Path,
+    pub(super) path: &'a Path,
     /// The array, for messages (`DataArray "density" data`).
-    pub what: String,
-    pub header64: bool,
-    pub big_endian: bool,
-    pub compressed: bool,
+    pub(super) what: String,
+    pub(super) header64: bool,
+    pub(super) big_endian: bool,
+    pub(super) compressed: bool,
     /// Compressed blocks are raw LZ4 blocks (`vtkLZ4DataCompressor`) rather than zlib streams.
-    pub lz4: bool,
+    pub(super) lz4: bool,
     /// Bytes of samples needed.
-    pub needed: usize,
+    pub(super) needed: usize,
 }
 
 /// A compression header `[blocks, block size, last size, sizes…]`, checked.
@@ -210,7 +210,7 @@ impl Layout<'_> {
     }
 
     /// An appended raw block (`region`: from the array's offset to the end of its data).
-    pub fn raw_block(&self, region: &[u8]) -> Result<Vec<u8>> {
+    pub(super) fn raw_block(&self, region: &[u8]) -> Result<Vec<u8>> {
         if !self.compressed {
             return self.uncompressed(region);
         }
@@ -273,7 +273,7 @@ impl Layout<'_> {
     /// A base64 block (inline `binary`, or appended `base64`), `text` without whitespace and
     /// limited to the array's region: the header and the data are encoded separately when
     /// compressed, and either way when not.
-    pub fn base64_block(&self, text: &[u8]) -> Result<Vec<u8>> {
+    pub(super) fn base64_block(&self, text: &[u8]) -> Result<Vec<u8>> {
         let engine = base64::engine::general_purpose::STANDARD;
         let chars = |bytes: usize| bytes.div_ceil(3) * 4;
         let dec = |t: &[u8], part: &str| -> Result<Vec<u8>> {

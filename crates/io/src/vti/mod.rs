@@ -52,13 +52,41 @@ pub fn read_vti(path: impl AsRef<Path>) -> Result<AnyVolume> {
 }
 
 /// Reads a `.vti` file with [`ReadOptions`] (`array` picks a point-data array by name); the
-/// result lists the arrays present.
+/// result lists the arrays present. A `.vti` file holds one volume: a `frame` other than 0 or
+/// a `series` is an error.
 pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let path = path.as_ref();
-    // A VTK XML image data file names no other file; only a link out of the folder is refused.
-    crate::confine::Confinement::of(path, &options.limits)?;
+    options.refuse_series(path)?;
+    options.refuse_frame(path)?;
+    let bytes = read_whole_file(path, &options.limits)?;
+    // Split off <AppendedData>: raw appended data are not XML.
+    let (xml_bytes, appended) = split_appended(path, &bytes)?;
+    let doc = parse_xml(path, &xml_bytes)?;
+    let root = doc.root_element();
+    let encoding = FileEncoding::of(path, &root)?;
+    let image = child(&root, "ImageData").ok_or_else(|| IoError::missing(path, "ImageData"))?;
+    let extent = WholeExtent::of(path, &image)?;
+    let grid = image_grid(path, &image, &extent, &options.limits)?;
+    let piece = the_piece(path, &image, &extent)?;
+    let choice = choose_array(path, &piece, options.array.as_deref())?;
+    let array = ArrayRef {
+        doc: &doc,
+        node: choice.arrays[choice.chosen],
+        name: &choice.names[choice.chosen],
+    };
+    let volume = read_array(path, array, &encoding, grid, appended)?;
+    Ok(LoadedVolume {
+        arrays: choice.names,
+        ..LoadedVolume::single(volume, "VTK image data", choice.notes)
+    })
+}
+
+/// The file's bytes, read whole: at most [`crate::Limits::max_xml_bytes`], a regular file, not a
+/// link out of [`crate::Limits::confine_to`] (a VTK XML image data file names no other file).
+fn read_whole_file(path: &Path, limits: &crate::Limits) -> Result<Vec<u8>> {
+    crate::confine::Confinement::of(path, limits)?;
     crate::limits::require_regular_file(path, "volume file")?;
-    let limit = options.limits.max_xml_bytes;
+    let limit = limits.max_xml_bytes;
     let file = std::fs::File::open(path).map_err(|e| IoError::os(path, "open", e))?;
     let len = file
         .metadata()
@@ -76,10 +104,11 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
     file.take(limit)
         .read_to_end(&mut bytes)
         .map_err(|e| IoError::os(path, "read", e))?;
+    Ok(bytes)
+}
 
-    // Split off <AppendedData>: raw appended data are not XML.
-    let (xml_bytes, appended) = split_appended(path, &bytes)?;
-    let xml_bytes: &[u8] = &xml_bytes;
+/// The XML part of the file (UTF-8, well-formed) as a document whose root is `<VTKFile>`.
+fn parse_xml<'x>(path: &Path, xml_bytes: &'x [u8]) -> Result<roxmltree::Document<'x>> {
     let xml = std::str::from_utf8(xml_bytes).map_err(|e| IoError::Syntax {
         path: path.to_path_buf(),
         line: line_of(xml_bytes, e.valid_up_to()),
@@ -101,62 +130,114 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
             "not a VTK XML file (expected <VTKFile>)",
         ));
     }
-    let attr = |name: &str| root.attribute(name);
-    match attr("type") {
-        Some("ImageData") => {}
-        other => {
-            return Err(IoError::unsupported(
-                path,
-                "VTKFile type",
-                other.unwrap_or(""),
-                "ImageData (.vti)",
-            ));
+    Ok(doc)
+}
+
+/// How `<VTKFile>` says its binary data are written.
+struct FileEncoding {
+    /// `byte_order="BigEndian"`.
+    big_endian: bool,
+    /// `header_type="UInt64"` (else `UInt32`).
+    header64: bool,
+    /// A `compressor` is named.
+    compressed: bool,
+    /// The compressor is `vtkLZ4DataCompressor` (else zlib).
+    lz4: bool,
+}
+
+impl FileEncoding {
+    /// The `<VTKFile>` attributes `type` (must be `ImageData`), `byte_order`, `header_type`
+    /// and `compressor`, checked.
+    fn of(path: &Path, root: &roxmltree::Node) -> Result<Self> {
+        let attr = |name: &str| root.attribute(name);
+        match attr("type") {
+            Some("ImageData") => {}
+            other => {
+                return Err(IoError::unsupported(
+                    path,
+                    "VTKFile type",
+                    other.unwrap_or(""),
+                    "ImageData (.vti)",
+                ));
+            }
         }
+        let big_endian = match attr("byte_order").unwrap_or("LittleEndian") {
+            "LittleEndian" => false,
+            "BigEndian" => true,
+            other => {
+                return Err(IoError::field(
+                    path,
+                    "byte_order",
+                    other,
+                    "must be LittleEndian or BigEndian",
+                ));
+            }
+        };
+        let header64 = match attr("header_type").unwrap_or("UInt32") {
+            "UInt32" => false,
+            "UInt64" => true,
+            other => {
+                return Err(IoError::unsupported(
+                    path,
+                    "header_type",
+                    other,
+                    "UInt32, UInt64",
+                ));
+            }
+        };
+        let (compressed, lz4) = match attr("compressor") {
+            None | Some("") => (false, false),
+            Some("vtkZLibDataCompressor") => (true, false),
+            Some("vtkLZ4DataCompressor") => (true, true),
+            Some(other) => {
+                return Err(IoError::unsupported(
+                    path,
+                    "compressor",
+                    other,
+                    "none, vtkZLibDataCompressor, vtkLZ4DataCompressor",
+                ));
+            }
+        };
+        Ok(FileEncoding {
+            big_endian,
+            header64,
+            compressed,
+            lz4,
+        })
     }
-    let big_endian = match attr("byte_order").unwrap_or("LittleEndian") {
-        "LittleEndian" => false,
-        "BigEndian" => true,
-        other => {
-            return Err(IoError::field(
-                path,
-                "byte_order",
-                other,
-                "must be LittleEndian or BigEndian",
-            ));
-        }
-    };
-    let header64 = match attr("header_type").unwrap_or("UInt32") {
-        "UInt32" => false,
-        "UInt64" => true,
-        other => {
-            return Err(IoError::unsupported(
-                path,
-                "header_type",
-                other,
-                "UInt32, UInt64",
-            ));
-        }
-    };
-    let (compressed, lz4) = match attr("compressor") {
-        None | Some("") => (false, false),
-        Some("vtkZLibDataCompressor") => (true, false),
-        Some("vtkLZ4DataCompressor") => (true, true),
-        Some(other) => {
-            return Err(IoError::unsupported(
-                path,
-                "compressor",
-                other,
-                "none, vtkZLibDataCompressor, vtkLZ4DataCompressor",
-            ));
-        }
-    };
-    let image = child(&root, "ImageData").ok_or_else(|| IoError::missing(path, "ImageData"))?;
-    let ext_text = image
-        .attribute("WholeExtent")
-        .ok_or_else(|| IoError::missing(path, "WholeExtent"))?;
-    let ext = parse_extent(path, "WholeExtent", ext_text)?;
+}
+
+/// `<ImageData WholeExtent="x0 x1 y0 y1 z0 z1">`, as written and parsed.
+struct WholeExtent<'x> {
+    /// The attribute's text, for messages.
+    text: &'x str,
+    /// First and last index along x, y, z (inclusive).
+    extent: [i64; 6],
+}
+
+impl<'x> WholeExtent<'x> {
+    /// The `WholeExtent` attribute of `<ImageData>` (required).
+    fn of(path: &Path, image: &roxmltree::Node<'x, '_>) -> Result<Self> {
+        let text = image
+            .attribute("WholeExtent")
+            .ok_or_else(|| IoError::missing(path, "WholeExtent"))?;
+        let extent = parse_extent(path, "WholeExtent", text)?;
+        Ok(WholeExtent { text, extent })
+    }
+}
+
+/// The grid of `<ImageData>`: the extent's sizes (checked against the voxel limit), `Origin`,
+/// `Spacing` and `Direction`. A negative spacing is folded into the direction; voxel (0,0,0) is
+/// the extent's first point, at `Origin + D·(x0·sx, y0·sy, z0·sz)` (world frame as written).
+fn image_grid(
+    path: &Path,
+    image: &roxmltree::Node,
+    whole: &WholeExtent,
+    limits: &crate::Limits,
+) -> Result<Grid> {
+    let ext = whole.extent;
     let sizes = [0, 1, 2].map(|a| (ext[2 * a + 1] - ext[2 * a]) as u64 + 1);
-    let dims = checked_dims(path, "WholeExtent", ext_text, sizes, &options.limits)?;
+    let dims = checked_dims(path, "WholeExtent", whole.text, sizes, limits)?;
     let origin: [f64; 3] = floats(path, "Origin", image.attribute("Origin"), [0.0; 3])?;
     let mut spacing: [f64; 3] = floats(path, "Spacing", image.attribute("Spacing"), [1.0; 3])?;
     let d: [f64; 9] = floats(
@@ -180,7 +261,7 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
         ext[4] as f64 * spacing[2],
     );
     let origin0 = (DVec3::from(origin) + direction * first).to_array();
-    let grid = Grid::new(dims, spacing, origin0, direction).map_err(|e| match &e {
+    Grid::new(dims, spacing, origin0, direction).map_err(|e| match &e {
         CoreError::InvalidField { field, .. } if field == "direction" => IoError::field(
             path,
             "Direction",
@@ -194,8 +275,15 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
             "spacings must be non-zero finite numbers",
         ),
         _ => IoError::core(path, e),
-    })?;
+    })
+}
 
+/// The one `<Piece>` of `<ImageData>`, which must cover the whole extent.
+fn the_piece<'a, 'i>(
+    path: &Path,
+    image: &roxmltree::Node<'a, 'i>,
+    whole: &WholeExtent,
+) -> Result<roxmltree::Node<'a, 'i>> {
     let pieces: Vec<_> = image
         .children()
         .filter(|n| n.has_tag_name("Piece"))
@@ -213,17 +301,42 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
         }
     };
     if let Some(pe) = piece.attribute("Extent")
-        && parse_extent(path, "Piece Extent", pe)? != ext
+        && parse_extent(path, "Piece Extent", pe)? != whole.extent
     {
         return Err(IoError::unsupported(
             path,
             "Piece Extent",
             pe,
-            format!("the WholeExtent ({ext_text}); partial pieces are not supported"),
+            format!(
+                "the WholeExtent ({}); partial pieces are not supported",
+                whole.text
+            ),
         ));
     }
+    Ok(piece)
+}
+
+/// The point-data arrays of a piece and the one to read.
+struct ArrayChoice<'a, 'i> {
+    /// The `<DataArray>` elements, in file order.
+    arrays: Vec<roxmltree::Node<'a, 'i>>,
+    /// Their names (`#i` for an unnamed one).
+    names: Vec<String>,
+    /// The index of the array to read: `wanted` by name, else the active `Scalars`, else the
+    /// first.
+    chosen: usize,
+    /// A note listing the arrays when there are several.
+    notes: Vec<String>,
+}
+
+/// Chooses the array of `piece` to read; see [`ArrayChoice`].
+fn choose_array<'a, 'i>(
+    path: &Path,
+    piece: &roxmltree::Node<'a, 'i>,
+    wanted: Option<&str>,
+) -> Result<ArrayChoice<'a, 'i>> {
     let point_data =
-        child(&piece, "PointData").ok_or_else(|| IoError::missing(path, "PointData"))?;
+        child(piece, "PointData").ok_or_else(|| IoError::missing(path, "PointData"))?;
     let arrays: Vec<roxmltree::Node> = point_data
         .children()
         .filter(|n| n.has_tag_name("DataArray"))
@@ -240,7 +353,7 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
         return Err(IoError::missing(path, "PointData DataArray"));
     }
     let mut notes = Vec::new();
-    let chosen = match (&options.array, point_data.attribute("Scalars")) {
+    let chosen = match (wanted, point_data.attribute("Scalars")) {
         (Some(want), _) => names.iter().position(|n| n == want).ok_or_else(|| {
             IoError::invalid_argument(
                 path,
@@ -265,10 +378,37 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
             names[chosen]
         ));
     }
-    let array = arrays[chosen];
-    let name = &names[chosen];
+    Ok(ArrayChoice {
+        arrays,
+        names,
+        chosen,
+        notes,
+    })
+}
+
+/// The `<DataArray>` to read, in its document.
+#[derive(Clone, Copy)]
+struct ArrayRef<'d, 'a, 'i> {
+    doc: &'d roxmltree::Document<'i>,
+    node: roxmltree::Node<'a, 'i>,
+    /// Its name (or `#i`), for messages.
+    name: &'d str,
+}
+
+/// The samples of one scalar `<DataArray>` on `grid`: its `type` as a [`FileType`], then its
+/// data as `ascii` text, `binary` (inline base64 blocks) or `appended` (raw or base64 blocks in
+/// `<AppendedData>`, at the array's `offset`), decoded with the file's byte order.
+fn read_array(
+    path: &Path,
+    array: ArrayRef,
+    encoding: &FileEncoding,
+    grid: Grid,
+    appended: Option<(String, &[u8])>,
+) -> Result<AnyVolume> {
+    let name = array.name;
+    let node = array.node;
     let field = |f: &str| format!("DataArray {name:?} {f}");
-    if let Some(n) = array.attribute("NumberOfComponents")
+    if let Some(n) = node.attribute("NumberOfComponents")
         && n.trim() != "1"
     {
         return Err(IoError::unsupported(
@@ -278,50 +418,25 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
             "1 (scalar arrays only)",
         ));
     }
-    let ty = array.attribute("type").unwrap_or("");
-    let ft = match ty {
-        "Int8" | "Char" => FileType::I8,
-        "UInt8" | "UnsignedChar" => FileType::U8,
-        "Int16" | "Short" => FileType::I16,
-        "UInt16" | "UnsignedShort" => FileType::U16,
-        "Int32" | "Int" => FileType::I32,
-        "UInt32" | "UnsignedInt" => FileType::U32,
-        "Float32" | "Float" => FileType::F32,
-        "Float64" | "Double" => FileType::F64,
-        _ => {
-            return Err(IoError::unsupported(
-                path,
-                field("type"),
-                ty,
-                "Int8, UInt8, Int16, UInt16, Float32; converted to Float32: Int32, UInt32, \
-                 Float64",
-            ));
-        }
-    };
+    let ft = array_type(path, &field("type"), node.attribute("type").unwrap_or(""))?;
     let count = grid.voxel_count();
     let needed = count * ft.size_bytes() as usize;
     let layout = Layout {
         path,
         what: field("data"),
-        header64,
-        big_endian,
-        compressed,
-        lz4,
+        header64: encoding.header64,
+        big_endian: encoding.big_endian,
+        compressed: encoding.compressed,
+        lz4: encoding.lz4,
         needed,
     };
-    let format = array.attribute("format").unwrap_or("ascii");
-    let bytes = match format {
+    let bytes = match node.attribute("format").unwrap_or("ascii") {
         "ascii" => {
-            let text = array.text().unwrap_or("");
-            return finish(
-                path,
-                ascii_volume(path, &field("data"), text, ft, grid)?,
-                names,
-                notes,
-            );
+            let text = node.text().unwrap_or("");
+            return ascii_volume(path, &field("data"), text, ft, grid);
         }
         "binary" => {
-            let text: Vec<u8> = array
+            let text: Vec<u8> = node
                 .text()
                 .unwrap_or("")
                 .bytes()
@@ -333,7 +448,7 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
             let Some((encoding, data)) = appended else {
                 return Err(IoError::missing(path, "AppendedData"));
             };
-            let region = appended_region(path, &doc, array, &field("offset"), &encoding, data)?;
+            let region = appended_region(path, array.doc, node, &field("offset"), &encoding, data)?;
             match encoding.as_str() {
                 "raw" => layout.raw_block(&region)?,
                 _ => layout.base64_block(&region)?,
@@ -348,25 +463,30 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
             ));
         }
     };
-    let volume = decode(bytes, ft, big_endian, grid, path)?;
-    finish(path, volume, names, notes)
+    decode(bytes, ft, encoding.big_endian, grid, path)
 }
 
-fn finish(
-    _path: &Path,
-    volume: AnyVolume,
-    arrays: Vec<String>,
-    notes: Vec<String>,
-) -> Result<LoadedVolume> {
-    Ok(LoadedVolume {
-        volume,
-        format: "VTK image data".into(),
-        frames: 1,
-        frame: 0,
-        arrays,
-        series: Vec::new(),
-        series_uid: None,
-        notes,
+/// A `<DataArray>`'s `type` (`field` names it in messages): 8- and 16-bit integers and
+/// `Float32` as they are; `Int32`, `UInt32`, `Float64` to be converted to f32.
+fn array_type(path: &Path, field: &str, ty: &str) -> Result<FileType> {
+    Ok(match ty {
+        "Int8" | "Char" => FileType::I8,
+        "UInt8" | "UnsignedChar" => FileType::U8,
+        "Int16" | "Short" => FileType::I16,
+        "UInt16" | "UnsignedShort" => FileType::U16,
+        "Int32" | "Int" => FileType::I32,
+        "UInt32" | "UnsignedInt" => FileType::U32,
+        "Float32" | "Float" => FileType::F32,
+        "Float64" | "Double" => FileType::F64,
+        _ => {
+            return Err(IoError::unsupported(
+                path,
+                field,
+                ty,
+                "Int8, UInt8, Int16, UInt16, Float32; converted to Float32: Int32, UInt32, \
+                 Float64",
+            ));
+        }
     })
 }
 
