@@ -344,8 +344,8 @@ fn read_compressed_samples(spec: &PayloadSpec<'_>, file: File, needed: u64) -> R
             if spec.exact {
                 return Err(IoError::SizeMismatch {
                     path: path.to_path_buf(),
-                    expected: skip + needed,
-                    actual: skip + needed + 1,
+                    expected: skip.saturating_add(needed),
+                    actual: skip.saturating_add(needed).saturating_add(1),
                     detail: format!(
                         "decompressed: {skip} header bytes + {needed} sample bytes; \
                          the stream holds at least one byte more"
