@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 /// Arguments of `volsplat aa-figures`.
 #[derive(Debug, Args)]
-pub struct AaFiguresArgs {
+pub(crate) struct AaFiguresArgs {
     /// Output folder for README.md and the figures (created if missing).
     #[arg(short, long, default_value = "docs/figures")]
     pub out: PathBuf,
@@ -25,7 +25,7 @@ pub struct AaFiguresArgs {
 }
 
 /// `volsplat aa-figures`.
-pub fn aa_figures_cmd(a: AaFiguresArgs) -> Result<()> {
+pub(crate) fn aa_figures_cmd(a: AaFiguresArgs) -> Result<()> {
     let settings = volsplat_studies::AaFiguresSettings {
         out: a.out,
         frames: a.frames,

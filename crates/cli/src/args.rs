@@ -2,7 +2,7 @@
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
-pub use volsplat::{
+pub(crate) use volsplat::{
     AntialiasChoice, KernelChoice, Mode, OrderChoice, PhantomKind, PreintegrateChoice,
     ShadeAtChoice, VisibilityChoice, VolumeLevel,
 };
@@ -11,13 +11,13 @@ pub use volsplat::{
 /// slabs and Buchanan's NIL-map displays.
 #[derive(Debug, Parser)]
 #[command(name = "volsplat", version, long_about = None)]
-pub struct Cli {
+pub(crate) struct Cli {
     #[command(subcommand)]
     pub command: Command,
 }
 
 #[derive(Debug, Subcommand)]
-pub enum Command {
+pub(crate) enum Command {
     /// Render a volume (or the built-in MRI head) to a PNG or .npy image.
     Render(Box<RenderArgs>),
     /// Render a turntable or a keyframed camera flight to PNG frames, GIF, APNG or video.
@@ -53,7 +53,7 @@ pub enum Command {
 
 /// Where the volume comes from.
 #[derive(Debug, Args)]
-pub struct InputArgs {
+pub(crate) struct InputArgs {
     /// Volume file: NRRD (.nrrd, .nhdr), MetaImage (.mha, .mhd), NIfTI (.nii, .nii.gz, .hdr),
     /// VTK image data (.vti), TIFF (.tif, .tiff, or a folder of TIFF slices), DICOM (a folder
     /// of a series, or one of its files; --series chooses), or raw with --raw-dims. Omit for
@@ -124,7 +124,7 @@ pub struct InputArgs {
 // in VTK's order: Azimuth, Elevation, OrthogonalizeViewUp, Roll, Zoom, Dolly.
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Camera")]
-pub struct ViewArgs {
+pub(crate) struct ViewArgs {
     /// Camera JSON file (VTK's camera; format in README.md, section "Files"). --azimuth,
     /// --elevation, --roll, --zoom, --dolly and --perspective/--view-angle are applied to it.
     #[arg(long, value_name = "FILE")]
@@ -173,7 +173,7 @@ pub struct ViewArgs {
 
 /// Classification and rendering options.
 #[derive(Debug, Args)]
-pub struct RenderOptions {
+pub(crate) struct RenderOptions {
     /// Image size in pixels: WxH (e.g. 640x480), or N for N×N.
     #[arg(
         long,
@@ -404,7 +404,7 @@ pub struct RenderOptions {
 
 /// How images become PNG files (render and movie).
 #[derive(Debug, Clone, Args)]
-pub struct ImageOptions {
+pub(crate) struct ImageOptions {
     /// PNG bit depth: 8 or 16.
     #[arg(
         long = "bit-depth",
@@ -471,7 +471,7 @@ fn parse_preset(s: &str) -> Result<String, String> {
 }
 
 #[derive(Debug, Args)]
-pub struct RenderArgs {
+pub(crate) struct RenderArgs {
     #[command(flatten)]
     pub input: InputArgs,
     /// Output image: .png (8-bit linear values as VTK writes them; --srgb encodes, --bit-depth 16)
@@ -541,7 +541,7 @@ pub struct RenderArgs {
 }
 
 /// `render` flags that only the splatting renderer reads (clap ids and their flags).
-pub const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
+pub(crate) const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
     ("kernel", "--kernel"),
     ("visibility", "--visibility"),
     ("order", "--order"),
@@ -566,7 +566,7 @@ pub const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
 
 /// Renderers reachable from `render --renderer`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum RendererArg {
+pub(crate) enum RendererArg {
     /// Splatting (Westover 1991; perspective and anti-aliasing after Swan et al. 1997).
     Splat,
     /// Sabella's density-emitter display integrated along each ray (Buchanan eq. 3.1).
@@ -577,7 +577,7 @@ pub enum RendererArg {
 }
 
 #[derive(Debug, Args)]
-pub struct InfoArgs {
+pub(crate) struct InfoArgs {
     #[command(flatten)]
     pub input: InputArgs,
     /// Print one JSON object (stable field names, documented in README.md "Files") instead of
@@ -587,7 +587,7 @@ pub struct InfoArgs {
 }
 
 #[derive(Debug, Args)]
-pub struct ConvertArgs {
+pub(crate) struct ConvertArgs {
     #[command(flatten)]
     pub input: InputArgs,
     /// Output, by its extension: .nrrd (attached header, space left-posterior-superior), .nii or
@@ -606,7 +606,7 @@ pub struct ConvertArgs {
 }
 
 #[derive(Debug, Args)]
-pub struct PhantomArgs {
+pub(crate) struct PhantomArgs {
     /// Which phantom.
     #[arg(value_enum)]
     pub kind: PhantomKind,
@@ -627,7 +627,7 @@ pub struct PhantomArgs {
 }
 
 #[derive(Debug, Args)]
-pub struct BenchArgs {
+pub(crate) struct BenchArgs {
     #[command(flatten)]
     pub input: InputArgs,
     #[command(flatten)]
@@ -651,7 +651,7 @@ pub struct BenchArgs {
 
 /// Image size presets of the texture-filtering benchmark.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum TextureBenchSize {
+pub(crate) enum TextureBenchSize {
     /// 48×36: a quick look (seconds).
     Quick,
     /// 128×96 (default; about a minute on 2 cores).
@@ -661,7 +661,7 @@ pub enum TextureBenchSize {
 }
 
 #[derive(Debug, Args)]
-pub struct TextureBenchArgs {
+pub(crate) struct TextureBenchArgs {
     /// Output folder for report.md and the images (created if missing).
     #[arg(short, long, default_value = "texture-bench")]
     pub out: PathBuf,

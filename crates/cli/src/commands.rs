@@ -15,7 +15,7 @@ use volsplat::{
     default_ladder, renderer_name,
 };
 
-pub fn run(cli: Cli) -> Result<()> {
+pub(crate) fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render(a) => render_cmd(*a),
         Command::Info(a) => info_cmd(a),
@@ -88,7 +88,7 @@ pub(crate) fn check_output_path(path: &Path, flag: &str, extensions: &[&str]) ->
 
 /// Non-finite values in what would be written: an image file must never hold NaN or infinity.
 #[derive(Debug)]
-pub struct NonFiniteOutput {
+pub(crate) struct NonFiniteOutput {
     /// The renderer or stage that produced the image.
     pub stage: String,
     /// Pixels with at least one non-finite value.

@@ -9,7 +9,7 @@ use volsplat::{AttenuationChoice, ControlChoice, DensityChoice, DisplayChoice};
 /// Options of the Chapter 6 displays (ignored by the splatting renderer).
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Research (Chapter 6 displays)")]
-pub struct DisplayArgs {
+pub(crate) struct DisplayArgs {
     /// Chapter 6 display drawn by `--renderer nil`.
     #[arg(long, value_enum, default_value = "linearised", hide_short_help = true)]
     pub display: DisplayChoice,
@@ -120,7 +120,7 @@ pub struct DisplayArgs {
 }
 
 /// The `--flags` of [`DisplayArgs`] given explicitly on the command line in `matches`.
-pub fn given_flags(matches: &clap::ArgMatches) -> Vec<String> {
+pub(crate) fn given_flags(matches: &clap::ArgMatches) -> Vec<String> {
     let cmd = DisplayArgs::augment_args(clap::Command::new("display"));
     cmd.get_arguments()
         .filter(|arg| {
@@ -133,7 +133,7 @@ pub fn given_flags(matches: &clap::ArgMatches) -> Vec<String> {
 
 /// Report size of `display-bench`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum BenchSize {
+pub(crate) enum BenchSize {
     /// 80×60 pixels on the volume downsampled ×2 (seconds).
     Quick,
     /// 160×120 pixels on the volume downsampled ×2 (the thesis also reduced its data set).
@@ -144,7 +144,7 @@ pub enum BenchSize {
 
 /// Arguments of `volsplat display-bench`.
 #[derive(Debug, Args)]
-pub struct DisplayBenchArgs {
+pub(crate) struct DisplayBenchArgs {
     /// Volume file (required; any format `render` reads). The committed report
     /// `docs/nil-display/report.md` uses the MRI `mri_brainsmall.nrrd`, which is not in the
     /// repository.
@@ -163,7 +163,7 @@ pub struct DisplayBenchArgs {
 
 /// `volsplat display-bench`: the Chapter 6 report (plates and timings), written by
 /// `volsplat_studies::display_bench`; prints the report.
-pub fn display_bench_cmd(a: DisplayBenchArgs) -> Result<()> {
+pub(crate) fn display_bench_cmd(a: DisplayBenchArgs) -> Result<()> {
     use volsplat_studies::{DisplayBenchSettings, DisplayBenchSize};
     let settings = DisplayBenchSettings {
         input: a.input,

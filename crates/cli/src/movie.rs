@@ -20,7 +20,7 @@ use volsplat::movie::{
 use volsplat::{CameraSpec, Renderer, TransferSpec};
 
 #[derive(Debug, Args)]
-pub struct MovieArgs {
+pub(crate) struct MovieArgs {
     #[command(flatten)]
     pub input: InputArgs,
     /// Output: a folder (frame_0000.png …) or a file name with a zero-padded %04d (PNG frames),
@@ -226,7 +226,7 @@ fn check_movie_args(a: &MovieArgs) -> Result<(usize, usize)> {
     Ok(size)
 }
 
-pub fn movie_cmd(a: MovieArgs) -> Result<()> {
+pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
     let t0 = Instant::now();
     let (w, h) = check_movie_args(&a)?;
     let axis = turn_axis(&a.axis)?;

@@ -8,7 +8,7 @@ use std::io::IsTerminal;
 const FRACTION_STEPS: u64 = 1000;
 
 /// A progress bar, or nothing when stderr is not a terminal or the command is quiet.
-pub struct Bar(Option<ProgressBar>);
+pub(crate) struct Bar(Option<ProgressBar>);
 
 impl Bar {
     fn make(len: u64, template: &str, quiet: bool) -> Self {
@@ -27,7 +27,7 @@ impl Bar {
     }
 
     /// A bar for one render, fed with fractions in [0, 1] ([`Bar::set_fraction`]).
-    pub fn fraction(label: &str, quiet: bool) -> Self {
+    pub(crate) fn fraction(label: &str, quiet: bool) -> Self {
         let b = Bar::make(
             FRACTION_STEPS,
             "{prefix} {msg:9} [{bar:32}] {percent:>3}% {elapsed} (ETA {eta})",
@@ -38,7 +38,7 @@ impl Bar {
     }
 
     /// A bar of `n` items (frames), with rate ([`rate`]) and ETA.
-    pub fn items(n: u64, label: &str, quiet: bool) -> Self {
+    pub(crate) fn items(n: u64, label: &str, quiet: bool) -> Self {
         let b = Bar::make(
             n,
             "{prefix} [{bar:32}] {pos}/{len} {rate} {elapsed} (ETA {eta})",
@@ -49,7 +49,7 @@ impl Bar {
     }
 
     /// A spinner with the elapsed time, for work that reports no fraction (the study reports).
-    pub fn spinner(label: &str, quiet: bool) -> Self {
+    pub(crate) fn spinner(label: &str, quiet: bool) -> Self {
         if quiet || !std::io::stderr().is_terminal() {
             return Bar(None);
         }
@@ -69,7 +69,7 @@ impl Bar {
     }
 
     /// Sets a fraction bar to `f` (clamped to [0, 1]) with the stage name as its message.
-    pub fn set_fraction(&self, f: f64, stage: &str) {
+    pub(crate) fn set_fraction(&self, f: f64, stage: &str) {
         if let Some(b) = &self.0 {
             b.set_position((f.clamp(0.0, 1.0) * FRACTION_STEPS as f64) as u64);
             b.set_message(stage.to_string());
@@ -77,14 +77,14 @@ impl Bar {
     }
 
     /// Advances an item bar by one.
-    pub fn inc(&self) {
+    pub(crate) fn inc(&self) {
         if let Some(b) = &self.0 {
             b.inc(1);
         }
     }
 
     /// Prints `line` on stderr above the bar.
-    pub fn println(&self, line: &str) {
+    pub(crate) fn println(&self, line: &str) {
         match &self.0 {
             Some(b) => b.suspend(|| crate::say::line(line)),
             None => crate::say::line(line),
@@ -92,7 +92,7 @@ impl Bar {
     }
 
     /// Removes the bar from the terminal.
-    pub fn clear(&self) {
+    pub(crate) fn clear(&self) {
         if let Some(b) = &self.0 {
             b.finish_and_clear();
         }
@@ -102,7 +102,7 @@ impl Bar {
 /// A rate of items per second for the bar, with three significant digits (`7.10/s`, `24.0/s`,
 /// `312/s`), or the seconds per item when below one (`4.2 s each`); indicatif's own `per_sec`
 /// prints four decimals (`7.1024/s`).
-pub fn rate(per_sec: f64) -> String {
+pub(crate) fn rate(per_sec: f64) -> String {
     if !(per_sec.is_finite() && per_sec > 0.0) {
         return "-/s".into();
     }

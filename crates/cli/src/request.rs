@@ -16,10 +16,10 @@ use volsplat::{
 };
 
 /// The clap ids of the flags given on the command line.
-pub type Given = HashSet<String>;
+pub(crate) type Given = HashSet<String>;
 
 /// Parses "A,B,C" into three numbers, naming the flag on error.
-pub fn triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
+pub(crate) fn triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if parts.len() != 3 {
         bail!("{flag}: expected three comma-separated values, got `{s}`");
@@ -35,7 +35,7 @@ pub fn triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
         .map_err(|_| anyhow!("{flag}: expected three values"))
 }
 
-pub fn pair(s: &str, sep: char, flag: &str) -> Result<[f64; 2]> {
+pub(crate) fn pair(s: &str, sep: char, flag: &str) -> Result<[f64; 2]> {
     let (a, b) = s
         .split_once(sep)
         .ok_or_else(|| anyhow!("{flag}: expected A{sep}B, got `{s}`"))?;
@@ -48,7 +48,7 @@ pub fn pair(s: &str, sep: char, flag: &str) -> Result<[f64; 2]> {
 }
 
 /// Parses an image size: `WxH` (or `WXH`) or a single `N` for N×N, each in 1..=16384.
-pub fn parse_image_size(s: &str, flag: &str) -> Result<(usize, usize)> {
+pub(crate) fn parse_image_size(s: &str, flag: &str) -> Result<(usize, usize)> {
     let bad = || anyhow!("{flag}: expected WxH (e.g. 640x480) or N (N×N pixels), got `{s}`");
     let parse = |v: &str| v.trim().parse::<usize>().map_err(|_| bad());
     let (width, height) = match s.split_once(['x', 'X']) {
@@ -65,7 +65,7 @@ pub fn parse_image_size(s: &str, flag: &str) -> Result<(usize, usize)> {
 }
 
 /// A phantom grid `N`, `X,Y,Z` (or the checkerboard's `X,Y[,SQUARE]`) as numbers.
-pub fn parse_grid(s: &str, flag: &str) -> Result<Vec<usize>> {
+pub(crate) fn parse_grid(s: &str, flag: &str) -> Result<Vec<usize>> {
     s.split(',')
         .map(|p| {
             p.trim()
@@ -118,7 +118,7 @@ fn parse_plane(s: &str) -> Result<volsplat::PlaneSpec> {
 }
 
 /// The reader limits of `--limits` (the defaults where not given).
-pub fn reader_limits(a: &InputArgs) -> Result<volsplat::io::Limits> {
+pub(crate) fn reader_limits(a: &InputArgs) -> Result<volsplat::io::Limits> {
     let mut l = volsplat::io::Limits::default();
     let Some(text) = &a.limits else {
         return Ok(l);
@@ -150,7 +150,7 @@ pub fn reader_limits(a: &InputArgs) -> Result<volsplat::io::Limits> {
 }
 
 /// The volume source of the input flags.
-pub fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
+pub(crate) fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
     Ok(match &a.input {
         None => VolumeSource::Phantom {
             // The synthetic head is the one with a size to choose (and was the demo before the
@@ -220,7 +220,7 @@ fn parse_light(s: &str) -> Result<LightSpec> {
 /// Builds the request of `render` / `bench` from their flags; `base` is a `--scene` request.
 /// Notes for the user ([`build_request_noted`]) are printed on stderr.
 #[allow(clippy::too_many_arguments)]
-pub fn build_request(
+pub(crate) fn build_request(
     input: &InputArgs,
     view: &ViewArgs,
     o: &RenderOptions,
@@ -250,7 +250,7 @@ pub fn build_request(
 /// volume, camera, classification, clipping and cues, size and mode, output, renderer and
 /// quality, display.
 #[allow(clippy::too_many_arguments)]
-pub fn build_request_noted(
+pub(crate) fn build_request_noted(
     input: &InputArgs,
     view: &ViewArgs,
     o: &RenderOptions,
@@ -599,7 +599,7 @@ fn apply_output_flags(
 }
 
 /// A mode's name as `--mode` takes it.
-pub fn mode_name(mode: volsplat::Mode) -> String {
+pub(crate) fn mode_name(mode: volsplat::Mode) -> String {
     use clap::ValueEnum;
     mode.to_possible_value()
         .map(|v| v.get_name().to_string())

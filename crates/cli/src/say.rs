@@ -5,7 +5,7 @@
 use std::io::Write;
 
 /// Writes `text` and a newline to stderr, ignoring errors.
-pub fn line(text: &str) {
+pub(crate) fn line(text: &str) {
     let _ = writeln!(std::io::stderr().lock(), "{text}");
 }
 

@@ -20,13 +20,13 @@ const SIGNALS: &[i32] = &[signal_hook::consts::SIGINT, signal_hook::consts::SIGT
 
 /// Whether a stop was asked for, and by which signal.
 #[derive(Clone)]
-pub struct Stop {
+pub(crate) struct Stop {
     signal: Arc<AtomicUsize>,
 }
 
 impl Stop {
     /// Installs the handlers for the rest of the process.
-    pub fn install() -> Result<Stop> {
+    pub(crate) fn install() -> Result<Stop> {
         let signal = Arc::new(AtomicUsize::new(0));
         let seen = Arc::new(AtomicBool::new(false));
         for &sig in SIGNALS {
@@ -39,7 +39,7 @@ impl Stop {
     }
 
     /// The signal that asked to stop, if one did.
-    pub fn signal(&self) -> Option<i32> {
+    pub(crate) fn signal(&self) -> Option<i32> {
         match self.signal.load(Ordering::SeqCst) {
             0 => None,
             s => Some(s as i32),
@@ -47,7 +47,7 @@ impl Stop {
     }
 
     /// `Err(Interrupted)` if a signal asked to stop; `done` says what was left behind.
-    pub fn check(&self, done: &str) -> std::result::Result<(), Interrupted> {
+    pub(crate) fn check(&self, done: &str) -> std::result::Result<(), Interrupted> {
         match self.signal() {
             Some(signal) => Err(Interrupted {
                 signal,
@@ -60,7 +60,7 @@ impl Stop {
 
 /// A command stopped by a signal; the process exits with 128 + `signal`.
 #[derive(Debug)]
-pub struct Interrupted {
+pub(crate) struct Interrupted {
     /// The signal's number.
     pub signal: i32,
     /// What was stopped and what was left (or removed).
@@ -69,7 +69,7 @@ pub struct Interrupted {
 
 impl Interrupted {
     /// The exit status: 128 + the signal's number.
-    pub fn status(&self) -> u8 {
+    pub(crate) fn status(&self) -> u8 {
         (128 + self.signal).clamp(0, 255) as u8
     }
 }

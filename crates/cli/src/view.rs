@@ -19,7 +19,7 @@ use volsplat_view::{Viewer, ViewerSettings};
 
 /// Flags of `volsplat view`.
 #[derive(Debug, Args)]
-pub struct ViewCmdArgs {
+pub(crate) struct ViewCmdArgs {
     #[command(flatten)]
     pub input: InputArgs,
     #[command(flatten)]
@@ -45,7 +45,7 @@ pub struct ViewCmdArgs {
 /// How the server listens and paces frames (`view` and `bench-view`).
 #[derive(Debug, Args)]
 #[command(next_help_heading = "Server")]
-pub struct ServerArgs {
+pub(crate) struct ServerArgs {
     /// Address to listen on. Anything but loopback (127.0.0.1, ::1) needs --allow-remote;
     /// prefer an SSH tunnel (`ssh -L 8080:127.0.0.1:PORT host`).
     #[arg(long, default_value = "127.0.0.1")]
@@ -82,7 +82,7 @@ pub struct ServerArgs {
 
 /// `--preview-level`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum PreviewLevelArg {
+pub(crate) enum PreviewLevelArg {
     /// The volume itself.
     Full,
     /// The pyramid level that fits the preview's pixels.
@@ -159,7 +159,7 @@ fn viewer_settings(s: &ServerArgs, fit_view: bool) -> Result<ViewerSettings> {
     Ok(settings)
 }
 
-pub fn view_cmd(a: ViewCmdArgs) -> Result<()> {
+pub(crate) fn view_cmd(a: ViewCmdArgs) -> Result<()> {
     check_image_options(&a.image)?;
     let req = view_request(
         &a.input,
@@ -260,7 +260,7 @@ fn open_browser(url: &str) -> bool {
 
 /// Which recordings `bench-view` replays.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ReplayChoice {
+pub(crate) enum ReplayChoice {
     /// A 10-second orbit drag at 60 events a second.
     Orbit,
     /// A 5-second transfer-function drag at 60 events a second.
@@ -271,7 +271,7 @@ pub enum ReplayChoice {
 
 /// Flags of `volsplat bench-view`.
 #[derive(Debug, Args)]
-pub struct BenchViewArgs {
+pub(crate) struct BenchViewArgs {
     #[command(flatten)]
     pub input: InputArgs,
     #[command(flatten)]
@@ -295,7 +295,7 @@ pub struct BenchViewArgs {
 
 /// `bench-view`: starts the viewer in this process, replays recorded input over a WebSocket
 /// as the page would send it, and prints one JSON object (docs/BENCHMARKS.md).
-pub fn bench_view_cmd(a: BenchViewArgs) -> Result<()> {
+pub(crate) fn bench_view_cmd(a: BenchViewArgs) -> Result<()> {
     check_image_options(&a.image)?;
     let req = view_request(
         &a.input,

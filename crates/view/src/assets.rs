@@ -11,7 +11,7 @@ const SCRIPT: &str = include_str!("../assets/app.js");
 
 /// The page and the nonce its `<script>` carries (the Content-Security-Policy allows that
 /// script and no other).
-pub fn page() -> (Vec<u8>, String) {
+pub(crate) fn page() -> (Vec<u8>, String) {
     let mut bytes = [0u8; 16];
     // The operating system's random source does not fail on supported systems (the token
     // needed it already); should it, the time stands in: the nonce only has to differ from

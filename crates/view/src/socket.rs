@@ -14,17 +14,17 @@ use tungstenite::protocol::frame::Frame;
 use tungstenite::protocol::frame::coding::{Data, OpCode};
 
 /// How long a write may block on a client that does not read (then the tab closes).
-pub const WRITE_TIMEOUT: Duration = Duration::from_secs(20);
+pub(crate) const WRITE_TIMEOUT: Duration = Duration::from_secs(20);
 
 /// The writing end of a connection, shared by its threads.
 #[derive(Debug)]
-pub struct Outgoing {
+pub(crate) struct Outgoing {
     stream: Mutex<TcpStream>,
 }
 
 impl Outgoing {
     /// The writing end of `stream` (a clone of the socket), with a write timeout.
-    pub fn new(stream: TcpStream) -> std::io::Result<Outgoing> {
+    pub(crate) fn new(stream: TcpStream) -> std::io::Result<Outgoing> {
         stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
         Ok(Outgoing {
             stream: Mutex::new(stream),
@@ -32,7 +32,7 @@ impl Outgoing {
     }
 
     /// Writes `bytes` whole, under the lock.
-    pub fn write_all(&self, bytes: &[u8]) -> std::io::Result<()> {
+    pub(crate) fn write_all(&self, bytes: &[u8]) -> std::io::Result<()> {
         let mut s = self.stream.lock().unwrap_or_else(|e| e.into_inner());
         s.write_all(bytes)?;
         s.flush()
@@ -48,17 +48,17 @@ impl Outgoing {
     }
 
     /// Sends a text message.
-    pub fn text(&self, text: &str) -> std::io::Result<()> {
+    pub(crate) fn text(&self, text: &str) -> std::io::Result<()> {
         self.send(text.as_bytes().to_vec(), Data::Text)
     }
 
     /// Sends a binary message.
-    pub fn binary(&self, bytes: Vec<u8>) -> std::io::Result<()> {
+    pub(crate) fn binary(&self, bytes: Vec<u8>) -> std::io::Result<()> {
         self.send(bytes, Data::Binary)
     }
 
     /// Closes the socket both ways (wakes the reader).
-    pub fn shutdown(&self) {
+    pub(crate) fn shutdown(&self) {
         let s = self.stream.lock().unwrap_or_else(|e| e.into_inner());
         let _ = s.shutdown(std::net::Shutdown::Both);
     }
@@ -67,7 +67,7 @@ impl Outgoing {
 /// The stream tungstenite reads: the bytes already read with the request head first, then the
 /// socket; its writes go through the shared [`Outgoing`].
 #[derive(Debug)]
-pub struct SocketStream {
+pub(crate) struct SocketStream {
     prefix: Vec<u8>,
     at: usize,
     read: TcpStream,
@@ -76,7 +76,7 @@ pub struct SocketStream {
 
 impl SocketStream {
     /// A stream that first yields `prefix` (the request head and anything after it).
-    pub fn new(prefix: Vec<u8>, read: TcpStream, out: std::sync::Arc<Outgoing>) -> Self {
+    pub(crate) fn new(prefix: Vec<u8>, read: TcpStream, out: std::sync::Arc<Outgoing>) -> Self {
         SocketStream {
             prefix,
             at: 0,

@@ -22,7 +22,7 @@ use volsplat::session::{Job, JobKind, JobOutcome, Session};
 use volsplat::{EngineError, Progress, RenderRequest};
 
 /// Bins of the histogram sent to the page.
-pub const HISTOGRAM_BINS: usize = 256;
+pub(crate) const HISTOGRAM_BINS: usize = 256;
 
 /// Work the reader hands to the worker besides frames.
 #[derive(Debug)]

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs the `volsplat` binary of this build with `args` and waits for it.
-pub fn volsplat(args: &[&str]) -> Output {
+pub(crate) fn volsplat(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_volsplat"))
         .args(args)
         .output()
@@ -15,17 +15,17 @@ pub fn volsplat(args: &[&str]) -> Output {
 }
 
 /// What a run printed on stderr (lossy UTF-8).
-pub fn stderr(o: &Output) -> String {
+pub(crate) fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// What a run printed on stdout (lossy UTF-8).
-pub fn stdout(o: &Output) -> String {
+pub(crate) fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 /// The float32 values of a `.npy` file `volsplat` wrote (little-endian, C order), in order.
-pub fn npy_f32(path: &Path) -> Vec<f32> {
+pub(crate) fn npy_f32(path: &Path) -> Vec<f32> {
     let bytes = std::fs::read(path).unwrap();
     let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
     bytes[10 + header_len..]

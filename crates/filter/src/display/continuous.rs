@@ -74,7 +74,12 @@ impl<'a> NodeGrids<'a> {
     /// Node grids of `map` for a volume whose box of voxel centres is `[0, hi]` (index space);
     /// `level0`: whether `map`'s level-0 cells hold the data exactly (a plain map of trilinear
     /// data), so that level 0 may use a grid as well.
-    pub fn new(map: &'a dyn NilSource, proj: &'a Projector, hi: [f64; 3], level0: bool) -> Self {
+    pub(super) fn new(
+        map: &'a dyn NilSource,
+        proj: &'a Projector,
+        hi: [f64; 3],
+        level0: bool,
+    ) -> Self {
         let levels = (0..=map.gamma_max().max(0))
             .map(|_| OnceLock::new())
             .collect();

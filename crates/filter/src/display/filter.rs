@@ -30,7 +30,7 @@ pub(crate) struct Sigma {
 
 impl Sigma {
     #[inline]
-    pub fn at(&self, t: f64) -> f64 {
+    pub(crate) fn at(&self, t: f64) -> f64 {
         (self.a + self.b * t).max(1e-12)
     }
 }
@@ -68,7 +68,7 @@ pub(crate) enum PixelFilter {
 impl PixelFilter {
     /// Filter weight at a world point (not masked by the volume box).
     #[inline]
-    pub fn weight(&self, p: DVec3) -> f64 {
+    pub(crate) fn weight(&self, p: DVec3) -> f64 {
         match *self {
             PixelFilter::Linearised { ray, sigma, tau } => {
                 let rel = p - ray.o;
@@ -123,7 +123,7 @@ impl PixelFilter {
     /// The narrowest cross-section of the filter inside the volume's box, world units: the
     /// width `2·3σ` of the truncated screen Gaussian at the ray's entry (σ grows with depth
     /// under perspective), or of the ball.
-    pub fn min_width(&self) -> f64 {
+    pub(crate) fn min_width(&self) -> f64 {
         match *self {
             PixelFilter::Linearised { ray, sigma, .. }
             | PixelFilter::LineIntegral { ray, sigma }
@@ -134,7 +134,7 @@ impl PixelFilter {
 
     /// Weight at an index-space point.
     #[inline]
-    pub fn weight_index(&self, vol: &DisplayVolume, p_index: DVec3) -> f64 {
+    pub(crate) fn weight_index(&self, vol: &DisplayVolume, p_index: DVec3) -> f64 {
         self.weight(vol.world_from_index(p_index))
     }
 }

@@ -172,7 +172,7 @@ fn clip(q0: DVec3, dq: DVec3, lo: DVec3, hi: DVec3, mut t0: f64, mut t1: f64) ->
 impl LineFilter {
     /// Rebuilds `self` as the lines of `filter` with `cross` nodes (pairs `(a, w_a)` over
     /// `[−3, 3]`) per axis of the cross-section.
-    pub fn set(&mut self, vol: &DisplayVolume, filter: &PixelFilter, cross: &[(f64, f64)]) {
+    pub(super) fn set(&mut self, vol: &DisplayVolume, filter: &PixelFilter, cross: &[(f64, f64)]) {
         self.lines.clear();
         // World frame: p(t) = p0 + t·d + (a·e1 + b·e2)·(s0 + s1·t), weight w_ab·jac.
         let (p0, d, e1, e2, s0, s1, jac, profile) = match *filter {
@@ -256,7 +256,7 @@ impl LineFilter {
     /// filter's support, so the hierarchy root must enclose them).
     /// Clamped into the box: rounding in the clip must not make a coordinate negative (no
     /// dyadic cell holds both signs of a coordinate).
-    pub fn endpoints(&self, out: &mut Vec<DVec3>) {
+    pub(super) fn endpoints(&self, out: &mut Vec<DVec3>) {
         let hi = self.hi;
         for l in &self.lines {
             out.push((l.q0 + l.dq * l.t0).clamp(DVec3::ZERO, hi));
@@ -265,7 +265,7 @@ impl LineFilter {
     }
 
     /// Whether any line of the filter crosses `cell`.
-    pub fn hits(&self, cell: &Cell) -> bool {
+    pub(super) fn hits(&self, cell: &Cell) -> bool {
         let h = cell.size();
         let lo = DVec3::new(
             cell.index[0] as f64,
@@ -284,7 +284,7 @@ impl LineFilter {
 
     /// The masked filter at an index-space point (the thesis's control points, decision 0007
     /// keeps them for comparison): `filter.weight` inside the box of voxel centres, else 0.
-    pub fn masked(vol: &DisplayVolume, filter: &PixelFilter, p_index: DVec3) -> f64 {
+    pub(super) fn masked(vol: &DisplayVolume, filter: &PixelFilter, p_index: DVec3) -> f64 {
         if vol.inside(p_index) {
             filter.weight_index(vol, p_index)
         } else {
@@ -297,7 +297,7 @@ impl LineFilter {
     /// Direct evaluation (the reference): `Σ_lines w ∫_{t0}^{t1} profile(t)·ρ(q(t)) dt / K`,
     /// composite 2-point Gauss–Legendre along each clipped line with panels of at most `step`
     /// world units (and of the profile's scale). `None` if the filter misses the box.
-    pub fn direct(&self, vol: &DisplayVolume, step: f64) -> Option<f64> {
+    pub(super) fn direct(&self, vol: &DisplayVolume, step: f64) -> Option<f64> {
         let profile = self.profile?;
         if self.lines.is_empty() {
             return None;
@@ -334,7 +334,7 @@ pub(crate) struct Projector {
 }
 
 impl Projector {
-    pub fn new(basis: PatchBasis) -> Self {
+    pub(super) fn new(basis: PatchBasis) -> Self {
         let m = basis.order();
         // Gram matrix by 5-point Gauss–Legendre on [0, 1] (exact to degree 9 ≥ 2(M − 1)).
         let (x, w) = gauss_legendre(5);
@@ -383,7 +383,7 @@ impl Projector {
 
     /// Moments `m_ijk = ∫_cell F·B_ijk` (world volume; `M³`, index `(k·M + j)·M + i`) of the
     /// masked filter on `cell`. Returns false if no line meets the cell.
-    pub fn moments(&self, filter: &LineFilter, cell: &Cell, mom: &mut [f64; 64]) -> bool {
+    pub(super) fn moments(&self, filter: &LineFilter, cell: &Cell, mom: &mut [f64; 64]) -> bool {
         match self.basis.order() {
             1 => self.moments_m::<1>(filter, cell, mom),
             2 => self.moments_m::<2>(filter, cell, mom),
@@ -466,7 +466,12 @@ impl Projector {
     /// Control points of `filter` on `cell` into `b` (`M³`, index `(k·M + j)·M + i`): the L²
     /// projection of the masked filter, `b = (G⁻¹ ⊗ G⁻¹ ⊗ G⁻¹) m`. Returns false if no line
     /// meets the cell.
-    pub fn control_points(&self, filter: &LineFilter, cell: &Cell, b: &mut [f64; 64]) -> bool {
+    pub(super) fn control_points(
+        &self,
+        filter: &LineFilter,
+        cell: &Cell,
+        b: &mut [f64; 64],
+    ) -> bool {
         let mut mom = [0.0; 64];
         if !self.moments(filter, cell, &mut mom) {
             return false;
@@ -481,7 +486,7 @@ impl Projector {
     /// time; `x` is overwritten. Applied to a filter's moments it gives its control points;
     /// applied to a NIL cell `C` it gives the Lagrange coefficients of the cell's L²
     /// projection of the data, i.e. that projection's values at the nodes.
-    pub fn apply_ginv(&self, x: &mut [f64], out: &mut [f64]) {
+    pub(super) fn apply_ginv(&self, x: &mut [f64], out: &mut [f64]) {
         let m = self.basis.order();
         let g = &self.ginv;
         let mut tmp = [0.0; 64];

@@ -233,7 +233,7 @@ pub(crate) struct Rays {
 }
 
 impl Rays {
-    pub fn ray(&self, vol: &DisplayVolume, x: f64, y: f64) -> Option<PixelRay> {
+    pub(crate) fn ray(&self, vol: &DisplayVolume, x: f64, y: f64) -> Option<PixelRay> {
         let (o, d) = self.proj.ray(x, y);
         let (ta, tb) = vol.clip(o, d)?;
         let f = self.proj.frame();
@@ -264,7 +264,7 @@ impl Rays {
 
     /// World size of one pixel at parameter `t` along `ray` (constant for orthographic).
     #[inline]
-    pub fn pixel_size(&self, ray: &PixelRay, t: f64) -> f64 {
+    pub(crate) fn pixel_size(&self, ray: &PixelRay, t: f64) -> f64 {
         self.proj.pixel_size_at((t * ray.cos).max(1e-9))
     }
 }
