@@ -260,7 +260,8 @@ impl<T: Scalar> Ctx<'_, T> {
             for (r, live_r) in live.iter_mut().enumerate() {
                 let y = y0 + r;
                 let o = r * w;
-                let Some(lw) = shrink_live_alpha(live_r, &band.a[o..o + w], self.cutoff) else {
+                let alpha = &band.a[o..o + w];
+                let Some(lw) = shrink_live(live_r, self.cutoff, |x| alpha[x]) else {
                     continue;
                 };
                 any_live = true;
@@ -579,7 +580,7 @@ impl<T: Scalar> Ctx<'_, T> {
                 let walk = self.walk(y, d);
                 let mut span = self.clip_span(y, d, walk.span);
                 let row_acc = &mut acc[r * w..(r + 1) * w];
-                let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
+                let Some(lw) = shrink_live(&mut live[r], self.cutoff, |x| row_acc[x][3]) else {
                     continue;
                 };
                 any_live = true;
@@ -646,13 +647,18 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 }
 
-/// Narrows a row's window of live pixels (those below the opacity `cutoff`) from both ends;
-/// `None` once every pixel of the row is opaque.
-fn shrink_live(lw: &mut (i64, i64), row: &[Rgba], cutoff: f32) -> Option<(i64, i64)> {
-    while lw.0 <= lw.1 && row[lw.0 as usize][3] >= cutoff {
+/// Narrows a row's window of live pixels (those whose opacity `alpha(x)` is below `cutoff`)
+/// from both ends; `None` once every pixel of the row is opaque.
+#[inline]
+fn shrink_live(
+    lw: &mut (i64, i64),
+    cutoff: f32,
+    alpha: impl Fn(usize) -> f32,
+) -> Option<(i64, i64)> {
+    while lw.0 <= lw.1 && alpha(lw.0 as usize) >= cutoff {
         lw.0 += 1;
     }
-    while lw.1 >= lw.0 && row[lw.1 as usize][3] >= cutoff {
+    while lw.1 >= lw.0 && alpha(lw.1 as usize) >= cutoff {
         lw.1 -= 1;
     }
     (lw.0 <= lw.1).then_some(*lw)
@@ -711,17 +717,6 @@ fn coarse_to_fine(n: usize) -> Vec<usize> {
         order.extend((s..n).step_by(2 * s));
     }
     order
-}
-
-/// [`shrink_live`] on a row's opacity channel.
-fn shrink_live_alpha(lw: &mut (i64, i64), alpha: &[f32], cutoff: f32) -> Option<(i64, i64)> {
-    while lw.0 <= lw.1 && alpha[lw.0 as usize] >= cutoff {
-        lw.0 += 1;
-    }
-    while lw.1 >= lw.0 && alpha[lw.1 as usize] >= cutoff {
-        lw.1 -= 1;
-    }
-    (lw.0 <= lw.1).then_some(*lw)
 }
 
 #[cfg(test)]

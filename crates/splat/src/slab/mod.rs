@@ -268,8 +268,8 @@ pub fn render_slabs<T: Scalar>(
     };
     let risk = {
         let (alphas, scale): (Vec<f32>, f32) = match (&post, &shade_table) {
-            (Some(t), _) => (t.values.iter().map(|v| v[3]).collect(), t.scale),
-            (None, Some(t)) => (t.rows.iter().map(|r| r[0]).collect(), t.scale),
+            (Some(t), _) => (t.values.iter().map(|v| v[3]).collect(), t.axis.scale),
+            (None, Some(t)) => (t.rows.iter().map(|r| r[0]).collect(), t.axis.scale),
             _ => (Vec::new(), 0.0),
         };
         let (lo, hi) = bricks
@@ -290,9 +290,9 @@ pub fn render_slabs<T: Scalar>(
     // `BrickGrid::active_in_table`); pre-integrated segments reach into the brick before, and
     // the per-sample classifier resamples the opacity table, so they keep the slack test.
     let table_active = match (&post, &shade_table) {
-        (Some(t), _) if !preint => Some(bricks.active_in_table(&t.nonzero(), |x| t.pos(x))),
+        (Some(t), _) if !preint => Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x))),
         (None, Some(t)) if !preint || voxel_shading.is_none() => {
-            Some(bricks.active_in_table(&t.nonzero(), |x| t.pos(x)))
+            Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x)))
         }
         _ => None,
     };

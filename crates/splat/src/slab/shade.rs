@@ -164,11 +164,33 @@ pub(super) fn premultiplied(col: [f32; 3], a: f32) -> Rgba {
 }
 
 impl<T: Scalar> Ctx<'_, T> {
+    /// The voxels whose difference is the derivative along axis `a` (of two voxels or more) at
+    /// the voxel with linear index `at`, index `p` along `a`: `(lower, upper, span)`, the
+    /// derivative being `(ρ(upper) − ρ(lower)) / span` per index step. Central (`p ± 1`, span 2)
+    /// inside the grid, one-sided on its faces (`p, p + 1` at `p = 0`, `p − 1, p` at `p = n − 1`;
+    /// span 1). The stencil of both [`Ctx::gradient_at`] and [`Ctx::gradient_lerp`].
+    #[inline(always)]
+    fn difference_ends(&self, at: usize, p: usize, a: usize) -> (usize, usize, f32) {
+        let s = self.stride[a];
+        if p == 0 {
+            (at, at + s, 1.0)
+        } else if p == self.dims[a] - 1 {
+            (at - s, at, 1.0)
+        } else {
+            (at - s, at + s, 2.0)
+        }
+    }
+
     /// The world gradient of the reconstruction at pixel `x` of a row (data units per world
     /// unit): the tent kernel's interpolation of the voxels' central differences (one-sided on
     /// the faces of the grid), i.e. gradient splats gathered at the sample, which is what VTK's
     /// ray caster and the reference integrator shade with. Computed only for samples with
-    /// opacity.
+    /// opacity, by the per-sample classifier ([`Ctx::band_plain`]). Its corner weights are the
+    /// products `Π (f or 1 − f)`, not [`Ctx::gradient_lerp`]'s nested interpolations: the two
+    /// agree to rounding, not to the bit, so each keeps its own arithmetic (the images of the
+    /// per-sample classifier were recorded with this one).
+    ///
+    /// [`Ctx::band_plain`]: super::march::Ctx::band_plain
     pub(super) fn gradient_at(&self, walk: &Walk, x: usize) -> Vec3 {
         let (c, f) = self.cell_f32(walk, x);
         let mut g = [0.0f32; 3];
@@ -185,17 +207,10 @@ impl<T: Scalar> Ctx<'_, T> {
             }
             let here = p[0] + p[1] * self.stride[1] + p[2] * self.stride[2];
             for a in 0..3 {
-                let n = self.dims[a];
-                if n < 2 {
+                if self.dims[a] < 2 {
                     continue;
                 }
-                let (lo, hi, span) = if p[a] == 0 {
-                    (here, here + self.stride[a], 1.0)
-                } else if p[a] == n - 1 {
-                    (here - self.stride[a], here, 1.0)
-                } else {
-                    (here - self.stride[a], here + self.stride[a], 2.0)
-                };
+                let (lo, hi, span) = self.difference_ends(here, p[a], a);
                 g[a] += w * (self.data[hi].to_f32() - self.data[lo].to_f32()) / span;
             }
         }
@@ -217,22 +232,14 @@ impl<T: Scalar> Ctx<'_, T> {
         let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
         let mut g = [0.0f32; 3];
         for (a, out) in g.iter_mut().enumerate() {
-            let (n, s) = (self.dims[a], self.stride[a]);
-            if n < 2 {
+            if self.dims[a] < 2 {
                 continue;
             }
             let mut d = [0.0f32; 8];
             for (k, (dk, &o)) in d.iter_mut().zip(&offs).enumerate() {
-                let p = c[a] + (k >> a & 1);
-                let at = base + o;
-                let v = |q: usize| self.data[q].to_f32();
-                *dk = if p == 0 {
-                    (v(at + s) - v(at)) * 1.0
-                } else if p == n - 1 {
-                    (v(at) - v(at - s)) * 1.0
-                } else {
-                    (v(at + s) - v(at - s)) * 0.5
-                };
+                let (lo, hi, span) = self.difference_ends(base + o, c[a] + (k >> a & 1), a);
+                // `1/span` is ½ or 1, exact: the kernel's `· ½` (`ShadeSource`).
+                *dk = (self.data[hi].to_f32() - self.data[lo].to_f32()) * (1.0 / span);
             }
             let c00 = lerp(d[0], d[1], f[0]);
             let c10 = lerp(d[2], d[3], f[0]);

@@ -26,10 +26,54 @@ pub(super) struct PostTable {
     /// trapezoidal, summed in f64), and the same paired as `pairs`.
     integ: Vec<Rgba>,
     pub(super) integ_pairs: Vec<[f32; 8]>,
+    /// The densities of the entries.
+    pub(super) axis: TableAxis,
+    pub(super) values: Vec<Rgba>,
+}
+
+/// The density axis of a table of entries spaced evenly from density `lo`: `scale` entries
+/// per data unit, `last` the last entry's index (a table of one entry: `scale = last = 0`).
+/// Shared by [`PostTable`] and [`ShadeTable`], and read by the AVX2 kernels' `table_pos8`.
+#[derive(Clone, Copy)]
+pub(super) struct TableAxis {
     pub(super) lo: f32,
     pub(super) scale: f32,
     pub(super) last: f32,
-    pub(super) values: Vec<Rgba>,
+}
+
+impl TableAxis {
+    /// The axis of a table of `n` entries spanning `[lo, hi]`.
+    fn new(lo: f32, hi: f32, n: usize) -> Self {
+        let scale = if n > 1 {
+            (n - 1) as f32 / (hi - lo)
+        } else {
+            0.0
+        };
+        TableAxis {
+            lo,
+            scale,
+            last: (n - 1) as f32,
+        }
+    }
+
+    /// The table position of density `x`: `min(max((x − lo)·scale, 0), last)` (NaN → 0).
+    #[inline(always)]
+    pub(super) fn pos(&self, x: f32) -> f32 {
+        ((x - self.lo) * self.scale).max(0.0).min(self.last)
+    }
+}
+
+/// Linear interpolation in a table of `N`-channel entries at table position `t` (in
+/// `[0, last]`): `row_i + f·(row_{i+1} − row_i)` per channel, the last entry standing for the
+/// one after it (the tables whose last row is repeated never need that).
+#[inline(always)]
+fn lerp_rows<const N: usize>(rows: &[[f32; N]], t: f32) -> [f32; N] {
+    // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
+    let i = t as i32 as usize;
+    let f = t - i as f32;
+    let a = rows[i];
+    let b = rows[(i + 1).min(rows.len() - 1)];
+    std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
 }
 
 /// [`Preintegrate::Auto`] pre-integrates where [`ring_risk`] exceeds this: where the steepest
@@ -181,7 +225,6 @@ impl PostTable {
                 })
                 .collect()
         };
-        let (scale, last) = table_steps(lo, hi, n);
         let integ = integral_rows(&persp, 3);
         Some(PostTable {
             pairs: paired(&values),
@@ -189,9 +232,7 @@ impl PostTable {
             integ_pairs: paired(&integ),
             integ,
             persp,
-            lo,
-            scale,
-            last,
+            axis: TableAxis::new(lo, hi, n),
             values,
         })
     }
@@ -216,13 +257,7 @@ impl PostTable {
     /// Linear interpolation in `values` (either table) at density `x`.
     #[inline(always)]
     pub(super) fn lookup_in(&self, values: &[Rgba], x: f32) -> Rgba {
-        Self::at(values, self.pos(x))
-    }
-
-    /// The table position of density `x`: `min(max((x − lo)·scale, 0), last)` (NaN → 0).
-    #[inline(always)]
-    pub(super) fn pos(&self, x: f32) -> f32 {
-        ((x - self.lo) * self.scale).max(0.0).min(self.last)
+        lerp_rows(values, self.axis.pos(x))
     }
 
     /// The pre-integrated classification of the segment of a ray whose density goes linearly
@@ -237,24 +272,8 @@ impl PostTable {
     /// [`Ctx::post_seg_src`]: super::march::Ctx::post_seg_src
     #[inline(always)]
     pub(super) fn segment(&self, u: f32, v: f32) -> Rgba {
-        let at = |integ: bool, t| Self::at(if integ { &self.integ } else { &self.persp }, t);
-        segment_average::<4, 3, 3>(self.pos(u), self.pos(v), at)
-    }
-
-    /// Linear interpolation in `values` at table position `t` (in `[0, last]`).
-    #[inline(always)]
-    fn at(values: &[Rgba], t: f32) -> Rgba {
-        // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
-        let i = t as i32 as usize;
-        let f = t - i as f32;
-        let a = values[i];
-        let b = values[(i + 1).min(values.len() - 1)];
-        [
-            a[0] + f * (b[0] - a[0]),
-            a[1] + f * (b[1] - a[1]),
-            a[2] + f * (b[2] - a[2]),
-            a[3] + f * (b[3] - a[3]),
-        ]
+        let at = |integ: bool, t| lerp_rows(if integ { &self.integ } else { &self.persp }, t);
+        segment_average::<4, 3, 3>(self.axis.pos(u), self.axis.pos(v), at)
     }
 }
 
@@ -265,9 +284,8 @@ impl PostTable {
 ///
 /// [`shaded_src`]: super::shade::shaded_src
 pub(crate) struct ShadeTable {
-    pub(super) lo: f32,
-    pub(super) scale: f32,
-    pub(super) last: f32,
+    /// The densities of the entries of `rows` and `integ`.
+    pub(super) axis: TableAxis,
     /// `[α, e_r, e_g, e_b, d_r, d_g, d_b, log2(1 − α)]` per density (α step-corrected, `e` the
     /// emission `classify` adds, `d` the reflection colour; `log2(1 − α)` is −126 for `α = 1`),
     /// with the last entry repeated so that entry `i + 1` exists for every `i ≤ last`.
@@ -343,11 +361,8 @@ impl ShadeTable {
             .map(|i| (i as f64 / Self::SPEC as f64).powf(p) as f32)
             .collect();
         spec_pow.push(spec_pow[Self::SPEC]);
-        let (scale, last) = table_steps(lo, hi, n);
         Some(ShadeTable {
-            lo,
-            scale,
-            last,
+            axis: TableAxis::new(lo, hi, n),
             rows,
             integ,
             spec_pow,
@@ -377,23 +392,7 @@ impl ShadeTable {
     /// The entry at density `x`, linearly interpolated.
     #[inline(always)]
     pub(super) fn entry(&self, x: f32) -> [f32; 8] {
-        Self::at(&self.rows, self.pos(x))
-    }
-
-    /// The table position of density `x` (as [`PostTable::pos`]).
-    #[inline(always)]
-    pub(super) fn pos(&self, x: f32) -> f32 {
-        ((x - self.lo) * self.scale).max(0.0).min(self.last)
-    }
-
-    /// Row `t` of `rows` (a position in `[0, last]`), linearly interpolated.
-    #[inline(always)]
-    fn at(rows: &[[f32; 8]], t: f32) -> [f32; 8] {
-        // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
-        let i = t as i32 as usize;
-        let f = t - i as f32;
-        let (a, b) = (rows[i], rows[i + 1]);
-        std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
+        lerp_rows(&self.rows, self.axis.pos(x))
     }
 
     /// The pre-integrated entry of the segment from density `u` (the previous plane) to `v`
@@ -404,8 +403,8 @@ impl ShadeTable {
     /// [`shade_opacity`]: super::shade::shade_opacity
     #[inline(always)]
     pub(super) fn segment_entry(&self, u: f32, v: f32) -> [f32; 8] {
-        let at = |integ: bool, t| Self::at(if integ { &self.integ } else { &self.rows }, t);
-        segment_average::<8, 0, 7>(self.pos(u), self.pos(v), at)
+        let at = |integ: bool, t| lerp_rows(if integ { &self.integ } else { &self.rows }, t);
+        segment_average::<8, 0, 7>(self.axis.pos(u), self.axis.pos(v), at)
     }
 
     /// The lights of the frame.
@@ -427,17 +426,6 @@ impl ShadeTable {
         let (a, b) = (self.spec_pow[i], self.spec_pow[i + 1]);
         a + f * (b - a)
     }
-}
-
-/// Entries per data unit and the last entry's index of a table of `n` entries spanning
-/// `[lo, hi]` (a table of one entry: `(0, 0)`).
-fn table_steps(lo: f32, hi: f32, n: usize) -> (f32, f32) {
-    let scale = if n > 1 {
-        (n - 1) as f32 / (hi - lo)
-    } else {
-        0.0
-    };
-    (scale, (n - 1) as f32)
 }
 
 /// The density range `[lo, hi]` that the density-indexed tables cover together.
@@ -463,7 +451,6 @@ mod tests {
     /// A post table over `[0, n − 1]` (one entry per data unit) from `persp` entries.
     fn post_table(persp: Vec<Rgba>) -> PostTable {
         let n = persp.len();
-        let (scale, last) = table_steps(0.0, (n - 1) as f32, n);
         let integ = integral_rows(&persp, 3);
         PostTable {
             pairs: Vec::new(),
@@ -472,9 +459,7 @@ mod tests {
             values: Vec::new(),
             persp,
             integ,
-            lo: 0.0,
-            scale,
-            last,
+            axis: TableAxis::new(0.0, (n - 1) as f32, n),
         }
     }
 

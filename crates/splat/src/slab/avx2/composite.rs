@@ -4,7 +4,7 @@ use super::sampler::{Cells8, Sampler8};
 use super::shade::{ShadeSource, VoxelShadeSource};
 use super::{exp2_neg8, first_lanes, interp8, lanes, table_pos8};
 use crate::slab::march::{Counters, Ctx, Post, RowCtx};
-use crate::slab::tables::{PostTable, SEGMENT_MIN_ENTRIES};
+use crate::slab::tables::{PostTable, SEGMENT_MIN_ENTRIES, TableAxis};
 use crate::slab::view::Walk;
 use volsplat_core::Scalar;
 
@@ -382,7 +382,7 @@ impl<T: Scalar> Source8<T> for PostSource<'_, T> {
             ];
             return (src, ok);
         }
-        let pos = table_pos8(rho, t.lo, t.scale, t.last);
+        let pos = table_pos8(rho, t.axis);
         let corrected_bits = _mm256_movemask_ps(corrected);
         let mut src = [zero; 4];
         let mut contributes = _mm256_setzero_ps();
@@ -440,7 +440,7 @@ fn segment_split8(
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
 pub(super) unsafe fn segment_average8<const N: usize, const W: usize, const L: usize>(
-    (lo, scale, last): (f32, f32, f32),
+    axis: TableAxis,
     u: std::arch::x86_64::__m256,
     v: std::arch::x86_64::__m256,
     mid_rows: &[[f32; 8]],
@@ -449,8 +449,8 @@ pub(super) unsafe fn segment_average8<const N: usize, const W: usize, const L: u
 ) -> [std::arch::x86_64::__m256; N] {
     use std::arch::x86_64::*;
     let (w, l) = (W, L);
-    let tu = table_pos8(u, lo, scale, last);
-    let tv = table_pos8(v, lo, scale, last);
+    let tu = table_pos8(u, axis);
+    let tv = table_pos8(v, axis);
     let (short, mid, dt) = segment_split8(tu, tv);
     let bits = _mm256_movemask_ps(short);
     let zero = _mm256_setzero_ps();
@@ -491,14 +491,5 @@ unsafe fn post_segment8(
     v: std::arch::x86_64::__m256,
 ) -> [std::arch::x86_64::__m256; 4] {
     // SAFETY: the paired tables have a row per position in [0, last].
-    unsafe {
-        segment_average8::<4, 3, 3>(
-            (t.lo, t.scale, t.last),
-            u,
-            v,
-            &t.persp_pairs,
-            &t.integ_pairs,
-            true,
-        )
-    }
+    unsafe { segment_average8::<4, 3, 3>(t.axis, u, v, &t.persp_pairs, &t.integ_pairs, true) }
 }

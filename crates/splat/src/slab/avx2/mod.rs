@@ -12,6 +12,7 @@ pub(super) mod shade;
 pub(super) use composite::composite_run_avx2;
 
 use super::march::{Counters, Ctx};
+use super::tables::TableAxis;
 use super::view::Walk;
 use sampler::Sampler8;
 use volsplat_core::Scalar;
@@ -257,25 +258,20 @@ fn splat3(v: [f32; 3]) -> [std::arch::x86_64::__m256; 3] {
     ]
 }
 
-/// A table position on eight lanes, `min(max((ρ − lo)·scale, 0), last)` (NaN → 0), as the
-/// scalar lookups compute it ([`PostTable::lookup_in`], [`ShadeTable::entry`]).
-///
-/// [`PostTable::lookup_in`]: crate::slab::tables::PostTable::lookup_in
-/// [`ShadeTable::entry`]: crate::slab::tables::ShadeTable::entry
+/// A table position on eight lanes, `min(max((ρ − lo)·scale, 0), last)` (NaN → 0): lane by
+/// lane the operations of its scalar twin [`TableAxis::pos`].
 #[inline]
 #[target_feature(enable = "avx2")]
-fn table_pos8(
-    rho: std::arch::x86_64::__m256,
-    lo: f32,
-    scale: f32,
-    last: f32,
-) -> std::arch::x86_64::__m256 {
+fn table_pos8(rho: std::arch::x86_64::__m256, axis: TableAxis) -> std::arch::x86_64::__m256 {
     use std::arch::x86_64::*;
     let t = _mm256_mul_ps(
-        _mm256_sub_ps(rho, _mm256_set1_ps(lo)),
-        _mm256_set1_ps(scale),
+        _mm256_sub_ps(rho, _mm256_set1_ps(axis.lo)),
+        _mm256_set1_ps(axis.scale),
     );
-    _mm256_min_ps(_mm256_max_ps(t, _mm256_setzero_ps()), _mm256_set1_ps(last))
+    _mm256_min_ps(
+        _mm256_max_ps(t, _mm256_setzero_ps()),
+        _mm256_set1_ps(axis.last),
+    )
 }
 
 /// `p + f·(q − p)` on eight lanes ([`lerp`]).
