@@ -1,11 +1,140 @@
 //! The classification tables of density-indexed transfer functions: unshaded
-//! ([`PostTable`]), shaded ([`ShadeTable`]), their pre-integrated segments, and the ringing
-//! risk that decides pre-integration ([`ring_risk`]).
+//! ([`PostTable`]), shaded ([`ShadeTable`]), their pre-integrated segments, the ringing
+//! risk that decides pre-integration ([`ring_risk`]), and the tables of one frame together
+//! ([`FrameTables`]) with the bricks they leave empty.
 
 use super::math::{log2_unit, max_ps, min_ps};
+use crate::bricks::BrickGrid;
+use crate::error::Result;
+use crate::normals::{NormalField, ShadeAt, VoxelShading};
+use crate::render::{Preintegrate, RenderMode, RenderSettings};
 use volsplat_core::glam::Vec3;
 use volsplat_core::image::Rgba;
-use volsplat_core::{CrioTables, FrameClassifier, SampleInput};
+use volsplat_core::{CrioTables, FrameClassifier, SampleInput, Scalar, Volume};
+
+/// How one frame classifies its samples (decisions 0016, 0019, 0020): through a density table
+/// where the transfer function depends on the density alone (unshaded, [`PostTable`]; shaded,
+/// [`ShadeTable`], at the samples or at the voxels), through the per-sample classifier
+/// otherwise (both tables `None`); and whether the segments between planes are pre-integrated.
+pub(super) struct FrameTables<'a> {
+    /// Composite whose lights need the gradient.
+    pub(super) shade: bool,
+    /// Unshaded composite classified by density.
+    pub(super) post: Option<PostTable>,
+    /// Shaded composite classified by density.
+    pub(super) shaded: Option<ShadeTable>,
+    /// With `shaded`, shaded at the voxels ([`ShadeAt::Voxels`]): the frame's lights applied
+    /// to every direction code, and the voxels' codes (empty otherwise).
+    pub(super) voxel: Option<VoxelShading>,
+    pub(super) codes: &'a [u16],
+    /// Per index axis: the world direction of that axis divided by its spacing.
+    pub(super) grad_to_world: [Vec3; 3],
+    /// [`ring_risk`] of the density table (0 without one).
+    pub(super) risk: f32,
+    /// Pre-integrate the segments between planes ([`RenderSettings::preintegrate`], `auto`
+    /// where `risk` exceeds [`RING_RISK`]).
+    pub(super) preint: bool,
+}
+
+impl<'a> FrameTables<'a> {
+    /// The tables of a frame of `volume` classified by `classifier` (made for the frame's
+    /// slab thickness) under `settings`. The voxels' direction codes come from `bricks` where
+    /// it keeps them across frames, else are built into `owned_normals`; an error where they
+    /// cannot be allocated.
+    pub(super) fn build<T: Scalar>(
+        volume: &Volume<T>,
+        tables: &CrioTables,
+        classifier: &FrameClassifier,
+        settings: &RenderSettings,
+        bricks: &'a BrickGrid,
+        owned_normals: &'a mut Option<NormalField>,
+    ) -> Result<Self> {
+        let grid = volume.grid();
+        let composite = settings.mode == RenderMode::Composite;
+        let shade = composite && classifier.needs_gradient;
+        let post = (composite && !shade)
+            .then(|| PostTable::new(tables, classifier))
+            .flatten();
+        let grad_to_world = [0, 1, 2].map(|a| (grid.direction.col(a) / grid.spacing[a]).as_vec3());
+        // Shaded composite through tables where the classification depends on the density
+        // alone; the per-sample classifier otherwise.
+        let shaded = shade
+            .then(|| ShadeTable::new(tables, classifier, grad_to_world))
+            .flatten();
+        // Shading at the voxels (VTK's order; `crate::normals`): the voxels' direction codes,
+        // kept with the brick grid across frames, and the frame's lights applied to every code.
+        let (voxel, codes): (Option<VoxelShading>, &[u16]) = match &shaded {
+            Some(t) if settings.shade_at == ShadeAt::Voxels => {
+                let field = match bricks.normals(volume)? {
+                    Some(f) => f,
+                    None => owned_normals.insert(NormalField::build(volume)?),
+                };
+                (Some(VoxelShading::new(t)), field.codes())
+            }
+            _ => (None, &[]),
+        };
+        let risk = {
+            let (alphas, scale): (Vec<f32>, f32) = match (&post, &shaded) {
+                (Some(t), _) => (t.values.iter().map(|v| v[3]).collect(), t.axis.scale),
+                (None, Some(t)) => (t.rows.iter().map(|r| r[0]).collect(), t.axis.scale),
+                _ => (Vec::new(), 0.0),
+            };
+            let (lo, hi) = bricks
+                .ranges
+                .iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |a, r| {
+                    (a.0.min(r[0]), a.1.max(r[1]))
+                });
+            ring_risk(&alphas, scale, hi - lo)
+        };
+        let preint = match settings.preintegrate {
+            Preintegrate::Off => false,
+            Preintegrate::On => true,
+            Preintegrate::Auto => risk > RING_RISK,
+        };
+        Ok(FrameTables {
+            shade,
+            post,
+            shaded,
+            voxel,
+            codes,
+            grad_to_world,
+            risk,
+            preint,
+        })
+    }
+
+    /// Whether the frame's samples are pre-integrated: composite, asked for and classified
+    /// through a table that pre-integrates (unshaded, or shaded at the voxels).
+    pub(super) fn preintegrated(&self) -> bool {
+        self.preint && (self.post.is_some() || self.voxel.is_some())
+    }
+
+    /// One flag per brick of `bricks`: whether a sample in it can have opacity (empty space,
+    /// module docs of [`super`]). Composite classified by a density table, one point per slab,
+    /// skips the bricks whose samples read only entries without opacity from that very table
+    /// (exact, [`BrickGrid::active_in_table`]); pre-integrated segments reach into the brick
+    /// before, and the per-sample classifier resamples the opacity table of `tables`, so they
+    /// keep the slack test ([`BrickGrid::active`]).
+    pub(super) fn active_bricks(&self, bricks: &BrickGrid, tables: &CrioTables) -> Vec<bool> {
+        let table_active = match (&self.post, &self.shaded) {
+            (Some(t), _) if !self.preint => {
+                Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x)))
+            }
+            (None, Some(t)) if !self.preint || self.voxel.is_none() => {
+                Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x)))
+            }
+            _ => None,
+        };
+        table_active.unwrap_or_else(|| {
+            bricks.active(
+                &tables.opacity,
+                (tables.opacity.hi - tables.opacity.lo) / 4095.0,
+                false,
+            )
+        })
+    }
+}
 
 /// Premultiplied RGBA per density for unshaded classification: [`FrameClassifier::classify`]
 /// evaluated at the entries of its own fused table (so the entries agree with it exactly),
