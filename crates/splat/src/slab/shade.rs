@@ -164,20 +164,22 @@ pub(super) fn premultiplied(col: [f32; 3], a: f32) -> Rgba {
 }
 
 impl<T: Scalar> Ctx<'_, T> {
-    /// The voxels whose difference is the derivative along axis `a` (of two voxels or more) at
-    /// the voxel with linear index `at`, index `p` along `a`: `(lower, upper, span)`, the
-    /// derivative being `(ρ(upper) − ρ(lower)) / span` per index step. Central (`p ± 1`, span 2)
-    /// inside the grid, one-sided on its faces (`p, p + 1` at `p = 0`, `p − 1, p` at `p = n − 1`;
-    /// span 1). The stencil of both [`Ctx::gradient_at`] and [`Ctx::gradient_lerp`].
+    /// The difference of the voxels around the voxel with linear index `at` (index `p`) along
+    /// axis `a` (of two voxels or more), and whether it is central: `(ρ(p + 1) − ρ(p − 1), true)`
+    /// inside the grid, one-sided on its faces (`ρ(p + 1) − ρ(p)` at `p = 0`, `ρ(p) − ρ(p − 1)`
+    /// at `p = n − 1`; `false`). A central difference spans two index steps, so the derivative
+    /// per index step is half of it. The stencil of both [`Ctx::gradient_at`] and
+    /// [`Ctx::gradient_lerp`].
     #[inline(always)]
-    fn difference_ends(&self, at: usize, p: usize, a: usize) -> (usize, usize, f32) {
+    fn difference(&self, at: usize, p: usize, a: usize) -> (f32, bool) {
         let s = self.stride[a];
+        let v = |q: usize| self.data[q].to_f32();
         if p == 0 {
-            (at, at + s, 1.0)
+            (v(at + s) - v(at), false)
         } else if p == self.dims[a] - 1 {
-            (at - s, at, 1.0)
+            (v(at) - v(at - s), false)
         } else {
-            (at - s, at + s, 2.0)
+            (v(at + s) - v(at - s), true)
         }
     }
 
@@ -210,8 +212,8 @@ impl<T: Scalar> Ctx<'_, T> {
                 if self.dims[a] < 2 {
                     continue;
                 }
-                let (lo, hi, span) = self.difference_ends(here, p[a], a);
-                g[a] += w * (self.data[hi].to_f32() - self.data[lo].to_f32()) / span;
+                let (d, central) = self.difference(here, p[a], a);
+                g[a] += w * d / if central { 2.0 } else { 1.0 };
             }
         }
         self.grad_to_world[0] * g[0] + self.grad_to_world[1] * g[1] + self.grad_to_world[2] * g[2]
@@ -237,9 +239,8 @@ impl<T: Scalar> Ctx<'_, T> {
             }
             let mut d = [0.0f32; 8];
             for (k, (dk, &o)) in d.iter_mut().zip(&offs).enumerate() {
-                let (lo, hi, span) = self.difference_ends(base + o, c[a] + (k >> a & 1), a);
-                // `1/span` is ½ or 1, exact: the kernel's `· ½` (`ShadeSource`).
-                *dk = (self.data[hi].to_f32() - self.data[lo].to_f32()) * (1.0 / span);
+                let (d, central) = self.difference(base + o, c[a] + (k >> a & 1), a);
+                *dk = d * if central { 0.5 } else { 1.0 };
             }
             let c00 = lerp(d[0], d[1], f[0]);
             let c10 = lerp(d[2], d[3], f[0]);
