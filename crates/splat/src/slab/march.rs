@@ -307,8 +307,11 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         }
     }
 
-    /// The cell of pixel `x` of a row and the fractions in it, from the row's f32 start and step
-    /// (the positions [`sample_run_avx2`] computes lane by lane).
+    /// The cell of pixel `x` of a row and the fractions in it, from the row's f32 start and step:
+    /// the scalar twin of [`Sampler8::locate`] and [`Cells8::fractions`].
+    ///
+    /// [`Sampler8::locate`]: super::avx2::sampler::Sampler8::locate
+    /// [`Cells8::fractions`]: super::avx2::sampler::Cells8::fractions
     #[inline(always)]
     pub(super) fn cell_f32(&self, walk: &Walk, x: usize) -> ([usize; 3], [f32; 3]) {
         let xf = x as f32;
@@ -526,7 +529,10 @@ impl<'a, T: Scalar> Ctx<'a, T> {
     }
 
     /// The premultiplied colour of an unshaded sample of density `rho` with slab exponent `k`
-    /// (`corrected`: `k ≠ 1` or perspective), or `None` where it has no opacity.
+    /// (`corrected`: `k ≠ 1` or perspective), or `None` where it has no opacity: the scalar
+    /// twin of [`PostSource`]'s classification.
+    ///
+    /// [`PostSource`]: super::avx2::composite::PostSource
     #[inline(always)]
     fn post_src(t: &PostTable, rho: f32, k: f32, corrected: bool) -> Option<Rgba> {
         if corrected {

@@ -52,7 +52,7 @@
 //! pre-integrated segments and the per-sample classifier keep the slack test of
 //! [`BrickGrid::active`] (`docs/decisions/0031-prefiltered-pyramid-previews.md`).
 //!
-//! # Speed (issue 12; `docs/BENCHMARKS.md` §13)
+//! # Speed (issue 12; decision 0016; measured in `docs/BENCHMARKS.md` §13, §15.3 and §18.5)
 //!
 //! Rows of a plane are processed eight pixels at a time where the CPU has AVX2 (runtime
 //! detection; every kernel has a scalar twin doing the same f32 operations in the same order, so
@@ -132,17 +132,15 @@ pub const DEFAULT_SLAB: f64 = 0.5;
 /// smallest grid spacing: one voxel, as Mueller & Crawfis suggest.
 pub const DEFAULT_SLAB_COMPOSITE: f64 = 1.0;
 
-/// The slab thickness the front ends use when none is asked for
-/// (`docs/decisions/0017-slab-thickness-by-mode.md`, amended by 0019), in units of the
-/// smallest grid spacing, for `mode` and `shading` (`None`: unshaded; else where the lights are
-/// evaluated): [`DEFAULT_SLAB_COMPOSITE`] (1) for unshaded composite, whose post-classified
-/// slabs at one voxel still lie 7–13 dB closer to the exact integral than VTK's ray caster at
-/// half a voxel, at half the cost of [`DEFAULT_SLAB`], and for composite shaded at the voxels
-/// (the interpolated light changes no faster than the values: 44°→46° popping 1.06–1.08, and
-/// 0.1–0.2 dB from half a voxel against the exact integral); [`DEFAULT_SLAB`] (½) for MIP and
-/// MinIP (a maximum sampled every voxel misses peaks by up to half a voxel: 6 dB worse) and
-/// for composite shaded at the samples (gradients change faster than values; the popping ratio
-/// rises from 1.2 to 1.45 at one voxel).
+/// The slab thickness the front ends use when none is asked for, in units of the smallest grid
+/// spacing, for `mode` and `shading` (`None`: unshaded; else where the lights are evaluated):
+/// [`DEFAULT_SLAB_COMPOSITE`] (1) for unshaded composite (one voxel stays closer to the exact
+/// integral than VTK's ray caster at half a voxel, at half the cost of [`DEFAULT_SLAB`]) and for
+/// composite shaded at the voxels (the interpolated light changes no faster than the values);
+/// [`DEFAULT_SLAB`] (½) for MIP and MinIP (a maximum sampled every voxel misses the peaks
+/// between samples) and for composite shaded at the samples (gradients change faster than the
+/// values, and popping rises at one voxel). The measurements behind each choice are in
+/// `docs/decisions/0017-slab-thickness-by-mode.md` and its amendment for decision 0019.
 pub fn default_slab(mode: RenderMode, shading: Option<ShadeAt>) -> f64 {
     match (mode, shading) {
         (RenderMode::Composite, None | Some(ShadeAt::Voxels)) => DEFAULT_SLAB_COMPOSITE,

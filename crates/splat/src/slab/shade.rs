@@ -147,16 +147,16 @@ pub(super) fn shade_opacity(v: &[f32; 8], k: f32, corrected: bool) -> Option<f32
 /// Pre-integration shaded at the voxels: where along its segment a slab is lit, as the fraction
 /// of the way back from this plane's sample to the plane before's: the middle. A ramp that the
 /// segment crosses is crossed anywhere along it with equal chance, and the middle is where the
-/// segment's path is centred. Two better-founded placements were measured against it
-/// (`docs/BENCHMARKS.md` §17.4, decision 0020's amendment): the visible centroid of an evenly
-/// spread extinction (stop 24) lit opaque segments near their front, in the air before a sharp
-/// ramp, and lost up to 1.1 dB to the middle; the centroid of a step in extinction between the
-/// segment's two samples gained 0.4 dB over the middle on one scene `auto` pre-integrates and
-/// nothing on the others, for 10–17 % of the frame.
+/// segment's path is centred. Two better-founded placements were measured against it and not
+/// kept (the visible centroid of an evenly spread extinction, which lit opaque segments near
+/// their front, in the air before a sharp ramp; and the centroid of a step in extinction
+/// between the segment's two samples, which cost more than it gained): the numbers are in
+/// `docs/decisions/0020-preintegration-for-sharp-ramps.md`, its amendment of 2026-11-25.
 pub(super) const SEGMENT_LIGHT_AT: f32 = 0.5;
 
 /// The shaded colour `col` clamped to [0, 1] (as `maxps`/`minps` clamp) and multiplied by the
-/// opacity `a`: the premultiplied RGBA of a shaded sample.
+/// opacity `a`: the premultiplied RGBA of a shaded sample. The scalar twin of
+/// `premultiplied8` (`avx2/shade.rs`).
 #[inline(always)]
 pub(super) fn premultiplied(col: [f32; 3], a: f32) -> Rgba {
     let c = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);

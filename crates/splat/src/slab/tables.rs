@@ -185,7 +185,8 @@ impl TableAxis {
         }
     }
 
-    /// The table position of density `x`: `min(max((x − lo)·scale, 0), last)` (NaN → 0).
+    /// The table position of density `x`: `min(max((x − lo)·scale, 0), last)` (NaN → 0). The
+    /// scalar twin of `table_pos8` (`avx2/mod.rs`).
     #[inline(always)]
     pub(super) fn pos(&self, x: f32) -> f32 {
         ((x - self.lo) * self.scale).max(0.0).min(self.last)
@@ -207,11 +208,9 @@ fn lerp_rows<const N: usize>(rows: &[[f32; N]], t: f32) -> [f32; N] {
 
 /// [`Preintegrate::Auto`] pre-integrates where [`ring_risk`] exceeds this: where the steepest
 /// ramp of the transfer function takes a slab's opacity through more than 4 across a quarter of
-/// the data's value range. Measured on the CT head phantom and the MRIs (decision 0020; PSNR
-/// against the same renderer at ⅛ voxel, segment minus point): sharp skin ramps (risk 10–11)
-/// +5.4 dB unshaded, +0.7 dB shaded; Slicer's CT-Soft-Tissue (79) +6 dB; CT-Air (1.3), CT-Skin
-/// (1.5, shaded), CT-Muscle (1.2, shaded), CT-Bone (0.8) and the MRI scenes (0.2–0.3) lose 1–14
-/// dB by segment; the built-in demo (2.2, shaded) would gain 5 dB but stays by point.
+/// the data's value range. Every case measured above it gains by segment, and every case below
+/// it but the built-in demo loses: the cases are tabled in
+/// `docs/decisions/0020-preintegration-for-sharp-ramps.md` ("The `auto` rule").
 ///
 /// [`Preintegrate::Auto`]: crate::render::Preintegrate::Auto
 pub const RING_RISK: f32 = 4.0;
@@ -247,7 +246,8 @@ pub(super) const SEGMENT_MIN_ENTRIES: f32 = 1.0;
 /// middle (`at(false, ·)`); else from the integral rows (`at(true, ·)`), `L̄ = Δ∫L / Δt` in slot
 /// `L`, each other slot `Δ∫x·L / Δ∫L`, and 0 in slot `W` (where the rows hold `∫L`) if it is
 /// not `L`. The post table integrates into slot 3 and returns `[c̄, L̄]` (`W = L = 3`); the
-/// shade table integrates into slot 0 and returns `[0, ē, d̄, L̄]` (`W = 0`, `L = 7`).
+/// shade table integrates into slot 0 and returns `[0, ē, d̄, L̄]` (`W = 0`, `L = 7`). The
+/// scalar twin of `segment_average8` (`avx2/composite.rs`).
 #[inline(always)]
 pub(super) fn segment_average<const N: usize, const W: usize, const L: usize>(
     tu: f32,
@@ -398,6 +398,8 @@ impl PostTable {
     /// no opacity (`∫L = 0`) `L̄` is 0 and the colours 0/0 (NaN): it contributes nothing
     /// ([`Ctx::post_seg_src`], and the kernels' masks).
     ///
+    /// The scalar twin of `post_segment8` (`avx2/composite.rs`).
+    ///
     /// [`Ctx::post_seg_src`]: super::march::Ctx::post_seg_src
     #[inline(always)]
     pub(super) fn segment(&self, u: f32, v: f32) -> Rgba {
@@ -528,6 +530,8 @@ impl ShadeTable {
     /// ([`PostTable::segment`]'s averages): `[0, ē, d̄, L̄]`, emission and reflection colours
     /// weighted by `L`. The opacity slot is 0: pre-integrated samples always take the
     /// path-corrected opacity `1 − 2^(k·L̄)` ([`shade_opacity`] with `corrected`).
+    ///
+    /// The scalar twin of `shade_segment8` (`avx2/shade.rs`).
     ///
     /// [`shade_opacity`]: super::shade::shade_opacity
     #[inline(always)]
