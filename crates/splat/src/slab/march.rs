@@ -8,14 +8,24 @@ use super::avx2::{composite_run_avx2, extreme_row_avx2, sample_run_avx2};
 use super::math::{exp2_neg, trilinear};
 use super::path::boundary_factor;
 use super::shade::{SEGMENT_LIGHT_AT, shade_opacity, shaded_src, voxel_shaded_src};
-use super::tables::{PostTable, ShadeTable};
-use super::view::{FRAC, View, Walk, clip_linear, to_fixed};
+use super::simd_available;
+use super::tables::{FrameTables, PostTable, ShadeTable};
+use super::view::{FRAC, Planes, View, Walk, clip_linear, to_fixed};
 use crate::bricks::BrickGrid;
+use crate::error::{Result, SplatError};
 use crate::normals::VoxelShading;
-use crate::render::RenderMode;
+use crate::render::{Progress, RenderMode, RenderSettings};
+use rayon::prelude::*;
 use volsplat_core::glam::{DVec3, Vec3};
 use volsplat_core::image::{Rgba, over_front_to_back};
-use volsplat_core::{FrameClassifier, SampleInput, Scalar};
+use volsplat_core::{FrameClassifier, SampleInput, Scalar, Volume};
+
+/// The most rows of one band of the slabs' parallel decomposition (`RenderSettings::band_height`
+/// caps it further; `docs/decisions/0016-image-aligned-post-classified-slabs.md`).
+const SLAB_BAND_ROWS: usize = 8;
+
+/// Bands per thread between two progress reports of the slabs (the threads meet at each report).
+const BANDS_PER_THREAD: usize = 8;
 
 #[derive(Default, Clone, Copy)]
 pub(super) struct Counters {
@@ -58,7 +68,8 @@ pub(super) struct Ctx<'a, T> {
     /// per index step becomes a world gradient).
     pub(super) grad_to_world: [Vec3; 3],
     pub(super) bricks: &'a BrickGrid,
-    pub(super) active: &'a [bool],
+    /// Per brick, whether a sample in it can have opacity ([`FrameTables::active_bricks`]).
+    pub(super) active: Vec<bool>,
     /// `active` as bytes, padded with three zero bytes (AVX2 gathers read 4 bytes).
     pub(super) active_bytes: Vec<u8>,
     /// MIP: each brick's maximum; MinIP: its minimum (empty otherwise): the one bound of
@@ -95,7 +106,123 @@ pub(super) struct Ctx<'a, T> {
     pub(super) clip: Vec<(DVec3, f64)>,
 }
 
-impl<T: Scalar> Ctx<'_, T> {
+impl<'a, T: Scalar> Ctx<'a, T> {
+    /// The march of one frame of `volume` under `settings`: through `planes`, classified by
+    /// `classifier` through `tables`, skipping the bricks of `bricks` that `active` leaves out.
+    pub(super) fn new(
+        volume: &'a Volume<T>,
+        settings: &RenderSettings,
+        planes: Planes,
+        tables: &'a FrameTables<'a>,
+        classifier: &'a FrameClassifier,
+        bricks: &'a BrickGrid,
+        active: Vec<bool>,
+    ) -> Self {
+        let grid = volume.grid();
+        let dims = grid.dims;
+        let composite = settings.mode == RenderMode::Composite;
+        let all_active = active.iter().all(|&a| a);
+        Ctx {
+            data: volume.data(),
+            dims,
+            box_hi: planes.geo.dims.map(|n| n as i64 - 1),
+            max_cell: dims.map(|n| n.max(2) as i64 - 2),
+            simd: simd_available() && volume.data().len() < i32::MAX as usize,
+            grad_to_world: tables.grad_to_world,
+            stride: [1, dims[0], dims[0] * dims[1]],
+            up: [
+                usize::from(dims[0] > 1),
+                usize::from(dims[1] > 1) * dims[0],
+                usize::from(dims[2] > 1) * dims[0] * dims[1],
+            ],
+            bricks,
+            active_bytes: active.iter().map(|&a| u8::from(a)).chain([0; 3]).collect(),
+            active,
+            extreme_bounds: match settings.mode {
+                RenderMode::Mip => bricks.ranges.iter().map(|r| r[1]).collect(),
+                RenderMode::Minip => bricks.ranges.iter().map(|r| r[0]).collect(),
+                _ => Vec::new(),
+            },
+            skip_empty: composite && !all_active,
+            view: planes.view,
+            classifier,
+            post: tables.post.as_ref(),
+            shaded: tables.shaded.as_ref(),
+            voxel: tables.voxel.as_ref(),
+            codes: tables.codes,
+            preint: tables.preint,
+            mode: settings.mode,
+            shade: tables.shade,
+            cutoff: settings.opacity_cutoff,
+            j0: planes.j0,
+            n_planes: planes.n_planes,
+            delta: planes.delta,
+            dmin: planes.dmin,
+            depth_scale: if planes.dmax > planes.dmin {
+                1.0 / (planes.dmax - planes.dmin)
+            } else {
+                0.0
+            },
+            width: settings.width,
+            clip: settings
+                .clip
+                .iter()
+                .map(|p| (DVec3::from(p.normal), p.offset))
+                .collect(),
+        }
+    }
+
+    /// Marches the image of `settings.height` rows, band by band, through every plane: the
+    /// bands go to the threads in groups, and `progress` is called after each group with
+    /// `sheets_done`/`sheets_total` counting bands (`false` cancels with
+    /// [`SplatError::Cancelled`]). Returns the accumulated pixels (MIP/MinIP: the extreme in
+    /// the first channel, NaN where no plane met the volume) and the counters.
+    pub(super) fn march_bands(
+        &self,
+        settings: &RenderSettings,
+        progress: &mut dyn FnMut(&Progress) -> bool,
+    ) -> Result<(Vec<Rgba>, Counters)> {
+        let (w, h) = (settings.width, settings.height);
+        let init: Rgba = match settings.mode {
+            RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
+            _ => [0.0; 4],
+        };
+        let mut acc = vec![init; w * h];
+        // Bands of at most `SLAB_BAND_ROWS` rows: a band's work is very uneven here (a band
+        // through an opaque object stops after a few planes, one beside it runs through the
+        // whole volume), so many small bands balance the threads better than a few large ones.
+        // The image does not depend on the band height (every pixel's arithmetic is its own).
+        let band_h = settings.band_height.min(SLAB_BAND_ROWS);
+        let n_bands = h.div_ceil(band_h);
+        // Bands handed to the threads between two progress reports: the threads wait for the
+        // slowest band of a group, so a group holds several bands per thread.
+        let group = (BANDS_PER_THREAD * rayon::current_num_threads()).max(2 * BANDS_PER_THREAD);
+        let mut done = 0;
+        let mut counters = Counters::default();
+        let chunks: Vec<(usize, &mut [Rgba])> = acc.chunks_mut(band_h * w).enumerate().collect();
+        let mut chunks = chunks.into_iter().peekable();
+        while chunks.peek().is_some() {
+            let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group).collect();
+            let n = batch.len();
+            let c = batch
+                .into_par_iter()
+                .map(|(b, rows)| self.band(b * band_h, rows))
+                .reduce(Counters::default, Counters::add);
+            counters = counters.add(c);
+            done += n;
+            // The accumulation of finished bands is only visible after the loop (the bands hold
+            // it mutably); the callback gets the count.
+            if !progress(&Progress {
+                sheets_done: done,
+                sheets_total: n_bands,
+                accumulation: &[],
+            }) {
+                return Err(SplatError::Cancelled);
+            }
+        }
+        Ok((acc, counters))
+    }
+
     pub(super) fn depth(&self, plane: usize) -> f64 {
         (self.j0 + plane as i64) as f64 * self.delta
     }
@@ -180,8 +307,11 @@ impl<T: Scalar> Ctx<'_, T> {
         }
     }
 
-    /// The cell of pixel `x` of a row and the fractions in it, from the row's f32 start and step
-    /// (the positions [`sample_run_avx2`] computes lane by lane).
+    /// The cell of pixel `x` of a row and the fractions in it, from the row's f32 start and step:
+    /// the scalar twin of [`Sampler8::locate`] and [`Cells8::fractions`].
+    ///
+    /// [`Sampler8::locate`]: super::avx2::sampler::Sampler8::locate
+    /// [`Cells8::fractions`]: super::avx2::sampler::Cells8::fractions
     #[inline(always)]
     pub(super) fn cell_f32(&self, walk: &Walk, x: usize) -> ([usize; 3], [f32; 3]) {
         let xf = x as f32;
@@ -260,7 +390,8 @@ impl<T: Scalar> Ctx<'_, T> {
             for (r, live_r) in live.iter_mut().enumerate() {
                 let y = y0 + r;
                 let o = r * w;
-                let Some(lw) = shrink_live_alpha(live_r, &band.a[o..o + w], self.cutoff) else {
+                let alpha = &band.a[o..o + w];
+                let Some(lw) = shrink_live(live_r, self.cutoff, |x| alpha[x]) else {
                     continue;
                 };
                 any_live = true;
@@ -398,7 +529,10 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 
     /// The premultiplied colour of an unshaded sample of density `rho` with slab exponent `k`
-    /// (`corrected`: `k ≠ 1` or perspective), or `None` where it has no opacity.
+    /// (`corrected`: `k ≠ 1` or perspective), or `None` where it has no opacity: the scalar
+    /// twin of [`PostSource`]'s classification.
+    ///
+    /// [`PostSource`]: super::avx2::composite::PostSource
     #[inline(always)]
     fn post_src(t: &PostTable, rho: f32, k: f32, corrected: bool) -> Option<Rgba> {
         if corrected {
@@ -579,7 +713,7 @@ impl<T: Scalar> Ctx<'_, T> {
                 let walk = self.walk(y, d);
                 let mut span = self.clip_span(y, d, walk.span);
                 let row_acc = &mut acc[r * w..(r + 1) * w];
-                let Some(lw) = shrink_live(&mut live[r], row_acc, self.cutoff) else {
+                let Some(lw) = shrink_live(&mut live[r], self.cutoff, |x| row_acc[x][3]) else {
                     continue;
                 };
                 any_live = true;
@@ -646,13 +780,18 @@ impl<T: Scalar> Ctx<'_, T> {
     }
 }
 
-/// Narrows a row's window of live pixels (those below the opacity `cutoff`) from both ends;
-/// `None` once every pixel of the row is opaque.
-fn shrink_live(lw: &mut (i64, i64), row: &[Rgba], cutoff: f32) -> Option<(i64, i64)> {
-    while lw.0 <= lw.1 && row[lw.0 as usize][3] >= cutoff {
+/// Narrows a row's window of live pixels (those whose opacity `alpha(x)` is below `cutoff`)
+/// from both ends; `None` once every pixel of the row is opaque.
+#[inline]
+fn shrink_live(
+    lw: &mut (i64, i64),
+    cutoff: f32,
+    alpha: impl Fn(usize) -> f32,
+) -> Option<(i64, i64)> {
+    while lw.0 <= lw.1 && alpha(lw.0 as usize) >= cutoff {
         lw.0 += 1;
     }
-    while lw.1 >= lw.0 && row[lw.1 as usize][3] >= cutoff {
+    while lw.1 >= lw.0 && alpha(lw.1 as usize) >= cutoff {
         lw.1 -= 1;
     }
     (lw.0 <= lw.1).then_some(*lw)
@@ -711,17 +850,6 @@ fn coarse_to_fine(n: usize) -> Vec<usize> {
         order.extend((s..n).step_by(2 * s));
     }
     order
-}
-
-/// [`shrink_live`] on a row's opacity channel.
-fn shrink_live_alpha(lw: &mut (i64, i64), alpha: &[f32], cutoff: f32) -> Option<(i64, i64)> {
-    while lw.0 <= lw.1 && alpha[lw.0 as usize] >= cutoff {
-        lw.0 += 1;
-    }
-    while lw.1 >= lw.0 && alpha[lw.1 as usize] >= cutoff {
-        lw.1 -= 1;
-    }
-    (lw.0 <= lw.1).then_some(*lw)
 }
 
 #[cfg(test)]

@@ -20,7 +20,8 @@ pub(super) fn log2_unit(y: f32) -> f32 {
 }
 
 /// `2^z` for `z ≤ 0` (0 below −126): `2^(i + ½)·2^f`, `f ∈ [−½, ½]`, with the Taylor series of
-/// `2^f` to `f⁶` (relative error below 2·10⁻⁷). Plain arithmetic, as [`log2_unit`].
+/// `2^f` to `f⁶` (relative error below 2·10⁻⁷). Plain arithmetic, as [`log2_unit`]; the scalar
+/// twin of `exp2_neg8` (`avx2/mod.rs`).
 #[inline(always)]
 pub(super) fn exp2_neg(z: f32) -> f32 {
     if z.is_nan() || z < -126.0 {
@@ -66,6 +67,7 @@ pub(super) fn min_ps(x: f32, hi: f32) -> f32 {
     if x < hi { x } else { hi }
 }
 
+/// `a + t·(b − a)`: the scalar twin of `lerp8` (`avx2/mod.rs`; no fused multiply–add).
 #[inline(always)]
 pub(super) fn lerp(a: f32, b: f32, t: f32) -> f32 {
     a + t * (b - a)

@@ -52,7 +52,7 @@
 //! pre-integrated segments and the per-sample classifier keep the slack test of
 //! [`BrickGrid::active`] (`docs/decisions/0031-prefiltered-pyramid-previews.md`).
 //!
-//! # Speed (issue 12; `docs/BENCHMARKS.md` §13)
+//! # Speed (issue 12; decision 0016; measured in `docs/BENCHMARKS.md` §13, §15.3 and §18.5)
 //!
 //! Rows of a plane are processed eight pixels at a time where the CPU has AVX2 (runtime
 //! detection; every kernel has a scalar twin doing the same f32 operations in the same order, so
@@ -109,18 +109,15 @@ pub use tables::{RING_RISK, ring_risk};
 
 use crate::bricks::BrickGrid;
 use crate::error::{Result, SplatError};
-use crate::normals::{NormalField, ShadeAt, VoxelShading};
+use crate::normals::ShadeAt;
 use crate::render::{
-    Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, finish, ms, validate,
+    Progress, RenderMode, RenderSettings, RenderStats, Rendered, finish, ms, validate,
 };
-use march::{Counters, Ctx};
-use rayon::prelude::*;
+use march::Ctx;
 use std::time::Instant;
 use supersample::{render_supersampled, supersampling};
-use tables::PostTable;
-use view::{View, drawn_geometry};
-use volsplat_core::glam::DVec3;
-use volsplat_core::image::Rgba;
+use tables::FrameTables;
+use view::Planes;
 use volsplat_core::{
     AnyVolume, Camera, CrioTables, FrameClassifier, Projection, Scalar, Volume, with_volume,
 };
@@ -135,30 +132,21 @@ pub const DEFAULT_SLAB: f64 = 0.5;
 /// smallest grid spacing: one voxel, as Mueller & Crawfis suggest.
 pub const DEFAULT_SLAB_COMPOSITE: f64 = 1.0;
 
-/// The slab thickness the front ends use when none is asked for
-/// (`docs/decisions/0017-slab-thickness-by-mode.md`, amended by 0019), in units of the
-/// smallest grid spacing, for `mode` and `shading` (`None`: unshaded; else where the lights are
-/// evaluated): [`DEFAULT_SLAB_COMPOSITE`] (1) for unshaded composite, whose post-classified
-/// slabs at one voxel still lie 7–13 dB closer to the exact integral than VTK's ray caster at
-/// half a voxel, at half the cost of [`DEFAULT_SLAB`], and for composite shaded at the voxels
-/// (the interpolated light changes no faster than the values: 44°→46° popping 1.06–1.08, and
-/// 0.1–0.2 dB from half a voxel against the exact integral); [`DEFAULT_SLAB`] (½) for MIP and
-/// MinIP (a maximum sampled every voxel misses peaks by up to half a voxel: 6 dB worse) and
-/// for composite shaded at the samples (gradients change faster than values; the popping ratio
-/// rises from 1.2 to 1.45 at one voxel).
+/// The slab thickness the front ends use when none is asked for, in units of the smallest grid
+/// spacing, for `mode` and `shading` (`None`: unshaded; else where the lights are evaluated):
+/// [`DEFAULT_SLAB_COMPOSITE`] (1) for unshaded composite (one voxel stays closer to the exact
+/// integral than VTK's ray caster at half a voxel, at half the cost of [`DEFAULT_SLAB`]) and for
+/// composite shaded at the voxels (the interpolated light changes no faster than the values);
+/// [`DEFAULT_SLAB`] (½) for MIP and MinIP (a maximum sampled every voxel misses the peaks
+/// between samples) and for composite shaded at the samples (gradients change faster than the
+/// values, and popping rises at one voxel). The measurements behind each choice are in
+/// `docs/decisions/0017-slab-thickness-by-mode.md` and its amendment for decision 0019.
 pub fn default_slab(mode: RenderMode, shading: Option<ShadeAt>) -> f64 {
     match (mode, shading) {
         (RenderMode::Composite, None | Some(ShadeAt::Voxels)) => DEFAULT_SLAB_COMPOSITE,
         _ => DEFAULT_SLAB,
     }
 }
-
-/// The most rows of one band of the slabs' parallel decomposition (`RenderSettings::band_height`
-/// caps it further). `docs/BENCHMARKS.md` §18.3.
-const SLAB_BAND_ROWS: usize = 8;
-
-/// Bands per thread between two progress reports of the slabs (the threads meet at each report).
-const BANDS_PER_THREAD: usize = 8;
 
 /// Renders any volume with image-aligned, post-classified slabs; see [`render_slabs`].
 pub fn render_slabs_any(
@@ -199,211 +187,48 @@ pub fn render_slabs<T: Scalar>(
         }
     };
     let proj = Projection::new(camera, settings.width, settings.height)?;
-    let frame = *proj.frame();
     let min_spacing = grid.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
     let ss = supersampling(settings, &proj, grid, min_spacing);
     if ss > 1.0 {
         return render_supersampled(volume, camera, tables, settings, Some(bricks), progress, ss);
     }
-    // The box the rays cross: the voxel centres', an axis of one sample spanning its voxel
-    // (decision 0023). No thicker slabs than the box's thinnest extent, so that a ray through
-    // both of its widest faces meets a plane inside (a sheet one voxel thick under `--slab 2`
-    // would otherwise fall between two planes and draw nothing); with slabs of at most one
-    // voxel this never applies (every extent is a spacing or more).
-    let geo = drawn_geometry(grid);
-    let thinnest = (0..3)
-        .map(|a| (geo.dims[a] - 1) as f64 * geo.spacing[a])
-        .fold(f64::INFINITY, f64::min);
-    let delta = (settings.slab * min_spacing).min(thinnest);
-    let classifier = FrameClassifier::new(tables, &frame, delta);
-    let composite = settings.mode == RenderMode::Composite;
-    let shade = composite && classifier.needs_gradient;
-
-    // Depth range of the box the rays cross, and the planes inside it.
-    let depths = geo
-        .corners_world()
-        .map(|c| (c - frame.eye).dot(frame.forward));
-    let dmin = depths.iter().fold(f64::INFINITY, |m, &d| m.min(d));
-    let dmax = depths.iter().fold(f64::NEG_INFINITY, |m, &d| m.max(d));
-    let perspective = matches!(proj, Projection::Perspective(_));
-    let mut j0 = (dmin / delta).ceil();
-    if perspective {
-        j0 = j0.max(1.0); // planes in front of the eye only
-    }
-    let j1 = (dmax / delta).floor();
-    let n_planes = if j1 >= j0 { (j1 - j0) as usize + 1 } else { 0 };
-    if n_planes > 1 << 24 {
-        return Err(SplatError::Setting {
-            name: "slab",
-            value: settings.slab.to_string(),
-            expected: "fewer than 2^24 planes across the volume; use a thicker slab",
-        });
-    }
-    let (w, h) = (settings.width, settings.height);
-    let view = View::new(&proj, &geo, w, h);
-    let post = (composite && !shade)
-        .then(|| PostTable::new(tables, &classifier))
-        .flatten();
-    let grad_to_world = [0, 1, 2].map(|a| (grid.direction.col(a) / grid.spacing[a]).as_vec3());
-    // Shaded composite through tables where the classification depends on the density alone;
-    // the per-sample classifier otherwise.
-    let shade_table = shade
-        .then(|| ShadeTable::new(tables, &classifier, grad_to_world))
-        .flatten();
-    // Shading at the voxels (VTK's order; `crate::normals`): the voxels' direction codes, kept
-    // with the brick grid across frames, and the frame's lights applied to every code.
-    let owned_normals;
-    let (voxel_shading, codes): (Option<VoxelShading>, &[u16]) = match &shade_table {
-        Some(t) if settings.shade_at == ShadeAt::Voxels => {
-            let field = match bricks.normals(volume)? {
-                Some(f) => f,
-                None => {
-                    owned_normals = NormalField::build(volume)?;
-                    &owned_normals
-                }
-            };
-            (Some(VoxelShading::new(t)), field.codes())
-        }
-        _ => (None, &[]),
-    };
-    let risk = {
-        let (alphas, scale): (Vec<f32>, f32) = match (&post, &shade_table) {
-            (Some(t), _) => (t.values.iter().map(|v| v[3]).collect(), t.scale),
-            (None, Some(t)) => (t.rows.iter().map(|r| r[0]).collect(), t.scale),
-            _ => (Vec::new(), 0.0),
-        };
-        let (lo, hi) = bricks
-            .ranges
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |a, r| {
-                (a.0.min(r[0]), a.1.max(r[1]))
-            });
-        ring_risk(&alphas, scale, hi - lo)
-    };
-    let preint = match settings.preintegrate {
-        Preintegrate::Off => false,
-        Preintegrate::On => true,
-        Preintegrate::Auto => risk > RING_RISK,
-    };
-    // Empty space: composite classified by a density table, one point per slab, skips the
-    // bricks whose samples read only entries without opacity from that very table (exact,
-    // `BrickGrid::active_in_table`); pre-integrated segments reach into the brick before, and
-    // the per-sample classifier resamples the opacity table, so they keep the slack test.
-    let table_active = match (&post, &shade_table) {
-        (Some(t), _) if !preint => Some(bricks.active_in_table(&t.nonzero(), |x| t.pos(x))),
-        (None, Some(t)) if !preint || voxel_shading.is_none() => {
-            Some(bricks.active_in_table(&t.nonzero(), |x| t.pos(x)))
-        }
-        _ => None,
-    };
-    let active = table_active.unwrap_or_else(|| {
-        bricks.active(
-            &tables.opacity,
-            (tables.opacity.hi - tables.opacity.lo) / 4095.0,
-            false,
-        )
-    });
-    let all_active = active.iter().all(|&a| a);
-    let ctx = Ctx {
-        data: volume.data(),
-        dims: grid.dims,
-        box_hi: geo.dims.map(|n| n as i64 - 1),
-        max_cell: grid.dims.map(|n| n.max(2) as i64 - 2),
-        simd: simd_available() && volume.data().len() < i32::MAX as usize,
-        grad_to_world,
-        stride: [1, grid.dims[0], grid.dims[0] * grid.dims[1]],
-        up: [
-            usize::from(grid.dims[0] > 1),
-            usize::from(grid.dims[1] > 1) * grid.dims[0],
-            usize::from(grid.dims[2] > 1) * grid.dims[0] * grid.dims[1],
-        ],
+    // Set-up: the planes, the frame's classification, the bricks that can have opacity.
+    let planes = Planes::place(settings, &proj, grid, min_spacing)?;
+    let classifier = FrameClassifier::new(tables, proj.frame(), planes.delta);
+    let mut owned_normals = None;
+    let frame_tables = FrameTables::build(
+        volume,
+        tables,
+        &classifier,
+        settings,
         bricks,
-        active: &active,
-        active_bytes: active.iter().map(|&a| u8::from(a)).chain([0; 3]).collect(),
-        extreme_bounds: match settings.mode {
-            RenderMode::Mip => bricks.ranges.iter().map(|r| r[1]).collect(),
-            RenderMode::Minip => bricks.ranges.iter().map(|r| r[0]).collect(),
-            _ => Vec::new(),
-        },
-        skip_empty: composite && !all_active,
-        view,
-        classifier: &classifier,
-        post: post.as_ref(),
-        shaded: shade_table.as_ref(),
-        voxel: voxel_shading.as_ref(),
-        codes,
-        preint,
-        mode: settings.mode,
-        shade,
-        cutoff: settings.opacity_cutoff,
-        j0: j0 as i64,
-        n_planes,
-        delta,
-        dmin,
-        depth_scale: if dmax > dmin {
-            1.0 / (dmax - dmin)
-        } else {
-            0.0
-        },
-        width: w,
-        clip: settings
-            .clip
-            .iter()
-            .map(|p| {
-                let n = DVec3::from(p.normal);
-                (n, p.offset)
-            })
-            .collect(),
-    };
-    let init: Rgba = match settings.mode {
-        RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
-        _ => [0.0; 4],
-    };
-    let mut acc = vec![init; w * h];
-    // Bands of at most `SLAB_BAND_ROWS` rows: a band's work is very uneven here (a band through
-    // an opaque object stops after a few planes, one beside it runs through the whole volume),
-    // so many small bands balance the threads better than a few large ones. The image does not
-    // depend on the band height (every pixel's arithmetic is its own).
-    let band_h = settings.band_height.min(SLAB_BAND_ROWS);
-    let n_bands = h.div_ceil(band_h);
+        &mut owned_normals,
+    )?;
+    let active = frame_tables.active_bricks(bricks, tables);
     let mut stats = RenderStats {
-        preintegrated: composite && preint && (post.is_some() || voxel_shading.is_some()),
-        ring_risk: f64::from(risk),
-        sheets: n_planes,
+        preintegrated: frame_tables.preintegrated(),
+        ring_risk: f64::from(frame_tables.risk),
+        sheets: planes.n_planes,
         sheet_axis: 3,
-        sheet_spacing: delta,
+        sheet_spacing: planes.delta,
         threads: rayon::current_num_threads(),
         ..RenderStats::default()
     };
+    let ctx = Ctx::new(
+        volume,
+        settings,
+        planes,
+        &frame_tables,
+        &classifier,
+        bricks,
+        active,
+    );
     stats.setup_ms = ms(t_start);
+    // The march, band by band of the image.
     let t_render = Instant::now();
-    // Bands handed to the threads between two progress reports: the threads wait for the
-    // slowest band of a group, so a group holds several bands per thread.
-    let group = (BANDS_PER_THREAD * rayon::current_num_threads()).max(2 * BANDS_PER_THREAD);
-    let mut done = 0;
-    let mut counters = Counters::default();
-    let chunks: Vec<(usize, &mut [Rgba])> = acc.chunks_mut(band_h * w).enumerate().collect();
-    let mut chunks = chunks.into_iter().peekable();
-    while chunks.peek().is_some() {
-        let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group).collect();
-        let n = batch.len();
-        let c = batch
-            .into_par_iter()
-            .map(|(b, rows)| ctx.band(b * band_h, rows))
-            .reduce(Counters::default, Counters::add);
-        counters = counters.add(c);
-        done += n;
-        // The accumulation of finished bands is only visible after the loop (the bands hold
-        // it mutably); the callback gets the count.
-        if !progress(&Progress {
-            sheets_done: done,
-            sheets_total: n_bands,
-            accumulation: &[],
-        }) {
-            return Err(SplatError::Cancelled);
-        }
-    }
+    let (acc, counters) = ctx.march_bands(settings, progress)?;
     stats.classify_ms = ms(t_render);
+    // The finish: counters into stats, the accumulation into the picture.
     stats.voxels = counters.samples;
     stats.splats = counters.visible;
     stats.pixel_updates = counters.visible;

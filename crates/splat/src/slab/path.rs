@@ -175,7 +175,7 @@ impl<T: Scalar> Ctx<'_, T> {
 /// the volume (and its clipping) between the eye depths `din` and `dout`: `kf`, except for the
 /// first and last slab of the ray, which stand for the path from where the ray enters (leaves)
 /// the volume, not a whole slab (without this the cut faces step from plane to plane: wood
-/// grain).
+/// grain). The scalar twin of `Run::slab_exponents` (`avx2/composite.rs`).
 #[inline(always)]
 pub(super) fn boundary_factor(kf: f32, din: f32, dout: f32, d: f32, half: f32) -> f32 {
     let lo_cut = d - 2.0 * half < din;

@@ -147,16 +147,16 @@ pub(super) fn shade_opacity(v: &[f32; 8], k: f32, corrected: bool) -> Option<f32
 /// Pre-integration shaded at the voxels: where along its segment a slab is lit, as the fraction
 /// of the way back from this plane's sample to the plane before's: the middle. A ramp that the
 /// segment crosses is crossed anywhere along it with equal chance, and the middle is where the
-/// segment's path is centred. Two better-founded placements were measured against it
-/// (`docs/BENCHMARKS.md` §17.4, decision 0020's amendment): the visible centroid of an evenly
-/// spread extinction (stop 24) lit opaque segments near their front, in the air before a sharp
-/// ramp, and lost up to 1.1 dB to the middle; the centroid of a step in extinction between the
-/// segment's two samples gained 0.4 dB over the middle on one scene `auto` pre-integrates and
-/// nothing on the others, for 10–17 % of the frame.
+/// segment's path is centred. Two better-founded placements were measured against it and not
+/// kept (the visible centroid of an evenly spread extinction, which lit opaque segments near
+/// their front, in the air before a sharp ramp; and the centroid of a step in extinction
+/// between the segment's two samples, which cost more than it gained): the numbers are in
+/// `docs/decisions/0020-preintegration-for-sharp-ramps.md`, its amendment of 2026-11-25.
 pub(super) const SEGMENT_LIGHT_AT: f32 = 0.5;
 
 /// The shaded colour `col` clamped to [0, 1] (as `maxps`/`minps` clamp) and multiplied by the
-/// opacity `a`: the premultiplied RGBA of a shaded sample.
+/// opacity `a`: the premultiplied RGBA of a shaded sample. The scalar twin of
+/// `premultiplied8` (`avx2/shade.rs`).
 #[inline(always)]
 pub(super) fn premultiplied(col: [f32; 3], a: f32) -> Rgba {
     let c = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
@@ -164,11 +164,35 @@ pub(super) fn premultiplied(col: [f32; 3], a: f32) -> Rgba {
 }
 
 impl<T: Scalar> Ctx<'_, T> {
+    /// The difference of the voxels around the voxel with linear index `at` (index `p`) along
+    /// axis `a` (of two voxels or more), and whether it is central: `(ρ(p + 1) − ρ(p − 1), true)`
+    /// inside the grid, one-sided on its faces (`ρ(p + 1) − ρ(p)` at `p = 0`, `ρ(p) − ρ(p − 1)`
+    /// at `p = n − 1`; `false`). A central difference spans two index steps, so the derivative
+    /// per index step is half of it. The stencil of both [`Ctx::gradient_at`] and
+    /// [`Ctx::gradient_lerp`].
+    #[inline(always)]
+    fn difference(&self, at: usize, p: usize, a: usize) -> (f32, bool) {
+        let s = self.stride[a];
+        let v = |q: usize| self.data[q].to_f32();
+        if p == 0 {
+            (v(at + s) - v(at), false)
+        } else if p == self.dims[a] - 1 {
+            (v(at) - v(at - s), false)
+        } else {
+            (v(at + s) - v(at - s), true)
+        }
+    }
+
     /// The world gradient of the reconstruction at pixel `x` of a row (data units per world
     /// unit): the tent kernel's interpolation of the voxels' central differences (one-sided on
     /// the faces of the grid), i.e. gradient splats gathered at the sample, which is what VTK's
     /// ray caster and the reference integrator shade with. Computed only for samples with
-    /// opacity.
+    /// opacity, by the per-sample classifier ([`Ctx::band_plain`]). Its corner weights are the
+    /// products `Π (f or 1 − f)`, not [`Ctx::gradient_lerp`]'s nested interpolations: the two
+    /// agree to rounding, not to the bit, so each keeps its own arithmetic (the images of the
+    /// per-sample classifier were recorded with this one).
+    ///
+    /// [`Ctx::band_plain`]: super::march::Ctx::band_plain
     pub(super) fn gradient_at(&self, walk: &Walk, x: usize) -> Vec3 {
         let (c, f) = self.cell_f32(walk, x);
         let mut g = [0.0f32; 3];
@@ -185,18 +209,11 @@ impl<T: Scalar> Ctx<'_, T> {
             }
             let here = p[0] + p[1] * self.stride[1] + p[2] * self.stride[2];
             for a in 0..3 {
-                let n = self.dims[a];
-                if n < 2 {
+                if self.dims[a] < 2 {
                     continue;
                 }
-                let (lo, hi, span) = if p[a] == 0 {
-                    (here, here + self.stride[a], 1.0)
-                } else if p[a] == n - 1 {
-                    (here - self.stride[a], here, 1.0)
-                } else {
-                    (here - self.stride[a], here + self.stride[a], 2.0)
-                };
-                g[a] += w * (self.data[hi].to_f32() - self.data[lo].to_f32()) / span;
+                let (d, central) = self.difference(here, p[a], a);
+                g[a] += w * d / if central { 2.0 } else { 1.0 };
             }
         }
         self.grad_to_world[0] * g[0] + self.grad_to_world[1] * g[1] + self.grad_to_world[2] * g[2]
@@ -217,22 +234,13 @@ impl<T: Scalar> Ctx<'_, T> {
         let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
         let mut g = [0.0f32; 3];
         for (a, out) in g.iter_mut().enumerate() {
-            let (n, s) = (self.dims[a], self.stride[a]);
-            if n < 2 {
+            if self.dims[a] < 2 {
                 continue;
             }
             let mut d = [0.0f32; 8];
             for (k, (dk, &o)) in d.iter_mut().zip(&offs).enumerate() {
-                let p = c[a] + (k >> a & 1);
-                let at = base + o;
-                let v = |q: usize| self.data[q].to_f32();
-                *dk = if p == 0 {
-                    (v(at + s) - v(at)) * 1.0
-                } else if p == n - 1 {
-                    (v(at) - v(at - s)) * 1.0
-                } else {
-                    (v(at + s) - v(at - s)) * 0.5
-                };
+                let (d, central) = self.difference(base + o, c[a] + (k >> a & 1), a);
+                *dk = d * if central { 0.5 } else { 1.0 };
             }
             let c00 = lerp(d[0], d[1], f[0]);
             let c10 = lerp(d[2], d[3], f[0]);

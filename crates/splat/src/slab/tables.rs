@@ -1,11 +1,140 @@
 //! The classification tables of density-indexed transfer functions: unshaded
-//! ([`PostTable`]), shaded ([`ShadeTable`]), their pre-integrated segments, and the ringing
-//! risk that decides pre-integration ([`ring_risk`]).
+//! ([`PostTable`]), shaded ([`ShadeTable`]), their pre-integrated segments, the ringing
+//! risk that decides pre-integration ([`ring_risk`]), and the tables of one frame together
+//! ([`FrameTables`]) with the bricks they leave empty.
 
 use super::math::{log2_unit, max_ps, min_ps};
+use crate::bricks::BrickGrid;
+use crate::error::Result;
+use crate::normals::{NormalField, ShadeAt, VoxelShading};
+use crate::render::{Preintegrate, RenderMode, RenderSettings};
 use volsplat_core::glam::Vec3;
 use volsplat_core::image::Rgba;
-use volsplat_core::{CrioTables, FrameClassifier, SampleInput};
+use volsplat_core::{CrioTables, FrameClassifier, SampleInput, Scalar, Volume};
+
+/// How one frame classifies its samples (decisions 0016, 0019, 0020): through a density table
+/// where the transfer function depends on the density alone (unshaded, [`PostTable`]; shaded,
+/// [`ShadeTable`], at the samples or at the voxels), through the per-sample classifier
+/// otherwise (both tables `None`); and whether the segments between planes are pre-integrated.
+pub(super) struct FrameTables<'a> {
+    /// Composite whose lights need the gradient.
+    pub(super) shade: bool,
+    /// Unshaded composite classified by density.
+    pub(super) post: Option<PostTable>,
+    /// Shaded composite classified by density.
+    pub(super) shaded: Option<ShadeTable>,
+    /// With `shaded`, shaded at the voxels ([`ShadeAt::Voxels`]): the frame's lights applied
+    /// to every direction code, and the voxels' codes (empty otherwise).
+    pub(super) voxel: Option<VoxelShading>,
+    pub(super) codes: &'a [u16],
+    /// Per index axis: the world direction of that axis divided by its spacing.
+    pub(super) grad_to_world: [Vec3; 3],
+    /// [`ring_risk`] of the density table (0 without one).
+    pub(super) risk: f32,
+    /// Pre-integrate the segments between planes ([`RenderSettings::preintegrate`], `auto`
+    /// where `risk` exceeds [`RING_RISK`]).
+    pub(super) preint: bool,
+}
+
+impl<'a> FrameTables<'a> {
+    /// The tables of a frame of `volume` classified by `classifier` (made for the frame's
+    /// slab thickness) under `settings`. The voxels' direction codes come from `bricks` where
+    /// it keeps them across frames, else are built into `owned_normals`; an error where they
+    /// cannot be allocated.
+    pub(super) fn build<T: Scalar>(
+        volume: &Volume<T>,
+        tables: &CrioTables,
+        classifier: &FrameClassifier,
+        settings: &RenderSettings,
+        bricks: &'a BrickGrid,
+        owned_normals: &'a mut Option<NormalField>,
+    ) -> Result<Self> {
+        let grid = volume.grid();
+        let composite = settings.mode == RenderMode::Composite;
+        let shade = composite && classifier.needs_gradient;
+        let post = (composite && !shade)
+            .then(|| PostTable::new(tables, classifier))
+            .flatten();
+        let grad_to_world = [0, 1, 2].map(|a| (grid.direction.col(a) / grid.spacing[a]).as_vec3());
+        // Shaded composite through tables where the classification depends on the density
+        // alone; the per-sample classifier otherwise.
+        let shaded = shade
+            .then(|| ShadeTable::new(tables, classifier, grad_to_world))
+            .flatten();
+        // Shading at the voxels (VTK's order; `crate::normals`): the voxels' direction codes,
+        // kept with the brick grid across frames, and the frame's lights applied to every code.
+        let (voxel, codes): (Option<VoxelShading>, &[u16]) = match &shaded {
+            Some(t) if settings.shade_at == ShadeAt::Voxels => {
+                let field = match bricks.normals(volume)? {
+                    Some(f) => f,
+                    None => owned_normals.insert(NormalField::build(volume)?),
+                };
+                (Some(VoxelShading::new(t)), field.codes())
+            }
+            _ => (None, &[]),
+        };
+        let risk = {
+            let (alphas, scale): (Vec<f32>, f32) = match (&post, &shaded) {
+                (Some(t), _) => (t.values.iter().map(|v| v[3]).collect(), t.axis.scale),
+                (None, Some(t)) => (t.rows.iter().map(|r| r[0]).collect(), t.axis.scale),
+                _ => (Vec::new(), 0.0),
+            };
+            let (lo, hi) = bricks
+                .ranges
+                .iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |a, r| {
+                    (a.0.min(r[0]), a.1.max(r[1]))
+                });
+            ring_risk(&alphas, scale, hi - lo)
+        };
+        let preint = match settings.preintegrate {
+            Preintegrate::Off => false,
+            Preintegrate::On => true,
+            Preintegrate::Auto => risk > RING_RISK,
+        };
+        Ok(FrameTables {
+            shade,
+            post,
+            shaded,
+            voxel,
+            codes,
+            grad_to_world,
+            risk,
+            preint,
+        })
+    }
+
+    /// Whether the frame's samples are pre-integrated: composite, asked for and classified
+    /// through a table that pre-integrates (unshaded, or shaded at the voxels).
+    pub(super) fn preintegrated(&self) -> bool {
+        self.preint && (self.post.is_some() || self.voxel.is_some())
+    }
+
+    /// One flag per brick of `bricks`: whether a sample in it can have opacity (empty space,
+    /// module docs of [`super`]). Composite classified by a density table, one point per slab,
+    /// skips the bricks whose samples read only entries without opacity from that very table
+    /// (exact, [`BrickGrid::active_in_table`]); pre-integrated segments reach into the brick
+    /// before, and the per-sample classifier resamples the opacity table of `tables`, so they
+    /// keep the slack test ([`BrickGrid::active`]).
+    pub(super) fn active_bricks(&self, bricks: &BrickGrid, tables: &CrioTables) -> Vec<bool> {
+        let table_active = match (&self.post, &self.shaded) {
+            (Some(t), _) if !self.preint => {
+                Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x)))
+            }
+            (None, Some(t)) if !self.preint || self.voxel.is_none() => {
+                Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x)))
+            }
+            _ => None,
+        };
+        table_active.unwrap_or_else(|| {
+            bricks.active(
+                &tables.opacity,
+                (tables.opacity.hi - tables.opacity.lo) / 4095.0,
+                false,
+            )
+        })
+    }
+}
 
 /// Premultiplied RGBA per density for unshaded classification: [`FrameClassifier::classify`]
 /// evaluated at the entries of its own fused table (so the entries agree with it exactly),
@@ -26,19 +155,62 @@ pub(super) struct PostTable {
     /// trapezoidal, summed in f64), and the same paired as `pairs`.
     integ: Vec<Rgba>,
     pub(super) integ_pairs: Vec<[f32; 8]>,
+    /// The densities of the entries.
+    pub(super) axis: TableAxis,
+    pub(super) values: Vec<Rgba>,
+}
+
+/// The density axis of a table of entries spaced evenly from density `lo`: `scale` entries
+/// per data unit, `last` the last entry's index (a table of one entry: `scale = last = 0`).
+/// Shared by [`PostTable`] and [`ShadeTable`], and read by the AVX2 kernels' `table_pos8`.
+#[derive(Clone, Copy)]
+pub(super) struct TableAxis {
     pub(super) lo: f32,
     pub(super) scale: f32,
     pub(super) last: f32,
-    pub(super) values: Vec<Rgba>,
+}
+
+impl TableAxis {
+    /// The axis of a table of `n` entries spanning `[lo, hi]`.
+    fn new(lo: f32, hi: f32, n: usize) -> Self {
+        let scale = if n > 1 {
+            (n - 1) as f32 / (hi - lo)
+        } else {
+            0.0
+        };
+        TableAxis {
+            lo,
+            scale,
+            last: (n - 1) as f32,
+        }
+    }
+
+    /// The table position of density `x`: `min(max((x − lo)·scale, 0), last)` (NaN → 0). The
+    /// scalar twin of `table_pos8` (`avx2/mod.rs`).
+    #[inline(always)]
+    pub(super) fn pos(&self, x: f32) -> f32 {
+        ((x - self.lo) * self.scale).max(0.0).min(self.last)
+    }
+}
+
+/// Linear interpolation in a table of `N`-channel entries at table position `t` (in
+/// `[0, last]`): `row_i + f·(row_{i+1} − row_i)` per channel, the last entry standing for the
+/// one after it (the tables whose last row is repeated never need that).
+#[inline(always)]
+fn lerp_rows<const N: usize>(rows: &[[f32; N]], t: f32) -> [f32; N] {
+    // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
+    let i = t as i32 as usize;
+    let f = t - i as f32;
+    let a = rows[i];
+    let b = rows[(i + 1).min(rows.len() - 1)];
+    std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
 }
 
 /// [`Preintegrate::Auto`] pre-integrates where [`ring_risk`] exceeds this: where the steepest
 /// ramp of the transfer function takes a slab's opacity through more than 4 across a quarter of
-/// the data's value range. Measured on the CT head phantom and the MRIs (decision 0020; PSNR
-/// against the same renderer at ⅛ voxel, segment minus point): sharp skin ramps (risk 10–11)
-/// +5.4 dB unshaded, +0.7 dB shaded; Slicer's CT-Soft-Tissue (79) +6 dB; CT-Air (1.3), CT-Skin
-/// (1.5, shaded), CT-Muscle (1.2, shaded), CT-Bone (0.8) and the MRI scenes (0.2–0.3) lose 1–14
-/// dB by segment; the built-in demo (2.2, shaded) would gain 5 dB but stays by point.
+/// the data's value range. Every case measured above it gains by segment, and every case below
+/// it but the built-in demo loses: the cases are tabled in
+/// `docs/decisions/0020-preintegration-for-sharp-ramps.md` ("The `auto` rule").
 ///
 /// [`Preintegrate::Auto`]: crate::render::Preintegrate::Auto
 pub const RING_RISK: f32 = 4.0;
@@ -74,7 +246,8 @@ pub(super) const SEGMENT_MIN_ENTRIES: f32 = 1.0;
 /// middle (`at(false, ·)`); else from the integral rows (`at(true, ·)`), `L̄ = Δ∫L / Δt` in slot
 /// `L`, each other slot `Δ∫x·L / Δ∫L`, and 0 in slot `W` (where the rows hold `∫L`) if it is
 /// not `L`. The post table integrates into slot 3 and returns `[c̄, L̄]` (`W = L = 3`); the
-/// shade table integrates into slot 0 and returns `[0, ē, d̄, L̄]` (`W = 0`, `L = 7`).
+/// shade table integrates into slot 0 and returns `[0, ē, d̄, L̄]` (`W = 0`, `L = 7`). The
+/// scalar twin of `segment_average8` (`avx2/composite.rs`).
 #[inline(always)]
 pub(super) fn segment_average<const N: usize, const W: usize, const L: usize>(
     tu: f32,
@@ -181,7 +354,6 @@ impl PostTable {
                 })
                 .collect()
         };
-        let (scale, last) = table_steps(lo, hi, n);
         let integ = integral_rows(&persp, 3);
         Some(PostTable {
             pairs: paired(&values),
@@ -189,9 +361,7 @@ impl PostTable {
             integ_pairs: paired(&integ),
             integ,
             persp,
-            lo,
-            scale,
-            last,
+            axis: TableAxis::new(lo, hi, n),
             values,
         })
     }
@@ -216,13 +386,7 @@ impl PostTable {
     /// Linear interpolation in `values` (either table) at density `x`.
     #[inline(always)]
     pub(super) fn lookup_in(&self, values: &[Rgba], x: f32) -> Rgba {
-        Self::at(values, self.pos(x))
-    }
-
-    /// The table position of density `x`: `min(max((x − lo)·scale, 0), last)` (NaN → 0).
-    #[inline(always)]
-    pub(super) fn pos(&self, x: f32) -> f32 {
-        ((x - self.lo) * self.scale).max(0.0).min(self.last)
+        lerp_rows(values, self.axis.pos(x))
     }
 
     /// The pre-integrated classification of the segment of a ray whose density goes linearly
@@ -234,27 +398,13 @@ impl PostTable {
     /// no opacity (`∫L = 0`) `L̄` is 0 and the colours 0/0 (NaN): it contributes nothing
     /// ([`Ctx::post_seg_src`], and the kernels' masks).
     ///
+    /// The scalar twin of `post_segment8` (`avx2/composite.rs`).
+    ///
     /// [`Ctx::post_seg_src`]: super::march::Ctx::post_seg_src
     #[inline(always)]
     pub(super) fn segment(&self, u: f32, v: f32) -> Rgba {
-        let at = |integ: bool, t| Self::at(if integ { &self.integ } else { &self.persp }, t);
-        segment_average::<4, 3, 3>(self.pos(u), self.pos(v), at)
-    }
-
-    /// Linear interpolation in `values` at table position `t` (in `[0, last]`).
-    #[inline(always)]
-    fn at(values: &[Rgba], t: f32) -> Rgba {
-        // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
-        let i = t as i32 as usize;
-        let f = t - i as f32;
-        let a = values[i];
-        let b = values[(i + 1).min(values.len() - 1)];
-        [
-            a[0] + f * (b[0] - a[0]),
-            a[1] + f * (b[1] - a[1]),
-            a[2] + f * (b[2] - a[2]),
-            a[3] + f * (b[3] - a[3]),
-        ]
+        let at = |integ: bool, t| lerp_rows(if integ { &self.integ } else { &self.persp }, t);
+        segment_average::<4, 3, 3>(self.axis.pos(u), self.axis.pos(v), at)
     }
 }
 
@@ -265,9 +415,8 @@ impl PostTable {
 ///
 /// [`shaded_src`]: super::shade::shaded_src
 pub(crate) struct ShadeTable {
-    pub(super) lo: f32,
-    pub(super) scale: f32,
-    pub(super) last: f32,
+    /// The densities of the entries of `rows` and `integ`.
+    pub(super) axis: TableAxis,
     /// `[α, e_r, e_g, e_b, d_r, d_g, d_b, log2(1 − α)]` per density (α step-corrected, `e` the
     /// emission `classify` adds, `d` the reflection colour; `log2(1 − α)` is −126 for `α = 1`),
     /// with the last entry repeated so that entry `i + 1` exists for every `i ≤ last`.
@@ -343,11 +492,8 @@ impl ShadeTable {
             .map(|i| (i as f64 / Self::SPEC as f64).powf(p) as f32)
             .collect();
         spec_pow.push(spec_pow[Self::SPEC]);
-        let (scale, last) = table_steps(lo, hi, n);
         Some(ShadeTable {
-            lo,
-            scale,
-            last,
+            axis: TableAxis::new(lo, hi, n),
             rows,
             integ,
             spec_pow,
@@ -377,23 +523,7 @@ impl ShadeTable {
     /// The entry at density `x`, linearly interpolated.
     #[inline(always)]
     pub(super) fn entry(&self, x: f32) -> [f32; 8] {
-        Self::at(&self.rows, self.pos(x))
-    }
-
-    /// The table position of density `x` (as [`PostTable::pos`]).
-    #[inline(always)]
-    pub(super) fn pos(&self, x: f32) -> f32 {
-        ((x - self.lo) * self.scale).max(0.0).min(self.last)
-    }
-
-    /// Row `t` of `rows` (a position in `[0, last]`), linearly interpolated.
-    #[inline(always)]
-    fn at(rows: &[[f32; 8]], t: f32) -> [f32; 8] {
-        // t ∈ [0, last] (NaN maps to 0 through `max`), so the i32 conversion is exact.
-        let i = t as i32 as usize;
-        let f = t - i as f32;
-        let (a, b) = (rows[i], rows[i + 1]);
-        std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
+        lerp_rows(&self.rows, self.axis.pos(x))
     }
 
     /// The pre-integrated entry of the segment from density `u` (the previous plane) to `v`
@@ -401,11 +531,13 @@ impl ShadeTable {
     /// weighted by `L`. The opacity slot is 0: pre-integrated samples always take the
     /// path-corrected opacity `1 − 2^(k·L̄)` ([`shade_opacity`] with `corrected`).
     ///
+    /// The scalar twin of `shade_segment8` (`avx2/shade.rs`).
+    ///
     /// [`shade_opacity`]: super::shade::shade_opacity
     #[inline(always)]
     pub(super) fn segment_entry(&self, u: f32, v: f32) -> [f32; 8] {
-        let at = |integ: bool, t| Self::at(if integ { &self.integ } else { &self.rows }, t);
-        segment_average::<8, 0, 7>(self.pos(u), self.pos(v), at)
+        let at = |integ: bool, t| lerp_rows(if integ { &self.integ } else { &self.rows }, t);
+        segment_average::<8, 0, 7>(self.axis.pos(u), self.axis.pos(v), at)
     }
 
     /// The lights of the frame.
@@ -427,17 +559,6 @@ impl ShadeTable {
         let (a, b) = (self.spec_pow[i], self.spec_pow[i + 1]);
         a + f * (b - a)
     }
-}
-
-/// Entries per data unit and the last entry's index of a table of `n` entries spanning
-/// `[lo, hi]` (a table of one entry: `(0, 0)`).
-fn table_steps(lo: f32, hi: f32, n: usize) -> (f32, f32) {
-    let scale = if n > 1 {
-        (n - 1) as f32 / (hi - lo)
-    } else {
-        0.0
-    };
-    (scale, (n - 1) as f32)
 }
 
 /// The density range `[lo, hi]` that the density-indexed tables cover together.
@@ -463,7 +584,6 @@ mod tests {
     /// A post table over `[0, n − 1]` (one entry per data unit) from `persp` entries.
     fn post_table(persp: Vec<Rgba>) -> PostTable {
         let n = persp.len();
-        let (scale, last) = table_steps(0.0, (n - 1) as f32, n);
         let integ = integral_rows(&persp, 3);
         PostTable {
             pairs: Vec::new(),
@@ -472,9 +592,7 @@ mod tests {
             values: Vec::new(),
             persp,
             integ,
-            lo: 0.0,
-            scale,
-            last,
+            axis: TableAxis::new(0.0, (n - 1) as f32, n),
         }
     }
 

@@ -1,9 +1,84 @@
-//! The frame's rays in the volume's index space: the box the rays cross, the point of each
-//! pixel on each plane, and the rows of a plane walked in fixed point.
+//! The view set-up: the box the rays cross and the planes across it ([`Planes`]), the frame's
+//! rays in the volume's index space (the point of each pixel on each plane, [`View`]), and the
+//! rows of a plane walked in fixed point ([`Walk`]).
 
 use crate::bricks::BRICK;
-use volsplat_core::Projection;
+use crate::error::{Result, SplatError};
+use crate::render::RenderSettings;
 use volsplat_core::glam::DVec3;
+use volsplat_core::{Grid, Projection};
+
+/// Where the slabs of a frame lie: the planes parallel to the image, `Δ` apart at the eye
+/// depths `d_j = Δ·j` (module docs of [`super`]), that cross the box the rays cross.
+pub(super) struct Planes {
+    /// The geometry the rays are set up in ([`drawn_geometry`]).
+    pub(super) geo: Grid,
+    /// The frame's rays in `geo`'s index space.
+    pub(super) view: View,
+    /// The slab thickness `Δ` (world units).
+    pub(super) delta: f64,
+    /// The first plane's number: plane `p` lies at the eye depth `(j0 + p)·Δ`.
+    pub(super) j0: i64,
+    /// The planes across the box (at most 2²⁴).
+    pub(super) n_planes: usize,
+    /// The eye depths of the box's nearest and farthest corners (world units).
+    pub(super) dmin: f64,
+    pub(super) dmax: f64,
+}
+
+impl Planes {
+    /// The planes of a frame of `settings.width × settings.height` pixels seen through `proj`,
+    /// `settings.slab` times `min_spacing` (the grid's smallest spacing) apart, capped at the
+    /// thinnest extent of the box the rays cross; an error where more than 2²⁴ planes would
+    /// cross the volume.
+    pub(super) fn place(
+        settings: &RenderSettings,
+        proj: &Projection,
+        grid: &Grid,
+        min_spacing: f64,
+    ) -> Result<Self> {
+        // The box the rays cross: the voxel centres', an axis of one sample spanning its voxel
+        // (decision 0023). No thicker slabs than the box's thinnest extent, so that a ray
+        // through both of its widest faces meets a plane inside (a sheet one voxel thick under
+        // `--slab 2` would otherwise fall between two planes and draw nothing); with slabs of
+        // at most one voxel this never applies (every extent is a spacing or more).
+        let geo = drawn_geometry(grid);
+        let thinnest = (0..3)
+            .map(|a| (geo.dims[a] - 1) as f64 * geo.spacing[a])
+            .fold(f64::INFINITY, f64::min);
+        let delta = (settings.slab * min_spacing).min(thinnest);
+        // Depth range of the box the rays cross, and the planes inside it.
+        let frame = proj.frame();
+        let depths = geo
+            .corners_world()
+            .map(|c| (c - frame.eye).dot(frame.forward));
+        let dmin = depths.iter().fold(f64::INFINITY, |m, &d| m.min(d));
+        let dmax = depths.iter().fold(f64::NEG_INFINITY, |m, &d| m.max(d));
+        let mut j0 = (dmin / delta).ceil();
+        if matches!(proj, Projection::Perspective(_)) {
+            j0 = j0.max(1.0); // planes in front of the eye only
+        }
+        let j1 = (dmax / delta).floor();
+        let n_planes = if j1 >= j0 { (j1 - j0) as usize + 1 } else { 0 };
+        if n_planes > 1 << 24 {
+            return Err(SplatError::Setting {
+                name: "slab",
+                value: settings.slab.to_string(),
+                expected: "fewer than 2^24 planes across the volume; use a thicker slab",
+            });
+        }
+        let view = View::new(proj, &geo, settings.width, settings.height);
+        Ok(Planes {
+            geo,
+            view,
+            delta,
+            j0: j0 as i64,
+            n_planes,
+            dmin,
+            dmax,
+        })
+    }
+}
 
 /// The geometry the slabs' rays are set up in (`docs/decisions/0023-thin-volumes.md`): `grid`
 /// itself where every axis has two samples or more; otherwise each axis of one sample becomes
@@ -12,7 +87,7 @@ use volsplat_core::glam::DVec3;
 /// ([`volsplat_core::Grid::drawn_box_index`]). Only positions use it: the cells are clamped to
 /// the real grid (`Ctx::max_cell`, 0 there) and the step to the next voxel along the axis is 0
 /// (`Ctx::up`), so every position along the axis reads the one sample.
-pub(super) fn drawn_geometry(grid: &volsplat_core::Grid) -> volsplat_core::Grid {
+pub(super) fn drawn_geometry(grid: &Grid) -> Grid {
     let mut geo = grid.clone();
     for a in 0..3 {
         if grid.dims[a] == 1 {
@@ -47,7 +122,7 @@ pub(super) struct View {
 }
 
 impl View {
-    pub(super) fn new(proj: &Projection, grid: &volsplat_core::Grid, w: usize, h: usize) -> Self {
+    pub(super) fn new(proj: &Projection, grid: &Grid, w: usize, h: usize) -> Self {
         let fr = proj.frame();
         let q0 = grid.index_from_world(DVec3::ZERO);
         let lin = |v: DVec3| grid.index_from_world(v) - q0;

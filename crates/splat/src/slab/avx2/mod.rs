@@ -1,9 +1,24 @@
 //! The AVX2 kernels: eight pixels of a row at a time, for x86-64 CPUs that have AVX2
-//! (detected at run time, `super::simd_available`). Every kernel names its scalar twin, which
-//! does the same f32 operations in the same order (no fused multiply–add), so the bits do not
-//! depend on the CPU: sampling ([`sample_run_avx2`], [`sampler`]), composite ([`composite`],
-//! shaded in [`shade`]) and MIP/MinIP ([`extreme_row_avx2`]); the lane helpers shared by them
-//! are here.
+//! (detected at run time, `super::simd_available`). This module is the only one behind
+//! `#[cfg(target_arch = "x86_64")]` (in `super`, and at the three call sites in `super::march`
+//! that try a kernel before the scalar loop). Every kernel names its scalar twin, which does the
+//! same f32 operations in the same order (no fused multiply–add), so the bits do not depend on
+//! the CPU, and every twin names its kernel:
+//!
+//! | kernel (here) | scalar twin |
+//! |---|---|
+//! | [`sample_run_avx2`], [`sampler::Sampler8`] | `Ctx::sample_scalar`, `Ctx::cell_f32` (`march.rs`), `trilinear` (`math.rs`) |
+//! | [`composite_run_avx2`] and its skeleton `composite_groups_avx2` | `Ctx::composite_one` (`march.rs`) |
+//! | `composite::Run::slab_exponents` | `boundary_factor` (`path.rs`) |
+//! | `composite::PostSource`, `post_segment8`, `segment_average8` | `Ctx::post_src`, `PostTable::segment`, `segment_average` (`march.rs`, `tables.rs`) |
+//! | `shade::ShadeSource` (`shade_terms8`, `shade_light8`) | `Ctx::gradient_lerp`, `shaded_src` (`shade.rs`) |
+//! | `shade::VoxelShadeSource`, `light_cells`, `shade_segment8` | `voxel_shaded_src`, `Ctx::light_cell`, `ShadeTable::segment_entry` |
+//! | [`extreme_row_avx2`] | `Ctx::extreme_one` (`march.rs`) |
+//! | `table_pos8`, `lerp8`, `exp2_neg8`, `premultiplied8` | `TableAxis::pos`, `lerp`, `exp2_neg`, `premultiplied` |
+//!
+//! Sampling is in [`sampler`], the composite skeleton and the unshaded classification in
+//! [`composite`], the shaded classifications in [`shade`]; the lane helpers shared by them are
+//! here.
 
 pub(super) mod composite;
 pub(super) mod sampler;
@@ -12,6 +27,7 @@ pub(super) mod shade;
 pub(super) use composite::composite_run_avx2;
 
 use super::march::{Counters, Ctx};
+use super::tables::TableAxis;
 use super::view::Walk;
 use sampler::Sampler8;
 use volsplat_core::Scalar;
@@ -257,28 +273,23 @@ fn splat3(v: [f32; 3]) -> [std::arch::x86_64::__m256; 3] {
     ]
 }
 
-/// A table position on eight lanes, `min(max((ρ − lo)·scale, 0), last)` (NaN → 0), as the
-/// scalar lookups compute it ([`PostTable::lookup_in`], [`ShadeTable::entry`]).
-///
-/// [`PostTable::lookup_in`]: crate::slab::tables::PostTable::lookup_in
-/// [`ShadeTable::entry`]: crate::slab::tables::ShadeTable::entry
+/// A table position on eight lanes, `min(max((ρ − lo)·scale, 0), last)` (NaN → 0): lane by
+/// lane the operations of its scalar twin [`TableAxis::pos`].
 #[inline]
 #[target_feature(enable = "avx2")]
-fn table_pos8(
-    rho: std::arch::x86_64::__m256,
-    lo: f32,
-    scale: f32,
-    last: f32,
-) -> std::arch::x86_64::__m256 {
+fn table_pos8(rho: std::arch::x86_64::__m256, axis: TableAxis) -> std::arch::x86_64::__m256 {
     use std::arch::x86_64::*;
     let t = _mm256_mul_ps(
-        _mm256_sub_ps(rho, _mm256_set1_ps(lo)),
-        _mm256_set1_ps(scale),
+        _mm256_sub_ps(rho, _mm256_set1_ps(axis.lo)),
+        _mm256_set1_ps(axis.scale),
     );
-    _mm256_min_ps(_mm256_max_ps(t, _mm256_setzero_ps()), _mm256_set1_ps(last))
+    _mm256_min_ps(
+        _mm256_max_ps(t, _mm256_setzero_ps()),
+        _mm256_set1_ps(axis.last),
+    )
 }
 
-/// `p + f·(q − p)` on eight lanes ([`lerp`]).
+/// `p + f·(q − p)` on eight lanes: its scalar twin [`lerp`].
 ///
 /// [`lerp`]: crate::slab::math::lerp
 #[inline]

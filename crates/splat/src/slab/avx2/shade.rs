@@ -112,7 +112,7 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         corrected: std::arch::x86_64::__m256,
     ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
-        let pos = table_pos8(rho, self.t.lo, self.t.scale, self.t.last);
+        let pos = table_pos8(rho, self.t.axis);
         // SAFETY: positions are clamped to [0, last], and row last + 1 exists.
         let v = unsafe { interp8(&self.t.rows, pos, false) };
         let (v, a, contributes) = shade_terms8(v, k, corrected);
@@ -337,7 +337,7 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
         let v = if self.preint {
             unsafe { shade_segment8(self.t, u, rho) }
         } else {
-            let pos = table_pos8(rho, self.t.lo, self.t.scale, self.t.last);
+            let pos = table_pos8(rho, self.t.axis);
             unsafe { interp8(&self.t.rows, pos, false) }
         };
         let (v, a, contributes) = shade_terms8(v, k, corrected);
@@ -405,7 +405,7 @@ unsafe fn shade_segment8(
     v: std::arch::x86_64::__m256,
 ) -> [std::arch::x86_64::__m256; 8] {
     // SAFETY: both tables repeat their last row, so row last + 1 exists.
-    unsafe { segment_average8::<8, 0, 7>((t.lo, t.scale, t.last), u, v, &t.rows, &t.integ, false) }
+    unsafe { segment_average8::<8, 0, 7>(t.axis, u, v, &t.rows, &t.integ, false) }
 }
 
 /// The first half of [`shaded_src`] on eight lanes, from the table's entries `v` (at the
