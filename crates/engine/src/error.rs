@@ -5,6 +5,7 @@ use thiserror::Error;
 
 /// Everything that can go wrong between a [`crate::RenderRequest`] and an [`crate::Output`].
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum EngineError {
     /// Invalid camera, transfer function, grid or phantom parameters.
     #[error(transparent)]

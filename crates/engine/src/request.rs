@@ -16,6 +16,7 @@ use volsplat_splat::{Antialias, Order, RenderMode, RenderSettings, Visibility};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum Mode {
     /// Emission–absorption compositing of classified, shaded samples.
     #[default]
@@ -44,6 +45,7 @@ impl Mode {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum RendererChoice {
     /// Chosen per request by the rules of `docs/architecture.md` ("Which renderer draws a
     /// request"): image-aligned slabs for composite, MIP and MinIP where visibility `auto`
@@ -71,6 +73,7 @@ pub enum RendererChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum KernelChoice {
     /// Westover's Gaussian, σ = 0.6 voxel, radius 2.
     #[default]
@@ -119,6 +122,7 @@ impl KernelChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum AntialiasChoice {
     /// Swan et al. eq. 4 and 8.
     Swan,
@@ -140,6 +144,7 @@ pub enum AntialiasChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum VisibilityChoice {
     /// Chosen by measurement (decisions 0016 and 0019): image-aligned slabs for composite
     /// (shaded at the voxels, as VTK shades, where the transfer function depends on the density
@@ -167,6 +172,7 @@ pub enum VisibilityChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum ShadeAtChoice {
     /// At the voxels, interpolated: each voxel's gradient direction is shaded once per frame
     /// and a sample blends its cell's eight corners' light, as VTK's CPU ray caster
@@ -184,6 +190,7 @@ pub enum ShadeAtChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum PreintegrateChoice {
     /// By segment where the transfer function's steepest ramp is sharp against the data's value
     /// range (rings and popping otherwise: a CT's skin), by point elsewhere (noisy data, smooth
@@ -278,6 +285,7 @@ impl VolumeLevel {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum OrderChoice {
     /// Front to back (allows early termination).
     #[default]
@@ -289,6 +297,7 @@ pub enum OrderChoice {
 /// Quality settings of the splatting renderers.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
+#[non_exhaustive]
 pub struct Quality {
     /// Reconstruction kernel (the splat list takes `gaussian` or `crawfis-max`).
     pub kernel: KernelChoice,
@@ -358,6 +367,7 @@ impl Default for Quality {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum DisplayChoice {
     /// Sabella's display as a filter: the screen-filtered line integral `X` (through NIL maps,
     /// or by quadrature with `direct`), shown as `1 − e^{−τX}` (decision 0027). The thesis's
@@ -379,6 +389,7 @@ pub enum DisplayChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum DensityChoice {
     /// The transfer function's scalar opacity.
     #[default]
@@ -391,6 +402,7 @@ pub enum DensityChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum AttenuationChoice {
     /// Sabella's own attenuation: `1 − e^{−τX}` of the screen-filtered line integral `X`.
     #[default]
@@ -405,6 +417,7 @@ pub enum AttenuationChoice {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[non_exhaustive]
 pub enum ControlChoice {
     /// L² projection of the filter onto each patch.
     #[default]

@@ -15,6 +15,7 @@ use std::str::FromStr;
 /// (`volsplat_splat::RenderSettings::xray_offset`).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[non_exhaustive]
 pub enum XrayDensity {
     /// [`XRAY_CT_OFFSET`] (1000) where the data look like CT in Hounsfield units
     /// ([`looks_like_hounsfield`]), the values as they are otherwise.

@@ -9,6 +9,7 @@ use volsplat_core::ProjectionKind;
 /// The stage a render is in ([`Progress::stage`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "lowercase")]
+#[non_exhaustive]
 pub enum Stage {
     /// Loading or building the volume.
     Load,
@@ -42,6 +43,7 @@ impl fmt::Display for Stage {
 
 /// Progress of a render, passed to the caller's callback.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct Progress {
     /// Fraction done, in [0, 1].
     pub fraction: f64,
@@ -53,6 +55,7 @@ pub struct Progress {
 /// ([`crate::RendererChoice`]), these stats, the modules and `docs/architecture.md`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum UsedRenderer {
     /// Westover's dense orthographic sheet-buffer renderer (`volsplat_splat::render`).
     Sheets,
@@ -94,6 +97,7 @@ pub fn renderer_name(r: UsedRenderer) -> &'static str {
 /// The axis the sheets or slabs are stacked along ([`Stats::sheet_axis`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "lowercase")]
+#[non_exhaustive]
 pub enum SheetAxis {
     /// The lattice's first index axis.
     I,
@@ -126,6 +130,7 @@ fn or_empty<T: Serialize, S: Serializer>(v: &Option<T>, s: S) -> Result<S::Ok, S
 /// Timings (milliseconds) and counters of one render: one type for every renderer. Fields a
 /// renderer does not have are zero or absent.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[non_exhaustive]
 pub struct Stats {
     /// The renderer that drew the image.
     pub renderer: Option<UsedRenderer>,
@@ -282,6 +287,7 @@ impl From<volsplat_splat::ShadeAt> for ShadeAtChoice {
 
 /// Timings (milliseconds) and counters of a Chapter 6 display.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[non_exhaustive]
 pub struct DisplayStats {
     /// NIL map construction (whenever it was built; 0 without a map).
     pub map_build_ms: f64,

@@ -74,6 +74,7 @@ impl Clock for ManualClock {
 
 /// How a session paces its frames. Times in milliseconds.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct SessionSettings {
     /// Frames per second to keep while input arrives (default 60, the rate at which a
     /// browser sends pointer events): the frame budget is `1000 / target_fps` ms of render
