@@ -29,9 +29,13 @@ mod mipcull;
 pub mod normals;
 pub mod pyramid;
 pub mod refine;
-pub mod render;
 mod row;
+pub mod sheets;
 pub mod slab;
+/// The sheet renderer's former module name, kept so that `crate::render::…` paths (the slab
+/// renderer's imports) still resolve; new code names [`sheets`].
+#[doc(hidden)]
+pub use sheets as render;
 
 pub use aa::Antialias;
 pub use bricks::BrickGrid;
@@ -44,7 +48,7 @@ pub use list::{
 };
 pub use normals::ShadeAt;
 pub use pyramid::{Pyramid, PyramidLevel, auto_level, focal_pixel_size, render_level};
-pub use render::{
+pub use sheets::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
     render_any, render_with_progress, xray_weight,
 };

@@ -30,7 +30,7 @@
 //! inside the volume. Splats whose centre is closer to the eye plane than the kernel's radius
 //! (or behind it) are clipped, never drawn inverted.
 //!
-//! **Parallel and deterministic**: the band decomposition of [`mod@crate::render`]; output is
+//! **Parallel and deterministic**: the band decomposition of [`mod@crate::sheets`]; output is
 //! bit-identical for any thread count.
 
 use crate::aa::{footprint_variance, widen};
@@ -38,7 +38,7 @@ use crate::clip::LatticeClip;
 use crate::error::{Result, SplatError, try_filled, try_with_capacity};
 use crate::footprint::metric_from;
 use crate::geometry::Order;
-use crate::render::{
+use crate::sheets::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
     SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit,
     div_band, finish, gradient_at, ms, scale_kept, validate, xray_weight,
@@ -1050,7 +1050,7 @@ fn splat_one<const S: u8>(
 mod tests {
     use super::*;
     use crate::aa::Antialias;
-    use crate::render::render;
+    use crate::sheets::render;
     use volsplat_core::TransferFunction;
 
     fn smooth_volume(n: usize) -> Volume<f32> {

@@ -8,7 +8,7 @@
 //! aliases.
 
 use crate::error::Result;
-use crate::render::{RenderSettings, Rendered, render};
+use crate::sheets::{RenderSettings, Rendered, render};
 use volsplat_core::{Camera, CrioTables, Kernel, Scalar, Volume};
 
 /// One rung of the ladder.

@@ -1,21 +1,18 @@
-//! The orthographic Westover splatting renderer (Westover 1991, Ch. 3–5).
-//!
-//! Pipeline per frame (§3.3): transform → CRIO (classify + shade, culling zero opacity) →
-//! reconstruct (footprint table) → visibility (sheet buffer or composite-every-sample), sheet by
-//! sheet in front-to-back or back-to-front order.
-//!
-//! **Parallel and deterministic** (§4.3.2 "multiple independent sheet buffers", docs/design.md §4.6):
-//! the image is cut into fixed bands of scanlines, each owning its slice of the sheet buffer and
-//! of the accumulation buffer. Sheets are processed in batches: the sheets of a batch are
-//! classified in parallel (one thread per sheet, samples in a fixed order, each splat routed to
-//! the bands its footprint touches), then the bands splat and composite the batch's sheets in
-//! parallel. Every pixel therefore receives its contributions in the same order whatever the
-//! thread count, and the output is bit-identical for any number of threads.
+//! The dense sheet renderer: every lattice point of each sheet classified, and splatted through
+//! the frame's footprint table (Westover 1991, Ch. 3–5).
 
-use crate::aa::Antialias;
-use crate::clip::{ClipPlane, LatticeClip};
+use super::band::{
+    BandState, SINK_LINE, SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, Sink, SpanCtx, Splat, TILE,
+    composite_band_sheet, deposit, div_band, scale_kept,
+};
+use super::driver::finish;
+use super::settings::{
+    Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, ms, validate,
+    xray_weight,
+};
+use crate::clip::LatticeClip;
 use crate::error::{Result, SplatError};
-use crate::footprint::{FootprintSettings, FootprintTable, LocatedPlanes};
+use crate::footprint::{FootprintTable, LocatedPlanes};
 use crate::geometry::{Order, SplatGeometry};
 use crate::mipcull::MipTiles;
 use crate::row::deposit_row;
@@ -23,248 +20,11 @@ use rayon::prelude::*;
 use std::time::Instant;
 use volsplat_core::crio::FrameClassifier;
 use volsplat_core::glam::{Mat3, Vec3};
-use volsplat_core::image::{Rgba, over_back_to_front, over_front_to_back};
+use volsplat_core::image::Rgba;
 use volsplat_core::{
-    AnyVolume, Camera, CrioTables, Image, Kernel, OrthoProjection, SampleInput, Scalar,
-    ScalarImage, ScalarType, Volume, with_volume,
+    AnyVolume, Camera, CrioTables, OrthoProjection, SampleInput, Scalar, ScalarType, Volume,
+    with_volume,
 };
-
-/// What is computed along each view ray.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum RenderMode {
-    /// Emission–absorption compositing of classified, shaded samples (Westover's renderer).
-    #[default]
-    Composite,
-    /// Maximum intensity projection of the reconstructed data (beyond the thesis).
-    Mip,
-    /// Minimum intensity projection of the reconstructed data.
-    Minip,
-    /// The line integral `∫ρ ds` of the reconstructed data, data units × world units.
-    Xray,
-}
-
-/// How reconstruction and visibility are combined (Westover §3.8.1, §5.3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Visibility {
-    /// Sum each sheet's footprints in a sheet buffer, then composite the sheet (default).
-    #[default]
-    SheetBuffer,
-    /// Composite every footprint directly (Westover 1989); bleeds, kept for comparison.
-    EverySample,
-    /// Image-aligned slabs, classified and shaded per pixel after reconstruction (Mueller &
-    /// Crawfis 1998; Mueller, Möller & Crawfis 1999): [`crate::slab`]. Composite, MIP and MinIP;
-    /// X-ray falls back to the sheet buffer, whose line integrals are exact.
-    ImageAligned,
-}
-
-/// Everything that controls one render.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RenderSettings {
-    /// Image width, pixels (≥ 1).
-    pub width: usize,
-    /// Image height, pixels (≥ 1).
-    pub height: usize,
-    /// Ray function.
-    pub mode: RenderMode,
-    /// Sheet buffer or composite-every-sample (composite mode only).
-    pub visibility: Visibility,
-    /// Traversal order.
-    pub order: Order,
-    /// Reconstruction kernel (default: Westover's Gaussian σ = 0.6, radius 2).
-    pub kernel: Kernel,
-    /// Use every `subsample`-th voxel per axis (1, 2, 4, ...: successive refinement, §4.2.3).
-    pub subsample: usize,
-    /// Front-to-back composite only: pixels whose opacity reaches this value receive no further
-    /// splats (early splat termination). `1.0` or more disables it. The default `1 − 2⁻²⁰`
-    /// changes no pixel by more than 1e-6.
-    pub opacity_cutoff: f32,
-    /// Cull samples of zero opacity before reconstruction (Westover §5.2). Turning it off only
-    /// costs time; the image is the same.
-    pub cull_transparent: bool,
-    /// Footprint table sizing.
-    pub footprint: FootprintSettings,
-    /// Scanlines per band of the parallel decomposition (fixed, so output does not depend on the
-    /// thread count); a positive multiple of 4. The image-aligned slabs take at most 8 (their
-    /// bands' work is uneven; their image does not depend on the band height).
-    pub band_height: usize,
-    /// Sheets classified together before the bands splat them.
-    pub sheets_per_batch: usize,
-    /// Anti-aliasing of footprints finer than a pixel (Swan et al. 1997; default
-    /// [`Antialias::Swan`]). Changes nothing where every voxel spans at least a pixel.
-    pub antialias: Antialias,
-    /// Clipping planes (world frame; a crop box is six of them), cut smoothly by weighting each
-    /// voxel with its kernel's share on the kept side ([`crate::clip`]). Empty: no clipping.
-    pub clip: Vec<ClipPlane>,
-    /// Image-aligned visibility only: slab thickness (plane spacing along the view), in units of
-    /// the grid's smallest spacing, in [0.01, 16]; default [`crate::slab::DEFAULT_SLAB`].
-    pub slab: f64,
-    /// Image-aligned visibility, shaded composite: where the lights are evaluated
-    /// ([`crate::normals::ShadeAt`]; default at every sample, the exact integral's order).
-    pub shade_at: crate::normals::ShadeAt,
-    /// Image-aligned visibility, composite through density tables (unshaded, or shaded at the
-    /// voxels): whether each slab is classified by the segment of the ray from the previous
-    /// plane's sample to this one (pre-integrated classification, Engel, Kraus & Ertl 2001)
-    /// instead of by its one sample ([`Preintegrate`]; default [`Preintegrate::Off`]).
-    pub preintegrate: Preintegrate,
-    /// X-ray only: what is integrated. `None` (default): the values as they are, `∫ ρ ds`.
-    /// `Some(o)`: `∫ max(ρ + o, 0) ds`, data units shifted by `o` (finite) and clamped at zero
-    /// before the kernel spreads them: with `o = 1000` on a CT in Hounsfield units, attenuation
-    /// relative to air, `μ/μ_water · 1000` (a digitally reconstructed radiograph; air and
-    /// padding below −1000 HU add nothing). See [`xray_weight`].
-    pub xray_offset: Option<f32>,
-}
-
-/// The value an X-ray integrates for a sample of value `v` ([`RenderSettings::xray_offset`]):
-/// `v`, or `max(v + o, 0)`.
-#[inline(always)]
-pub fn xray_weight(v: f32, offset: Option<f32>) -> f32 {
-    match offset {
-        Some(o) => (v + o).max(0.0),
-        None => v,
-    }
-}
-
-/// Pre-integrated classification in the image-aligned slabs ([`RenderSettings::preintegrate`];
-/// `docs/decisions/0020-preintegration-for-sharp-ramps.md`). Pre-integration removes the rings
-/// and popping that a transfer-function ramp much sharper than the data's steps leaves (a CT's
-/// skin), but on noisy data the straight value path it assumes between two samples misses the
-/// voxels' extremes, and a convex ramp then loses opacity (an MRI at one voxel: 7 dB worse).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Preintegrate {
-    /// One point per slab.
-    #[default]
-    Off,
-    /// Every slab by its segment.
-    On,
-    /// By segment where the transfer function's steepest opacity ramp would change a slab's
-    /// opacity by more than [`crate::slab::RING_RISK`] across a quarter of the data's value
-    /// range ([`crate::slab::ring_risk`]), by point elsewhere.
-    Auto,
-}
-
-impl Default for RenderSettings {
-    fn default() -> Self {
-        RenderSettings {
-            width: 512,
-            height: 512,
-            mode: RenderMode::Composite,
-            visibility: Visibility::SheetBuffer,
-            order: Order::FrontToBack,
-            kernel: Kernel::default(),
-            subsample: 1,
-            opacity_cutoff: 1.0 - 1.0 / (1u32 << 20) as f32,
-            cull_transparent: true,
-            footprint: FootprintSettings::default(),
-            band_height: 32,
-            sheets_per_batch: 8,
-            antialias: Antialias::default(),
-            clip: Vec::new(),
-            slab: crate::slab::DEFAULT_SLAB,
-            shade_at: crate::normals::ShadeAt::Samples,
-            preintegrate: Preintegrate::Off,
-            xray_offset: None,
-        }
-    }
-}
-
-/// Per-stage timings and counters of one render (Westover Table 4.02).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct RenderStats {
-    /// Frame set-up: geometry, footprint table, classifier tables (ms).
-    pub setup_ms: f64,
-    /// Transform + CRIO (classification and shading) wall time (ms).
-    pub classify_ms: f64,
-    /// Splatting into sheet buffers (ms; the splat/composite phase's wall time split in
-    /// proportion to the CPU time of each).
-    pub splat_ms: f64,
-    /// Compositing sheets onto the accumulation buffer (ms; see `splat_ms`).
-    pub composite_ms: f64,
-    /// Whole render excluding file loading (ms).
-    pub total_ms: f64,
-    /// Lattice points visited.
-    pub voxels: u64,
-    /// Samples that survived culling and were splatted.
-    pub splats: u64,
-    /// Samples skipped because their whole footprint was already opaque (composite), or because
-    /// they cannot change the projection (MIP/MinIP, the `mipcull` module).
-    pub splats_terminated: u64,
-    /// Perspective only: splats clipped at the near plane (behind or too close to the eye).
-    pub splats_clipped: u64,
-    /// Splats whose footprint anti-aliasing widened (beyond `k`, Swan et al. 1997 §4.3).
-    pub splats_widened: u64,
-    /// Pixel updates (multiply–adds of one RGBA weight) — Westover's kernel cost (§4.2.2).
-    pub pixel_updates: u64,
-    /// Number of sheets.
-    pub sheets: usize,
-    /// Sheet-normal axis (0 = i, 1 = j, 2 = k).
-    pub sheet_axis: usize,
-    /// World path length between sheets along the view.
-    pub sheet_spacing: f64,
-    /// Footprint table entries.
-    pub footprint_entries: usize,
-    /// Footprint sub-pixel phases per axis.
-    pub footprint_phases: usize,
-    /// Footprint half-extent in pixels (x, y).
-    pub footprint_half_extent: [f64; 2],
-    /// Threads in the rayon pool that ran the render.
-    pub threads: usize,
-    /// Image-aligned slabs: rays per pixel and axis area-averaged into each pixel (anti-aliasing
-    /// of minified views, [`crate::slab`]; a fraction where the pixel is a fraction larger than
-    /// a voxel); 0 or 1 means one ray per pixel.
-    pub supersampling: f64,
-    /// Image-aligned slabs, composite: whether the slabs were classified by segment
-    /// ([`Preintegrate`]).
-    pub preintegrated: bool,
-    /// Image-aligned slabs, composite through a density table: the frame's
-    /// [`crate::slab::ring_risk`], which [`Preintegrate::Auto`] compares with
-    /// [`crate::slab::RING_RISK`] (0 otherwise).
-    pub ring_risk: f64,
-}
-
-impl RenderStats {
-    /// Average pixels touched per splat.
-    pub fn kernel_cost(&self) -> f64 {
-        if self.splats == 0 {
-            0.0
-        } else {
-            self.pixel_updates as f64 / self.splats as f64
-        }
-    }
-}
-
-/// The result of a render.
-#[derive(Debug, Clone)]
-pub struct Rendered {
-    /// Premultiplied RGBA image (no background). For MIP/MinIP, the projected value mapped through
-    /// the emission and opacity tables (as VTK does); for X-ray, grey scaled to the maximum.
-    pub image: Image,
-    /// X-ray line integrals (data units × world units) or MIP/MinIP values (data units; NaN where
-    /// no sample covers the pixel). `None` in composite mode.
-    pub values: Option<ScalarImage>,
-    /// Timings and counters.
-    pub stats: RenderStats,
-}
-
-/// State passed to a progress callback after each batch of sheets (Westover §4.2.1).
-pub struct Progress<'a> {
-    /// Sheets finished so far.
-    pub sheets_done: usize,
-    /// Sheets in the frame.
-    pub sheets_total: usize,
-    /// The accumulation buffer so far (premultiplied; row-major, width × height). In X-ray mode
-    /// channel 0 holds the partial line integral; in MIP/MinIP channel 0 holds the running
-    /// extreme (NaN where not yet covered).
-    pub accumulation: &'a [Rgba],
-}
-
-/// One classified sample on its way to reconstruction (Westover's tuple D, §3.4).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Splat {
-    pub(crate) x: f32,
-    pub(crate) y: f32,
-    /// Premultiplied RGBA (composite); `[ρ·Δs, ..]` (X-ray); `[ρ, 1, 0, 0]` (MIP/MinIP).
-    pub(crate) v: Rgba,
-}
 
 #[derive(Default)]
 struct SheetSplats {
@@ -273,46 +33,6 @@ struct SheetSplats {
     splatted: u64,
     skipped: u64,
 }
-
-pub(crate) struct BandState {
-    pub(crate) sheet: Vec<Rgba>,
-    pub(crate) opaque_tiles: Vec<bool>,
-    pub(crate) pixel_updates: u64,
-    pub(crate) terminated: u64,
-    pub(crate) splat_s: f64,
-    pub(crate) composite_s: f64,
-    /// MIP/MinIP culling state ([`crate::mipcull`]); empty until a MIP/MinIP sheet needs it.
-    pub(crate) mip: MipTiles,
-}
-
-impl BandState {
-    /// Empty state for a band of `rows` scanlines of an image `w` pixels wide.
-    pub(crate) fn new(rows: usize, w: usize) -> Self {
-        BandState {
-            sheet: vec![[0.0; 4]; rows * w],
-            opaque_tiles: vec![false; w.div_ceil(TILE) * rows.div_ceil(TILE)],
-            pixel_updates: 0,
-            terminated: 0,
-            splat_s: 0.0,
-            composite_s: 0.0,
-            mip: MipTiles::default(),
-        }
-    }
-}
-
-/// `v / band_h` for routing splats to bands: a shift when `band_h` is a power of two (the
-/// default), where a 64-bit division per splat edge was a measurable share of the routing time.
-#[inline(always)]
-pub(crate) fn div_band(v: usize, band_h: usize) -> usize {
-    if band_h.is_power_of_two() {
-        v >> band_h.trailing_zeros()
-    } else {
-        v / band_h
-    }
-}
-
-/// Side of the square pixel tiles whose opacity is tracked for early termination.
-pub(crate) const TILE: usize = 4;
 
 /// Renders any volume; see [`render`].
 pub fn render_any(
@@ -461,68 +181,6 @@ pub fn render_with_progress<T: Scalar>(
         values,
         stats,
     })
-}
-
-pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
-    let bad = |name: &'static str, value: String, expected: &'static str| {
-        Err(SplatError::Setting {
-            name,
-            value,
-            expected,
-        })
-    };
-    if s.width == 0 || s.height == 0 || (s.width as u128) * (s.height as u128) > 1 << 28 {
-        return bad(
-            "width × height",
-            format!("{} × {}", s.width, s.height),
-            "each side ≥ 1 and at most 2^28 pixels in all",
-        );
-    }
-    if s.subsample == 0 {
-        return bad("subsample", "0".into(), "a stride ≥ 1");
-    }
-    if s.band_height == 0 || !s.band_height.is_multiple_of(TILE) {
-        return bad(
-            "band_height",
-            s.band_height.to_string(),
-            "a positive multiple of 4 rows",
-        );
-    }
-    if s.sheets_per_batch == 0 {
-        return bad("sheets_per_batch", "0".into(), "≥ 1");
-    }
-    if s.opacity_cutoff.is_nan() || s.opacity_cutoff <= 0.0 {
-        return bad(
-            "opacity_cutoff",
-            s.opacity_cutoff.to_string(),
-            "an opacity > 0 (VTK stops rays at 0.9922)",
-        );
-    }
-    if s.xray_offset.is_some_and(|o| !o.is_finite()) {
-        return bad(
-            "xray_offset",
-            format!("{:?}", s.xray_offset),
-            "a finite offset in data units (1000 for CT in Hounsfield units)",
-        );
-    }
-    if s.footprint.max_entries == 0 {
-        return bad("footprint.max_entries", "0".into(), "≥ 1");
-    }
-    if s.footprint.max_phases == 0 {
-        return bad("footprint.max_phases", "0".into(), "≥ 1");
-    }
-    if let Some(p) = s.clip.iter().find(|p| !p.is_valid()) {
-        return bad(
-            "clip",
-            format!("normal {:?}, offset {}", p.normal, p.offset),
-            "a plane needs a finite, non-zero normal and a finite offset",
-        );
-    }
-    Ok(())
-}
-
-pub(crate) fn ms(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
 }
 
 /// Read-only state for classifying sheets.
@@ -797,18 +455,6 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
     }
 }
 
-/// A splat's value weighted by the kept share `k` of its kernel ([`crate::clip`]): premultiplied
-/// colour and opacity (composite), density (X-ray) or value (MIP) times `k`; MinIP unchanged
-/// (its splats are kept or dropped at `k = ½`).
-#[inline]
-pub(crate) fn scale_kept(v: Rgba, k: f32, mode: RenderMode) -> Rgba {
-    match mode {
-        RenderMode::Composite => [v[0] * k, v[1] * k, v[2] * k, v[3] * k],
-        RenderMode::Xray | RenderMode::Mip => [v[0] * k, v[1], v[2], v[3]],
-        RenderMode::Minip => v,
-    }
-}
-
 /// World-space gradient at full-resolution voxel `p`: central differences divided by
 /// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
 /// by the direction matrix (docs/design.md §4.4). Data units per world unit.
@@ -881,77 +527,6 @@ pub(crate) fn index_gradient<T: Scalar>(
         };
     }
     g
-}
-
-/// Composites the touched columns `tx0..tx1` of one band's sheet buffer into the band's slice
-/// of the accumulation buffer (premultiplied *over*, opacity clamped with colour scaled alike,
-/// docs/design.md §4.2; or the normalised MIP/MinIP update) and clears them. With `cutoff`, marks the
-/// 4 × 4 tiles whose pixels all reached that opacity (front-to-back early termination).
-pub(crate) fn composite_band_sheet(
-    mode: RenderMode,
-    ftb: bool,
-    cutoff: Option<f32>,
-    w: usize,
-    st: &mut BandState,
-    acc: &mut [Rgba],
-    (tx0, tx1): (usize, usize),
-) {
-    let rows = acc.len() / w;
-    // Composite the touched columns of the sheet buffer, then clear them.
-    for r in 0..rows {
-        let range = r * w + tx0..r * w + tx1;
-        let (srow, arow) = (&mut st.sheet[range.clone()], &mut acc[range]);
-        match mode {
-            RenderMode::Composite => {
-                for (s, a) in srow.iter_mut().zip(arow) {
-                    if s[3] > 0.0 {
-                        let mut src = *s;
-                        // Clamp consistently: opacity ≤ 1 with colour scaled alike
-                        // (docs/design.md §4.2).
-                        if src[3] > 1.0 {
-                            let k = 1.0 / src[3];
-                            src = [src[0] * k, src[1] * k, src[2] * k, 1.0];
-                        }
-                        if ftb {
-                            over_front_to_back(a, src)
-                        } else {
-                            over_back_to_front(a, src)
-                        }
-                    }
-                    *s = [0.0; 4];
-                }
-            }
-            RenderMode::Mip | RenderMode::Minip => {
-                let max = mode == RenderMode::Mip;
-                for (s, a) in srow.iter_mut().zip(arow) {
-                    // Normalised reconstruction where the sheet covers the pixel.
-                    if s[1] >= 0.5 {
-                        let val = s[0] / s[1];
-                        if a[0].is_nan() || (max && val > a[0]) || (!max && val < a[0]) {
-                            a[0] = val;
-                        }
-                    }
-                    *s = [0.0; 4];
-                }
-            }
-            RenderMode::Xray => {}
-        }
-    }
-    if let Some(cutoff) = cutoff {
-        let n_tiles = w.div_ceil(TILE);
-        for tr in 0..rows.div_ceil(TILE) {
-            let (y0, y1) = (tr * TILE, ((tr + 1) * TILE).min(rows));
-            for t in tx0 / TILE..=(tx1 - 1) / TILE {
-                let flag = &mut st.opaque_tiles[tr * n_tiles + t];
-                if *flag {
-                    continue;
-                }
-                let (c0, c1) = (t * TILE, ((t + 1) * TILE).min(w));
-                *flag =
-                    (y0..y1).all(|r| acc[r * w + c0..r * w + c1].iter().all(|p| p[3] >= cutoff));
-            }
-        }
-    }
 }
 
 struct BandContext<'a> {
@@ -1053,107 +628,6 @@ impl BandContext<'_> {
             st.mip.refresh(acc, w, (tx0, tx1), max);
         }
         st.composite_s += t1.elapsed().as_secs_f64();
-    }
-}
-
-/// Where weighted splat values go.
-#[derive(Debug, Clone, Copy)]
-pub(crate) enum Sink {
-    /// Add into the sheet buffer (sheet-buffer visibility, MIP/MinIP).
-    Sheet,
-    /// Add channel 0 into the accumulation buffer (X-ray line integral).
-    Line,
-    /// Composite directly, front to back (composite-every-sample).
-    OverFtb,
-    /// Composite directly, back to front (composite-every-sample).
-    OverBtf,
-}
-
-/// Per-band clipping and bookkeeping shared by the splat loops.
-pub(crate) struct SpanCtx<'a> {
-    pub(crate) y_lo: i32,
-    pub(crate) rows: i32,
-    pub(crate) width: i32,
-    pub(crate) terminate: bool,
-    pub(crate) opaque: &'a [bool],
-    pub(crate) tx0: usize,
-    pub(crate) tx1: usize,
-    pub(crate) updates: u64,
-    pub(crate) terminated: u64,
-}
-
-impl SpanCtx<'_> {
-    /// Clips the column range `[x0, x1]` to the image; `None` if empty or (FTB) every tile
-    /// under columns `x0..=x1` and band rows `r0..r1` (band-relative) is already opaque.
-    #[inline(always)]
-    pub(crate) fn columns(&mut self, x0: i32, x1: i32, r0: i32, r1: i32) -> Option<(i32, i32)> {
-        let (x0, x1) = (x0.max(0), x1.min(self.width - 1));
-        if x0 > x1 {
-            return None;
-        }
-        if self.terminate {
-            let n_tiles = (self.width as usize).div_ceil(TILE);
-            let (t0, t1) = (x0 as usize / TILE, x1 as usize / TILE);
-            let all = (r0 as usize / TILE..=(r1 - 1) as usize / TILE).all(|tr| {
-                self.opaque[tr * n_tiles + t0..=tr * n_tiles + t1]
-                    .iter()
-                    .all(|&o| o)
-            });
-            if all {
-                self.terminated += 1;
-                return None;
-            }
-        }
-        Some((x0, x1))
-    }
-}
-
-pub(crate) const SINK_SHEET: u8 = 0;
-pub(crate) const SINK_LINE: u8 = 1;
-pub(crate) const SINK_OVER_FTB: u8 = 2;
-pub(crate) const SINK_OVER_BTF: u8 = 3;
-
-impl Sink {
-    pub(crate) fn code(self) -> u8 {
-        match self {
-            Sink::Sheet => SINK_SHEET,
-            Sink::Line => SINK_LINE,
-            Sink::OverFtb => SINK_OVER_FTB,
-            Sink::OverBtf => SINK_OVER_BTF,
-        }
-    }
-}
-
-/// Accumulates `weight × v` into one pixel; `S` is a [`Sink`] code, so each splat loop is
-/// compiled once per sink with no per-pixel dispatch.
-#[inline(always)]
-pub(crate) fn deposit<const S: u8>(px: &mut Rgba, wt: f32, v: &Rgba) {
-    let sink = match S {
-        SINK_SHEET => Sink::Sheet,
-        SINK_LINE => Sink::Line,
-        SINK_OVER_FTB => Sink::OverFtb,
-        _ => Sink::OverBtf,
-    };
-    match sink {
-        Sink::Sheet => {
-            px[0] += wt * v[0];
-            px[1] += wt * v[1];
-            px[2] += wt * v[2];
-            px[3] += wt * v[3];
-        }
-        Sink::Line => px[0] += wt * v[0],
-        Sink::OverFtb | Sink::OverBtf => {
-            let mut src = [wt * v[0], wt * v[1], wt * v[2], wt * v[3]];
-            if src[3] > 1.0 {
-                let k = 1.0 / src[3];
-                src = [src[0] * k, src[1] * k, src[2] * k, 1.0];
-            }
-            if matches!(sink, Sink::OverFtb) {
-                over_front_to_back(px, src)
-            } else {
-                over_back_to_front(px, src)
-            }
-        }
     }
 }
 
@@ -1280,85 +754,13 @@ fn splat_planes(
     span.tx1 = span.tx1.max(xb as usize + 1);
 }
 
-/// Turns the accumulation buffer into the output image and values, after checking that every
-/// value the caller will see is finite (MIP/MinIP values may be NaN where nothing covers the
-/// pixel, by definition). `stage` names the renderer in the error.
-pub(crate) fn finish(
-    acc: Vec<Rgba>,
-    settings: &RenderSettings,
-    tables: &CrioTables,
-    stage: &'static str,
-) -> Result<(Image, Option<ScalarImage>)> {
-    let w = settings.width;
-    let bad = |p: &Rgba| match settings.mode {
-        RenderMode::Composite => p.iter().any(|c| !c.is_finite()),
-        RenderMode::Xray => !p[0].is_finite(),
-        RenderMode::Mip | RenderMode::Minip => p[0].is_infinite(),
-    };
-    if let Some(first) = acc.iter().position(bad) {
-        return Err(SplatError::NonFinite {
-            stage,
-            count: acc.iter().filter(|p| bad(p)).count(),
-            x: first % w,
-            y: first / w,
-        });
-    }
-    Ok(finish_unchecked(acc, settings, tables))
-}
-
-fn finish_unchecked(
-    acc: Vec<Rgba>,
-    settings: &RenderSettings,
-    tables: &CrioTables,
-) -> (Image, Option<ScalarImage>) {
-    let (w, h) = (settings.width, settings.height);
-    match settings.mode {
-        RenderMode::Composite => {
-            let img = Image::from_pixels(w, h, acc).unwrap_or_else(|| Image::new(w, h));
-            (img, None)
-        }
-        RenderMode::Xray => {
-            let values: Vec<f32> = acc.iter().map(|p| p[0]).collect();
-            let max = values.iter().fold(0.0f32, |m, &v| m.max(v));
-            let k = if max > 0.0 { 1.0 / max } else { 0.0 };
-            let pixels = values.iter().map(|&v| {
-                let g = (v * k).clamp(0.0, 1.0);
-                [g, g, g, 1.0]
-            });
-            let img =
-                Image::from_pixels(w, h, pixels.collect()).unwrap_or_else(|| Image::new(w, h));
-            (img, ScalarImage::from_values(w, h, values))
-        }
-        RenderMode::Mip | RenderMode::Minip => {
-            let values: Vec<f32> = acc.iter().map(|p| p[0]).collect();
-            let pixels = values
-                .iter()
-                .map(|&v| {
-                    if v.is_nan() {
-                        return [0.0; 4];
-                    }
-                    let c = tables.emission.lookup(v);
-                    let a = tables.opacity.lookup(v)[0].clamp(0.0, 1.0);
-                    [
-                        c[0].clamp(0.0, 1.0) * a,
-                        c[1].clamp(0.0, 1.0) * a,
-                        c[2].clamp(0.0, 1.0) * a,
-                        a,
-                    ]
-                })
-                .collect();
-            let img = Image::from_pixels(w, h, pixels).unwrap_or_else(|| Image::new(w, h));
-            (img, ScalarImage::from_values(w, h, values))
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::footprint::PhaseBlock;
     use volsplat_core::glam::{DMat3, DVec3};
     use volsplat_core::{Grid, TransferFunction};
+    use volsplat_core::{Image, Kernel};
 
     fn camera_for(grid: &Grid, az: f64, el: f64, roll: f64) -> Camera {
         let (lo, hi) = grid.bounds_world();
