@@ -40,8 +40,8 @@ use crate::footprint::metric_from;
 use crate::geometry::Order;
 use crate::sheets::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
-    SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit,
-    div_band, finish, gradient_at, ms, scale_kept, validate, xray_weight,
+    SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SheetPass, SpanCtx, deposit, div_band, drive,
+    gradient_at, ms, scale_kept, validate, xray_weight,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -696,15 +696,7 @@ fn render_inner(
         n_bands,
         clip: LatticeClip::new(&settings.clip, &list.grid, &settings.kernel, list.stride),
     };
-    let init: Rgba = match settings.mode {
-        RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
-        _ => [0.0; 4],
-    };
-    let mut acc = try_filled(w * h, init, "the splat list's image buffer")?;
-    let mut bands: Vec<BandState> = (0..n_bands)
-        .map(|b| BandState::new(band_h.min(h - b * band_h), w))
-        .collect();
-    let mut stats = RenderStats {
+    let stats = RenderStats {
         sheets: n_sheets,
         sheet_axis: axis,
         sheet_spacing: frame_spacing,
@@ -714,67 +706,51 @@ fn render_inner(
         voxels: list.len() as u64,
         ..RenderStats::default()
     };
-    stats.setup_ms = ms(t_start);
-    let batch = settings.sheets_per_batch;
-    let mut slots: Vec<SheetBuckets> = (0..batch).map(|_| SheetBuckets::default()).collect();
-    let mut done = 0;
-    for sheets in sheet_order.chunks(batch) {
-        let t0 = Instant::now();
-        let classified = &mut slots[..sheets.len()];
-        classified
-            .par_iter_mut()
-            .zip(sheets.par_iter())
-            .for_each(|(slot, &c)| fr.classify_sheet(axis, c, slot));
-        stats.classify_ms += ms(t0);
-        if let Some(bytes) = classified.iter().find_map(|c| c.out_of_memory) {
+    let pass = ListPass { frame: fr, axis };
+    drive(
+        &pass,
+        &sheet_order,
+        (settings, tables),
+        (stats, t_start),
+        progress,
+    )
+}
+
+/// The splat-list renderer's part of the sheet driver ([`SheetPass`]): sheets along `axis`.
+struct ListPass<'a> {
+    frame: Frame<'a>,
+    axis: usize,
+}
+
+impl SheetPass for ListPass<'_> {
+    type Sheet = SheetBuckets;
+    const NAME: &'static str = "splat-list renderer";
+    const IMAGE_BUFFER: &'static str = "the splat list's image buffer";
+
+    fn reads_opaque_tiles(&self) -> bool {
+        false
+    }
+
+    fn classify_sheet(&self, sheet: usize, _opaque: &[bool], out: &mut SheetBuckets) {
+        self.frame.classify_sheet(self.axis, sheet, out);
+    }
+
+    fn tally(&self, c: &SheetBuckets, stats: &mut RenderStats) -> Result<()> {
+        if let Some(bytes) = c.out_of_memory {
             return Err(SplatError::OutOfMemory {
                 what: "the splat list's sheet buffers",
                 bytes,
             });
         }
-        for c in classified.iter() {
-            stats.splats += c.splatted;
-            stats.splats_clipped += c.clipped;
-            stats.splats_widened += c.widened;
-        }
-        let t1 = Instant::now();
-        let classified = &*classified;
-        acc.par_chunks_mut(band_h * w)
-            .zip(bands.par_iter_mut())
-            .enumerate()
-            .for_each(|(b, (acc_band, state))| {
-                for sheet in classified {
-                    fr.process(b, acc_band, state, &sheet.buckets[b]);
-                }
-            });
-        stats.splat_ms += ms(t1);
-        done += sheets.len();
-        let p = Progress {
-            sheets_done: done,
-            sheets_total: sheet_order.len(),
-            accumulation: &acc,
-        };
-        if !progress(&p) {
-            return Err(SplatError::Cancelled);
-        }
+        stats.splats += c.splatted;
+        stats.splats_clipped += c.clipped;
+        stats.splats_widened += c.widened;
+        Ok(())
     }
-    let (splat_cpu, comp_cpu) = bands
-        .iter()
-        .fold((0.0, 0.0), |(s, c), b| (s + b.splat_s, c + b.composite_s));
-    let phase_ms = stats.splat_ms;
-    if splat_cpu + comp_cpu > 0.0 {
-        stats.splat_ms = phase_ms * splat_cpu / (splat_cpu + comp_cpu);
-        stats.composite_ms = phase_ms * comp_cpu / (splat_cpu + comp_cpu);
+
+    fn splat_band(&self, b: usize, acc: &mut [Rgba], st: &mut BandState, sheet: &SheetBuckets) {
+        self.frame.process(b, acc, st, &sheet.buckets[b]);
     }
-    stats.pixel_updates = bands.iter().map(|b| b.pixel_updates).sum();
-    stats.splats_terminated = bands.iter().map(|b| b.terminated).sum();
-    let (image, values) = finish(acc, settings, tables, "splat-list renderer")?;
-    stats.total_ms = ms(t_start);
-    Ok(Rendered {
-        image,
-        values,
-        stats,
-    })
 }
 
 /// Packs a metric for the band loops: coefficients of `ρ²/R²`, the weight factor and the half
@@ -924,68 +900,28 @@ impl Frame<'_> {
         });
     }
 
+    /// Splats one sheet's splats into band `b` and composites them (Westover §3.8.1).
     fn process(&self, b: usize, acc: &mut [Rgba], st: &mut BandState, splats: &[PSplat]) {
         if splats.is_empty() {
             return;
         }
-        let s = self.settings;
-        let w = s.width;
-        let rows = acc.len() / w;
-        let mode = s.mode;
-        let ftb = s.order == Order::FrontToBack;
-        let cutoff = s.opacity_cutoff;
-        let terminate = mode == RenderMode::Composite && ftb && cutoff < 1.0;
-        let every = mode == RenderMode::Composite && s.visibility == Visibility::EverySample;
-        let code = if every {
-            if ftb { SINK_OVER_FTB } else { SINK_OVER_BTF }
-        } else if mode == RenderMode::Xray {
-            SINK_LINE
-        } else {
-            SINK_SHEET
-        };
-        let t0 = Instant::now();
-        let sheet = code == SINK_SHEET;
-        let target: &mut [Rgba] = if sheet { &mut st.sheet } else { acc };
-        let mut span = SpanCtx {
-            y_lo: (b * self.band_h) as i32,
-            rows: rows as i32,
-            width: w as i32,
-            // No opaque tile in the band yet: nothing can be terminated, so skip the per-splat
-            // tile check (the outcome is the same).
-            terminate: terminate && st.opaque_tiles.contains(&true),
-            opaque: &st.opaque_tiles,
-            tx0: w,
-            tx1: 0,
-            updates: 0,
-            terminated: 0,
-        };
-        let f = match code {
-            SINK_SHEET => splat_one::<SINK_SHEET>,
-            SINK_LINE => splat_one::<SINK_LINE>,
-            SINK_OVER_FTB => splat_one::<SINK_OVER_FTB>,
-            _ => splat_one::<SINK_OVER_BTF>,
-        };
-        for sp in splats {
-            f(&self.table, sp, &mut span, target);
-        }
-        let (tx0, tx1) = (span.tx0, span.tx1);
-        st.pixel_updates += span.updates;
-        st.terminated += span.terminated;
-        let t1 = Instant::now();
-        st.splat_s += (t1 - t0).as_secs_f64();
-        if !sheet || tx0 >= tx1 {
-            return;
-        }
-        composite_band_sheet(
-            mode,
-            ftb,
-            terminate.then_some(cutoff),
-            w,
-            st,
+        st.splat_sheet(
+            self.settings,
+            b * self.band_h,
             acc,
-            (tx0, tx1),
+            |sink, span, target, _| {
+                let f = match sink.code() {
+                    SINK_SHEET => splat_one::<SINK_SHEET>,
+                    SINK_LINE => splat_one::<SINK_LINE>,
+                    SINK_OVER_FTB => splat_one::<SINK_OVER_FTB>,
+                    _ => splat_one::<SINK_OVER_BTF>,
+                };
+                for sp in splats {
+                    f(&self.table, sp, span, target);
+                }
+                false
+            },
         );
-        st.composite_s += t1.elapsed().as_secs_f64();
     }
 }
 

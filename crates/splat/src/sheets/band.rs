@@ -1,8 +1,10 @@
 //! A band of scanlines: its slice of the sheet buffer, its opacity tiles, and the deposit of
 //! weighted splats into the sheet buffer or the accumulation buffer (Westover §3.8.1, §4.3.2).
 
-use super::settings::RenderMode;
+use super::settings::{RenderMode, RenderSettings, Visibility};
+use crate::geometry::Order;
 use crate::mipcull::MipTiles;
+use std::time::Instant;
 use volsplat_core::image::{Rgba, over_back_to_front, over_front_to_back};
 
 /// One classified sample on its way to reconstruction (Westover's tuple D, §3.4).
@@ -37,6 +39,78 @@ impl BandState {
             composite_s: 0.0,
             mip: MipTiles::default(),
         }
+    }
+
+    /// The band step of both sheet renderers (Westover §3.8.1): `splat_all` deposits one
+    /// sheet's splats of this band (image rows from `y_lo`, as many as `acc`, the band's rows of
+    /// the accumulation buffer, holds) through the [`SpanCtx`] it is given into the target it is
+    /// given (the band's sheet buffer for [`Sink::Sheet`], else `acc`), using the band's MIP
+    /// culling state if it wishes, and returns whether it culled (so the state is refreshed
+    /// after compositing). Then the sheet buffer's touched columns are composited onto `acc` and
+    /// cleared ([`composite_band_sheet`]). Times and counts the work in the band's counters.
+    pub(crate) fn splat_sheet(
+        &mut self,
+        settings: &RenderSettings,
+        y_lo: usize,
+        acc: &mut [Rgba],
+        splat_all: impl FnOnce(Sink, &mut SpanCtx, &mut [Rgba], &mut MipTiles) -> bool,
+    ) {
+        let w = settings.width;
+        let rows = acc.len() / w;
+        let mode = settings.mode;
+        let every = mode == RenderMode::Composite && settings.visibility == Visibility::EverySample;
+        let ftb = settings.order == Order::FrontToBack;
+        let cutoff = settings.opacity_cutoff;
+        let terminate = mode == RenderMode::Composite && ftb && cutoff < 1.0;
+        let sink = if every {
+            if ftb { Sink::OverFtb } else { Sink::OverBtf }
+        } else if mode == RenderMode::Xray {
+            Sink::Line
+        } else {
+            Sink::Sheet
+        };
+        let t0 = Instant::now();
+        let target: &mut [Rgba] = if matches!(sink, Sink::Sheet) {
+            &mut self.sheet
+        } else {
+            acc
+        };
+        let mut span = SpanCtx {
+            y_lo: y_lo as i32,
+            rows: rows as i32,
+            width: w as i32,
+            // No opaque tile in the band yet: nothing can be terminated, so skip the per-splat
+            // tile check (the outcome is the same).
+            terminate: terminate && self.opaque_tiles.contains(&true),
+            opaque: &self.opaque_tiles,
+            tx0: w,
+            tx1: 0,
+            updates: 0,
+            terminated: 0,
+        };
+        let culled = splat_all(sink, &mut span, target, &mut self.mip);
+        let (tx0, tx1) = (span.tx0, span.tx1);
+        self.pixel_updates += span.updates;
+        self.terminated += span.terminated;
+        let t1 = Instant::now();
+        self.splat_s += (t1 - t0).as_secs_f64();
+        if !matches!(sink, Sink::Sheet) || tx0 >= tx1 {
+            return;
+        }
+        composite_band_sheet(
+            mode,
+            ftb,
+            terminate.then_some(cutoff),
+            w,
+            self,
+            acc,
+            (tx0, tx1),
+        );
+        if culled {
+            self.mip
+                .refresh(acc, w, (tx0, tx1), mode == RenderMode::Mip);
+        }
+        self.composite_s += t1.elapsed().as_secs_f64();
     }
 }
 

@@ -3,20 +3,18 @@
 
 use super::band::{
     BandState, SINK_LINE, SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, Sink, SpanCtx, Splat, TILE,
-    composite_band_sheet, deposit, div_band, scale_kept,
+    deposit, div_band, scale_kept,
 };
-use super::driver::finish;
+use super::driver::{SheetPass, drive};
 use super::settings::{
-    Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, ms, validate,
-    xray_weight,
+    Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, validate, xray_weight,
 };
 use crate::clip::LatticeClip;
-use crate::error::{Result, SplatError};
+use crate::error::Result;
 use crate::footprint::{FootprintTable, LocatedPlanes};
 use crate::geometry::{Order, SplatGeometry};
 use crate::mipcull::MipTiles;
 use crate::row::deposit_row;
-use rayon::prelude::*;
 use std::time::Instant;
 use volsplat_core::crio::FrameClassifier;
 use volsplat_core::glam::{Mat3, Vec3};
@@ -78,18 +76,8 @@ pub fn render_with_progress<T: Scalar>(
         settings.antialias,
     )?;
     let classifier = FrameClassifier::new(tables, &proj.frame, geom.sheet_spacing);
-    let (w, h) = (settings.width, settings.height);
-    let band_h = settings.band_height;
-    let n_bands = h.div_ceil(band_h);
-    let init: Rgba = match settings.mode {
-        RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
-        _ => [0.0; 4],
-    };
-    let mut acc = vec![init; w * h];
-    let mut bands: Vec<BandState> = (0..n_bands)
-        .map(|b| BandState::new(band_h.min(h - b * band_h), w))
-        .collect();
-    let mut stats = RenderStats {
+    let n_bands = settings.height.div_ceil(settings.band_height);
+    let stats = RenderStats {
         sheets: geom.sheet_order.len(),
         sheet_axis: geom.sheet_axis,
         sheet_spacing: geom.sheet_spacing,
@@ -99,88 +87,64 @@ pub fn render_with_progress<T: Scalar>(
         threads: rayon::current_num_threads(),
         ..RenderStats::default()
     };
-    stats.setup_ms = ms(t_start);
-    let ctx = ClassifyContext::new(
-        volume,
-        &geom,
-        (tables, &classifier),
-        settings,
-        &table,
-        n_bands,
-    );
-    let batch = settings.sheets_per_batch;
-    let terminate = settings.mode == RenderMode::Composite
-        && settings.order == Order::FrontToBack
-        && settings.opacity_cutoff < 1.0;
-    let mut opaque: Vec<bool> = Vec::new();
-    let mut slots: Vec<SheetSplats> = (0..batch).map(|_| SheetSplats::default()).collect();
-    let mut done = 0;
-    for sheets in geom.sheet_order.chunks(batch) {
-        let t0 = Instant::now();
-        if terminate {
-            opaque.clear();
-            for b in &bands {
-                opaque.extend_from_slice(&b.opaque_tiles);
-            }
-        }
-        let classified = &mut slots[..sheets.len()];
-        classified
-            .par_iter_mut()
-            .zip(sheets.par_iter())
-            .for_each(|(slot, &s)| ctx.classify_sheet(s, &opaque, slot));
-        stats.classify_ms += ms(t0);
-        for c in classified.iter() {
-            stats.voxels += c.visited;
-            stats.splats += c.splatted;
-            stats.splats_terminated += c.skipped;
-        }
-        let t1 = Instant::now();
-        let band_ctx = BandContext {
+    let pass = Dense {
+        classify: ClassifyContext::new(
+            volume,
+            &geom,
+            (tables, &classifier),
+            settings,
+            &table,
+            n_bands,
+        ),
+        bands: BandContext {
             table: &table,
             settings,
-            width: w,
-            band_h,
-        };
-        let classified = &*classified;
-        acc.par_chunks_mut(band_h * w)
-            .zip(bands.par_iter_mut())
-            .enumerate()
-            .for_each(|(b, (acc_band, state))| {
-                for sheet in classified {
-                    band_ctx.process(b, acc_band, state, &sheet.buckets[b]);
-                }
-            });
-        let phase = ms(t1);
-        stats.splat_ms += phase; // split below
-        done += sheets.len();
-        let p = Progress {
-            sheets_done: done,
-            sheets_total: geom.sheet_order.len(),
-            accumulation: &acc,
-        };
-        if !progress(&p) {
-            return Err(SplatError::Cancelled);
-        }
+            band_h: settings.band_height,
+        },
+        terminate: settings.mode == RenderMode::Composite
+            && settings.order == Order::FrontToBack
+            && settings.opacity_cutoff < 1.0,
+    };
+    drive(
+        &pass,
+        &geom.sheet_order,
+        (settings, tables),
+        (stats, t_start),
+        progress,
+    )
+}
+
+/// The dense renderer's part of the sheet driver ([`SheetPass`]).
+struct Dense<'a, T> {
+    classify: ClassifyContext<'a, T>,
+    bands: BandContext<'a>,
+    /// Front-to-back early splat termination: classification skips samples over opaque tiles.
+    terminate: bool,
+}
+
+impl<T: Scalar> SheetPass for Dense<'_, T> {
+    type Sheet = SheetSplats;
+    const NAME: &'static str = "sheet renderer";
+    const IMAGE_BUFFER: &'static str = "the sheet renderer's image buffer";
+
+    fn reads_opaque_tiles(&self) -> bool {
+        self.terminate
     }
-    // Split the splat/composite phase's wall time in proportion to the CPU time of each stage.
-    let (splat_cpu, comp_cpu) = bands
-        .iter()
-        .fold((0.0, 0.0), |(s, c), b| (s + b.splat_s, c + b.composite_s));
-    let phase_ms = stats.splat_ms;
-    let total_cpu = splat_cpu + comp_cpu;
-    if total_cpu > 0.0 {
-        stats.splat_ms = phase_ms * splat_cpu / total_cpu;
-        stats.composite_ms = phase_ms * comp_cpu / total_cpu;
+
+    fn classify_sheet(&self, sheet: usize, opaque: &[bool], out: &mut SheetSplats) {
+        self.classify.classify_sheet(sheet, opaque, out);
     }
-    stats.pixel_updates = bands.iter().map(|b| b.pixel_updates).sum();
-    stats.splats_terminated += bands.iter().map(|b| b.terminated).sum::<u64>();
-    let (image, values) = finish(acc, settings, tables, "orthographic splatting renderer")?;
-    stats.total_ms = ms(t_start);
-    Ok(Rendered {
-        image,
-        values,
-        stats,
-    })
+
+    fn tally(&self, c: &SheetSplats, stats: &mut RenderStats) -> Result<()> {
+        stats.voxels += c.visited;
+        stats.splats += c.splatted;
+        stats.splats_terminated += c.skipped;
+        Ok(())
+    }
+
+    fn splat_band(&self, b: usize, acc: &mut [Rgba], st: &mut BandState, sheet: &SheetSplats) {
+        self.bands.process(b, acc, st, &sheet.buckets[b]);
+    }
 }
 
 /// Read-only state for classifying sheets.
@@ -532,7 +496,6 @@ pub(crate) fn index_gradient<T: Scalar>(
 struct BandContext<'a> {
     table: &'a FootprintTable,
     settings: &'a RenderSettings,
-    width: usize,
     band_h: usize,
 }
 
@@ -542,92 +505,46 @@ impl BandContext<'_> {
         if splats.is_empty() {
             return;
         }
-        let w = self.width;
-        let rows = acc.len() / w;
         let mode = self.settings.mode;
-        let every =
-            mode == RenderMode::Composite && self.settings.visibility == Visibility::EverySample;
-        let ftb = self.settings.order == Order::FrontToBack;
-        let cutoff = self.settings.opacity_cutoff;
-        let terminate = mode == RenderMode::Composite && ftb && cutoff < 1.0;
-        let sink = if every {
-            if ftb { Sink::OverFtb } else { Sink::OverBtf }
-        } else if mode == RenderMode::Xray {
-            Sink::Line
-        } else {
-            Sink::Sheet
-        };
-        let t0 = Instant::now();
-        let target: &mut [Rgba] = if matches!(sink, Sink::Sheet) {
-            &mut st.sheet
-        } else {
-            acc
-        };
-        let mut span = SpanCtx {
-            y_lo: (b * self.band_h) as i32,
-            rows: rows as i32,
-            width: w as i32,
-            // No opaque tile in the band yet: nothing can be terminated, so skip the per-splat
-            // tile check (the outcome is the same).
-            terminate: terminate && st.opaque_tiles.contains(&true),
-            opaque: &st.opaque_tiles,
-            tx0: w,
-            tx1: 0,
-            updates: 0,
-            terminated: 0,
-        };
-        let f = match sink.code() {
-            SINK_SHEET => splat_block::<SINK_SHEET>,
-            SINK_LINE => splat_block::<SINK_LINE>,
-            SINK_OVER_FTB => splat_block::<SINK_OVER_FTB>,
-            _ => splat_block::<SINK_OVER_BTF>,
-        };
-        // MIP/MinIP: skip the splats that cannot change the projection (exact; crate::mipcull).
-        let extreme = matches!(mode, RenderMode::Mip | RenderMode::Minip);
-        let cull = extreme
-            && matches!(sink, Sink::Sheet)
-            && self.table.non_negative()
-            && crate::mipcull::enabled();
-        let max = mode == RenderMode::Mip;
-        if cull {
-            if st.mip.is_empty() {
-                st.mip = MipTiles::new(rows, w);
-            }
-            st.mip
-                .prepare(self.table, splats, (span.y_lo, span.rows, span.width), max);
-            for (i, sp) in splats.iter().enumerate() {
-                if st.mip.skip(i) {
-                    span.terminated += 1;
-                } else {
-                    f(self.table, sp, &mut span, target);
-                }
-            }
-        } else {
-            for sp in splats {
-                f(self.table, sp, &mut span, target);
-            }
-        }
-        let (tx0, tx1) = (span.tx0, span.tx1);
-        st.pixel_updates += span.updates;
-        st.terminated += span.terminated;
-        let t1 = Instant::now();
-        st.splat_s += (t1 - t0).as_secs_f64();
-        if !matches!(sink, Sink::Sheet) || tx0 >= tx1 {
-            return;
-        }
-        composite_band_sheet(
-            mode,
-            ftb,
-            terminate.then_some(cutoff),
-            w,
-            st,
+        st.splat_sheet(
+            self.settings,
+            b * self.band_h,
             acc,
-            (tx0, tx1),
+            |sink, span, target, mip| {
+                let f = match sink.code() {
+                    SINK_SHEET => splat_block::<SINK_SHEET>,
+                    SINK_LINE => splat_block::<SINK_LINE>,
+                    SINK_OVER_FTB => splat_block::<SINK_OVER_FTB>,
+                    _ => splat_block::<SINK_OVER_BTF>,
+                };
+                // MIP/MinIP: skip the splats that cannot change the projection (exact;
+                // crate::mipcull).
+                let extreme = matches!(mode, RenderMode::Mip | RenderMode::Minip);
+                let cull = extreme
+                    && matches!(sink, Sink::Sheet)
+                    && self.table.non_negative()
+                    && crate::mipcull::enabled();
+                if cull {
+                    if mip.is_empty() {
+                        *mip = MipTiles::new(span.rows as usize, span.width as usize);
+                    }
+                    let max = mode == RenderMode::Mip;
+                    mip.prepare(self.table, splats, (span.y_lo, span.rows, span.width), max);
+                    for (i, sp) in splats.iter().enumerate() {
+                        if mip.skip(i) {
+                            span.terminated += 1;
+                        } else {
+                            f(self.table, sp, span, target);
+                        }
+                    }
+                } else {
+                    for sp in splats {
+                        f(self.table, sp, span, target);
+                    }
+                }
+                cull
+            },
         );
-        if cull {
-            st.mip.refresh(acc, w, (tx0, tx1), max);
-        }
-        st.composite_s += t1.elapsed().as_secs_f64();
     }
 }
 
@@ -760,6 +677,7 @@ mod tests {
     use crate::footprint::PhaseBlock;
     use volsplat_core::glam::{DMat3, DVec3};
     use volsplat_core::{Grid, TransferFunction};
+    use crate::error::SplatError;
     use volsplat_core::{Image, Kernel};
 
     fn camera_for(grid: &Grid, az: f64, el: f64, roll: f64) -> Camera {
@@ -830,7 +748,6 @@ mod tests {
             let ctx = BandContext {
                 table: &table,
                 settings: &settings,
-                width: 1,
                 band_h: 16,
             };
             let mut acc = vec![[0.0f32; 4]];

@@ -23,12 +23,12 @@ mod driver;
 mod settings;
 
 pub(crate) use band::{
-    BandState, SINK_LINE, SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Splat, TILE,
-    composite_band_sheet, deposit, div_band, scale_kept,
+    BandState, SINK_LINE, SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Splat, TILE, deposit,
+    div_band, scale_kept,
 };
 pub(crate) use dense::gradient_at;
 pub use dense::{render, render_any, render_with_progress};
-pub(crate) use driver::finish;
+pub(crate) use driver::{SheetPass, drive, finish};
 pub use settings::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility,
     xray_weight,
