@@ -21,6 +21,7 @@
 pub mod aa;
 pub mod bricks;
 pub mod clip;
+mod dispatch;
 pub mod error;
 pub mod footprint;
 pub mod geometry;
@@ -40,6 +41,7 @@ pub use sheets as render;
 pub use aa::Antialias;
 pub use bricks::BrickGrid;
 pub use clip::ClipPlane;
+pub use dispatch::render_by_visibility;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};

@@ -42,7 +42,8 @@ pub fn default_ladder(final_kernel: Kernel) -> Vec<RefinementStep> {
 /// Renders each rung of `ladder` in turn with `settings` (its `subsample` and `kernel` replaced
 /// by the rung's), passing each result to `on_step(rung index, result)`. Returning `false` from
 /// the callback stops the ladder (e.g. because the view changed) and returns that rung's result.
-/// Returns the last rendered rung; errors if `ladder` is empty.
+/// Returns the last rendered rung; errors if `ladder` is empty. Every rung is drawn by the sheet
+/// renderer ([`crate::sheets::render`]), which refuses image-aligned visibility outside X-ray.
 pub fn render_ladder<T: Scalar>(
     volume: &Volume<T>,
     camera: &Camera,

@@ -10,7 +10,7 @@ use super::settings::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, validate, xray_weight,
 };
 use crate::clip::LatticeClip;
-use crate::error::Result;
+use crate::error::{Result, SplatError};
 use crate::footprint::{FootprintTable, LocatedPlanes};
 use crate::geometry::{Order, SplatGeometry};
 use crate::mipcull::MipTiles;
@@ -53,7 +53,9 @@ pub fn render<T: Scalar>(
 }
 
 /// Like [`render`], calling `progress` after each batch of sheets; returning `false` from it
-/// cancels the render with [`SplatError::Cancelled`].
+/// cancels the render with [`SplatError::Cancelled`]. [`Visibility::ImageAligned`] is refused
+/// with [`SplatError::Setting`] (`visibility`) except in X-ray, which keeps the sheet buffer:
+/// the slabs are [`crate::slab::render_slabs`], or [`crate::render_by_visibility`] to dispatch.
 pub fn render_with_progress<T: Scalar>(
     volume: &Volume<T>,
     camera: &Camera,
@@ -61,10 +63,8 @@ pub fn render_with_progress<T: Scalar>(
     settings: &RenderSettings,
     progress: &mut dyn FnMut(&Progress) -> bool,
 ) -> Result<Rendered> {
-    if settings.visibility == Visibility::ImageAligned && settings.mode != RenderMode::Xray {
-        return crate::slab::render_slabs(volume, camera, tables, settings, None, progress);
-    }
     let t_start = Instant::now();
+    refuse_image_aligned(settings)?;
     validate(settings)?;
     settings.kernel.validate()?;
     let proj = OrthoProjection::new(camera, settings.width, settings.height)?;
@@ -112,6 +112,23 @@ pub fn render_with_progress<T: Scalar>(
         (stats, t_start),
         progress,
     )
+}
+
+/// Errors for [`Visibility::ImageAligned`] outside X-ray: image-aligned slabs are another
+/// renderer ([`crate::slab::render_slabs`]; [`crate::render_by_visibility`] dispatches on the
+/// visibility), never drawn behind this one's back. X-ray keeps the sheet buffer, whose line
+/// integrals are exact (the fallback [`Visibility::ImageAligned`] documents).
+fn refuse_image_aligned(settings: &RenderSettings) -> Result<()> {
+    if settings.visibility == Visibility::ImageAligned && settings.mode != RenderMode::Xray {
+        return Err(SplatError::Setting {
+            name: "visibility",
+            value: "ImageAligned".into(),
+            expected: "SheetBuffer or EverySample: the sheet renderer does not draw image-aligned \
+                       slabs (render_slabs does; render_by_visibility dispatches on the \
+                       visibility)",
+        });
+    }
+    Ok(())
 }
 
 /// The dense renderer's part of the sheet driver ([`SheetPass`]).
@@ -677,7 +694,6 @@ mod tests {
     use crate::footprint::PhaseBlock;
     use volsplat_core::glam::{DMat3, DVec3};
     use volsplat_core::{Grid, TransferFunction};
-    use crate::error::SplatError;
     use volsplat_core::{Image, Kernel};
 
     fn camera_for(grid: &Grid, az: f64, el: f64, roll: f64) -> Camera {
@@ -1158,6 +1174,66 @@ mod tests {
         };
         let e = render(&vol, &persp, &tables(), &RenderSettings::default()).unwrap_err();
         assert!(e.to_string().contains("parallel_projection"), "{e}");
+    }
+
+    /// The sheet renderer refuses image-aligned slabs instead of handing the frame to the slab
+    /// renderer behind the caller's back; `render_by_visibility` dispatches, openly, to the same
+    /// bits as each renderer called by name; X-ray keeps its exact sheet buffer.
+    #[test]
+    fn image_aligned_is_refused_and_dispatched_only_by_name() {
+        let vol = smooth_volume(12);
+        let cam = camera_for(vol.grid(), 20.0, 10.0, 0.0);
+        let t = tables();
+        let slabs = RenderSettings {
+            width: 24,
+            height: 24,
+            visibility: Visibility::ImageAligned,
+            ..RenderSettings::default()
+        };
+        for mode in [RenderMode::Composite, RenderMode::Mip, RenderMode::Minip] {
+            let s = RenderSettings {
+                mode,
+                ..slabs.clone()
+            };
+            let e = render(&vol, &cam, &t, &s).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    SplatError::Setting {
+                        name: "visibility",
+                        ..
+                    }
+                ),
+                "{mode:?}: {e}"
+            );
+            assert!(e.to_string().contains("render_slabs"), "{e}");
+            let by_name = crate::render_slabs(&vol, &cam, &t, &s, None, &mut |_| true).unwrap();
+            let dispatched =
+                crate::render_by_visibility(&vol, &cam, &t, &s, &mut |_| true).unwrap();
+            assert_eq!(
+                by_name.image.pixels(),
+                dispatched.image.pixels(),
+                "{mode:?}"
+            );
+        }
+        let sheet = RenderSettings {
+            visibility: Visibility::SheetBuffer,
+            ..slabs.clone()
+        };
+        let dispatched =
+            crate::render_by_visibility(&vol, &cam, &t, &sheet, &mut |_| true).unwrap();
+        assert_eq!(
+            dispatched.image.pixels(),
+            render(&vol, &cam, &t, &sheet).unwrap().image.pixels()
+        );
+        let xray = |visibility| RenderSettings {
+            mode: RenderMode::Xray,
+            visibility,
+            ..slabs.clone()
+        };
+        let a = render(&vol, &cam, &t, &xray(Visibility::ImageAligned)).unwrap();
+        let b = render(&vol, &cam, &t, &xray(Visibility::SheetBuffer)).unwrap();
+        assert_eq!(a.values.unwrap().values(), b.values.unwrap().values());
     }
 
     /// MIP/MinIP culling (crate::mipcull) changes no bit of the values or the image, on a noisy
