@@ -25,6 +25,7 @@ mod dispatch;
 pub mod error;
 pub mod footprint;
 pub mod geometry;
+mod gradient;
 pub mod list;
 mod mipcull;
 pub mod normals;

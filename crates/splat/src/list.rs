@@ -37,11 +37,12 @@ use crate::aa::{footprint_variance, widen};
 use crate::clip::LatticeClip;
 use crate::error::{Result, SplatError, try_filled, try_with_capacity};
 use crate::footprint::metric_from;
-use crate::geometry::Order;
+use crate::geometry::{Order, sheet_axis};
+use crate::gradient::gradient_at;
 use crate::sheets::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
-    SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SheetPass, SpanCtx, deposit, div_band, drive,
-    gradient_at, ms, scale_kept, validate, xray_weight,
+    SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SheetPass, SpanCtx, deposit, div_band, drive, ms,
+    scale_kept, validate, xray_weight,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -583,18 +584,12 @@ fn render_inner(
     let lattice_from_world = world_from_lattice.inverse();
     let origin = DVec3::from(grid.origin);
     let fwd = frame_v.forward;
-    let cosines = [0, 1, 2].map(|c| grid.direction.col(c).dot(fwd).abs());
-    let axis = (0..3)
-        .max_by(|&a, &b| cosines[a].total_cmp(&cosines[b]).then(b.cmp(&a)))
-        .unwrap_or(2);
-    if cosines[axis].is_nan() || cosines[axis] <= 1e-9 {
-        return Err(SplatError::DegenerateView);
-    }
+    let (axis, cos_axis) = sheet_axis(&grid.direction, fwd)?;
     if axis == 0 {
         list.try_by_i()?;
     }
     let axis_dir = grid.direction.col(axis);
-    let frame_spacing = spacing[axis] / cosines[axis];
+    let frame_spacing = spacing[axis] / cos_axis;
     // Sheet order: by depth (orthographic) or by distance of the sheet's plane from the eye.
     let n_sheets = list.dims[axis];
     let step = world_from_lattice.col(axis);

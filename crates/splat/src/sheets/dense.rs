@@ -13,6 +13,7 @@ use crate::clip::LatticeClip;
 use crate::error::{Result, SplatError};
 use crate::footprint::{FootprintTable, LocatedPlanes};
 use crate::geometry::{Order, SplatGeometry};
+use crate::gradient::{gradient_at, index_gradient};
 use crate::mipcull::MipTiles;
 use crate::row::deposit_row;
 use std::time::Instant;
@@ -434,80 +435,6 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         out.splatted = splatted;
         out.skipped = skipped;
     }
-}
-
-/// World-space gradient at full-resolution voxel `p`: central differences divided by
-/// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
-/// by the direction matrix (docs/design.md §4.4). Data units per world unit.
-#[inline]
-pub(crate) fn gradient_at<T: Scalar>(
-    data: &[T],
-    dims_full: [usize; 3],
-    inv_spacing_full: [f32; 3],
-    direction: Mat3,
-    p: [usize; 3],
-) -> Vec3 {
-    let [nx, ny, nz] = dims_full;
-    let lin = p[0] + nx * (p[1] + ny * p[2]);
-    let strides = [1, nx, nx * ny];
-    if p[0] > 0 && p[1] > 0 && p[2] > 0 && p[0] + 1 < nx && p[1] + 1 < ny && p[2] + 1 < nz {
-        // Interior: central differences on all three axes, no border cases.
-        let d = |s: usize| data[lin + s].to_f32() - data[lin - s].to_f32();
-        let g = Vec3::new(
-            d(1) * inv_spacing_full[0],
-            d(strides[1]) * inv_spacing_full[1],
-            d(strides[2]) * inv_spacing_full[2],
-        ) * 0.5;
-        return direction * g;
-    }
-    let mut g = Vec3::ZERO;
-    for c in 0..3 {
-        let n = dims_full[c];
-        if n < 2 {
-            continue;
-        }
-        let s = strides[c];
-        let (lo, hi, half) = if p[c] == 0 {
-            (lin, lin + s, 1.0)
-        } else if p[c] == n - 1 {
-            (lin - s, lin, 1.0)
-        } else {
-            (lin - s, lin + s, 0.5)
-        };
-        g[c] = (data[hi].to_f32() - data[lo].to_f32()) * half * inv_spacing_full[c];
-    }
-    direction * g
-}
-
-/// Central differences at full-resolution voxel `p` in index units (data units per voxel
-/// step): `(ρ(p + e) − ρ(p − e)) · ½`, one-sided `(ρ(p + e) − ρ(p)) · 1` on the faces, 0 along an
-/// axis of one voxel. [`gradient_at`] before its spacing and direction.
-#[inline]
-pub(crate) fn index_gradient<T: Scalar>(
-    data: &[T],
-    dims_full: [usize; 3],
-    p: [usize; 3],
-) -> [f32; 3] {
-    let [nx, ny, _] = dims_full;
-    let lin = p[0] + nx * (p[1] + ny * p[2]);
-    let strides = [1, nx, nx * ny];
-    let mut g = [0.0f32; 3];
-    for c in 0..3 {
-        let n = dims_full[c];
-        if n < 2 {
-            continue;
-        }
-        let s = strides[c];
-        let v = |q: usize| data[q].to_f32();
-        g[c] = if p[c] == 0 {
-            (v(lin + s) - v(lin)) * 1.0
-        } else if p[c] == n - 1 {
-            (v(lin) - v(lin - s)) * 1.0
-        } else {
-            (v(lin + s) - v(lin - s)) * 0.5
-        };
-    }
-    g
 }
 
 struct BandContext<'a> {

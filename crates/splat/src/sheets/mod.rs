@@ -26,7 +26,6 @@ pub(crate) use band::{
     BandState, SINK_LINE, SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Splat, TILE, deposit,
     div_band, scale_kept,
 };
-pub(crate) use dense::gradient_at;
 pub use dense::{render, render_any, render_with_progress};
 pub(crate) use driver::{SheetPass, drive, finish};
 pub use settings::{
