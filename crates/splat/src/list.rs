@@ -590,21 +590,13 @@ fn render_inner(
     }
     let axis_dir = grid.direction.col(axis);
     let frame_spacing = spacing[axis] / cos_axis;
-    // Sheet order: by depth (orthographic) or by distance of the sheet's plane from the eye.
     let n_sheets = list.dims[axis];
-    let step = world_from_lattice.col(axis);
-    let key = |c: usize| {
-        let plane = origin + step * c as f64;
-        match proj {
-            Projection::Ortho(_) => (plane - frame_v.eye).dot(fwd),
-            Projection::Perspective(_) => (plane - frame_v.eye).dot(axis_dir).abs(),
-        }
-    };
-    let mut sheet_order: Vec<usize> = (0..n_sheets).collect();
-    sheet_order.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
-    if settings.order == Order::BackToFront {
-        sheet_order.reverse();
-    }
+    let sheet_order = sheet_order(
+        &proj,
+        (origin, world_from_lattice.col(axis), axis_dir),
+        n_sheets,
+        settings.order,
+    );
     let classifier = FrameClassifier::new(tables, &frame_v, frame_spacing);
     let radius = settings.kernel.radius();
     let variance = footprint_variance(&settings.kernel);
@@ -613,55 +605,17 @@ fn render_inner(
         Projection::Ortho(_) => f64::NEG_INFINITY,
         Projection::Perspective(_) => radius * spacing.max_element(),
     };
-    let (mut dlo, mut dhi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for n in 0..8 {
-        let p = DVec3::new(
-            if n & 1 != 0 {
-                (list.dims[0] - 1) as f64
-            } else {
-                0.0
-            },
-            if n & 2 != 0 {
-                (list.dims[1] - 1) as f64
-            } else {
-                0.0
-            },
-            if n & 4 != 0 {
-                (list.dims[2] - 1) as f64
-            } else {
-                0.0
-            },
-        );
-        let z = (origin + world_from_lattice * p - frame_v.eye).dot(fwd);
-        dlo = dlo.min(z);
-        dhi = dhi.max(z);
-    }
-    dlo = dlo.max(near);
-    let table: Box<[f32; LIST_TABLE_LEN]> = Box::new(std::array::from_fn(|n| {
-        let t = n as f64 / (LIST_TABLE_LEN - 1) as f64;
-        settings
-            .kernel
-            .line_integral_radial(radius * t.sqrt())
-            .unwrap_or(0.0) as f32
-    }));
-    let xray = settings.mode == RenderMode::Xray;
+    let (dlo, dhi) = depth_range(list.dims, origin, world_from_lattice, &frame_v);
+    let dlo = dlo.max(near);
+    let table = radial_table(&settings.kernel, radius);
     let ortho = match proj {
-        Projection::Ortho(p) => {
-            let j_inv = p.raster_from_world_linear().inverse();
-            let (b0, b1, g) = (
-                lattice_from_world * j_inv.col(0),
-                lattice_from_world * j_inv.col(1),
-                lattice_from_world * fwd,
-            );
-            let q = metric_from(b0, b1, g);
-            let (q2, e) = widen(settings.antialias, q, variance);
-            let scale = if xray {
-                e / g.length()
-            } else {
-                e / (g.length() * frame_spacing)
-            };
-            Some(pack(q2, radius, scale))
-        }
+        Projection::Ortho(p) => Some(ortho_metric(
+            &p,
+            lattice_from_world,
+            settings,
+            (radius, variance),
+            frame_spacing,
+        )),
         Projection::Perspective(_) => None,
     };
     let band_h = settings.band_height;
@@ -709,6 +663,86 @@ fn render_inner(
         (stats, t_start),
         progress,
     )
+}
+
+/// The sheet indices `0..n_sheets` in traversal order: by depth (orthographic) or by the
+/// distance of the sheet's plane from the eye (perspective), front to back unless `order` says
+/// otherwise. `(origin, step, axis_dir)`: the world position of sheet 0's lattice origin, the
+/// world step from one sheet to the next, the sheet axis's unit world direction.
+fn sheet_order(
+    proj: &Projection,
+    (origin, step, axis_dir): (DVec3, DVec3, DVec3),
+    n_sheets: usize,
+    order: Order,
+) -> Vec<usize> {
+    let frame_v = proj.frame();
+    let key = |c: usize| {
+        let plane = origin + step * c as f64;
+        match proj {
+            Projection::Ortho(_) => (plane - frame_v.eye).dot(frame_v.forward),
+            Projection::Perspective(_) => (plane - frame_v.eye).dot(axis_dir).abs(),
+        }
+    };
+    let mut sheet_order: Vec<usize> = (0..n_sheets).collect();
+    sheet_order.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
+    if order == Order::BackToFront {
+        sheet_order.reverse();
+    }
+    sheet_order
+}
+
+/// The eye-space depth range (world units along the view) of the lattice's eight corners.
+fn depth_range(
+    dims: [usize; 3],
+    origin: DVec3,
+    world_from_lattice: DMat3,
+    frame_v: &volsplat_core::ViewFrame,
+) -> (f64, f64) {
+    let (mut dlo, mut dhi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for n in 0..8 {
+        let corner = |bit: usize, d: usize| if n & bit != 0 { (d - 1) as f64 } else { 0.0 };
+        let p = DVec3::new(corner(1, dims[0]), corner(2, dims[1]), corner(4, dims[2]));
+        let z = (origin + world_from_lattice * p - frame_v.eye).dot(frame_v.forward);
+        dlo = dlo.min(z);
+        dhi = dhi.max(z);
+    }
+    (dlo, dhi)
+}
+
+/// The kernel's pre-integrated radial profile ([`volsplat_core::Kernel::line_integral_radial`])
+/// tabulated in `ρ²/R²` over `[0, 1]`, `R` = `radius`.
+fn radial_table(kernel: &volsplat_core::Kernel, radius: f64) -> Box<[f32; LIST_TABLE_LEN]> {
+    Box::new(std::array::from_fn(|n| {
+        let t = n as f64 / (LIST_TABLE_LEN - 1) as f64;
+        kernel
+            .line_integral_radial(radius * t.sqrt())
+            .unwrap_or(0.0) as f32
+    }))
+}
+
+/// Orthographic views: every splat's footprint metric, widened by the anti-aliasing, and its
+/// weight factor, the same for the whole frame ([`pack`]ed; see the module docs).
+fn ortho_metric(
+    p: &volsplat_core::OrthoProjection,
+    lattice_from_world: DMat3,
+    settings: &RenderSettings,
+    (radius, variance): (f64, f64),
+    frame_spacing: f64,
+) -> ([f32; 3], f32, [f32; 2]) {
+    let j_inv = p.raster_from_world_linear().inverse();
+    let (b0, b1, g) = (
+        lattice_from_world * j_inv.col(0),
+        lattice_from_world * j_inv.col(1),
+        lattice_from_world * p.frame.forward,
+    );
+    let q = metric_from(b0, b1, g);
+    let (q2, e) = widen(settings.antialias, q, variance);
+    let scale = if settings.mode == RenderMode::Xray {
+        e / g.length()
+    } else {
+        e / (g.length() * frame_spacing)
+    };
+    pack(q2, radius, scale)
 }
 
 /// The splat-list renderer's part of the sheet driver ([`SheetPass`]): sheets along `axis`.

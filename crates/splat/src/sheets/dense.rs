@@ -294,7 +294,6 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         }
         out.buckets.resize_with(self.n_bands, Vec::new);
         let (mut splatted, mut skipped) = (0u64, 0u64);
-        let dlo = geom.depth_range.0;
         let [nx, ny, _] = self.dims_full;
         let data_stride = [1, nx, nx * ny];
         let (su, sv) = (data_stride[ua] * stride, data_stride[va] * stride);
@@ -321,23 +320,8 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                 let lin = row_lin + u * su;
                 let density = self.data[lin].to_f32();
                 // Shade first (§5.2): cull zero opacity before anything else is computed.
-                if self.cull {
-                    let zero = match self.mode {
-                        // 8/16-bit samples are integers in the table's range: the same test,
-                        // looked up.
-                        RenderMode::Composite if !self.zero_lut.is_empty() => {
-                            self.zero_lut[(density as i32 - self.lut_offset) as usize]
-                        }
-                        RenderMode::Composite => self
-                            .classifier
-                            .density_opacity(density)
-                            .is_some_and(|a| a.is_nan() || a <= 0.0),
-                        RenderMode::Xray => xray_weight(density, self.xray_offset) == 0.0,
-                        _ => false,
-                    };
-                    if zero {
-                        continue;
-                    }
+                if self.cull && self.is_transparent(density) {
+                    continue;
                 }
                 let p = row + ju * u as f64;
                 let (x, y) = (p.x as f32, p.y as f32);
@@ -349,24 +333,9 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     div_band((y - hy).max(0.0) as usize, self.band_h).min(self.n_bands - 1),
                     div_band((y + hy).min(h - 1.0) as usize, self.band_h).min(self.n_bands - 1),
                 );
-                if !opaque.is_empty() {
-                    // Tiles are TILE × TILE pixels; the map's rows are the image's tile rows.
-                    let (t0, t1) = (
-                        ((x - hx).max(0.0) as usize / TILE).min(n_tiles - 1),
-                        ((x + hx).min(w - 1.0) as usize / TILE).min(n_tiles - 1),
-                    );
-                    let (r0, r1) = (
-                        ((y - hy).max(0.0) as usize) / TILE,
-                        ((y + hy).min(h - 1.0) as usize) / TILE,
-                    );
-                    if (r0..=r1).all(|r| {
-                        opaque[r * n_tiles + t0..=r * n_tiles + t1]
-                            .iter()
-                            .all(|&o| o)
-                    }) {
-                        skipped += 1;
-                        continue;
-                    }
+                if !opaque.is_empty() && self.under_opaque_tiles(opaque, n_tiles, (x, y), (w, h)) {
+                    skipped += 1;
+                    continue;
                 }
                 // Smooth clipping: the kernel's share on the kept side of every plane.
                 let keep = if self.clip.is_empty() {
@@ -382,44 +351,15 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     }
                     k
                 };
-                let mut value: Rgba = match (self.mode, &self.shade) {
-                    (RenderMode::Composite, Some(t)) => {
-                        let mut l = [0usize; 3];
-                        l[sa] = sheet * stride;
-                        l[ua] = u * stride;
-                        l[va] = v * stride;
-                        let g = index_gradient(self.data, self.dims_full, l);
-                        match crate::slab::shaded_src(t, density, g, 1.0, false) {
-                            Some(c) => c,
-                            None if self.cull => continue,
-                            None => [0.0; 4],
-                        }
-                    }
-                    (RenderMode::Composite, None) => {
-                        let gradient = if self.needs_gradient {
-                            let mut l = [0usize; 3];
-                            l[sa] = sheet * stride;
-                            l[ua] = u * stride;
-                            l[va] = v * stride;
-                            self.gradient(l)
-                        } else {
-                            Vec3::ZERO
-                        };
-                        let depth = ((p.z - dlo) * self.depth_scale) as f32;
-                        match self.classifier.classify(&SampleInput {
-                            density,
-                            gradient,
-                            depth,
-                        }) {
-                            Some(c) => c,
-                            None if self.cull => continue,
-                            None => [0.0; 4],
-                        }
-                    }
-                    (RenderMode::Xray, _) => {
-                        [xray_weight(density, self.xray_offset) * ds, 0.0, 0.0, 0.0]
-                    }
-                    (RenderMode::Mip | RenderMode::Minip, _) => [density, 1.0, 0.0, 0.0],
+                let at = || {
+                    let mut l = [0usize; 3];
+                    l[sa] = sheet * stride;
+                    l[ua] = u * stride;
+                    l[va] = v * stride;
+                    l
+                };
+                let Some(mut value) = self.sample_value(density, at, p.z, ds) else {
+                    continue;
                 };
                 if keep < 1.0 {
                     value = scale_kept(value, keep, self.mode);
@@ -434,6 +374,96 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         out.visited = (nu * nv) as u64;
         out.splatted = splatted;
         out.skipped = skipped;
+    }
+
+    /// Whether a sample of `density` has zero opacity (composite) or zero X-ray weight, so that
+    /// culling drops it before anything else is computed (Westover §5.2). MIP and MinIP keep
+    /// every sample.
+    #[inline(always)]
+    fn is_transparent(&self, density: f32) -> bool {
+        match self.mode {
+            // 8/16-bit samples are integers in the table's range: the same test, looked up.
+            RenderMode::Composite if !self.zero_lut.is_empty() => {
+                self.zero_lut[(density as i32 - self.lut_offset) as usize]
+            }
+            RenderMode::Composite => self
+                .classifier
+                .density_opacity(density)
+                .is_some_and(|a| a.is_nan() || a <= 0.0),
+            RenderMode::Xray => xray_weight(density, self.xray_offset) == 0.0,
+            _ => false,
+        }
+    }
+
+    /// Whether the footprint at raster `(x, y)` (its half extents `half_x`, `half_y`) lies
+    /// wholly in tiles of `opaque`, the image's map of opaque TILE × TILE tiles (`n_tiles` per
+    /// row; its rows are the image's tile rows), on an image `w × h` pixels.
+    #[inline(always)]
+    fn under_opaque_tiles(
+        &self,
+        opaque: &[bool],
+        n_tiles: usize,
+        (x, y): (f32, f32),
+        (w, h): (f32, f32),
+    ) -> bool {
+        let (hx, hy) = (self.half_x, self.half_y);
+        let (t0, t1) = (
+            ((x - hx).max(0.0) as usize / TILE).min(n_tiles - 1),
+            ((x + hx).min(w - 1.0) as usize / TILE).min(n_tiles - 1),
+        );
+        let (r0, r1) = (
+            ((y - hy).max(0.0) as usize) / TILE,
+            ((y + hy).min(h - 1.0) as usize) / TILE,
+        );
+        (r0..=r1).all(|r| {
+            opaque[r * n_tiles + t0..=r * n_tiles + t1]
+                .iter()
+                .all(|&o| o)
+        })
+    }
+
+    /// The splat value of a sample of `density` at the full-resolution voxel `at()`, raster
+    /// depth `z`, `ds` world units from the previous sheet along the view (Westover §3.6): its
+    /// classified, shaded colour (composite), `ρ·Δs` (X-ray), or `[ρ, 1, 0, 0]` (MIP/MinIP).
+    /// `None`: a composite sample the tables leave out, dropped when culling.
+    #[inline(always)]
+    fn sample_value(
+        &self,
+        density: f32,
+        at: impl Fn() -> [usize; 3],
+        z: f64,
+        ds: f32,
+    ) -> Option<Rgba> {
+        let value: Rgba = match (self.mode, &self.shade) {
+            (RenderMode::Composite, Some(t)) => {
+                let g = index_gradient(self.data, self.dims_full, at());
+                match crate::slab::shaded_src(t, density, g, 1.0, false) {
+                    Some(c) => c,
+                    None if self.cull => return None,
+                    None => [0.0; 4],
+                }
+            }
+            (RenderMode::Composite, None) => {
+                let gradient = if self.needs_gradient {
+                    self.gradient(at())
+                } else {
+                    Vec3::ZERO
+                };
+                let depth = ((z - self.geom.depth_range.0) * self.depth_scale) as f32;
+                match self.classifier.classify(&SampleInput {
+                    density,
+                    gradient,
+                    depth,
+                }) {
+                    Some(c) => c,
+                    None if self.cull => return None,
+                    None => [0.0; 4],
+                }
+            }
+            (RenderMode::Xray, _) => [xray_weight(density, self.xray_offset) * ds, 0.0, 0.0, 0.0],
+            (RenderMode::Mip | RenderMode::Minip, _) => [density, 1.0, 0.0, 0.0],
+        };
+        Some(value)
     }
 }
 
