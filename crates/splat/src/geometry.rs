@@ -146,7 +146,7 @@ impl SplatGeometry {
 /// column of `direction`) is most nearly parallel to the view, so that the sheets are the
 /// closest to parallel with the image plane (Westover §3.5.1; the lower axis on a tie), with
 /// `|cos|` of its angle to the view. [`SplatError::DegenerateView`] when no axis has a
-/// component along the view. Both sheet renderers choose their sheets here.
+/// component along the view. The sheet renderer and the splat list both choose their sheets here.
 pub(crate) fn sheet_axis(direction: &DMat3, forward: DVec3) -> Result<(usize, f64)> {
     let cosines = [0, 1, 2].map(|c| direction.col(c).dot(forward).abs());
     let axis = (0..3)

@@ -1,5 +1,5 @@
 //! One-sided and central differences of the voxel data: the gradient that shading and gradient
-//! opacity read, shared by the dense sheet renderer, the splat list and the normal field
+//! opacity read, shared by the sheet renderer, the splat-list renderer and the normal field
 //! ([`crate::normals::NormalField`]). The image-aligned slabs difference their own samples
 //! ([`crate::slab`]).
 

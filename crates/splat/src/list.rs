@@ -30,7 +30,8 @@
 //! inside the volume. Splats whose centre is closer to the eye plane than the kernel's radius
 //! (or behind it) are clipped, never drawn inverted.
 //!
-//! **Parallel and deterministic**: the band decomposition of [`mod@crate::sheets`]; output is
+//! **Parallel and deterministic**: the sheet driver of [`mod@crate::sheets`] (batches of sheets,
+//! bands of scanlines), which this renderer shares with the sheet renderer; output is
 //! bit-identical for any thread count.
 
 use crate::aa::{footprint_variance, widen};
@@ -89,7 +90,7 @@ pub struct ExtractSettings {
     /// Keep voxels whose opacity exceeds this value, in `[0, 1)`: the transfer function's
     /// scalar opacity (per `opacity_unit_distance`) times its gradient opacity, at the largest
     /// depth-cue factor. `0` keeps every voxel that is not fully transparent, so the list renders
-    /// exactly what the dense renderer renders. Not used with [`ListVoxels::Every`].
+    /// exactly what the sheet renderer ([`crate::sheets`]) renders. Not used with [`ListVoxels::Every`].
     pub threshold: f32,
     /// Keep every `subsample`-th voxel per axis (≥ 1).
     pub subsample: usize,
@@ -1162,7 +1163,7 @@ mod tests {
                 }
                 _ => max_abs_diff(&dense.image, &sparse.image),
             };
-            // The dense renderer's phase table (first-order blend) vs the exact per-pixel
+            // The sheet renderer's phase table (first-order blend) vs the exact per-pixel
             // footprint: within the table's documented ±0.3 % ripple. MIP divides by the
             // sheet's coverage, which amplifies it at the silhouette (coverage ≈ ½).
             let bound = if mode == RenderMode::Mip { 0.04 } else { 0.01 };
@@ -1259,7 +1260,7 @@ mod tests {
         assert!((swan - 1.0).abs() < 0.01, "swan {swan}");
         assert!((ewa - 1.0).abs() < 0.01, "ewa {ewa}");
         assert!((area - 1.0).abs() < 0.01, "area {area}");
-        // The dense renderer applies the same rule through its footprint table.
+        // The sheet renderer applies the same rule through its footprint table.
         let s = RenderSettings {
             width: 12,
             height: 12,

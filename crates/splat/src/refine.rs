@@ -3,7 +3,7 @@
 //!
 //! Subsampling by `s` splats every `s`-th voxel per axis with the kernel scaled to the coarser
 //! lattice, so previews have no holes and keep the same opacity per unit length (opacity is
-//! corrected for the longer sheet spacing, which the thesis omits, §7.1.11 of the digest).
+//! corrected for the longer sheet spacing, which the thesis omits: Westover digest §7.1.11, listed in `docs/papers.md`).
 //! The preview is "partial but unbiased" only for band-limited data (§4.2.3): finer detail
 //! aliases.
 

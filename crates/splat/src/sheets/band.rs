@@ -41,7 +41,7 @@ impl BandState {
         }
     }
 
-    /// The band step of both sheet renderers (Westover §3.8.1): `splat_all` deposits one
+    /// The band step of the sheet renderer and the splat list (Westover §3.8.1): `splat_all` deposits one
     /// sheet's splats of this band (image rows from `y_lo`, as many as `acc`, the band's rows of
     /// the accumulation buffer, holds) through the [`SpanCtx`] it is given into the target it is
     /// given (the band's sheet buffer for [`Sink::Sheet`], else `acc`), using the band's MIP

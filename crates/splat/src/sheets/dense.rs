@@ -1,4 +1,4 @@
-//! The dense sheet renderer: every lattice point of each sheet classified, and splatted through
+//! The sheet renderer's own part: every lattice point of each sheet classified, and splatted through
 //! the frame's footprint table (Westover 1991, Ch. 3–5).
 
 use super::band::{
@@ -132,7 +132,7 @@ fn refuse_image_aligned(settings: &RenderSettings) -> Result<()> {
     Ok(())
 }
 
-/// The dense renderer's part of the sheet driver ([`SheetPass`]).
+/// The sheet renderer's part of the sheet driver ([`SheetPass`]).
 struct Dense<'a, T> {
     classify: ClassifyContext<'a, T>,
     bands: BandContext<'a>,

@@ -1,6 +1,6 @@
 //! The one sheet driver (Westover §4.3.2, "multiple independent sheet buffers"): batches of
-//! sheets, bands of scanlines, progress and the thread split, shared by the dense renderer
-//! ([`super::dense`]) and the splat-list renderer ([`crate::list`]), which supply only their
+//! sheets, bands of scanlines, progress and the thread split, shared by the sheet renderer
+//! (`dense.rs`) and the splat-list renderer ([`crate::list`]), which supply only their
 //! per-sheet classification and per-band splatting through [`SheetPass`] (as pbrt-v4's
 //! `ImageTileIntegrator::Render` drives each integrator's `Li`). Also the frame's end: the
 //! accumulation buffer turned into the picture ([`finish`]).

@@ -1,4 +1,5 @@
-//! The sheet renderers' settings, statistics and progress types, and the check of the settings.
+//! The settings, statistics and progress types of the sheet renderer, shared by the splat-list
+//! renderer and the image-aligned slabs, and the check of the settings.
 
 use super::band::TILE;
 use crate::aa::Antialias;
