@@ -656,9 +656,8 @@ fn render_inner(
         voxels: list.len() as u64,
         ..RenderStats::default()
     };
-    let pass = ListPass { frame: fr, axis };
     drive(
-        &pass,
+        || ListPass { frame: fr, axis },
         &sheet_order,
         (settings, tables),
         (stats, t_start),

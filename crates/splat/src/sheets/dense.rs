@@ -88,7 +88,7 @@ pub fn render_with_progress<T: Scalar>(
         threads: rayon::current_num_threads(),
         ..RenderStats::default()
     };
-    let pass = Dense {
+    let make_pass = || Dense {
         classify: ClassifyContext::new(
             volume,
             &geom,
@@ -107,7 +107,7 @@ pub fn render_with_progress<T: Scalar>(
             && settings.opacity_cutoff < 1.0,
     };
     drive(
-        &pass,
+        make_pass,
         &geom.sheet_order,
         (settings, tables),
         (stats, t_start),
