@@ -1,5 +1,5 @@
-//! Footprint tables (Westover 1991, §3.7.1–3.7.4, with the corrections of
-//! `research/seed-westover.md` §1.8).
+//! Footprint tables (Westover 1991, §3.7.1–3.7.4, with the corrections listed in `docs/papers.md`,
+//! rows §3.7.3–3.7.4).
 //!
 //! The footprint of a sample is the line integral of its reconstruction kernel along the view,
 //! `footprint(x, y) = ∫ h(x, y, z) dz` (§3.7.1). In an orthographic view of a rectilinear lattice

@@ -75,10 +75,7 @@ impl SplatGeometry {
         let forward = proj.frame.forward;
         // Sheet normal: the axis whose direction is most nearly parallel to the view, i.e. the
         // sheets closest to parallel with the image plane (Westover §3.5.1).
-        let cosines = [0, 1, 2].map(|c| grid.direction.col(c).dot(forward).abs());
-        let sheet_axis = (0..3)
-            .max_by(|&a, &b| cosines[a].total_cmp(&cosines[b]).then(b.cmp(&a)))
-            .unwrap_or(2);
+        let (sheet_axis, cos_a) = sheet_axis(&grid.direction, forward)?;
         let mut others: Vec<usize> = (0..3).filter(|&c| c != sheet_axis).collect();
         others.sort_by(|&a, &b| jacobian.col(a).z.abs().total_cmp(&jacobian.col(b).z.abs()));
         let in_sheet_axes = [others[0], others[1]];
@@ -92,10 +89,6 @@ impl SplatGeometry {
             (0..n).rev().collect()
         };
         let in_sheet_reversed = in_sheet_axes.map(|a| !increasing(a));
-        let cos_a = cosines[sheet_axis];
-        if cos_a.is_nan() || cos_a <= 1e-9 {
-            return Err(SplatError::DegenerateView);
-        }
         let sheet_spacing = spacing[sheet_axis] / cos_a;
         let mut lo = f64::INFINITY;
         let mut hi = f64::NEG_INFINITY;
@@ -147,6 +140,23 @@ impl SplatGeometry {
     pub fn lattice_points(&self) -> usize {
         self.dims.iter().product()
     }
+}
+
+/// The sheet axis for a view along `forward` (world frame): the grid axis whose direction (a
+/// column of `direction`) is most nearly parallel to the view, so that the sheets are the
+/// closest to parallel with the image plane (Westover §3.5.1; the lower axis on a tie), with
+/// `|cos|` of its angle to the view. [`SplatError::DegenerateView`] when no axis has a
+/// component along the view. The sheet renderer and the splat list both choose their sheets here.
+pub(crate) fn sheet_axis(direction: &DMat3, forward: DVec3) -> Result<(usize, f64)> {
+    let cosines = [0, 1, 2].map(|c| direction.col(c).dot(forward).abs());
+    let axis = (0..3)
+        .max_by(|&a, &b| cosines[a].total_cmp(&cosines[b]).then(b.cmp(&a)))
+        .unwrap_or(2);
+    let cos = cosines[axis];
+    if cos.is_nan() || cos <= 1e-9 {
+        return Err(SplatError::DegenerateView);
+    }
+    Ok((axis, cos))
 }
 
 #[cfg(test)]

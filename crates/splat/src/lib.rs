@@ -1,14 +1,20 @@
 //! # volsplat-splat
 //!
 //! Westover's splatting (Westover 1991, *Splatting: a parallel, feed-forward volume rendering
-//! algorithm*), orthographic, with the corrections recorded in `docs/papers.md`.
+//! algorithm*), Swan et al.'s anti-aliased perspective splat list (1997) and image-aligned
+//! post-classified slabs (Mueller, Möller & Crawfis 1999), with the corrections recorded in
+//! `docs/papers.md`. Which renderer the front ends choose, and why: `docs/architecture.md`.
 //!
-//! - [`render()`] / [`render_any`]: one frame → [`Rendered`] (premultiplied image, optional float
-//!   values, [`RenderStats`] per stage like Table 4.02), controlled by [`RenderSettings`]
-//!   ([`RenderMode`] composite / MIP / MinIP / X-ray, [`Visibility`] sheet buffer or
-//!   composite-every-sample, [`Order`] FTB/BTF, kernel, subsampling).
-//! - [`render_with_progress`]: the same with a callback after each batch of sheets (successive
-//!   refinement, §4.2.1), which can cancel.
+//! - [`sheets`], the sheet renderer (dense, orthographic): [`render()`] / [`render_any`]: one
+//!   frame → [`Rendered`] (premultiplied image, optional float values, [`RenderStats`] per stage
+//!   like Table 4.02), controlled by [`RenderSettings`] ([`RenderMode`] composite / MIP / MinIP /
+//!   X-ray, [`Visibility`] sheet buffer or composite-every-sample, [`Order`] FTB/BTF, kernel,
+//!   subsampling); [`render_with_progress`]: the same with a callback after each batch of sheets
+//!   (successive refinement, §4.2.1), which can cancel.
+//! - [`list`], the splat-list renderer (sparse, orthographic or perspective): [`SplatList`],
+//!   [`render_list`]; it shares the sheet renderer's driver (batches, bands, threads).
+//! - [`slab`], the image-aligned slabs: [`render_slabs`]. [`render_by_visibility`] dispatches
+//!   between the sheet renderer and the slabs on [`RenderSettings::visibility`].
 //! - [`refine`]: the preview ladder of subsampled renders with cheaper kernels (§4.2.2–4.2.4).
 //! - [`footprint`]: per-frame footprint tables with exact elliptical mapping (§3.7).
 //! - [`geometry`]: incremental view transform, sheet choice and traversal order (§3.5).
@@ -21,21 +27,28 @@
 pub mod aa;
 pub mod bricks;
 pub mod clip;
+mod dispatch;
 pub mod error;
 pub mod footprint;
 pub mod geometry;
+mod gradient;
 pub mod list;
 mod mipcull;
 pub mod normals;
 pub mod pyramid;
 pub mod refine;
-pub mod render;
 mod row;
+pub mod sheets;
 pub mod slab;
+/// The sheet renderer's former module name, kept so that `crate::render::…` paths (the slab
+/// renderer's imports) still resolve; new code names [`sheets`].
+#[doc(hidden)]
+pub use sheets as render;
 
 pub use aa::Antialias;
 pub use bricks::BrickGrid;
 pub use clip::ClipPlane;
+pub use dispatch::render_by_visibility;
 pub use error::{Result, SplatError};
 pub use footprint::{FootprintSettings, FootprintTable};
 pub use geometry::{Order, SplatGeometry};
@@ -44,7 +57,7 @@ pub use list::{
 };
 pub use normals::ShadeAt;
 pub use pyramid::{Pyramid, PyramidLevel, auto_level, focal_pixel_size, render_level};
-pub use render::{
+pub use sheets::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
     render_any, render_with_progress, xray_weight,
 };

@@ -30,18 +30,20 @@
 //! inside the volume. Splats whose centre is closer to the eye plane than the kernel's radius
 //! (or behind it) are clipped, never drawn inverted.
 //!
-//! **Parallel and deterministic**: the band decomposition of [`mod@crate::render`]; output is
+//! **Parallel and deterministic**: the sheet driver of [`mod@crate::sheets`] (batches of sheets,
+//! bands of scanlines), which this renderer shares with the sheet renderer; output is
 //! bit-identical for any thread count.
 
 use crate::aa::{footprint_variance, widen};
 use crate::clip::LatticeClip;
 use crate::error::{Result, SplatError, try_filled, try_with_capacity};
 use crate::footprint::metric_from;
-use crate::geometry::Order;
-use crate::render::{
+use crate::geometry::{Order, sheet_axis};
+use crate::gradient::gradient_at;
+use crate::sheets::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
-    SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SpanCtx, Visibility, composite_band_sheet, deposit,
-    div_band, finish, gradient_at, ms, scale_kept, validate, xray_weight,
+    SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SheetPass, SpanCtx, deposit, div_band, drive, ms,
+    scale_kept, validate, xray_weight,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -88,7 +90,7 @@ pub struct ExtractSettings {
     /// Keep voxels whose opacity exceeds this value, in `[0, 1)`: the transfer function's
     /// scalar opacity (per `opacity_unit_distance`) times its gradient opacity, at the largest
     /// depth-cue factor. `0` keeps every voxel that is not fully transparent, so the list renders
-    /// exactly what the dense renderer renders. Not used with [`ListVoxels::Every`].
+    /// exactly what the sheet renderer ([`crate::sheets`]) renders. Not used with [`ListVoxels::Every`].
     pub threshold: f32,
     /// Keep every `subsample`-th voxel per axis (≥ 1).
     pub subsample: usize,
@@ -583,33 +585,19 @@ fn render_inner(
     let lattice_from_world = world_from_lattice.inverse();
     let origin = DVec3::from(grid.origin);
     let fwd = frame_v.forward;
-    let cosines = [0, 1, 2].map(|c| grid.direction.col(c).dot(fwd).abs());
-    let axis = (0..3)
-        .max_by(|&a, &b| cosines[a].total_cmp(&cosines[b]).then(b.cmp(&a)))
-        .unwrap_or(2);
-    if cosines[axis].is_nan() || cosines[axis] <= 1e-9 {
-        return Err(SplatError::DegenerateView);
-    }
+    let (axis, cos_axis) = sheet_axis(&grid.direction, fwd)?;
     if axis == 0 {
         list.try_by_i()?;
     }
     let axis_dir = grid.direction.col(axis);
-    let frame_spacing = spacing[axis] / cosines[axis];
-    // Sheet order: by depth (orthographic) or by distance of the sheet's plane from the eye.
+    let frame_spacing = spacing[axis] / cos_axis;
     let n_sheets = list.dims[axis];
-    let step = world_from_lattice.col(axis);
-    let key = |c: usize| {
-        let plane = origin + step * c as f64;
-        match proj {
-            Projection::Ortho(_) => (plane - frame_v.eye).dot(fwd),
-            Projection::Perspective(_) => (plane - frame_v.eye).dot(axis_dir).abs(),
-        }
-    };
-    let mut sheet_order: Vec<usize> = (0..n_sheets).collect();
-    sheet_order.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
-    if settings.order == Order::BackToFront {
-        sheet_order.reverse();
-    }
+    let sheet_order = sheet_order(
+        &proj,
+        (origin, world_from_lattice.col(axis), axis_dir),
+        n_sheets,
+        settings.order,
+    );
     let classifier = FrameClassifier::new(tables, &frame_v, frame_spacing);
     let radius = settings.kernel.radius();
     let variance = footprint_variance(&settings.kernel);
@@ -618,55 +606,17 @@ fn render_inner(
         Projection::Ortho(_) => f64::NEG_INFINITY,
         Projection::Perspective(_) => radius * spacing.max_element(),
     };
-    let (mut dlo, mut dhi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for n in 0..8 {
-        let p = DVec3::new(
-            if n & 1 != 0 {
-                (list.dims[0] - 1) as f64
-            } else {
-                0.0
-            },
-            if n & 2 != 0 {
-                (list.dims[1] - 1) as f64
-            } else {
-                0.0
-            },
-            if n & 4 != 0 {
-                (list.dims[2] - 1) as f64
-            } else {
-                0.0
-            },
-        );
-        let z = (origin + world_from_lattice * p - frame_v.eye).dot(fwd);
-        dlo = dlo.min(z);
-        dhi = dhi.max(z);
-    }
-    dlo = dlo.max(near);
-    let table: Box<[f32; LIST_TABLE_LEN]> = Box::new(std::array::from_fn(|n| {
-        let t = n as f64 / (LIST_TABLE_LEN - 1) as f64;
-        settings
-            .kernel
-            .line_integral_radial(radius * t.sqrt())
-            .unwrap_or(0.0) as f32
-    }));
-    let xray = settings.mode == RenderMode::Xray;
+    let (dlo, dhi) = depth_range(list.dims, origin, world_from_lattice, &frame_v);
+    let dlo = dlo.max(near);
+    let table = radial_table(&settings.kernel, radius);
     let ortho = match proj {
-        Projection::Ortho(p) => {
-            let j_inv = p.raster_from_world_linear().inverse();
-            let (b0, b1, g) = (
-                lattice_from_world * j_inv.col(0),
-                lattice_from_world * j_inv.col(1),
-                lattice_from_world * fwd,
-            );
-            let q = metric_from(b0, b1, g);
-            let (q2, e) = widen(settings.antialias, q, variance);
-            let scale = if xray {
-                e / g.length()
-            } else {
-                e / (g.length() * frame_spacing)
-            };
-            Some(pack(q2, radius, scale))
-        }
+        Projection::Ortho(p) => Some(ortho_metric(
+            &p,
+            lattice_from_world,
+            settings,
+            (radius, variance),
+            frame_spacing,
+        )),
         Projection::Perspective(_) => None,
     };
     let band_h = settings.band_height;
@@ -696,15 +646,7 @@ fn render_inner(
         n_bands,
         clip: LatticeClip::new(&settings.clip, &list.grid, &settings.kernel, list.stride),
     };
-    let init: Rgba = match settings.mode {
-        RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
-        _ => [0.0; 4],
-    };
-    let mut acc = try_filled(w * h, init, "the splat list's image buffer")?;
-    let mut bands: Vec<BandState> = (0..n_bands)
-        .map(|b| BandState::new(band_h.min(h - b * band_h), w))
-        .collect();
-    let mut stats = RenderStats {
+    let stats = RenderStats {
         sheets: n_sheets,
         sheet_axis: axis,
         sheet_spacing: frame_spacing,
@@ -714,67 +656,130 @@ fn render_inner(
         voxels: list.len() as u64,
         ..RenderStats::default()
     };
-    stats.setup_ms = ms(t_start);
-    let batch = settings.sheets_per_batch;
-    let mut slots: Vec<SheetBuckets> = (0..batch).map(|_| SheetBuckets::default()).collect();
-    let mut done = 0;
-    for sheets in sheet_order.chunks(batch) {
-        let t0 = Instant::now();
-        let classified = &mut slots[..sheets.len()];
-        classified
-            .par_iter_mut()
-            .zip(sheets.par_iter())
-            .for_each(|(slot, &c)| fr.classify_sheet(axis, c, slot));
-        stats.classify_ms += ms(t0);
-        if let Some(bytes) = classified.iter().find_map(|c| c.out_of_memory) {
+    drive(
+        || ListPass { frame: fr, axis },
+        &sheet_order,
+        (settings, tables),
+        (stats, t_start),
+        progress,
+    )
+}
+
+/// The sheet indices `0..n_sheets` in traversal order: by depth (orthographic) or by the
+/// distance of the sheet's plane from the eye (perspective), front to back unless `order` says
+/// otherwise. `(origin, step, axis_dir)`: the world position of sheet 0's lattice origin, the
+/// world step from one sheet to the next, the sheet axis's unit world direction.
+fn sheet_order(
+    proj: &Projection,
+    (origin, step, axis_dir): (DVec3, DVec3, DVec3),
+    n_sheets: usize,
+    order: Order,
+) -> Vec<usize> {
+    let frame_v = proj.frame();
+    let key = |c: usize| {
+        let plane = origin + step * c as f64;
+        match proj {
+            Projection::Ortho(_) => (plane - frame_v.eye).dot(frame_v.forward),
+            Projection::Perspective(_) => (plane - frame_v.eye).dot(axis_dir).abs(),
+        }
+    };
+    let mut sheet_order: Vec<usize> = (0..n_sheets).collect();
+    sheet_order.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
+    if order == Order::BackToFront {
+        sheet_order.reverse();
+    }
+    sheet_order
+}
+
+/// The eye-space depth range (world units along the view) of the lattice's eight corners.
+fn depth_range(
+    dims: [usize; 3],
+    origin: DVec3,
+    world_from_lattice: DMat3,
+    frame_v: &volsplat_core::ViewFrame,
+) -> (f64, f64) {
+    let (mut dlo, mut dhi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for n in 0..8 {
+        let corner = |bit: usize, d: usize| if n & bit != 0 { (d - 1) as f64 } else { 0.0 };
+        let p = DVec3::new(corner(1, dims[0]), corner(2, dims[1]), corner(4, dims[2]));
+        let z = (origin + world_from_lattice * p - frame_v.eye).dot(frame_v.forward);
+        dlo = dlo.min(z);
+        dhi = dhi.max(z);
+    }
+    (dlo, dhi)
+}
+
+/// The kernel's pre-integrated radial profile ([`volsplat_core::Kernel::line_integral_radial`])
+/// tabulated in `ρ²/R²` over `[0, 1]`, `R` = `radius`.
+fn radial_table(kernel: &volsplat_core::Kernel, radius: f64) -> Box<[f32; LIST_TABLE_LEN]> {
+    Box::new(std::array::from_fn(|n| {
+        let t = n as f64 / (LIST_TABLE_LEN - 1) as f64;
+        kernel
+            .line_integral_radial(radius * t.sqrt())
+            .unwrap_or(0.0) as f32
+    }))
+}
+
+/// Orthographic views: every splat's footprint metric, widened by the anti-aliasing, and its
+/// weight factor, the same for the whole frame ([`pack`]ed; see the module docs).
+fn ortho_metric(
+    p: &volsplat_core::OrthoProjection,
+    lattice_from_world: DMat3,
+    settings: &RenderSettings,
+    (radius, variance): (f64, f64),
+    frame_spacing: f64,
+) -> ([f32; 3], f32, [f32; 2]) {
+    let j_inv = p.raster_from_world_linear().inverse();
+    let (b0, b1, g) = (
+        lattice_from_world * j_inv.col(0),
+        lattice_from_world * j_inv.col(1),
+        lattice_from_world * p.frame.forward,
+    );
+    let q = metric_from(b0, b1, g);
+    let (q2, e) = widen(settings.antialias, q, variance);
+    let scale = if settings.mode == RenderMode::Xray {
+        e / g.length()
+    } else {
+        e / (g.length() * frame_spacing)
+    };
+    pack(q2, radius, scale)
+}
+
+/// The splat-list renderer's part of the sheet driver ([`SheetPass`]): sheets along `axis`.
+struct ListPass<'a> {
+    frame: Frame<'a>,
+    axis: usize,
+}
+
+impl SheetPass for ListPass<'_> {
+    type Sheet = SheetBuckets;
+    const NAME: &'static str = "splat-list renderer";
+    const IMAGE_BUFFER: &'static str = "the splat list's image buffer";
+
+    fn reads_opaque_tiles(&self) -> bool {
+        false
+    }
+
+    fn classify_sheet(&self, sheet: usize, _opaque: &[bool], out: &mut SheetBuckets) {
+        self.frame.classify_sheet(self.axis, sheet, out);
+    }
+
+    fn tally(&self, c: &SheetBuckets, stats: &mut RenderStats) -> Result<()> {
+        if let Some(bytes) = c.out_of_memory {
             return Err(SplatError::OutOfMemory {
                 what: "the splat list's sheet buffers",
                 bytes,
             });
         }
-        for c in classified.iter() {
-            stats.splats += c.splatted;
-            stats.splats_clipped += c.clipped;
-            stats.splats_widened += c.widened;
-        }
-        let t1 = Instant::now();
-        let classified = &*classified;
-        acc.par_chunks_mut(band_h * w)
-            .zip(bands.par_iter_mut())
-            .enumerate()
-            .for_each(|(b, (acc_band, state))| {
-                for sheet in classified {
-                    fr.process(b, acc_band, state, &sheet.buckets[b]);
-                }
-            });
-        stats.splat_ms += ms(t1);
-        done += sheets.len();
-        let p = Progress {
-            sheets_done: done,
-            sheets_total: sheet_order.len(),
-            accumulation: &acc,
-        };
-        if !progress(&p) {
-            return Err(SplatError::Cancelled);
-        }
+        stats.splats += c.splatted;
+        stats.splats_clipped += c.clipped;
+        stats.splats_widened += c.widened;
+        Ok(())
     }
-    let (splat_cpu, comp_cpu) = bands
-        .iter()
-        .fold((0.0, 0.0), |(s, c), b| (s + b.splat_s, c + b.composite_s));
-    let phase_ms = stats.splat_ms;
-    if splat_cpu + comp_cpu > 0.0 {
-        stats.splat_ms = phase_ms * splat_cpu / (splat_cpu + comp_cpu);
-        stats.composite_ms = phase_ms * comp_cpu / (splat_cpu + comp_cpu);
+
+    fn splat_band(&self, b: usize, acc: &mut [Rgba], st: &mut BandState, sheet: &SheetBuckets) {
+        self.frame.process(b, acc, st, &sheet.buckets[b]);
     }
-    stats.pixel_updates = bands.iter().map(|b| b.pixel_updates).sum();
-    stats.splats_terminated = bands.iter().map(|b| b.terminated).sum();
-    let (image, values) = finish(acc, settings, tables, "splat-list renderer")?;
-    stats.total_ms = ms(t_start);
-    Ok(Rendered {
-        image,
-        values,
-        stats,
-    })
 }
 
 /// Packs a metric for the band loops: coefficients of `ρ²/R²`, the weight factor and the half
@@ -924,68 +929,28 @@ impl Frame<'_> {
         });
     }
 
+    /// Splats one sheet's splats into band `b` and composites them (Westover §3.8.1).
     fn process(&self, b: usize, acc: &mut [Rgba], st: &mut BandState, splats: &[PSplat]) {
         if splats.is_empty() {
             return;
         }
-        let s = self.settings;
-        let w = s.width;
-        let rows = acc.len() / w;
-        let mode = s.mode;
-        let ftb = s.order == Order::FrontToBack;
-        let cutoff = s.opacity_cutoff;
-        let terminate = mode == RenderMode::Composite && ftb && cutoff < 1.0;
-        let every = mode == RenderMode::Composite && s.visibility == Visibility::EverySample;
-        let code = if every {
-            if ftb { SINK_OVER_FTB } else { SINK_OVER_BTF }
-        } else if mode == RenderMode::Xray {
-            SINK_LINE
-        } else {
-            SINK_SHEET
-        };
-        let t0 = Instant::now();
-        let sheet = code == SINK_SHEET;
-        let target: &mut [Rgba] = if sheet { &mut st.sheet } else { acc };
-        let mut span = SpanCtx {
-            y_lo: (b * self.band_h) as i32,
-            rows: rows as i32,
-            width: w as i32,
-            // No opaque tile in the band yet: nothing can be terminated, so skip the per-splat
-            // tile check (the outcome is the same).
-            terminate: terminate && st.opaque_tiles.contains(&true),
-            opaque: &st.opaque_tiles,
-            tx0: w,
-            tx1: 0,
-            updates: 0,
-            terminated: 0,
-        };
-        let f = match code {
-            SINK_SHEET => splat_one::<SINK_SHEET>,
-            SINK_LINE => splat_one::<SINK_LINE>,
-            SINK_OVER_FTB => splat_one::<SINK_OVER_FTB>,
-            _ => splat_one::<SINK_OVER_BTF>,
-        };
-        for sp in splats {
-            f(&self.table, sp, &mut span, target);
-        }
-        let (tx0, tx1) = (span.tx0, span.tx1);
-        st.pixel_updates += span.updates;
-        st.terminated += span.terminated;
-        let t1 = Instant::now();
-        st.splat_s += (t1 - t0).as_secs_f64();
-        if !sheet || tx0 >= tx1 {
-            return;
-        }
-        composite_band_sheet(
-            mode,
-            ftb,
-            terminate.then_some(cutoff),
-            w,
-            st,
+        st.splat_sheet(
+            self.settings,
+            b * self.band_h,
             acc,
-            (tx0, tx1),
+            |sink, span, target, _| {
+                let f = match sink.code() {
+                    SINK_SHEET => splat_one::<SINK_SHEET>,
+                    SINK_LINE => splat_one::<SINK_LINE>,
+                    SINK_OVER_FTB => splat_one::<SINK_OVER_FTB>,
+                    _ => splat_one::<SINK_OVER_BTF>,
+                };
+                for sp in splats {
+                    f(&self.table, sp, span, target);
+                }
+                false
+            },
         );
-        st.composite_s += t1.elapsed().as_secs_f64();
     }
 }
 
@@ -1050,7 +1015,7 @@ fn splat_one<const S: u8>(
 mod tests {
     use super::*;
     use crate::aa::Antialias;
-    use crate::render::render;
+    use crate::sheets::render;
     use volsplat_core::TransferFunction;
 
     fn smooth_volume(n: usize) -> Volume<f32> {
@@ -1197,7 +1162,7 @@ mod tests {
                 }
                 _ => max_abs_diff(&dense.image, &sparse.image),
             };
-            // The dense renderer's phase table (first-order blend) vs the exact per-pixel
+            // The sheet renderer's phase table (first-order blend) vs the exact per-pixel
             // footprint: within the table's documented ±0.3 % ripple. MIP divides by the
             // sheet's coverage, which amplifies it at the silhouette (coverage ≈ ½).
             let bound = if mode == RenderMode::Mip { 0.04 } else { 0.01 };
@@ -1294,7 +1259,7 @@ mod tests {
         assert!((swan - 1.0).abs() < 0.01, "swan {swan}");
         assert!((ewa - 1.0).abs() < 0.01, "ewa {ewa}");
         assert!((area - 1.0).abs() < 0.01, "area {area}");
-        // The dense renderer applies the same rule through its footprint table.
+        // The sheet renderer applies the same rule through its footprint table.
         let s = RenderSettings {
             width: 12,
             height: 12,

@@ -5,7 +5,7 @@
 //!
 //! In a sheet, a pixel's candidate is the normalised reconstruction `Σ wᵢρᵢ / Σ wᵢ` over the splats
 //! covering it, and it replaces the running maximum `a` only if it is larger
-//! ([`crate::render::composite_band_sheet`]). With non-negative weights the candidate is a convex
+//! ([`crate::sheets::BandState::splat_sheet`]). With non-negative weights the candidate is a convex
 //! combination of the `ρᵢ`, so it is at most `M = max ρᵢ` up to rounding: `|error| ≤ 2nε·max|ρᵢ|`
 //! for `n` terms (Higham 2002, *Accuracy and Stability of Numerical Algorithms* §4.2, recursive
 //! summation), about 10⁻⁵·max|ρᵢ| for the ≤ 100 splats that overlap a pixel in one sheet.
@@ -20,7 +20,7 @@
 //! Kernels with negative lobes (weights < 0) break the convexity; the caller does not cull them.
 
 use crate::footprint::FootprintTable;
-use crate::render::{Splat, TILE};
+use crate::sheets::{Splat, TILE};
 use volsplat_core::image::Rgba;
 
 /// Tests switch culling off to compare against the plain loop.

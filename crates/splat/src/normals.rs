@@ -28,6 +28,7 @@
 //! [`volsplat_core::FrameClassifier::classify`]).
 
 use crate::error::{Result, try_filled};
+use crate::gradient::index_gradient;
 use crate::slab::ShadeTable;
 use rayon::prelude::*;
 use volsplat_core::glam::Vec3;
@@ -85,8 +86,7 @@ impl NormalField {
         let dims = grid.dims;
         let grad_to_world = grad_to_world(grid);
         let data = volume.data();
-        let (nx, ny, nz) = (dims[0], dims[1], dims[2]);
-        let stride = [1, nx, nx * ny];
+        let (nx, ny) = (dims[0], dims[1]);
         let m = grad_to_world;
         let mut codes = try_filled(
             data.len() + 1,
@@ -99,23 +99,7 @@ impl NormalField {
             .for_each(|(k, slice)| {
                 for j in 0..ny {
                     for i in 0..nx {
-                        let p = [i, j, k];
-                        let at = i + j * nx + k * nx * ny;
-                        let v = |q: usize| data[q].to_f32();
-                        let mut g = [0.0f32; 3];
-                        for a in 0..3 {
-                            let (n, s) = ([nx, ny, nz][a], stride[a]);
-                            if n < 2 {
-                                continue;
-                            }
-                            g[a] = if p[a] == 0 {
-                                (v(at + s) - v(at)) * 1.0
-                            } else if p[a] == n - 1 {
-                                (v(at) - v(at - s)) * 1.0
-                            } else {
-                                (v(at + s) - v(at - s)) * 0.5
-                            };
-                        }
+                        let g = index_gradient(data, dims, [i, j, k]);
                         let gw: [f32; 3] = std::array::from_fn(|c| {
                             m[0][c] * g[0] + m[1][c] * g[1] + m[2][c] * g[2]
                         });

@@ -23,7 +23,7 @@
 use crate::bricks::BrickGrid;
 use crate::clip::ClipPlane;
 use crate::error::Result;
-use crate::render::{Progress, RenderSettings, Rendered};
+use crate::sheets::{Progress, RenderSettings, Rendered};
 use rayon::prelude::*;
 use std::sync::{Arc, Mutex};
 use volsplat_core::glam::DVec3;

@@ -3,12 +3,12 @@
 //!
 //! Subsampling by `s` splats every `s`-th voxel per axis with the kernel scaled to the coarser
 //! lattice, so previews have no holes and keep the same opacity per unit length (opacity is
-//! corrected for the longer sheet spacing, which the thesis omits, §7.1.11 of the digest).
+//! corrected for the longer sheet spacing, which the thesis omits: Westover digest §7.1.11, listed in `docs/papers.md`).
 //! The preview is "partial but unbiased" only for band-limited data (§4.2.3): finer detail
 //! aliases.
 
 use crate::error::Result;
-use crate::render::{RenderSettings, Rendered, render};
+use crate::sheets::{RenderSettings, Rendered, render};
 use volsplat_core::{Camera, CrioTables, Kernel, Scalar, Volume};
 
 /// One rung of the ladder.
@@ -42,7 +42,8 @@ pub fn default_ladder(final_kernel: Kernel) -> Vec<RefinementStep> {
 /// Renders each rung of `ladder` in turn with `settings` (its `subsample` and `kernel` replaced
 /// by the rung's), passing each result to `on_step(rung index, result)`. Returning `false` from
 /// the callback stops the ladder (e.g. because the view changed) and returns that rung's result.
-/// Returns the last rendered rung; errors if `ladder` is empty.
+/// Returns the last rendered rung; errors if `ladder` is empty. Every rung is drawn by the sheet
+/// renderer ([`crate::sheets::render`]), which refuses image-aligned visibility outside X-ray.
 pub fn render_ladder<T: Scalar>(
     volume: &Volume<T>,
     camera: &Camera,

@@ -322,7 +322,7 @@ pub fn minification_error(
             let list = SplatList::build(v, &tables, &Default::default())?;
             Ok(render_list(&list, &camera, &tables, &s)?.image)
         } else {
-            Ok(volsplat_splat::render(v, &camera, &tables, &s)?.image)
+            Ok(volsplat_splat::render_by_visibility(v, &camera, &tables, &s, &mut |_| true)?.image)
         }
     };
     let img = draw(&sheet)?;
