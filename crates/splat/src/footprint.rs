@@ -59,7 +59,7 @@ impl Default for FootprintSettings {
 
 /// The pixel block shared by all phases, relative to a sample's base pixel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PhaseBlock {
+pub(crate) struct PhaseBlock {
     /// Pixel offset of the block's first column relative to the sample's base pixel.
     pub kx0: i32,
     /// Pixel offset of the block's first row relative to the sample's base pixel.
@@ -74,7 +74,7 @@ pub struct PhaseBlock {
 /// to blend (only `w00` for the single-point kernel), the blend fractions, and each row's
 /// non-zero column span.
 #[derive(Debug, Clone, Copy)]
-pub struct Located<'a> {
+pub(crate) struct Located<'a> {
     /// Image column of the block's first column.
     pub x0: i32,
     /// Image row of the block's first row.
@@ -98,9 +98,11 @@ pub struct Located<'a> {
 }
 
 impl Located<'_> {
-    /// The blended weight at block index `i`.
+    /// The blended weight at block index `i` (the renderers blend whole rows in their own
+    /// loops; the tests check those against this).
+    #[cfg(test)]
     #[inline(always)]
-    pub fn weight(&self, i: usize) -> f32 {
+    pub(crate) fn weight(&self, i: usize) -> f32 {
         if self.w10.is_empty() {
             return self.w00[i];
         }
@@ -113,7 +115,7 @@ impl Located<'_> {
 /// weights at the pixel centres a sample with that phase covers, as one dense block of a shape
 /// common to all phases, plus each row's non-zero column span.
 #[derive(Debug, Clone)]
-pub struct FootprintTable {
+pub(crate) struct FootprintTable {
     /// Sub-pixel phases per axis (`P`).
     pub phases: usize,
     /// Whether neighbouring phases are blended (all kernels but single-point).
@@ -394,7 +396,7 @@ pub(crate) fn metric_from(b0: DVec3, b1: DVec3, g: DVec3) -> DMat2 {
 /// `Q = U Λ Uᵀ` (the cancellation-free [`crate::aa`] form): `L = Λ^{1/2} Uᵀ`. Maps the ellipse
 /// `δᵀQδ = 1` onto the unit circle. A negative eigenvalue (rounding of a degenerate `Q`) is
 /// taken as 0.
-pub fn ellipse_to_circle(q: DMat2) -> DMat2 {
+pub(crate) fn ellipse_to_circle(q: DMat2) -> DMat2 {
     let (l1, l2, e1) = sym_eigen(q);
     let l2 = l2.max(0.0);
     let e2 = DVec2::new(-e1.y, e1.x);
@@ -488,7 +490,7 @@ impl FootprintTable {
     /// Errors ([`SplatError::FootprintTooLarge`]) if the footprint's block (`2⌈half extent⌉ + 2` pixels
     /// per axis) exceeds [`FootprintSettings::max_block_side`] or is not finite, before
     /// anything is allocated.
-    pub fn build(
+    pub(crate) fn build(
         kernel: &Kernel,
         geom: &SplatGeometry,
         settings: &FootprintSettings,
@@ -650,12 +652,12 @@ impl FootprintTable {
     }
 
     /// Total number of stored weights.
-    pub fn entry_count(&self) -> usize {
+    pub(crate) fn entry_count(&self) -> usize {
         self.entries.len()
     }
 
     /// The block shape shared by every phase.
-    pub fn block(&self) -> PhaseBlock {
+    pub(crate) fn block(&self) -> PhaseBlock {
         self.block
     }
 
@@ -672,7 +674,7 @@ impl FootprintTable {
     /// A convex (barycentric, two-triangle) blend was measured 10 % slower per frame
     /// (decision 0002). The single-point kernel (`P = 1`) lands on the nearest pixel.
     #[inline(always)]
-    pub fn locate(&self, x: f32, y: f32) -> Located<'_> {
+    pub(crate) fn locate(&self, x: f32, y: f32) -> Located<'_> {
         let p = self.phases as f32;
         let (w, h) = (self.block.width as usize, self.block.height as usize);
         // Floor without a libm call; positions are finite and far inside the i32 range.

@@ -18,7 +18,7 @@ pub enum Order {
 /// The lattice actually splatted for one frame: the volume's grid, possibly subsampled by
 /// `stride` (successive refinement, Westover §4.2.3), seen through an orthographic projection.
 #[derive(Debug, Clone)]
-pub struct SplatGeometry {
+pub(crate) struct SplatGeometry {
     /// Subsampling stride (1 = every voxel, 2 = every 2nd voxel per axis, ...).
     pub stride: usize,
     /// Number of lattice points per axis after subsampling.
@@ -28,8 +28,6 @@ pub struct SplatGeometry {
     pub jacobian: DMat3,
     /// Raster position (px, px, depth) of lattice point (0, 0, 0).
     pub origin_raster: DVec3,
-    /// `index_from_world` linear map of the (subsampled) lattice, for gradients and rays.
-    pub lattice_from_world: DMat3,
     /// The sheet-normal axis (0 = i, 1 = j, 2 = k): the grid axis most nearly parallel to the view.
     pub sheet_axis: usize,
     /// The two in-sheet axes, fastest first (smaller |Δdepth| first).
@@ -51,7 +49,7 @@ pub struct SplatGeometry {
 
 impl SplatGeometry {
     /// Computes the frame geometry for `grid` subsampled by `stride` under `proj`.
-    pub fn new(grid: &Grid, proj: &OrthoProjection, stride: usize, order: Order) -> Result<Self> {
+    pub(crate) fn new(grid: &Grid, proj: &OrthoProjection, stride: usize, order: Order) -> Result<Self> {
         if stride == 0 {
             return Err(SplatError::Setting {
                 name: "subsample",
@@ -70,8 +68,6 @@ impl SplatGeometry {
                 step: jacobian.to_cols_array(),
             });
         }
-        let lattice_from_world =
-            DMat3::from_diagonal(DVec3::from(spacing).recip()) * grid.direction.transpose();
         let forward = proj.frame.forward;
         // Sheet normal: the axis whose direction is most nearly parallel to the view, i.e. the
         // sheets closest to parallel with the image plane (Westover §3.5.1).
@@ -119,7 +115,6 @@ impl SplatGeometry {
             dims,
             jacobian,
             origin_raster,
-            lattice_from_world,
             sheet_axis,
             in_sheet_axes,
             sheet_order,
@@ -132,14 +127,10 @@ impl SplatGeometry {
     }
 
     /// Raster position (px, px, depth) of lattice point `p` (direct, not incremental).
-    pub fn raster_of(&self, p: [usize; 3]) -> DVec3 {
+    pub(crate) fn raster_of(&self, p: [usize; 3]) -> DVec3 {
         self.origin_raster + self.jacobian * DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)
     }
 
-    /// Number of lattice points visited per frame.
-    pub fn lattice_points(&self) -> usize {
-        self.dims.iter().product()
-    }
 }
 
 /// The sheet axis for a view along `forward` (world frame): the grid axis whose direction (a

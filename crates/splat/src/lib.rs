@@ -29,8 +29,8 @@ pub mod bricks;
 pub mod clip;
 mod dispatch;
 pub mod error;
-pub mod footprint;
-pub mod geometry;
+mod footprint;
+mod geometry;
 mod gradient;
 pub mod list;
 mod mipcull;
@@ -40,18 +40,14 @@ pub mod refine;
 mod row;
 pub mod sheets;
 pub mod slab;
-/// The sheet renderer's former module name, kept so that `crate::render::…` paths (the slab
-/// renderer's imports) still resolve; new code names [`sheets`].
-#[doc(hidden)]
-pub use sheets as render;
 
 pub use aa::Antialias;
 pub use bricks::BrickGrid;
 pub use clip::ClipPlane;
 pub use dispatch::render_by_visibility;
 pub use error::{Result, SplatError};
-pub use footprint::{FootprintSettings, FootprintTable};
-pub use geometry::{Order, SplatGeometry};
+pub use footprint::FootprintSettings;
+pub use geometry::Order;
 pub use list::{
     ExtractSettings, ListVoxels, SplatList, SplatRecord, render_list, render_list_with_progress,
 };

@@ -14,7 +14,7 @@ use super::view::{FRAC, Planes, View, Walk, clip_linear, to_fixed};
 use crate::bricks::BrickGrid;
 use crate::error::{Result, SplatError};
 use crate::normals::VoxelShading;
-use crate::render::{Progress, RenderMode, RenderSettings};
+use crate::sheets::{Progress, RenderMode, RenderSettings};
 use rayon::prelude::*;
 use volsplat_core::glam::{DVec3, Vec3};
 use volsplat_core::image::{Rgba, over_front_to_back};
@@ -92,7 +92,7 @@ pub(super) struct Ctx<'a, T> {
     /// Pre-integrated classification of the segments between planes
     /// ([`RenderSettings::preintegrate`]).
     ///
-    /// [`RenderSettings::preintegrate`]: crate::render::RenderSettings::preintegrate
+    /// [`RenderSettings::preintegrate`]: crate::sheets::RenderSettings::preintegrate
     pub(super) preint: bool,
     pub(super) mode: RenderMode,
     pub(super) shade: bool,
@@ -564,7 +564,7 @@ impl<'a, T: Scalar> Ctx<'a, T> {
     /// and classified through a density table (unshaded, or shaded at the voxels; shading at
     /// the samples keeps one point per slab).
     ///
-    /// [`RenderSettings::preintegrate`]: crate::render::RenderSettings::preintegrate
+    /// [`RenderSettings::preintegrate`]: crate::sheets::RenderSettings::preintegrate
     #[inline(always)]
     pub(super) fn preint_for(&self, post: Post<'_>) -> bool {
         self.preint && !matches!(post, Post::Shaded(_))

@@ -110,7 +110,7 @@ pub use tables::{RING_RISK, ring_risk};
 use crate::bricks::BrickGrid;
 use crate::error::{Result, SplatError};
 use crate::normals::ShadeAt;
-use crate::render::{
+use crate::sheets::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, finish, ms, validate,
 };
 use march::Ctx;

@@ -4,7 +4,7 @@
 use super::render_slabs;
 use crate::bricks::BrickGrid;
 use crate::error::Result;
-use crate::render::{Progress, RenderSettings, Rendered, validate};
+use crate::sheets::{Progress, RenderSettings, Rendered, validate};
 use volsplat_core::{Camera, CrioTables, Image, Projection, Scalar, ScalarImage, Volume};
 
 /// Sub-pixel rays per pixel and axis for the anti-aliasing of minified views, from `r`, the

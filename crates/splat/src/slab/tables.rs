@@ -7,7 +7,7 @@ use super::math::{log2_unit, max_ps, min_ps};
 use crate::bricks::BrickGrid;
 use crate::error::Result;
 use crate::normals::{NormalField, ShadeAt, VoxelShading};
-use crate::render::{Preintegrate, RenderMode, RenderSettings};
+use crate::sheets::{Preintegrate, RenderMode, RenderSettings};
 use volsplat_core::glam::Vec3;
 use volsplat_core::image::Rgba;
 use volsplat_core::{CrioTables, FrameClassifier, SampleInput, Scalar, Volume};
@@ -212,7 +212,7 @@ fn lerp_rows<const N: usize>(rows: &[[f32; N]], t: f32) -> [f32; N] {
 /// it but the built-in demo loses: the cases are tabled in
 /// `docs/decisions/0020-preintegration-for-sharp-ramps.md` ("The `auto` rule").
 ///
-/// [`Preintegrate::Auto`]: crate::render::Preintegrate::Auto
+/// [`Preintegrate::Auto`]: crate::sheets::Preintegrate::Auto
 pub const RING_RISK: f32 = 4.0;
 
 /// How much a slab's opacity can change across a quarter of the data's value range at the

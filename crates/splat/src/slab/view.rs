@@ -4,7 +4,7 @@
 
 use crate::bricks::BRICK;
 use crate::error::{Result, SplatError};
-use crate::render::RenderSettings;
+use crate::sheets::RenderSettings;
 use volsplat_core::glam::DVec3;
 use volsplat_core::{Grid, Projection};
 
