@@ -62,15 +62,15 @@ pub use xray::XrayDensity;
 
 /// The libraries underneath, for callers that need their types (cameras, volumes, images).
 pub use volsplat_core as core;
+/// Buchanan's filters and Chapter 6 displays, whose settings
+/// ([`DisplayOptions::settings`]) the engine's API hands out.
+pub use volsplat_filter as filter;
 /// Readers and writers (volumes, PNG, `.npy`, camera and transfer-function files).
 pub use volsplat_io as io;
 /// The splatting renderers, whose settings ([`RenderRequest::splat_settings`]) and images
 /// ([`Preview::rendered`]) the engine's API hands out.
 pub use volsplat_splat as splat;
-/// Buchanan's filters and Chapter 6 displays, whose settings
-/// ([`DisplayOptions::settings`]) the engine's API hands out.
-pub use volsplat_filter as filter;
-/// Successive-refinement ladders for [`Renderer::render_refined`].
-pub use volsplat_splat::refine::{RefinementStep, default_ladder};
 /// A splatting renderer's image, values and statistics ([`Preview::rendered`]).
 pub use volsplat_splat::Rendered;
+/// Successive-refinement ladders for [`Renderer::render_refined`].
+pub use volsplat_splat::refine::{RefinementStep, default_ladder};

@@ -786,40 +786,41 @@ impl RenderRequest {
     /// The splatting renderer's settings for this request.
     pub fn splat_settings(&self) -> RenderSettings {
         let q = &self.quality;
-        RenderSettings {
-            width: self.width,
-            height: self.height,
-            mode: self.mode.splat_mode(),
-            visibility: match q.visibility {
+        {
+            let mut s = RenderSettings::default();
+            s.width = self.width;
+            s.height = self.height;
+            s.mode = self.mode.splat_mode();
+            s.visibility = match q.visibility {
                 VisibilityChoice::Auto | VisibilityChoice::Sheet => Visibility::SheetBuffer,
                 VisibilityChoice::Every => Visibility::EverySample,
                 VisibilityChoice::Image => Visibility::ImageAligned,
-            },
-            order: match q.order {
+            };
+            s.order = match q.order {
                 OrderChoice::Ftb => Order::FrontToBack,
                 OrderChoice::Btf => Order::BackToFront,
-            },
-            kernel: q.kernel.kernel(),
-            subsample: q.subsample,
-            slab: q.slab.unwrap_or(volsplat_splat::slab::DEFAULT_SLAB),
-            shade_at: match q.shade_at {
+            };
+            s.kernel = q.kernel.kernel();
+            s.subsample = q.subsample;
+            s.slab = q.slab.unwrap_or(volsplat_splat::slab::DEFAULT_SLAB);
+            s.shade_at = match q.shade_at {
                 ShadeAtChoice::Voxels => volsplat_splat::ShadeAt::Voxels,
                 ShadeAtChoice::Samples => volsplat_splat::ShadeAt::Samples,
-            },
-            preintegrate: match q.preintegrate {
+            };
+            s.preintegrate = match q.preintegrate {
                 PreintegrateChoice::Auto => volsplat_splat::Preintegrate::Auto,
                 PreintegrateChoice::On => volsplat_splat::Preintegrate::On,
                 PreintegrateChoice::Off => volsplat_splat::Preintegrate::Off,
-            },
-            opacity_cutoff: q.opacity_cutoff,
-            antialias: match q.antialias {
+            };
+            s.opacity_cutoff = q.opacity_cutoff;
+            s.antialias = match q.antialias {
                 AntialiasChoice::Swan => Antialias::Swan,
                 AntialiasChoice::SwanPerpendicular => Antialias::SwanPerpendicular,
                 AntialiasChoice::Ewa => Antialias::Ewa,
                 AntialiasChoice::Area => Antialias::Area,
                 AntialiasChoice::None => Antialias::None,
-            },
-            ..RenderSettings::default()
+            };
+            s
         }
     }
 

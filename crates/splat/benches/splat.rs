@@ -116,10 +116,11 @@ fn table_4_01(c: &mut Criterion) {
             ("nearest", Kernel::Nearest),
             ("gaussian", Kernel::default()),
         ] {
-            let s = RenderSettings {
-                kernel,
-                subsample: sub,
-                ..RenderSettings::default()
+            let s = {
+                let mut s = RenderSettings::default();
+                s.kernel = kernel;
+                s.subsample = sub;
+                s
             };
             g.bench_function(format!("every {sub}/{name}"), |b| {
                 b.iter(|| black_box(render(&vol, &cam, &tables, &s).expect("render")))
@@ -156,15 +157,16 @@ fn slab_previews(c: &mut Criterion) {
         );
         // Levels are built once, outside the timing.
         pyramid.level(auto).expect("level");
-        let s = RenderSettings {
-            width: n,
-            height: n,
-            visibility: Visibility::ImageAligned,
-            shade_at: ShadeAt::Voxels,
-            slab: 1.0,
-            opacity_cutoff: 1.0 - 255.0 / 32767.0,
-            antialias: volsplat_splat::Antialias::Swan,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = n;
+            s.height = n;
+            s.visibility = Visibility::ImageAligned;
+            s.shade_at = ShadeAt::Voxels;
+            s.slab = 1.0;
+            s.opacity_cutoff = 1.0 - 255.0 / 32767.0;
+            s.antialias = volsplat_splat::Antialias::Swan;
+            s
         };
         for (name, level) in [("full", 0), ("auto", auto)] {
             g.bench_function(format!("{n}² {name} (level {level})"), |b| {

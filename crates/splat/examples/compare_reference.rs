@@ -40,10 +40,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &TransferFunction::preset(&preset, (-1000.0, 2000.0))?,
         4096,
     )?;
-    let s = RenderSettings {
-        width: 256,
-        height: 256,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = 256;
+        s.height = 256;
+        s
     };
     let splat = render(&vol, &cam, &tables, &s)?;
     write_ppm(&out.join("splat.ppm"), &splat.image)?;

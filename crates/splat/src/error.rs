@@ -5,6 +5,7 @@ use volsplat_core::CoreError;
 
 /// Everything that can go wrong while rendering.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum SplatError {
     /// Invalid camera, transfer function, kernel or volume.
     #[error(transparent)]

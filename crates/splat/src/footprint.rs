@@ -31,6 +31,7 @@ use volsplat_core::glam::{DMat2, DVec2, DVec3};
 
 /// How the per-frame footprint table is sized.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct FootprintSettings {
     /// Upper bound on the table's total entries (phases² × block size). Westover used about
     /// 128 × 128 = 16 384 with at most 9 × 9 phases; the default 2¹⁵ (128 KiB, cache-resident)

@@ -49,7 +49,12 @@ pub(crate) struct SplatGeometry {
 
 impl SplatGeometry {
     /// Computes the frame geometry for `grid` subsampled by `stride` under `proj`.
-    pub(crate) fn new(grid: &Grid, proj: &OrthoProjection, stride: usize, order: Order) -> Result<Self> {
+    pub(crate) fn new(
+        grid: &Grid,
+        proj: &OrthoProjection,
+        stride: usize,
+        order: Order,
+    ) -> Result<Self> {
         if stride == 0 {
             return Err(SplatError::Setting {
                 name: "subsample",
@@ -130,7 +135,6 @@ impl SplatGeometry {
     pub(crate) fn raster_of(&self, p: [usize; 3]) -> DVec3 {
         self.origin_raster + self.jacobian * DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)
     }
-
 }
 
 /// The sheet axis for a view along `forward` (world frame): the grid axis whose direction (a

@@ -86,6 +86,7 @@ impl ListVoxels {
 
 /// How a splat list is extracted.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct ExtractSettings {
     /// Keep voxels whose opacity exceeds this value, in `[0, 1)`: the transfer function's
     /// scalar opacity (per `opacity_unit_distance`) times its gradient opacity, at the largest

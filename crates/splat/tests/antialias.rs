@@ -48,11 +48,12 @@ fn perspective_xray_matches_closed_form_line_integrals() {
     let list = SplatList::build(&vol, &tables, &ExtractSettings::default()).unwrap();
     let cam = perspective_camera(vol.grid(), 35.0, 20.0, 1.4);
     let (w, h) = (120, 100);
-    let s = RenderSettings {
-        width: w,
-        height: h,
-        mode: RenderMode::Xray,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = w;
+        s.height = h;
+        s.mode = RenderMode::Xray;
+        s
     };
     let out = render_list(&list, &cam, &tables, &s).unwrap();
     let proj = Projection::new(&cam, w, h).unwrap();
@@ -84,10 +85,11 @@ fn perspective_composite_matches_the_reference_integrator() {
         let far = (DVec3::from(cam.position) - hi).length() + 2.0;
         assert!(far < k, "far {far} vs k {k}");
         let reference = reference_composite(&vol, &proj, &tables, &ReferenceSettings::default());
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = w;
+            s.height = h;
+            s
         };
         let out = render_list(&list, &cam, &tables, &s).unwrap();
         assert_eq!(out.stats.splats_widened, 0);
@@ -112,12 +114,13 @@ fn far_away_xray_keeps_its_energy_when_splats_grow() {
     let dist = (DVec3::from(cam.position) - DVec3::from(cam.focal_point)).length();
     // ∫∫ X dA over the image, with the pixel area at the blobs' distance.
     let energy = |aa: Antialias| {
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            mode: RenderMode::Xray,
-            antialias: aa,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = w;
+            s.height = h;
+            s.mode = RenderMode::Xray;
+            s.antialias = aa;
+            s
         };
         let out = render_list(&list, &cam, &tables, &s).unwrap();
         assert!(aa == Antialias::None || out.stats.splats_widened == out.stats.splats);
@@ -277,11 +280,12 @@ fn minified_errors<T: volsplat_core::Scalar>(
     tables: &CrioTables,
     n: usize,
 ) -> [f64; 4] {
-    let settings = |size: usize, aa: Antialias| RenderSettings {
-        width: size,
-        height: size,
-        antialias: aa,
-        ..RenderSettings::default()
+    let settings = |size: usize, aa: Antialias| {
+        let mut s = RenderSettings::default();
+        s.width = size;
+        s.height = size;
+        s.antialias = aa;
+        s
     };
     let draw = |size: usize, aa: Antialias| {
         volsplat_splat::render(vol, camera, tables, &settings(size, aa))

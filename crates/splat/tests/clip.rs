@@ -37,12 +37,13 @@ fn camera() -> Camera {
 fn xray(clip: Vec<ClipPlane>) -> [Vec<f32>; 2] {
     let vol = cube();
     let t = tables();
-    let s = RenderSettings {
-        width: 96,
-        height: 96,
-        mode: RenderMode::Xray,
-        clip,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = 96;
+        s.height = 96;
+        s.mode = RenderMode::Xray;
+        s.clip = clip;
+        s
     };
     let dense = render(&vol, &camera(), &t, &s).unwrap();
     let list = SplatList::build(&vol, &t, &ExtractSettings::default()).unwrap();

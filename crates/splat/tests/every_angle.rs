@@ -142,11 +142,12 @@ fn render_view(
     mode: RenderMode,
     (w, h): (usize, usize),
 ) -> Rendered {
-    let s = RenderSettings {
-        width: w,
-        height: h,
-        mode,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = w;
+        s.height = h;
+        s.mode = mode;
+        s
     };
     if cam.parallel_projection {
         render(vol, cam, tables, &s).unwrap()
@@ -308,11 +309,12 @@ fn constant_volume_is_right_at_the_reported_angles() {
         let tables = tables(&grid);
         for az in [0.0, 15.0, 30.0, 45.0, 55.0, 60.0, 90.0] {
             let cam = camera(&grid, az, 0.0, 0.0, 1.0, false);
-            let s = RenderSettings {
-                width: 128,
-                height: 128,
-                mode: RenderMode::Xray,
-                ..RenderSettings::default()
+            let s = {
+                let mut s = RenderSettings::default();
+                s.width = 128;
+                s.height = 128;
+                s.mode = RenderMode::Xray;
+                s
             };
             let out = render(&vol, &cam, &tables, &s).unwrap();
             let v = values(&out);
@@ -333,9 +335,10 @@ fn constant_volume_is_right_at_the_reported_angles() {
                 (got - expect).abs() < 0.03 * expect,
                 "spacing {spacing} az {az}: centre line integral {got}, expected {expect}"
             );
-            let s = RenderSettings {
-                mode: RenderMode::Composite,
-                ..s
+            let s = {
+                let mut s = s;
+                s.mode = RenderMode::Composite;
+                s
             };
             let img = render(&vol, &cam, &tables, &s).unwrap().image;
             let centre = img.pixels()[64 * 128 + 64];
@@ -407,13 +410,14 @@ fn sweep_slabs(perspective: bool) -> (f64, f64) {
             };
             // One ray per pixel, as the reference casts them (the anti-aliasing of minified
             // views, which averages a pixel's area, is `slab.rs`'s `minified_views…` test).
-            let s = |mode| RenderSettings {
-                width: shape.0,
-                height: shape.1,
-                mode,
-                visibility: volsplat_splat::Visibility::ImageAligned,
-                antialias: volsplat_splat::Antialias::None,
-                ..RenderSettings::default()
+            let s = |mode| {
+                let mut s = RenderSettings::default();
+                s.width = shape.0;
+                s.height = shape.1;
+                s.mode = mode;
+                s.visibility = volsplat_splat::Visibility::ImageAligned;
+                s.antialias = volsplat_splat::Antialias::None;
+                s
             };
             let what = format!(
                 "slabs {} az {az} el {el} {name} {}×{}",
@@ -432,9 +436,10 @@ fn sweep_slabs(perspective: bool) -> (f64, f64) {
             .unwrap();
             let refc = reference_composite(vol, &proj, &tables, &reference);
             let p = image_psnr(&c.image, &refc);
-            let thick = RenderSettings {
-                slab: volsplat_splat::slab::DEFAULT_SLAB_COMPOSITE,
-                ..s(RenderMode::Composite)
+            let thick = {
+                let mut s = s(RenderMode::Composite);
+                s.slab = volsplat_splat::slab::DEFAULT_SLAB_COMPOSITE;
+                s
             };
             let c1 = volsplat_splat::render_slabs(vol, &cam, &tables, &thick, None, &mut |_| true)
                 .unwrap();
@@ -445,9 +450,10 @@ fn sweep_slabs(perspective: bool) -> (f64, f64) {
             );
             worst_thick = worst_thick.min(p1);
             // The same by segment (pre-integrated, decision 0020).
-            let pre = RenderSettings {
-                preintegrate: volsplat_splat::Preintegrate::On,
-                ..thick.clone()
+            let pre = {
+                let mut s = thick.clone();
+                s.preintegrate = volsplat_splat::Preintegrate::On;
+                s
             };
             let cp = volsplat_splat::render_slabs(vol, &cam, &tables, &pre, None, &mut |_| true)
                 .unwrap();
@@ -480,10 +486,11 @@ fn sweep_slabs(perspective: bool) -> (f64, f64) {
             worst_shaded = worst_shaded.min(ps);
             // Shaded at the voxels (VTK's order) at one voxel, the front ends' default for
             // shaded composite (decision 0019), against the reference in the same order.
-            let at_voxels = RenderSettings {
-                slab: volsplat_splat::slab::DEFAULT_SLAB_COMPOSITE,
-                shade_at: volsplat_splat::ShadeAt::Voxels,
-                ..s(RenderMode::Composite)
+            let at_voxels = {
+                let mut s = s(RenderMode::Composite);
+                s.slab = volsplat_splat::slab::DEFAULT_SLAB_COMPOSITE;
+                s.shade_at = volsplat_splat::ShadeAt::Voxels;
+                s
             };
             let cv = volsplat_splat::render_slabs(vol, &cam, &lit, &at_voxels, None, &mut |_| true)
                 .unwrap();
@@ -834,19 +841,21 @@ fn thin_sweep(perspective: bool) {
                 supersample: 3,
                 ..centres
             };
-            let base = RenderSettings {
-                width: shape.0,
-                height: shape.1,
-                ..RenderSettings::default()
+            let base = {
+                let mut s = RenderSettings::default();
+                s.width = shape.0;
+                s.height = shape.1;
+                s
             };
-            let slab = |mode, slab, pre, shade_at| RenderSettings {
-                mode,
-                visibility: Visibility::ImageAligned,
-                antialias: Antialias::None,
-                slab,
-                preintegrate: pre,
-                shade_at,
-                ..base.clone()
+            let slab = |mode, slab, pre, shade_at| {
+                let mut s = base.clone();
+                s.mode = mode;
+                s.visibility = Visibility::ImageAligned;
+                s.antialias = Antialias::None;
+                s.slab = slab;
+                s.preintegrate = pre;
+                s.shade_at = shade_at;
+                s
             };
             let finite = |r: &Rendered, who: &str| {
                 assert!(
@@ -866,9 +875,10 @@ fn thin_sweep(perspective: bool) {
                 r
             };
             let sheets = |tables: &CrioTables, list: &SplatList, mode| {
-                let s = RenderSettings {
-                    mode,
-                    ..base.clone()
+                let s = {
+                    let mut s = base.clone();
+                    s.mode = mode;
+                    s
                 };
                 let r = if perspective {
                     render_list(list, &cam, tables, &s).unwrap()
@@ -940,9 +950,7 @@ fn thin_sweep(perspective: bool) {
             if !perspective {
                 // Shaded, orthographic (the dense sheets shade through the slab kernel's table).
                 let lit_cells = reference_composite(vol, &proj, &lit, &cells);
-                let img = render(vol, &cam, &lit, &RenderSettings { ..base.clone() })
-                    .unwrap()
-                    .image;
+                let img = render(vol, &cam, &lit, &base).unwrap().image;
                 let p = image_psnr(&img, &lit_cells);
                 line += &format!(" shaded {p:.1}");
                 checks.see(&format!("sheet composite dB{edge}"), p, &what);

@@ -52,11 +52,12 @@ fn xray_error(direction: DMat3, perspective: bool) -> [f64; 2] {
     cam.elevation(25.0);
     cam.orthogonalize_view_up();
     let (w, h) = (72, 64);
-    let s = RenderSettings {
-        width: w,
-        height: h,
-        mode: RenderMode::Xray,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = w;
+        s.height = h;
+        s.mode = RenderMode::Xray;
+        s
     };
     let exact = analytic_xray(&blobs(), &Projection::new(&cam, w, h).unwrap(), 1).unwrap();
     let sparse = render_list(&list, &cam, &tables, &s).unwrap();
@@ -99,11 +100,12 @@ fn oblique_grids_render_the_object_they_sample() {
     cam.azimuth(35.0);
     cam.elevation(25.0);
     cam.orthogonalize_view_up();
-    let s = RenderSettings {
-        width: 72,
-        height: 64,
-        mode: RenderMode::Xray,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = 72;
+        s.height = 64;
+        s.mode = RenderMode::Xray;
+        s
     };
     let exact = analytic_xray(&blobs(), &Projection::new(&cam, 72, 64).unwrap(), 1).unwrap();
     let r = render(&wrong, &cam, &tables, &s).unwrap();

@@ -45,11 +45,12 @@ fn xray_of_gaussian_blobs_matches_closed_form_line_integrals() {
     let blobs = smooth_blobs();
     let vol = phantom::sample(&blobs, [128; 3], 1).unwrap();
     let cam = oblique_camera(vol.grid(), 37.0, 23.0, 11.0);
-    let s = RenderSettings {
-        width: 512,
-        height: 512,
-        mode: RenderMode::Xray,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = 512;
+        s.height = 512;
+        s.mode = RenderMode::Xray;
+        s
     };
     let tables =
         CrioTables::from_transfer_function(&TransferFunction::ramp(0.0, 1.0, 1.0), 16).unwrap();
@@ -72,11 +73,12 @@ fn xray_of_shepp_logan_is_within_the_sampling_error_bound() {
     let vol = phantom::sample(&sl, [128; 3], 2).unwrap();
     let cam = oblique_camera(vol.grid(), 25.0, 35.0, 0.0);
     let (w, h) = (256, 256);
-    let s = RenderSettings {
-        width: w,
-        height: h,
-        mode: RenderMode::Xray,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = w;
+        s.height = h;
+        s.mode = RenderMode::Xray;
+        s
     };
     let tables =
         CrioTables::from_transfer_function(&TransferFunction::ramp(0.0, 1.0, 1.0), 16).unwrap();
@@ -145,11 +147,12 @@ fn composite_matches_reference_integrator_per_kernel() {
         ("nearest", Kernel::Nearest, 35.0),
         ("point", Kernel::SinglePoint, 35.0),
     ] {
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            kernel,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = w;
+            s.height = h;
+            s.kernel = kernel;
+            s
         };
         let out = render(&vol, &cam, &tables, &s).unwrap();
         let psnr = rgb_psnr(&out.image, &reference);
@@ -168,17 +171,13 @@ fn mip_matches_reference() {
     let cam = oblique_camera(vol.grid(), 15.0, 40.0, 0.0);
     let (w, h) = (96, 96);
     let tables = shaded_tables();
-    let out = render(
-        &vol,
-        &cam,
-        &tables,
-        &RenderSettings {
-            width: w,
-            height: h,
-            mode: RenderMode::Mip,
-            ..RenderSettings::default()
-        },
-    )
+    let out = render(&vol, &cam, &tables, &{
+        let mut s = RenderSettings::default();
+        s.width = w;
+        s.height = h;
+        s.mode = RenderMode::Mip;
+        s
+    })
     .unwrap();
     let proj = OrthoProjection::new(&cam, w, h).unwrap();
     let reference = reference_mip(
@@ -226,11 +225,12 @@ fn anisotropic_spacing_renders_like_isotropic() {
     let cam = oblique_camera(&iso, 40.0, 30.0, 0.0);
     let tables = shaded_tables();
     for mode in [RenderMode::Composite, RenderMode::Xray] {
-        let s = RenderSettings {
-            width: 128,
-            height: 128,
-            mode,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = 128;
+            s.height = 128;
+            s.mode = mode;
+            s
         };
         let a = render(&v_iso, &cam, &tables, &s).unwrap();
         let b = render(&v_aniso, &cam, &tables, &s).unwrap();

@@ -39,13 +39,14 @@ fn tables(shade: bool) -> CrioTables {
 }
 
 fn settings(n: usize) -> RenderSettings {
-    RenderSettings {
-        width: n,
-        height: n,
-        mode: RenderMode::Composite,
-        visibility: Visibility::ImageAligned,
-        shade_at: ShadeAt::Samples,
-        ..RenderSettings::default()
+    {
+        let mut s = RenderSettings::default();
+        s.width = n;
+        s.height = n;
+        s.mode = RenderMode::Composite;
+        s.visibility = Visibility::ImageAligned;
+        s.shade_at = ShadeAt::Samples;
+        s
     }
 }
 
@@ -105,9 +106,10 @@ fn previews_keep_the_brightness_and_cost_falls_with_the_pixels() {
     let mut last: Option<(u64, u64)> = None;
     for n in [64, 32] {
         let level = auto_level(focal_pixel_size(&cam, n, n).unwrap(), p.grids());
-        let s = RenderSettings {
-            antialias: Antialias::Swan,
-            ..settings(n)
+        let s = {
+            let mut s = settings(n);
+            s.antialias = Antialias::Swan;
+            s
         };
         let full = draw(&p, 0, &cam, &t, &s);
         let preview = draw(&p, level, &cam, &t, &s);
@@ -172,10 +174,11 @@ fn coarse_levels_are_bit_identical_for_any_thread_count_and_either_kernel() {
         for shade_at in [ShadeAt::Voxels, ShadeAt::Samples] {
             for parallel in [true, false] {
                 let cam = camera(p.full().grid(), 61.0, 17.0, parallel);
-                let s = RenderSettings {
-                    shade_at,
-                    band_height: 8,
-                    ..settings(37)
+                let s = {
+                    let mut s = settings(37);
+                    s.shade_at = shade_at;
+                    s.band_height = 8;
+                    s
                 };
                 let run = |threads: usize, scalar: bool| {
                     force_scalar_sampling(scalar);
@@ -224,9 +227,10 @@ fn a_coarse_level_draws_the_full_levels_box() {
         let row = 32;
         (0..64).filter(|&x| img.get(x, row)[3] > 0.5).count()
     };
-    let s = RenderSettings {
-        antialias: Antialias::None,
-        ..settings(64)
+    let s = {
+        let mut s = settings(64);
+        s.antialias = Antialias::None;
+        s
     };
     let full = covered(&draw(&p, 0, &cam, &t, &s).image);
     for level in [1, 2] {

@@ -38,13 +38,14 @@ fn volume(n: usize) -> Volume<f32> {
 /// Image-aligned slabs, one ray per pixel as the reference integrator casts them (the
 /// anti-aliasing of minified views has its own test, `minified_views_are_box_filtered`).
 fn settings(w: usize, h: usize, mode: RenderMode) -> RenderSettings {
-    RenderSettings {
-        width: w,
-        height: h,
-        mode,
-        visibility: Visibility::ImageAligned,
-        antialias: volsplat_splat::Antialias::None,
-        ..RenderSettings::default()
+    {
+        let mut s = RenderSettings::default();
+        s.width = w;
+        s.height = h;
+        s.mode = mode;
+        s.visibility = Visibility::ImageAligned;
+        s.antialias = volsplat_splat::Antialias::None;
+        s
     }
 }
 
@@ -93,9 +94,10 @@ fn composite_matches_the_reference_integrator() {
             eprintln!("parallel={parallel} {name}: slabs {p:.1} dB");
             assert!(p > bar, "parallel={parallel} {name}: {p:.2} dB ≤ {bar} dB");
             if parallel {
-                let sheet = RenderSettings {
-                    visibility: Visibility::SheetBuffer,
-                    ..s.clone()
+                let sheet = {
+                    let mut s = s.clone();
+                    s.visibility = Visibility::SheetBuffer;
+                    s
                 };
                 let ps = image_psnr(
                     &render(&vol, &cam, &tables, &sheet).unwrap().image,
@@ -243,10 +245,11 @@ fn empty_space_skipping_is_exact_next_to_a_ramp() {
     ] {
         for parallel in [true, false] {
             let cam = camera(vol.grid(), 23.0, 31.0, parallel);
-            let s = RenderSettings {
-                shade_at,
-                preintegrate: Preintegrate::Off,
-                ..settings(72, 64, RenderMode::Composite)
+            let s = {
+                let mut s = settings(72, 64, RenderMode::Composite);
+                s.shade_at = shade_at;
+                s.preintegrate = Preintegrate::Off;
+                s
             };
             let a = render_slabs(&vol, &cam, tables, &s, Some(&real), &mut |_| true).unwrap();
             let b = render_slabs(&vol, &cam, tables, &s, Some(&nothing_skipped), &mut |_| {
@@ -294,9 +297,10 @@ fn each_mode_and_projection(mut f: impl FnMut(&Volume<f32>, &Camera, &CrioTables
 #[test]
 fn bit_identical_for_any_thread_count() {
     each_mode_and_projection(|vol, cam, tables, s| {
-        let s = RenderSettings {
-            band_height: 8,
-            ..s
+        let s = {
+            let mut s = s;
+            s.band_height = 8;
+            s
         };
         let run = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
@@ -333,12 +337,13 @@ fn clipping_planes_cut_the_field() {
     let (w, h) = (64, 64);
     let full = slabs(&vol, &cam, &tables, &settings(w, h, RenderMode::Composite)).image;
     // Keep x ≥ 0 (world): the right half of the image in this view.
-    let s = RenderSettings {
-        clip: vec![ClipPlane {
+    let s = {
+        let mut s = settings(w, h, RenderMode::Composite);
+        s.clip = vec![ClipPlane {
             normal: [1.0, 0.0, 0.0],
             offset: 0.0,
-        }],
-        ..settings(w, h, RenderMode::Composite)
+        }];
+        s
     };
     let cut = slabs(&vol, &cam, &tables, &s).image;
     let frame = cam.frame();
@@ -384,9 +389,10 @@ fn no_popping_across_the_diagonal() {
         &slabs(&vol, &at(44.0), &tables, &s).image,
         &slabs(&vol, &at(46.0), &tables, &s).image,
     );
-    let sheet = RenderSettings {
-        visibility: Visibility::SheetBuffer,
-        ..s.clone()
+    let sheet = {
+        let mut s = s.clone();
+        s.visibility = Visibility::SheetBuffer;
+        s
     };
     let sheet_change = rms_diff(
         &render(&vol, &at(44.0), &tables, &sheet).unwrap().image,
@@ -407,9 +413,10 @@ fn no_popping_across_the_diagonal() {
 fn progress_and_cancellation() {
     let vol = volume(32);
     let cam = camera(vol.grid(), 20.0, 10.0, true);
-    let s = RenderSettings {
-        band_height: 4,
-        ..settings(64, 192, RenderMode::Composite)
+    let s = {
+        let mut s = settings(64, 192, RenderMode::Composite);
+        s.band_height = 4;
+        s
     };
     // One thread: 48 bands of 4 rows in groups of 16.
     let pool = rayon::ThreadPoolBuilder::new()
@@ -437,9 +444,10 @@ fn progress_and_cancellation() {
 fn the_image_does_not_depend_on_the_band_height() {
     each_mode_and_projection(|vol, cam, tables, s| {
         let run = |band_height: usize| {
-            let s = RenderSettings {
-                band_height,
-                ..s.clone()
+            let s = {
+                let mut s = s.clone();
+                s.band_height = band_height;
+                s
             };
             let mut calls = Vec::new();
             let r = render_slabs(vol, cam, tables, &s, None, &mut |p| {
@@ -470,9 +478,10 @@ fn bad_settings_are_errors() {
     let vol = volume(8);
     let cam = camera(vol.grid(), 0.0, 0.0, true);
     for slab in [0.0, -1.0, f64::NAN, 100.0] {
-        let s = RenderSettings {
-            slab,
-            ..settings(8, 8, RenderMode::Composite)
+        let s = {
+            let mut s = settings(8, 8, RenderMode::Composite);
+            s.slab = slab;
+            s
         };
         let e = render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| true).unwrap_err();
         assert!(e.to_string().contains("slab"), "{e}");
@@ -508,11 +517,12 @@ fn minified_views_are_box_filtered() {
     for (parallel, (w, h)) in [(true, (64, 56)), (false, (64, 56)), (true, (150, 131))] {
         let cam = camera(noisy.grid(), 33.0, 21.0, parallel);
         let reference = {
-            let s = RenderSettings {
-                width: 4 * w,
-                height: 4 * h,
-                antialias: Antialias::None,
-                ..settings(w, h, RenderMode::Composite)
+            let s = {
+                let mut s = settings(w, h, RenderMode::Composite);
+                s.width = 4 * w;
+                s.height = 4 * h;
+                s.antialias = Antialias::None;
+                s
             };
             let big = slabs(&noisy, &cam, &tables, &s).image;
             let mut px = vec![[0.0f32; 4]; w * h];
@@ -526,24 +536,16 @@ fn minified_views_are_box_filtered() {
             }
             Image::from_pixels(w, h, px).unwrap()
         };
-        let with = slabs(
-            &noisy,
-            &cam,
-            &tables,
-            &RenderSettings {
-                antialias: RenderSettings::default().antialias,
-                ..settings(w, h, RenderMode::Composite)
-            },
-        );
-        let without = slabs(
-            &noisy,
-            &cam,
-            &tables,
-            &RenderSettings {
-                antialias: Antialias::None,
-                ..settings(w, h, RenderMode::Composite)
-            },
-        );
+        let with = slabs(&noisy, &cam, &tables, &{
+            let mut s = settings(w, h, RenderMode::Composite);
+            s.antialias = RenderSettings::default().antialias;
+            s
+        });
+        let without = slabs(&noisy, &cam, &tables, &{
+            let mut s = settings(w, h, RenderMode::Composite);
+            s.antialias = Antialias::None;
+            s
+        });
         let (ea, en) = (
             rms_diff(&with.image, &reference),
             rms_diff(&without.image, &reference),
@@ -563,20 +565,17 @@ fn minified_views_are_box_filtered() {
     }
     // Magnified: nothing changes.
     let cam = camera(base.grid(), 33.0, 21.0, true);
-    let s = RenderSettings {
-        antialias: RenderSettings::default().antialias,
-        ..settings(200, 180, RenderMode::Composite)
+    let s = {
+        let mut s = settings(200, 180, RenderMode::Composite);
+        s.antialias = RenderSettings::default().antialias;
+        s
     };
     let a = slabs(&base, &cam, &tables, &s);
-    let b = slabs(
-        &base,
-        &cam,
-        &tables,
-        &RenderSettings {
-            antialias: Antialias::None,
-            ..s.clone()
-        },
-    );
+    let b = slabs(&base, &cam, &tables, &{
+        let mut s = s.clone();
+        s.antialias = Antialias::None;
+        s
+    });
     assert!(a.stats.supersampling <= 1.0);
     assert_eq!(a.image.pixels(), b.image.pixels());
 }
@@ -768,14 +767,15 @@ fn simd_and_scalar_sampling_agree_bit_for_bit() {
         ] {
             let tables = tables.clone();
             let cam = camera(vol.grid(), 23.0, 31.0, parallel);
-            let s = RenderSettings {
-                shade_at,
-                preintegrate: if preintegrate {
+            let s = {
+                let mut s = settings(83, 61, mode);
+                s.shade_at = shade_at;
+                s.preintegrate = if preintegrate {
                     volsplat_splat::Preintegrate::On
                 } else {
                     volsplat_splat::Preintegrate::Off
-                },
-                ..settings(83, 61, mode)
+                };
+                s
             };
             let run = |scalar: bool| {
                 volsplat_splat::force_scalar_sampling(scalar);
@@ -837,9 +837,10 @@ fn shading_at_the_voxels_matches_the_reference_in_vtks_order() {
         for parallel in [true, false] {
             let cam = camera(vol.grid(), -35.0, 25.0, parallel);
             let proj = Projection::new(&cam, w, h).unwrap();
-            let s = RenderSettings {
-                shade_at: ShadeAt::Voxels,
-                ..settings(w, h, RenderMode::Composite)
+            let s = {
+                let mut s = settings(w, h, RenderMode::Composite);
+                s.shade_at = ShadeAt::Voxels;
+                s
             };
             let img = slabs(&vol, &cam, &tables, &s).image;
             let reference = |shade_at_voxels| {
@@ -870,15 +871,17 @@ fn shading_at_the_voxels_matches_the_reference_in_vtks_order() {
 fn sheet_only_options_are_refused() {
     let vol = volume(8);
     let cam = camera(vol.grid(), 0.0, 0.0, true);
-    let s = RenderSettings {
-        subsample: 2,
-        ..settings(8, 8, RenderMode::Composite)
+    let s = {
+        let mut s = settings(8, 8, RenderMode::Composite);
+        s.subsample = 2;
+        s
     };
     let e = render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| true).unwrap_err();
     assert!(e.to_string().contains("subsample"), "{e}");
-    let s = RenderSettings {
-        order: volsplat_splat::Order::BackToFront,
-        ..settings(8, 8, RenderMode::Composite)
+    let s = {
+        let mut s = settings(8, 8, RenderMode::Composite);
+        s.order = volsplat_splat::Order::BackToFront;
+        s
     };
     let e = render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| true).unwrap_err();
     assert!(e.to_string().contains("order"), "{e}");
@@ -963,16 +966,12 @@ fn preintegration_removes_the_rings_of_a_sharp_ramp() {
                 },
             );
             let run = |p: Preintegrate| {
-                slabs(
-                    &vol,
-                    &cam,
-                    tables,
-                    &RenderSettings {
-                        shade_at,
-                        preintegrate: p,
-                        ..settings(w, h, RenderMode::Composite)
-                    },
-                )
+                slabs(&vol, &cam, tables, &{
+                    let mut s = settings(w, h, RenderMode::Composite);
+                    s.shade_at = shade_at;
+                    s.preintegrate = p;
+                    s
+                })
             };
             let (point, segment, auto) = (
                 run(Preintegrate::Off),
@@ -1034,10 +1033,11 @@ fn preintegration_removes_the_rings_of_a_sharp_ramp() {
     let blobs = volume(40);
     for tables in [unshaded_tables(), shaded_tables()] {
         let cam = camera(blobs.grid(), 27.0, 19.0, true);
-        let s = RenderSettings {
-            shade_at: ShadeAt::Voxels,
-            preintegrate: Preintegrate::Auto,
-            ..settings(w, h, RenderMode::Composite)
+        let s = {
+            let mut s = settings(w, h, RenderMode::Composite);
+            s.shade_at = ShadeAt::Voxels;
+            s.preintegrate = Preintegrate::Auto;
+            s
         };
         assert!(!slabs(&blobs, &cam, &tables, &s).stats.preintegrated);
     }
@@ -1085,10 +1085,11 @@ fn a_plane_on_a_face_keeps_the_whole_path() {
                             parallel_projection: parallel,
                             parallel_scale: c,
                         };
-                        let s = RenderSettings {
-                            slab,
-                            preintegrate,
-                            ..settings(33, 33, RenderMode::Composite)
+                        let s = {
+                            let mut s = settings(33, 33, RenderMode::Composite);
+                            s.slab = slab;
+                            s.preintegrate = preintegrate;
+                            s
                         };
                         let img = slabs(&vol, &cam, &tables, &s).image;
                         let a = img.get(16, 16)[3] as f64;

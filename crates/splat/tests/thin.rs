@@ -85,21 +85,23 @@ fn draw<T: Scalar>(
     mode: RenderMode,
     (w, h): (usize, usize),
 ) -> Rendered {
-    let base = RenderSettings {
-        width: w,
-        height: h,
-        mode,
-        antialias: Antialias::None,
-        ..RenderSettings::default()
+    let base = {
+        let mut s = RenderSettings::default();
+        s.width = w;
+        s.height = h;
+        s.mode = mode;
+        s.antialias = Antialias::None;
+        s
     };
     match drawer {
         Drawer::Slab(slab, preintegrate, shade_at) => {
-            let s = RenderSettings {
-                visibility: Visibility::ImageAligned,
-                slab,
-                preintegrate,
-                shade_at,
-                ..base
+            let s = {
+                let mut s = base;
+                s.visibility = Visibility::ImageAligned;
+                s.slab = slab;
+                s.preintegrate = preintegrate;
+                s.shade_at = shade_at;
+                s
             };
             render_slabs(vol, cam, tables, &s, None, &mut |_| true).unwrap()
         }

@@ -46,12 +46,13 @@ fn camera(vol: &Volume<i16>, az: f64, perspective: bool) -> Camera {
 }
 
 fn centre_value(vol: &Volume<i16>, cam: &Camera, offset: Option<f32>) -> f64 {
-    let s = RenderSettings {
-        width: 31,
-        height: 31,
-        mode: RenderMode::Xray,
-        xray_offset: offset,
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.width = 31;
+        s.height = 31;
+        s.mode = RenderMode::Xray;
+        s.xray_offset = offset;
+        s
     };
     let tables = keep_all();
     let out = if cam.parallel_projection {
@@ -111,10 +112,11 @@ fn the_weight_is_shifted_and_clamped_at_zero() {
     assert_eq!(xray_weight(40.0, Some(1000.0)), 1040.0);
     assert_eq!(xray_weight(-5.0, None), -5.0);
     let vol = water_in_air();
-    let s = RenderSettings {
-        mode: RenderMode::Xray,
-        xray_offset: Some(f32::NAN),
-        ..RenderSettings::default()
+    let s = {
+        let mut s = RenderSettings::default();
+        s.mode = RenderMode::Xray;
+        s.xray_offset = Some(f32::NAN);
+        s
     };
     let e = render(&vol, &camera(&vol, 0.0, false), &keep_all(), &s).unwrap_err();
     assert!(

@@ -121,11 +121,12 @@ pub fn perspective_errors(
 ) -> Result<(f64, f64, Vec<RegionErrors>)> {
     let (w, h) = (base.width, base.height);
     let supersampled = |f: usize| -> Result<Image> {
-        let hi = RenderSettings {
-            width: w * f,
-            height: h * f,
-            antialias: Antialias::Swan,
-            ..base.clone()
+        let hi = {
+            let mut s = base.clone();
+            s.width = w * f;
+            s.height = h * f;
+            s.antialias = Antialias::Swan;
+            s
         };
         box_downsample(&render_list(list, camera, tables, &hi)?.image, f)
     };
@@ -157,29 +158,21 @@ pub fn perspective_errors(
         .zip(&beyond_all)
         .map(|(a, b)| *a || *b)
         .collect();
-    let plain = render_list(
-        list,
-        camera,
-        tables,
-        &RenderSettings {
-            antialias: Antialias::None,
-            ..base.clone()
-        },
-    )?
+    let plain = render_list(list, camera, tables, &{
+        let mut s = base.clone();
+        s.antialias = Antialias::None;
+        s
+    })?
     .image;
     let black = Image::new(w, h);
     let plain_rms = rms_rgb(&plain, &black, Some(&before));
     let mut out = Vec::new();
     for aa in RULES {
-        let img = render_list(
-            list,
-            camera,
-            tables,
-            &RenderSettings {
-                antialias: aa,
-                ..base.clone()
-            },
-        )?
+        let img = render_list(list, camera, tables, &{
+            let mut s = base.clone();
+            s.antialias = aa;
+            s
+        })?
         .image;
         out.push(RegionErrors {
             antialias: aa,
@@ -217,11 +210,12 @@ pub fn minified_box_errors<T: Scalar>(
     rules: &[Antialias],
 ) -> Result<Vec<f64>> {
     let (w, h) = (base.width, base.height);
-    let hi = RenderSettings {
-        width: w * factor,
-        height: h * factor,
-        antialias: Antialias::None,
-        ..base.clone()
+    let hi = {
+        let mut s = base.clone();
+        s.width = w * factor;
+        s.height = h * factor;
+        s.antialias = Antialias::None;
+        s
     };
     let reference = box_downsample(
         &volsplat_splat::render(volume, camera, tables, &hi)?.image,
@@ -230,9 +224,10 @@ pub fn minified_box_errors<T: Scalar>(
     rules
         .iter()
         .map(|&aa| {
-            let s = RenderSettings {
-                antialias: aa,
-                ..base.clone()
+            let s = {
+                let mut s = base.clone();
+                s.antialias = aa;
+                s
             };
             let img = volsplat_splat::render(volume, camera, tables, &s)?.image;
             Ok(rms_rgb(&img, &reference, None))
@@ -312,10 +307,11 @@ pub fn minification_error(
         parallel_projection: true,
         parallel_scale: n as f64 * 0.5,
     };
-    let s = RenderSettings {
-        width: px,
-        height: px,
-        ..settings.clone()
+    let s = {
+        let mut s = settings.clone();
+        s.width = px;
+        s.height = px;
+        s
     };
     let draw = |v: &Volume<f32>| -> Result<Image> {
         if use_list {
@@ -388,11 +384,12 @@ fn figure(
     let mut times = [0.0; 2];
     let mut imgs = Vec::new();
     for (i, aa) in [Antialias::None, Antialias::Swan].into_iter().enumerate() {
-        let s = RenderSettings {
-            width: size.0,
-            height: size.1,
-            antialias: aa,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = size.0;
+            s.height = size.1;
+            s.antialias = aa;
+            s
         };
         let r = render_list(list, camera, tables, &s)?;
         times[i] = r.stats.total_ms;
@@ -461,10 +458,11 @@ fn mri_minification(md: &mut String, data: &Path) -> Result<()> {
             .copied()
             .fold(f64::INFINITY, f64::min);
         for n in [96usize, 112, 128] {
-            let base = RenderSettings {
-                width: n,
-                height: n,
-                ..RenderSettings::default()
+            let base = {
+                let mut s = RenderSettings::default();
+                s.width = n;
+                s.height = n;
+                s
             };
             let e = minified_box_errors(&vol, &camera, &tables, &base, 4, &RULES)?;
             let vpp = 2.0 * camera.parallel_scale / n as f64 / spacing;
@@ -692,9 +690,10 @@ fn orthographic_minification(md: &mut String) -> Result<()> {
                     240,
                     2,
                     vpp,
-                    &RenderSettings {
-                        antialias: aa,
-                        ..RenderSettings::default()
+                    &{
+                        let mut s = RenderSettings::default();
+                        s.antialias = aa;
+                        s
                     },
                     use_list,
                 )
@@ -738,10 +737,11 @@ fn perspective_checkerboard(md: &mut String, c: &Checkerboard) -> Result<()> {
     for square in [10usize, 2] {
         let sheet = scenes::checkerboard_sheet(nx, ny, square)?;
         let list = SplatList::build(&sheet, cb_tables, &ExtractSettings::default())?;
-        let base = RenderSettings {
-            width: 270,
-            height: 157,
-            ..RenderSettings::default()
+        let base = {
+            let mut s = RenderSettings::default();
+            s.width = 270;
+            s.height = 157;
+            s
         };
         let (k, conv, errs) = perspective_errors(&list, cb_cam, cb_tables, &base, 8)?;
         writeln!(
@@ -793,11 +793,12 @@ fn flicker(md: &mut String, c: &Checkerboard, frames: usize) -> Result<()> {
     writeln!(md, "|---|---|---|")?;
     let mut none_e = 0.0;
     for aa in RULES {
-        let s = RenderSettings {
-            width: 270,
-            height: 157,
-            antialias: aa,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = 270;
+            s.height = 157;
+            s.antialias = aa;
+            s
         };
         let e = temporal_highpass(cb, cb_cam, cb_tables, &s, frames.max(3), 1.5)?;
         if aa == Antialias::None {

@@ -672,10 +672,11 @@ fn splatting(b: &Bench<'_>, md: &mut String, nil_s: f64, sab: &DisplayImage) -> 
         volsplat_core::crio::DEFAULT_TABLE_LEN,
         vec![volsplat_core::Light::headlight()],
     )?;
-    let rs = volsplat_splat::RenderSettings {
-        width: b.w,
-        height: b.h,
-        ..Default::default()
+    let rs = {
+        let mut s = volsplat_splat::RenderSettings::default();
+        s.width = b.w;
+        s.height = b.h;
+        s
     };
     let mut times = Vec::new();
     for _ in 0..5 {

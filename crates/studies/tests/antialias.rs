@@ -13,18 +13,21 @@ use volsplat_studies::antialias::{
 #[test]
 fn orthographic_minification_swan_removes_the_aliasing() {
     // 2×2-voxel squares at 5 voxels per pixel: the squares' period (4 voxels) is below a pixel.
-    let none = RenderSettings {
-        antialias: Antialias::None,
-        ..RenderSettings::default()
+    let none = {
+        let mut s = RenderSettings::default();
+        s.antialias = Antialias::None;
+        s
     };
     let swan = RenderSettings::default();
-    let ewa = RenderSettings {
-        antialias: Antialias::Ewa,
-        ..RenderSettings::default()
+    let ewa = {
+        let mut s = RenderSettings::default();
+        s.antialias = Antialias::Ewa;
+        s
     };
-    let area = RenderSettings {
-        antialias: Antialias::Area,
-        ..RenderSettings::default()
+    let area = {
+        let mut s = RenderSettings::default();
+        s.antialias = Antialias::Area;
+        s
     };
     let mut report = Vec::new();
     for use_list in [false, true] {
@@ -66,10 +69,11 @@ fn checkerboard() -> (SplatList, CrioTables, Camera) {
 #[test]
 fn perspective_checkerboard_swan_reduces_the_error_beyond_k_only() {
     let (list, tables, camera) = checkerboard();
-    let base = RenderSettings {
-        width: 270,
-        height: 157,
-        ..RenderSettings::default()
+    let base = {
+        let mut s = RenderSettings::default();
+        s.width = 270;
+        s.height = 157;
+        s
     };
     let (k, converged, errs) = perspective_errors(&list, &camera, &tables, &base, 8).unwrap();
     eprintln!(
@@ -109,11 +113,12 @@ fn perspective_checkerboard_swan_reduces_the_error_beyond_k_only() {
 fn dolly_flicker_drops_with_swan() {
     let (list, tables, camera) = checkerboard();
     let flicker = |aa: Antialias| {
-        let s = RenderSettings {
-            width: 270,
-            height: 157,
-            antialias: aa,
-            ..RenderSettings::default()
+        let s = {
+            let mut s = RenderSettings::default();
+            s.width = 270;
+            s.height = 157;
+            s.antialias = aa;
+            s
         };
         temporal_highpass(&list, &camera, &tables, &s, 12, 1.5).unwrap()
     };
@@ -137,11 +142,12 @@ fn dolly_flicker_drops_with_swan() {
 /// decision 0023 every image here was black (relative error NaN).
 #[test]
 fn orthographic_minification_under_the_default_renderer() {
-    let slab = |antialias| RenderSettings {
-        visibility: volsplat_splat::Visibility::ImageAligned,
-        slab: 1.0,
-        antialias,
-        ..RenderSettings::default()
+    let slab = |antialias| {
+        let mut s = RenderSettings::default();
+        s.visibility = volsplat_splat::Visibility::ImageAligned;
+        s.slab = 1.0;
+        s.antialias = antialias;
+        s
     };
     let mut report = Vec::new();
     for (vpp, bound) in [(2.5, 0.12), (5.0, 0.05)] {

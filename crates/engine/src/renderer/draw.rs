@@ -306,15 +306,13 @@ impl Renderer {
         };
         let got = cached(&mut self.list, key, || {
             f.pool.install(|| {
-                Ok(Arc::new(SplatList::build_any(
-                    f.volume,
-                    &tables,
-                    &ExtractSettings {
-                        threshold: q.list_threshold,
-                        subsample: q.subsample,
-                        voxels,
-                    },
-                )?))
+                Ok(Arc::new(SplatList::build_any(f.volume, &tables, &{
+                    let mut e = ExtractSettings::default();
+                    e.threshold = q.list_threshold;
+                    e.subsample = q.subsample;
+                    e.voxels = voxels;
+                    e
+                })?))
             })
         })?;
         let list = Arc::clone(got.value);

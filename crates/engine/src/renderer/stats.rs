@@ -420,26 +420,27 @@ mod tests {
     /// displays).
     #[test]
     fn conversions_carry_every_counter() {
-        let s = volsplat_splat::RenderStats {
-            setup_ms: 1.0,
-            classify_ms: 2.0,
-            splat_ms: 3.0,
-            composite_ms: 4.0,
-            total_ms: 10.0,
-            voxels: 5,
-            splats: 4,
-            splats_terminated: 3,
-            splats_clipped: 2,
-            splats_widened: 1,
-            pixel_updates: 12,
-            sheets: 7,
-            sheet_axis: 1,
-            sheet_spacing: 0.5,
-            footprint_entries: 9,
-            footprint_phases: 8,
-            footprint_half_extent: [1.5, 2.5],
-            threads: 3,
-            ..Default::default()
+        let s = {
+            let mut s = volsplat_splat::RenderStats::default();
+            s.setup_ms = 1.0;
+            s.classify_ms = 2.0;
+            s.splat_ms = 3.0;
+            s.composite_ms = 4.0;
+            s.total_ms = 10.0;
+            s.voxels = 5;
+            s.splats = 4;
+            s.splats_terminated = 3;
+            s.splats_clipped = 2;
+            s.splats_widened = 1;
+            s.pixel_updates = 12;
+            s.sheets = 7;
+            s.sheet_axis = 1;
+            s.sheet_spacing = 0.5;
+            s.footprint_entries = 9;
+            s.footprint_phases = 8;
+            s.footprint_half_extent = [1.5, 2.5];
+            s.threads = 3;
+            s
         };
         let t = Stats::from(&s);
         assert_eq!(

@@ -41,6 +41,7 @@ pub enum Visibility {
 
 /// Everything that controls one render.
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct RenderSettings {
     /// Image width, pixels (≥ 1).
     pub width: usize,
@@ -151,6 +152,7 @@ impl Default for RenderSettings {
 
 /// Per-stage timings and counters of one render (Westover Table 4.02).
 #[derive(Debug, Clone, Default, PartialEq)]
+#[non_exhaustive]
 pub struct RenderStats {
     /// Frame set-up: geometry, footprint table, classifier tables (ms).
     pub setup_ms: f64,
@@ -228,6 +230,7 @@ pub struct Rendered {
 }
 
 /// State passed to a progress callback after each batch of sheets (Westover §4.2.1).
+#[non_exhaustive]
 pub struct Progress<'a> {
     /// Sheets finished so far.
     pub sheets_done: usize,
