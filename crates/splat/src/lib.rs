@@ -16,8 +16,10 @@
 //! - [`slab`], the image-aligned slabs: [`render_slabs`]. [`render_by_visibility`] dispatches
 //!   between the sheet renderer and the slabs on [`RenderSettings::visibility`].
 //! - [`refine`]: the preview ladder of subsampled renders with cheaper kernels (§4.2.2–4.2.4).
-//! - [`footprint`]: per-frame footprint tables with exact elliptical mapping (§3.7).
-//! - [`geometry`]: incremental view transform, sheet choice and traversal order (§3.5).
+//! - `footprint` (internal): per-frame footprint tables with exact elliptical mapping (§3.7);
+//!   [`FootprintSettings`] tunes them.
+//! - `geometry` (internal): incremental view transform, sheet choice and traversal order (§3.5);
+//!   [`Order`] is the traversal order.
 //! - [`pyramid`]: prefiltered levels of a volume for previews ([`Pyramid`], [`render_level`],
 //!   [`auto_level`]: the level whose voxel is about a pixel).
 //!

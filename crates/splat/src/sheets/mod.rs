@@ -25,7 +25,7 @@
 //!   (`finish`: accumulation buffer → image);
 //! - `dense.rs`: this renderer's part: each sheet's samples transformed, culled and classified
 //!   (`ClassifyContext::classify_sheet`), then splatted through the frame's footprint table
-//!   (`splat_block`, [`crate::footprint`]);
+//!   (`splat_block`, the internal `footprint` module);
 //! - `band.rs`: a band's sheet buffer, the deposit of a weighted splat into a pixel (`deposit`),
 //!   and the composite of the sheet buffer onto the accumulation buffer
 //!   (`composite_band_sheet`, the *over* operator of Westover §3.8.1).
