@@ -59,4 +59,4 @@ pub use sheets::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
     render_any, render_with_progress, xray_weight,
 };
-pub use slab::{force_scalar_sampling, render_slabs, render_slabs_any};
+pub use slab::{render_slabs, render_slabs_any};

@@ -9,7 +9,7 @@ use volsplat_core::phantom::{self, Blob, GaussianBlobs};
 use volsplat_core::{AnyVolume, Camera, CrioTables, Grid, Image, Projection, TransferFunction};
 use volsplat_splat::{
     Antialias, Pyramid, RenderMode, RenderSettings, Rendered, ShadeAt, Visibility, auto_level,
-    focal_pixel_size, force_scalar_sampling, render_level,
+    focal_pixel_size, render_level,
 };
 use volsplat_testkit::fixtures::orbit_camera as camera;
 use volsplat_testkit::metrics::image_psnr;
@@ -181,14 +181,13 @@ fn coarse_levels_are_bit_identical_for_any_thread_count_and_either_kernel() {
                     s
                 };
                 let run = |threads: usize, scalar: bool| {
-                    force_scalar_sampling(scalar);
-                    let out = rayon::ThreadPoolBuilder::new()
+                    let mut s = s.clone();
+                    s.simd = !scalar;
+                    rayon::ThreadPoolBuilder::new()
                         .num_threads(threads)
                         .build()
                         .unwrap()
-                        .install(|| draw(&p, 1, &cam, &t, &s));
-                    force_scalar_sampling(false);
-                    out
+                        .install(|| draw(&p, 1, &cam, &t, &s))
                 };
                 let one = run(1, false);
                 assert!(one.image.pixels().iter().any(|px| px[3] > 0.2));

@@ -83,6 +83,19 @@ fn draw<T: Scalar>(
     tables: &CrioTables,
     drawer: Drawer,
     mode: RenderMode,
+    size: (usize, usize),
+) -> Rendered {
+    draw_simd(true, vol, cam, tables, drawer, mode, size)
+}
+
+/// [`draw`], with the slabs' AVX2 kernels (`simd`) or their scalar twins.
+fn draw_simd<T: Scalar>(
+    simd: bool,
+    vol: &Volume<T>,
+    cam: &Camera,
+    tables: &CrioTables,
+    drawer: Drawer,
+    mode: RenderMode,
     (w, h): (usize, usize),
 ) -> Rendered {
     let base = {
@@ -91,6 +104,7 @@ fn draw<T: Scalar>(
         s.height = h;
         s.mode = mode;
         s.antialias = Antialias::None;
+        s.simd = simd;
         s
     };
     match drawer {
@@ -310,15 +324,24 @@ fn thin_slabs_are_deterministic() {
         tf.shade = true;
         let lit = CrioTables::from_transfer_function(&tf, 1024).unwrap();
         let plain = constant_tables(false);
-        let all = || {
+        let all_with = |simd: bool| {
             let mut out = Vec::new();
             for mode in [RenderMode::Composite, RenderMode::Mip, RenderMode::Minip] {
                 for drawer in SLABS {
-                    out.push(draw(&vol_f, &cam, &plain, drawer, mode, (41, 35)));
+                    out.push(draw_simd(
+                        simd,
+                        &vol_f,
+                        &cam,
+                        &plain,
+                        drawer,
+                        mode,
+                        (41, 35),
+                    ));
                 }
             }
             for drawer in SLABS {
-                out.push(draw(
+                out.push(draw_simd(
+                    simd,
                     &vol_f,
                     &cam,
                     &lit,
@@ -326,7 +349,8 @@ fn thin_slabs_are_deterministic() {
                     RenderMode::Composite,
                     (41, 35),
                 ));
-                out.push(draw(
+                out.push(draw_simd(
+                    simd,
                     &vol_u8,
                     &cam,
                     &plain,
@@ -334,7 +358,8 @@ fn thin_slabs_are_deterministic() {
                     RenderMode::Composite,
                     (41, 35),
                 ));
-                out.push(draw(
+                out.push(draw_simd(
+                    simd,
                     &vol_i16,
                     &cam,
                     &plain,
@@ -345,11 +370,10 @@ fn thin_slabs_are_deterministic() {
             }
             out
         };
+        let all = || all_with(true);
         let one = run(1, &all);
         let three = run(3, &all);
-        volsplat_splat::force_scalar_sampling(true);
-        let scalar = run(2, &all);
-        volsplat_splat::force_scalar_sampling(false);
+        let scalar = run(2, &|| all_with(false));
         for (k, ((a, b), c)) in one.iter().zip(&three).zip(&scalar).enumerate() {
             let bits = |r: &Rendered| {
                 let mut v: Vec<u32> = r

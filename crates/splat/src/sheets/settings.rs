@@ -72,6 +72,10 @@ pub struct RenderSettings {
     pub band_height: usize,
     /// Sheets classified together before the bands splat them.
     pub sheets_per_batch: usize,
+    /// Use the CPU's vector instructions where they are detected at run time (AVX2 on x86-64, in
+    /// the image-aligned slabs). `false` takes the scalar twins: the image is the same bits
+    /// either way (the tests compare the two), only the speed differs. Default `true`.
+    pub simd: bool,
     /// Anti-aliasing of footprints finer than a pixel (Swan et al. 1997; default
     /// [`Antialias::Swan`]). Changes nothing where every voxel spans at least a pixel.
     pub antialias: Antialias,
@@ -140,6 +144,7 @@ impl Default for RenderSettings {
             footprint: FootprintSettings::default(),
             band_height: 32,
             sheets_per_batch: 8,
+            simd: true,
             antialias: Antialias::default(),
             clip: Vec::new(),
             slab: crate::slab::DEFAULT_SLAB,

@@ -127,7 +127,7 @@ impl<'a, T: Scalar> Ctx<'a, T> {
             dims,
             box_hi: planes.geo.dims.map(|n| n as i64 - 1),
             max_cell: dims.map(|n| n.max(2) as i64 - 2),
-            simd: simd_available() && volume.data().len() < i32::MAX as usize,
+            simd: settings.simd && simd_available() && volume.data().len() < i32::MAX as usize,
             grad_to_world: tables.grad_to_world,
             stride: [1, dims[0], dims[0] * dims[1]],
             up: [

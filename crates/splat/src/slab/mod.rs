@@ -286,19 +286,9 @@ fn check_settings(settings: &RenderSettings, dims: [usize; 3]) -> Result<()> {
     Ok(())
 }
 
-static FORCE_SCALAR: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Makes the slab renderer sample one pixel at a time even where the CPU has AVX2 (tests compare
-/// the two paths bit for bit). Process-wide; the images do not change, only the speed.
-#[doc(hidden)]
-pub fn force_scalar_sampling(on: bool) {
-    FORCE_SCALAR.store(on, std::sync::atomic::Ordering::Relaxed);
-}
-
+/// Whether this CPU runs the AVX2 kernels (detected at run time; [`RenderSettings::simd`]
+/// can decline them).
 fn simd_available() -> bool {
-    if FORCE_SCALAR.load(std::sync::atomic::Ordering::Relaxed) {
-        return false;
-    }
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
