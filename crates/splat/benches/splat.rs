@@ -57,13 +57,9 @@ pub fn vtk_baseline_tf(lo: f64, hi: f64) -> TransferFunction {
     }
 }
 
+/// An orthographic view after VTK's reset, orbited (the tests' camera, `volsplat-testkit`).
 fn orbit_camera(grid: &Grid, az: f64, el: f64) -> Camera {
-    let (lo, hi) = grid.bounds_world();
-    let mut c = Camera::reset_to_bounds(lo, hi, true);
-    c.azimuth(az);
-    c.elevation(el);
-    c.orthogonalize_view_up();
-    c
+    volsplat_testkit::fixtures::orbit_camera(grid, az, el, true)
 }
 
 fn composite_256(c: &mut Criterion) {
