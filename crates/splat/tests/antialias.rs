@@ -30,11 +30,7 @@ fn blobs() -> GaussianBlobs {
 }
 
 fn perspective_camera(grid: &Grid, az: f64, el: f64, dolly: f64) -> Camera {
-    let (lo, hi) = grid.bounds_world();
-    let mut c = Camera::reset_to_bounds(lo, hi, false);
-    c.azimuth(az);
-    c.elevation(el);
-    c.orthogonalize_view_up();
+    let mut c = volsplat_testkit::fixtures::orbit_camera(grid, az, el, false);
     c.dolly(dolly);
     c
 }
