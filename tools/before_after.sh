@@ -2,7 +2,7 @@
 # Two volsplat binaries on the shared MRI scenes, alternating, 3 rounds; 2 threads, 512²;
 # each scene by the automatic choice and with --visibility sheet (the sheets or the splat list).
 # Prints one line per scene, round and choice: the median ms/frame and the renderer of each.
-cd /work/main
+cd "$(dirname "$0")/.."
 D=../shared/data; S=$D/scenes; P=python3
 A="${1:?usage: tools/before_after.sh OLD_BINARY [NEW_BINARY]}"; B="${2:-./target/release/volsplat}"
 for round in 1 2 3; do
