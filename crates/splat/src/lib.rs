@@ -42,6 +42,8 @@ pub mod refine;
 mod row;
 pub mod sheets;
 pub mod slab;
+#[cfg(test)]
+mod test_fixtures;
 
 pub use aa::Antialias;
 pub use bricks::BrickGrid;

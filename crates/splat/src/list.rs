@@ -1017,29 +1017,8 @@ mod tests {
     use super::*;
     use crate::aa::Antialias;
     use crate::sheets::render;
-    use volsplat_core::TransferFunction;
 
-    fn smooth_volume(n: usize) -> Volume<f32> {
-        let grid = Grid::with_dims([n, n, n]).unwrap();
-        let c = (n as f64 - 1.0) / 2.0;
-        Volume::from_fn(grid, |i, j, k| {
-            let d = DVec3::new(i as f64 - c, j as f64 - c * 0.8, k as f64 - c * 1.1) / c;
-            (1.0 - d.length()).clamp(0.0, 1.0) as f32
-        })
-        .unwrap()
-    }
-
-    fn tables() -> CrioTables {
-        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.6);
-        tf.color = vec![
-            [0.0, 0.1, 0.3, 1.0],
-            [0.5, 1.0, 0.5, 0.2],
-            [1.0, 1.0, 1.0, 1.0],
-        ];
-        tf.shade = true;
-        tf.ambient = 0.2;
-        CrioTables::from_transfer_function(&tf, 1024).unwrap()
-    }
+    use crate::test_fixtures::{smooth_volume, tables};
 
     use volsplat_testkit::fixtures::orbit_camera as camera;
 

@@ -649,41 +649,17 @@ fn splat_planes(
 mod tests {
     use super::*;
     use crate::footprint::PhaseBlock;
-    use volsplat_core::glam::{DMat3, DVec3};
+    use volsplat_core::glam::DMat3;
     use volsplat_core::{Grid, TransferFunction};
     use volsplat_core::{Image, Kernel};
 
     fn camera_for(grid: &Grid, az: f64, el: f64, roll: f64) -> Camera {
-        let (lo, hi) = grid.bounds_world();
-        let mut c = Camera::reset_to_bounds(lo, hi, true);
-        c.azimuth(az);
-        c.elevation(el);
-        c.orthogonalize_view_up();
+        let mut c = volsplat_testkit::fixtures::orbit_camera(grid, az, el, true);
         c.roll(roll);
         c
     }
 
-    fn smooth_volume(n: usize) -> Volume<f32> {
-        let grid = Grid::with_dims([n, n, n]).unwrap();
-        let c = (n as f64 - 1.0) / 2.0;
-        Volume::from_fn(grid, |i, j, k| {
-            let d = DVec3::new(i as f64 - c, j as f64 - c * 0.8, k as f64 - c * 1.1) / c;
-            (1.0 - d.length()).clamp(0.0, 1.0) as f32
-        })
-        .unwrap()
-    }
-
-    fn tables() -> CrioTables {
-        let mut tf = TransferFunction::ramp(0.0, 1.0, 0.6);
-        tf.color = vec![
-            [0.0, 0.1, 0.3, 1.0],
-            [0.5, 1.0, 0.5, 0.2],
-            [1.0, 1.0, 1.0, 1.0],
-        ];
-        tf.shade = true;
-        tf.ambient = 0.2;
-        CrioTables::from_transfer_function(&tf, 1024).unwrap()
-    }
+    use crate::test_fixtures::{smooth_volume, tables};
 
     /// A table that gives every splat weight 0.5 on its base pixel.
     fn half_weight_table() -> FootprintTable {
