@@ -79,9 +79,8 @@ pub struct SessionSettings {
     /// Frames per second to keep while input arrives (default 60, the rate at which a
     /// browser sends pointer events): the frame budget is `1000 / target_fps` ms of render
     /// and encoding. Frames slower than the events come back to back and keep every core
-    /// busy, so that encoding, transport and the page wait for the renderer: at 30 the same
-    /// previews took 17 ms instead of 11 and the 95th-percentile latency doubled (decision
-    /// 0029, docs/BENCHMARKS.md §22).
+    /// busy, so that encoding, transport and the page wait for the renderer (decision 0029;
+    /// the measurements against 30 are in docs/BENCHMARKS.md §22).
     pub target_fps: f64,
     /// Share of the frame interval previews aim at (default 0.8), leaving the rest for
     /// transport and jitter.
@@ -100,8 +99,8 @@ pub struct SessionSettings {
     pub min_scale: f64,
     /// Slab thickness of previews smaller than half the view's side, in multiples of the final
     /// frame's (default 2; 1 keeps the final frame's): a small image still pays for every
-    /// plane along the ray, so there the time is better spent on pixels (decision 0029: on
-    /// Colin27 at 160² doubling the slab saves a quarter of the time for 0.1 dB).
+    /// plane along the ray, so there the time is better spent on pixels (decision 0029
+    /// measures the trade).
     pub preview_slab: f64,
     /// Thickest preview slab, in multiples of the final frame's (default 4).
     pub max_slab_factor: f64,
@@ -114,10 +113,9 @@ pub struct SessionSettings {
     /// Previews draw the prefiltered pyramid's level whose voxel is about a preview pixel
     /// ([`VolumeLevel::Auto`], decision 0031): their cost then falls faster than the pixel
     /// count, and previews keep the final frame's slabs. `false` (the default): the volume
-    /// itself, one ray per pixel, with thicker slabs below half the side. At equal frame
-    /// rates the latter's worst previews measured up to 13 dB closer to the final frame on the
-    /// CT-like head and Colin27 at 512² and 1024², and never further (docs/BENCHMARKS.md
-    /// §22): the level that `auto` picks is blurrier than the preview needs.
+    /// itself, one ray per pixel, with thicker slabs below half the side, whose previews
+    /// measured closer to the final frame at equal frame rates (docs/BENCHMARKS.md §22,
+    /// decision 0031): the level that `auto` picks is blurrier than the preview needs.
     pub pyramid_previews: bool,
 }
 

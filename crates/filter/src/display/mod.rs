@@ -209,7 +209,7 @@ pub enum Attenuation {
     /// eq 3.3 = 6.1 as printed: attenuation `e^{−τ(t − t_a)}` from the ray's entry into the
     /// volume's box, i.e. unit density everywhere (the thesis's linearisation, Plates 6.3–6.6).
     /// Far darker than Sabella's display where the box holds empty space or low densities
-    /// (19 dB against it on the Colin27 MRI, issue 28).
+    /// (decision 0027 measures it).
     UnitDensity,
 }
 
@@ -220,8 +220,8 @@ pub struct QuadratureSettings {
     pub step: f64,
     /// Gauss–Legendre nodes per axis across the ray over `±3σ` (a multiple of 4): the filter's
     /// cross-section lines, shared by the direct evaluation and the NIL control points, so that
-    /// their difference is the patch approximation alone. Default 4 (16 lines; decision 0027:
-    /// 0.1 dB from 8 per axis on an MRI's NIL display, at a quarter of the cost).
+    /// their difference is the patch approximation alone. Default 4 (16 lines; decision 0027
+    /// compares it with 8 per axis).
     pub cross_nodes: usize,
 }
 

@@ -115,7 +115,7 @@ pub fn xray_weight(v: f32, offset: Option<f32>) -> f32 {
 /// `docs/decisions/0020-preintegration-for-sharp-ramps.md`). Pre-integration removes the rings
 /// and popping that a transfer-function ramp much sharper than the data's steps leaves (a CT's
 /// skin), but on noisy data the straight value path it assumes between two samples misses the
-/// voxels' extremes, and a convex ramp then loses opacity (an MRI at one voxel: 7 dB worse).
+/// voxels' extremes, and a convex ramp then loses opacity (the decision has the measurements).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Preintegrate {
     /// One point per slab.
