@@ -401,7 +401,8 @@ def test_visibility_and_slab(vol):
 
 def test_shade_at(vol):
     """Shaded composite: `auto` draws slabs shaded at the voxels (decision 0019) at one voxel;
-    `shade_at="samples"` shades every sample and sends `auto` back to the sheets."""
+    `shade_at="samples"` shades every sample, in the slabs under `auto` too (issue 33: the sheets
+    light the voxels, and say so when they draw it)."""
     tf = volsplat.TransferFunction(
         color=[[0, 0.2, 0.3, 0.9], [3000, 1, 1, 1]],
         opacity=[[0, 0.0], [500, 0.0], [3000, 0.6]],
@@ -411,8 +412,9 @@ def test_shade_at(vol):
     voxels = volsplat.render(vol, transfer_function=tf, size=48, visibility="image", slab=1.0)
     samples = volsplat.render(vol, transfer_function=tf, size=48, visibility="image",
                               shade_at="samples")
-    sheet_auto = volsplat.render(vol, transfer_function=tf, size=48, shade_at="samples")
-    assert auto.stats["renderer"] == "slab" and sheet_auto.stats["renderer"] == "sheets"
+    samples_auto = volsplat.render(vol, transfer_function=tf, size=48, shade_at="samples")
+    assert auto.stats["renderer"] == "slab" and samples_auto.stats["renderer"] == "slab"
+    np.testing.assert_array_equal(samples_auto.rgba, samples.rgba)
     np.testing.assert_array_equal(auto.rgba, voxels.rgba)
     assert samples.stats["sheet_spacing"] == pytest.approx(0.5)
     assert auto.rgba[..., 3].max() > 0.05

@@ -14,8 +14,8 @@
 //! | 8 | `auto`, `visibility: "image"` | `Slab` whatever the options | `row_8_image_visibility` |
 //! | 9 | `auto`, `visibility: "sheet"` or `"every"` | `Sheets` / `SplatList` by projection | `row_9_sheet_visibility` |
 //! | 10 | `auto`, `visibility: "auto"`, an option only the sheets have: refinement ladder, `k_contour`, `subsample` > 1, `order: "btf"`, a kernel other than the Gaussian, `antialias: "swan-perpendicular"` or `"ewa"` | `Sheets` / `SplatList` by projection | `row_10_sheet_only_options` |
-//! | 11 | `auto`, `visibility: "auto"`, shaded composite shaded at the samples (asked, or the transfer function depends on more than the density; decision 0019) | `Sheets` / `SplatList` by projection | `row_11_shading_at_the_samples_keeps_the_sheets` |
-//! | 12 | `auto`, `visibility: "auto"` otherwise: unshaded composite, composite shaded at the voxels, MIP, MinIP (decision 0016) | `Slab` | `row_12_auto_draws_slabs` |
+//! | 11 | `auto`, `visibility: "auto"`, composite lit at the voxels (`shade_at: "voxels"`, the default) with a transfer function that depends on more than the density, which the slabs can light only at the samples (decision 0019) | `Sheets` / `SplatList` by projection | `row_11_voxel_lighting_beyond_the_slabs_keeps_the_sheets` |
+//! | 12 | `auto`, `visibility: "auto"` otherwise: unshaded composite, composite lit at the voxels, composite lit at the samples (`shade_at: "samples"`: the slabs light the samples themselves; issue 33), MIP, MinIP (decision 0016) | `Slab` | `row_12_auto_draws_slabs` |
 //!
 //! Then the checks: a refinement ladder needs `Sheets`, `k_contour` needs `SplatList`
 //! (`checks_name_the_field`); `quality.level` above 0 with another renderer than `Slab` is a
@@ -138,6 +138,17 @@ pub(crate) fn plan(
             renderer.name()
         ));
     }
+    if matches!(renderer, UsedRenderer::Sheets | UsedRenderer::SplatList)
+        && request.mode == Mode::Composite
+        && request.quality.shade_at == ShadeAtChoice::Samples
+        && classification()?.needs_gradient
+    {
+        warnings.push(format!(
+            "shade_at samples: the {} lights each voxel before splatting, not the samples \
+             between them; the image-aligned slabs light the samples (visibility image or auto)",
+            renderer.name()
+        ));
+    }
     let draw = match renderer {
         UsedRenderer::Sabella | UsedRenderer::Nil => {
             Draw::Display(request.display.kind(request.renderer))
@@ -189,10 +200,16 @@ fn choose(
             VisibilityChoice::Sheet | VisibilityChoice::Every => splatting,
             VisibilityChoice::Auto if sheet_only_option(request, refine) => splatting,
             VisibilityChoice::Auto => {
+                // Row 11: lit at the voxels (VTK's order, the default) with tables that depend
+                // on more than the density, which the slabs can only light at the samples: the
+                // sheets, which classify and light each voxel. Lights asked at the samples go to
+                // the slabs (row 12), the one renderer that lights the samples themselves
+                // (issue 33: the sheets were further from the exact integral than VTK).
                 let c = classification()?;
-                let shaded_at_samples = request.mode == Mode::Composite
+                let voxels_beyond_the_slabs = request.mode == Mode::Composite
+                    && request.quality.shade_at == ShadeAtChoice::Voxels
                     && shading(request.quality.shade_at, c) == Some(ShadeAt::Samples);
-                if shaded_at_samples {
+                if voxels_beyond_the_slabs {
                     splatting
                 } else {
                     UsedRenderer::Slab
@@ -524,13 +541,18 @@ mod tests {
     }
 
     #[test]
-    fn row_11_shading_at_the_samples_keeps_the_sheets() {
+    fn row_11_voxel_lighting_beyond_the_slabs_keeps_the_sheets() {
         let mut r = request();
-        r.quality.shade_at = ShadeAtChoice::Samples;
-        assert_eq!(used(&r, false, SHADED), UsedRenderer::Sheets);
-        assert_eq!(used(&r, true, SHADED), UsedRenderer::SplatList);
         r.quality.shade_at = ShadeAtChoice::Voxels;
         assert_eq!(used(&r, false, SHADED_BY_GRADIENT), UsedRenderer::Sheets);
+        assert_eq!(used(&r, true, SHADED_BY_GRADIENT), UsedRenderer::SplatList);
+        // Lights asked at the samples: the slabs light them (row 12), whatever the tables.
+        r.quality.shade_at = ShadeAtChoice::Samples;
+        for tables in [SHADED, SHADED_BY_GRADIENT] {
+            assert_eq!(used(&r, false, tables), UsedRenderer::Slab);
+            assert_eq!(used(&r, true, tables), UsedRenderer::Slab);
+        }
+        r.quality.shade_at = ShadeAtChoice::Voxels;
         // MIP and MinIP are unlit: the slabs whatever the tables.
         r.mode = Mode::Mip;
         assert_eq!(used(&r, false, SHADED_BY_GRADIENT), UsedRenderer::Slab);
@@ -594,6 +616,38 @@ mod tests {
                 .warnings
                 .is_empty()
         );
+    }
+
+    /// Lights asked at the samples where the sheets or the splat list draw (visibility
+    /// `sheet`, or an option only they have) are not silently lit at the voxels: a warning
+    /// says so and names the renderer that lights the samples. Unshaded, MIP, or lit at the
+    /// voxels: nothing to say.
+    #[test]
+    fn samples_lit_by_the_sheets_are_said() {
+        let mut r = request();
+        r.quality.shade_at = ShadeAtChoice::Samples;
+        r.quality.visibility = VisibilityChoice::Sheet;
+        for perspective in [false, true] {
+            let p = plan_with(&r, perspective, false, SHADED).0.unwrap();
+            assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
+            assert!(
+                p.warnings[0].starts_with("shade_at samples: the ")
+                    && p.warnings[0].contains("image-aligned slabs light the samples"),
+                "{:?}",
+                p.warnings
+            );
+        }
+        let quiet = |r: &RenderRequest, c| plan_with(r, false, false, c).0.unwrap().warnings;
+        assert!(quiet(&r, UNSHADED).is_empty());
+        let mut mip = r.clone();
+        mip.mode = Mode::Mip;
+        assert!(quiet(&mip, SHADED).is_empty());
+        let mut voxels = r.clone();
+        voxels.quality.shade_at = ShadeAtChoice::Voxels;
+        assert!(quiet(&voxels, SHADED).is_empty());
+        let mut slabs = r.clone();
+        slabs.quality.visibility = VisibilityChoice::Auto;
+        assert!(quiet(&slabs, SHADED).is_empty());
     }
 
     fn slab_plan_of(r: &RenderRequest, c: Classification) -> (SlabPlan, Vec<String>) {
