@@ -82,7 +82,6 @@
 //! Every writer is atomic: it writes a temporary file in the target's directory and renames it
 //! over the target; on error the temporary file is removed and an existing target is untouched.
 #![deny(missing_docs)]
-#![warn(unreachable_pub)]
 
 mod atomic;
 mod confine;
