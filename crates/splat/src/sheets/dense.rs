@@ -522,6 +522,32 @@ impl BandContext<'_> {
     }
 }
 
+/// The rows `[cy0, cy1)` of a `bw × bh` block placed at pixel `(px0, py0)` that fall in the
+/// span's band, and the image columns `[xa, xb]` it may touch there; `None` if it misses.
+struct BlockClip {
+    cy0: i32,
+    cy1: i32,
+    xa: i32,
+    xb: i32,
+}
+
+/// Clips a footprint block to the band of `span` ([`BlockClip`]).
+#[inline(always)]
+fn clip_block(px0: i32, py0: i32, bw: i32, bh: i32, span: &mut SpanCtx) -> Option<BlockClip> {
+    let cy0 = (span.y_lo - py0).max(0);
+    let cy1 = (span.y_lo + span.rows - py0).min(bh);
+    if cy0 >= cy1 {
+        return None;
+    }
+    let (xa, xb) = span.columns(
+        px0,
+        px0 + bw - 1,
+        py0 + cy0 - span.y_lo,
+        py0 + cy1 - span.y_lo,
+    )?;
+    Some(BlockClip { cy0, cy1, xa, xb })
+}
+
 /// Splats one sample (Westover §3.7.2, Fig 3.08): its phase's block of weights is deposited
 /// over the pixels it covers, row by row within each row's non-zero span, clipped to the band.
 #[inline(always)]
@@ -540,17 +566,7 @@ fn splat_block<const S: u8>(
     }
     let loc = table.locate(sp.x, sp.y);
     let (px0, py0) = (loc.x0, loc.y0);
-    let cy0 = (span.y_lo - py0).max(0);
-    let cy1 = (span.y_lo + span.rows - py0).min(bh);
-    if cy0 >= cy1 {
-        return;
-    }
-    let Some((xa, xb)) = span.columns(
-        px0,
-        px0 + bw - 1,
-        py0 + cy0 - span.y_lo,
-        py0 + cy1 - span.y_lo,
-    ) else {
+    let Some(BlockClip { cy0, cy1, xa, xb }) = clip_block(px0, py0, bw, bh, span) else {
         return;
     };
     let (ca, cb) = ((xa - px0) as usize, (xb - px0 + 1) as usize);
@@ -600,17 +616,7 @@ fn splat_planes(
     target: &mut [Rgba],
 ) {
     let (px0, py0) = (loc.x0, loc.y0);
-    let cy0 = (span.y_lo - py0).max(0);
-    let cy1 = (span.y_lo + span.rows - py0).min(bh);
-    if cy0 >= cy1 {
-        return;
-    }
-    let Some((xa, xb)) = span.columns(
-        px0,
-        px0 + bw - 1,
-        py0 + cy0 - span.y_lo,
-        py0 + cy1 - span.y_lo,
-    ) else {
+    let Some(BlockClip { cy0, cy1, xa, xb }) = clip_block(px0, py0, bw, bh, span) else {
         return;
     };
     let (ca, cb) = ((xa - px0) as usize, (xb - px0 + 1) as usize);
