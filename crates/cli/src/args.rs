@@ -514,13 +514,13 @@ pub(crate) struct RenderArgs {
         hide_short_help = true
     )]
     pub draw_k: Option<String>,
-    /// Which renderer draws the image: Westover/Swan splatting, or one of Buchanan's
-    /// Chapter 6 displays (Sabella's density-emitter model, or the NIL-map linearised display;
+    /// Which renderer draws the image: the splatting renderers, chosen per request (`auto`), or
+    /// one of Buchanan's Chapter 6 displays (Sabella's density-emitter model, or the NIL-map linearised display;
     /// README.md, section "Volume display as filtering"). Their options: see --help.
     #[arg(
         long,
         value_enum,
-        default_value = "splat",
+        default_value = "auto",
         help_heading = "Research (Chapter 6 displays)"
     )]
     pub renderer: RendererArg,
@@ -567,8 +567,11 @@ pub(crate) const SPLAT_ONLY_FLAGS: &[(&str, &str)] = &[
 /// Renderers reachable from `render --renderer`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub(crate) enum RendererArg {
-    /// Splatting (Westover 1991; perspective and anti-aliasing after Swan et al. 1997).
-    Splat,
+    /// The splatting renderers, chosen per request as the engine's `auto` chooses: the
+    /// image-aligned slabs, Westover's sheets or the splat list with Swan's anti-aliasing
+    /// (docs/architecture.md, "Which renderer draws a request"). `splat` is its earlier name.
+    #[value(alias = "splat")]
+    Auto,
     /// Sabella's density-emitter display integrated along each ray (Buchanan eq. 3.1).
     Sabella,
     /// Sabella's display evaluated with NIL maps (Buchanan ch. 6; decision 0027), or another

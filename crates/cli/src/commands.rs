@@ -264,23 +264,23 @@ fn check_render_args(a: &RenderArgs) -> Result<()> {
     if let Some(c) = &a.draw_k {
         triple::<f32>(c, "--draw-k")?;
     }
-    if !a.given_display_flags.is_empty() && a.renderer == RendererArg::Splat {
+    if !a.given_display_flags.is_empty() && a.renderer == RendererArg::Auto {
         say!(
             "warning: {} only apply to --renderer sabella|nil; the splatting renderer ignores them",
             a.given_display_flags.join(", ")
         );
     }
-    if a.renderer != RendererArg::Splat {
+    if a.renderer != RendererArg::Auto {
         if a.options.mode != Mode::Composite {
             bail!(
                 "--mode {:?}: the Chapter 6 displays (--renderer sabella|nil) have their own ray \
-                 function; use --renderer splat for MIP, MinIP and X-ray",
+                 function; use --renderer auto for MIP, MinIP and X-ray",
                 a.options.mode
             );
         }
         if !a.given_splat_flags.is_empty() {
             say!(
-                "warning: {} only apply to --renderer splat; the {:?} display ignores them",
+                "warning: {} only apply to --renderer auto; the {:?} display ignores them",
                 a.given_splat_flags.join(", "),
                 a.renderer
             );
@@ -774,7 +774,7 @@ fn bench_cmd(a: BenchArgs) -> Result<()> {
         &a.view,
         &a.options,
         None,
-        RendererArg::Splat,
+        RendererArg::Auto,
         None,
         None,
         &a.given.iter().cloned().collect(),

@@ -241,7 +241,7 @@ pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
         &a.view,
         &a.options,
         Some(&a.image),
-        RendererArg::Splat,
+        RendererArg::Auto,
         None,
         None,
         &a.given.iter().cloned().collect(),

@@ -494,8 +494,8 @@ fn apply_renderer_and_quality_flags(
         req.renderer = match renderer {
             RendererArg::Sabella => RendererChoice::Sabella,
             RendererArg::Nil => RendererChoice::Nil,
-            RendererArg::Splat if o.splat_list => RendererChoice::SplatList,
-            RendererArg::Splat => RendererChoice::Auto,
+            RendererArg::Auto if o.splat_list => RendererChoice::SplatList,
+            RendererArg::Auto => RendererChoice::Auto,
         };
     }
     let q = &mut req.quality;

@@ -107,7 +107,7 @@ fn view_request(
         view,
         options,
         Some(image),
-        RendererArg::Splat,
+        RendererArg::Auto,
         None,
         None,
         &given.iter().cloned().collect(),

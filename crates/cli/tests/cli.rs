@@ -594,7 +594,7 @@ fn splat_only_flags_with_a_display_renderer_are_not_ignored_silently() {
     assert!(o.status.success(), "{}", stderr(&o));
     let e = stderr(&o);
     assert!(
-        e.contains("warning: --kernel, --no-specular only apply to --renderer splat"),
+        e.contains("warning: --kernel, --no-specular only apply to --renderer auto"),
         "{e}"
     );
     assert!(out.exists());
@@ -615,7 +615,7 @@ fn splat_only_flags_with_a_display_renderer_are_not_ignored_silently() {
     ]);
     assert_eq!(o.status.code(), Some(1));
     assert!(
-        stderr(&o).contains("--renderer splat for MIP"),
+        stderr(&o).contains("--renderer auto for MIP"),
         "{}",
         stderr(&o)
     );
@@ -1491,4 +1491,32 @@ fn bench_reports_peak_memory() {
     let kb = j["peak_rss_kb"].as_u64().unwrap();
     let volume = j["volume_bytes"].as_u64().unwrap();
     assert!(kb * 1024 >= volume, "{kb} KiB for a {volume}-byte volume");
+}
+
+/// `--renderer auto` (the default) lets the engine choose among the splatting renderers;
+/// `splat`, its earlier name, is the same choice and the same bytes.
+#[test]
+fn renderer_auto_and_its_earlier_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str| {
+        let out = dir.path().join(format!("{name}.npy"));
+        let o = volsplat(&[
+            "render",
+            "--phantom",
+            "blobs",
+            "--phantom-size",
+            "24",
+            "--size",
+            "24",
+            "--renderer",
+            name,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        std::fs::read(&out).unwrap()
+    };
+    let auto = run("auto");
+    assert_eq!(auto, run("splat"));
+    assert_ne!(auto, run("sabella"));
 }
