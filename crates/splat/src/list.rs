@@ -43,7 +43,7 @@ use crate::gradient::gradient_at;
 use crate::sheets::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
     SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SheetPass, SpanCtx, deposit, div_band, drive, ms,
-    scale_kept, validate, xray_weight,
+    refuse_image_aligned, scale_kept, validate, xray_weight,
 };
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -569,6 +569,7 @@ fn render_inner(
     progress: &mut dyn FnMut(&Progress) -> bool,
 ) -> Result<Rendered> {
     let t_start = Instant::now();
+    refuse_image_aligned(settings)?;
     validate(settings)?;
     settings.kernel.validate()?;
     if !settings.kernel.is_radial() {
@@ -1028,6 +1029,36 @@ mod tests {
             .zip(b.pixels())
             .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
             .fold(0.0, f32::max)
+    }
+
+    /// Image-aligned visibility is refused outside X-ray, as by the sheet renderer (the slabs
+    /// are another renderer), and not silently drawn as a sheet buffer; X-ray keeps the sheet
+    /// buffer's exact line integrals, the same bits either way.
+    #[test]
+    fn image_aligned_is_refused_not_replaced() {
+        let vol = smooth_volume(16);
+        let t = tables();
+        let list =
+            SplatList::build(&vol, &t, &ExtractSettings::for_mode(RenderMode::Xray)).unwrap();
+        let cam = camera(vol.grid(), 30.0, 20.0, false);
+        let mut s = RenderSettings {
+            width: 24,
+            height: 24,
+            visibility: crate::Visibility::ImageAligned,
+            ..RenderSettings::default()
+        };
+        for mode in [RenderMode::Composite, RenderMode::Mip, RenderMode::Minip] {
+            s.mode = mode;
+            match render_list(&list, &cam, &t, &s) {
+                Err(SplatError::Setting { name, .. }) => assert_eq!(name, "visibility"),
+                other => panic!("{mode:?}: {:?}", other.map(|_| ())),
+            }
+        }
+        s.mode = RenderMode::Xray;
+        let image = render_list(&list, &cam, &t, &s).unwrap();
+        s.visibility = crate::Visibility::SheetBuffer;
+        let sheet = render_list(&list, &cam, &t, &s).unwrap();
+        assert_eq!(image.values, sheet.values);
     }
 
     #[test]

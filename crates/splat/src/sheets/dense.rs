@@ -7,10 +7,11 @@ use super::band::{
 };
 use super::driver::{SheetPass, drive};
 use super::settings::{
-    Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, validate, xray_weight,
+    Progress, RenderMode, RenderSettings, RenderStats, Rendered, refuse_image_aligned, validate,
+    xray_weight,
 };
 use crate::clip::LatticeClip;
-use crate::error::{Result, SplatError};
+use crate::error::Result;
 use crate::footprint::{FootprintTable, LocatedPlanes};
 use crate::geometry::{Order, SplatGeometry};
 use crate::gradient::{gradient_at, index_gradient};
@@ -54,8 +55,8 @@ pub fn render<T: Scalar>(
 }
 
 /// Like [`render`], calling `progress` after each batch of sheets; returning `false` from it
-/// cancels the render with [`SplatError::Cancelled`]. [`Visibility::ImageAligned`] is refused
-/// with [`SplatError::Setting`] (`visibility`) except in X-ray, which keeps the sheet buffer:
+/// cancels the render with [`crate::SplatError::Cancelled`]. [`crate::Visibility::ImageAligned`] is refused
+/// with [`crate::SplatError::Setting`] (`visibility`) except in X-ray, which keeps the sheet buffer:
 /// the slabs are [`crate::slab::render_slabs`], or [`crate::render_by_visibility`] to dispatch.
 pub fn render_with_progress<T: Scalar>(
     volume: &Volume<T>,
@@ -113,23 +114,6 @@ pub fn render_with_progress<T: Scalar>(
         (stats, t_start),
         progress,
     )
-}
-
-/// Errors for [`Visibility::ImageAligned`] outside X-ray: image-aligned slabs are another
-/// renderer ([`crate::slab::render_slabs`]; [`crate::render_by_visibility`] dispatches on the
-/// visibility), never drawn behind this one's back. X-ray keeps the sheet buffer, whose line
-/// integrals are exact (the fallback [`Visibility::ImageAligned`] documents).
-fn refuse_image_aligned(settings: &RenderSettings) -> Result<()> {
-    if settings.visibility == Visibility::ImageAligned && settings.mode != RenderMode::Xray {
-        return Err(SplatError::Setting {
-            name: "visibility",
-            value: "ImageAligned".into(),
-            expected: "SheetBuffer or EverySample: the sheet renderer does not draw image-aligned \
-                       slabs (render_slabs does; render_by_visibility dispatches on the \
-                       visibility)",
-        });
-    }
-    Ok(())
 }
 
 /// The sheet renderer's part of the sheet driver ([`SheetPass`]).
@@ -655,6 +639,7 @@ fn splat_planes(
 mod tests {
     use super::*;
     use crate::footprint::PhaseBlock;
+    use crate::{SplatError, Visibility};
     use volsplat_core::glam::DMat3;
     use volsplat_core::{Grid, TransferFunction};
     use volsplat_core::{Image, Kernel};

@@ -45,4 +45,4 @@ pub use settings::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility,
     xray_weight,
 };
-pub(crate) use settings::{ms, validate};
+pub(crate) use settings::{ms, refuse_image_aligned, validate};

@@ -247,6 +247,24 @@ pub struct Progress<'a> {
     pub accumulation: &'a [Rgba],
 }
 
+/// Errors for [`Visibility::ImageAligned`] outside X-ray, for the sheet renderer and the splat
+/// list: image-aligned slabs are another renderer ([`crate::slab::render_slabs`];
+/// [`crate::render_by_visibility`] dispatches on the visibility), never drawn behind the
+/// caller's back, nor silently replaced by a sheet buffer. X-ray keeps the sheet buffer, whose
+/// line integrals are exact (the fallback [`Visibility::ImageAligned`] documents).
+pub(crate) fn refuse_image_aligned(settings: &RenderSettings) -> Result<()> {
+    if settings.visibility == Visibility::ImageAligned && settings.mode != RenderMode::Xray {
+        return Err(SplatError::Setting {
+            name: "visibility",
+            value: "ImageAligned".into(),
+            expected: "SheetBuffer or EverySample: the sheet renderer and the splat list do not \
+                       draw image-aligned slabs (render_slabs does; render_by_visibility \
+                       dispatches on the visibility)",
+        });
+    }
+    Ok(())
+}
+
 pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
     let bad = |name: &'static str, value: String, expected: &'static str| {
         Err(SplatError::Setting {
