@@ -314,7 +314,9 @@ impl RendererCore {
 
     /// Forgets everything kept between frames (volume, tables, splat list, thread pool).
     fn clear(&self, py: Python<'_>) {
-        py.detach(|| self.with_renderer(|r| *r = volsplat::Renderer::with_limits(self.limits.clone())));
+        py.detach(|| {
+            self.with_renderer(|r| *r = volsplat::Renderer::with_limits(self.limits.clone()))
+        });
     }
 }
 
