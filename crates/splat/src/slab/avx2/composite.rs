@@ -443,7 +443,11 @@ pub(super) trait Source8<T> {
     ///
     /// # Safety
     /// The CPU must support AVX2.
-    unsafe fn scalar_lanes(&self, cells: &Cells8, live: std::arch::x86_64::__m256) -> bool;
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn scalar_lanes(&self, _cells: &Cells8, _live: std::arch::x86_64::__m256) -> bool {
+        false
+    }
 
     /// The trilinear samples in `cells` (linear indices `base`, fractions `frac`), as
     /// [`Sampler8::sample_at`] computes them, or `None` where a read would pass the end of the
@@ -490,12 +494,6 @@ pub(in crate::slab) struct PostSource<'a, T> {
 
 impl<T: Scalar> Source8<T> for PostSource<'_, T> {
     type Pre = ();
-
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    unsafe fn scalar_lanes(&self, _: &Cells8, _: std::arch::x86_64::__m256) -> bool {
-        false
-    }
 
     #[inline]
     #[target_feature(enable = "avx2")]

@@ -304,12 +304,6 @@ impl<T: Scalar> Source8<T> for VoxelShadeSource<'_, T> {
 
     #[inline]
     #[target_feature(enable = "avx2")]
-    unsafe fn scalar_lanes(&self, _: &Cells8, _: std::arch::x86_64::__m256) -> bool {
-        false
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx2")]
     unsafe fn sample(
         &self,
         cells: &Cells8,
