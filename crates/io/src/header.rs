@@ -2,6 +2,7 @@
 //! shared by the NRRD and MetaImage readers.
 
 use crate::error::{IoError, Result};
+use std::collections::HashMap;
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -153,4 +154,29 @@ pub(crate) fn normalize_words(s: &str) -> String {
         .collect::<Vec<_>>()
         .join(" ")
         .to_ascii_lowercase()
+}
+
+/// One `key: value` (NRRD) or `Key = Value` (MetaImage) line of a header.
+pub(crate) struct Field {
+    /// The line number, 1-based, for messages.
+    pub(crate) line: usize,
+    /// The key as written (trimmed), for messages.
+    pub(crate) name: String,
+    /// The value, trimmed.
+    pub(crate) value: String,
+}
+
+/// A header's fields by canonical (lower-case or normalised) key.
+pub(crate) type Fields = HashMap<String, Field>;
+
+/// The field `canon` (canonical key), or an error saying that `name` is missing from `path`.
+pub(crate) fn require<'f>(
+    path: &Path,
+    fields: &'f Fields,
+    canon: &str,
+    name: &str,
+) -> Result<&'f Field> {
+    fields
+        .get(canon)
+        .ok_or_else(|| IoError::missing(path, name))
 }

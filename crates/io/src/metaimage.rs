@@ -28,21 +28,15 @@
 use crate::confine::Confinement;
 use crate::error::{IoError, Result, clip};
 use crate::header::{
-    LineAction, normalize_words, parse_finite, parse_numbers, read_header, resolve_data_path,
+    Field, Fields, LineAction, normalize_words, parse_finite, parse_numbers, read_header, require,
+    resolve_data_path,
 };
 use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload};
 use crate::{LoadedVolume, ReadOptions};
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
 use volsplat_core::{AnyVolume, CoreError, Grid};
-
-struct Field {
-    line: usize,
-    name: String,
-    value: String,
-}
 
 /// Reads a MetaImage volume (`.mha` or `.mhd`) with default [`ReadOptions`]. See the
 /// [module documentation](self) for the keys understood, conversions and limits. Errors name
@@ -107,8 +101,6 @@ fn read_metaimage_file(path: &Path, limits: &Limits) -> Result<AnyVolume> {
 }
 
 /// The header's keys, by lower-case name.
-type Fields = HashMap<String, Field>;
-
 /// The `Key = Value` lines of the header (blank lines and `#` comments skipped); a key given
 /// twice is an error naming both lines.
 fn parse_fields(path: &Path, lines: &[(usize, String)]) -> Result<Fields> {
@@ -148,13 +140,6 @@ fn parse_fields(path: &Path, lines: &[(usize, String)]) -> Result<Fields> {
         );
     }
     Ok(fields)
-}
-
-/// The key `canon` (lower case), or an error saying that `name` is missing.
-fn require<'f>(path: &Path, fields: &'f Fields, canon: &str, name: &str) -> Result<&'f Field> {
-    fields
-        .get(canon)
-        .ok_or_else(|| IoError::missing(path, name))
 }
 
 /// `ObjectType` (must be `Image` if given), `NDims` (must be 3) and `DimSize`, checked against

@@ -41,12 +41,12 @@ use crate::atomic::{write_atomic, write_err};
 use crate::confine::Confinement;
 use crate::error::{IoError, Result};
 use crate::header::{
-    LineAction, normalize_words, parse_finite, parse_numbers, read_header, resolve_data_path,
+    Field, Fields, LineAction, normalize_words, parse_finite, parse_numbers, read_header, require,
+    resolve_data_path,
 };
 use crate::limits::{Limits, checked_dims};
 use crate::payload::{ByteSkip, Encoding, FileType, PayloadSpec, read_payload, write_samples_le};
 use crate::{LoadedVolume, ReadOptions};
-use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
@@ -57,14 +57,6 @@ const SUPPORTED_TYPES: &str = "uint8 (uchar, unsigned char), int8 (signed char),
      uint16 (ushort, unsigned short), int16 (short), float; converted to float: \
      int32 (int), uint32 (uint), double";
 const SUPPORTED_ENCODINGS: &str = "raw, gzip (gz), ascii (text, txt)";
-
-/// One `field: value` line.
-struct Field {
-    line: usize,
-    /// The field name as written (trimmed), for messages.
-    name: String,
-    value: String,
-}
 
 /// Reads a NRRD volume (attached `.nrrd` or detached `.nhdr` header) into a runtime-typed volume,
 /// with default [`ReadOptions`].
@@ -123,8 +115,6 @@ fn read_nrrd_file(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String
 }
 
 /// The header's fields by canonical name ([`canonical_field`]).
-type Fields = HashMap<String, Field>;
-
 /// Checks the magic line and collects the fields of the header's other lines: `#` comments
 /// and `key:=value` pairs are skipped, a field given twice is an error naming both lines.
 fn parse_fields(path: &Path, lines: &[(usize, String)]) -> Result<Fields> {
@@ -195,13 +185,6 @@ fn parse_fields(path: &Path, lines: &[(usize, String)]) -> Result<Fields> {
         );
     }
     Ok(fields)
-}
-
-/// The field `canon` (canonical name), or an error saying that `name` is missing.
-fn require<'f>(path: &Path, fields: &'f Fields, canon: &str, name: &str) -> Result<&'f Field> {
-    fields
-        .get(canon)
-        .ok_or_else(|| IoError::missing(path, name))
 }
 
 /// `dimension` (must be 3) and `sizes`, checked against the voxel limit.
