@@ -40,7 +40,8 @@ import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 VOLUMES = {"mri_brainsmall": "mri_brainsmall.nrrd", "mri_colin27": "mri_colin27.nhdr"}
-ORDER = ["composite_ortho", "composite_shaded_ortho", "mip_ortho", "composite_persp"]
+ORDER = ["composite_ortho", "composite_shaded_ortho", "mip_ortho", "composite_persp",
+         "composite_shaded_persp"]
 
 
 def ensure_venv(script=None):

@@ -349,13 +349,15 @@ pub(crate) struct RenderOptions {
     /// (docs/decisions/0017-slab-thickness-by-mode.md, 0019).
     #[arg(long, help_heading = "Quality", hide_short_help = true)]
     pub slab: Option<f64>,
-    /// Image-aligned slabs, shaded composite: evaluate the lights at the voxels and interpolate
-    /// the light (`voxels`, as VTK's CPU ray caster does), or at every sample with the
-    /// interpolated gradient (`samples`, the exact integral's order; docs/decisions/0019).
+    /// Shaded composite: evaluate the lights at every sample with the interpolated gradient
+    /// (`samples`, the exact integral's order: the slabs light each one-voxel slab twice), at the
+    /// voxels with the light interpolated (`voxels`, as VTK's CPU ray caster does: for pictures
+    /// that match VTK's), or `auto`: at the samples where the slabs' kernel can (transfer
+    /// functions of the density alone), at the voxels otherwise (docs/decisions/0019, 0036).
     #[arg(
         long,
         value_enum,
-        default_value = "voxels",
+        default_value = "auto",
         help_heading = "Quality",
         hide_short_help = true
     )]

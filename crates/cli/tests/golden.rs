@@ -246,8 +246,8 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
             "0.99999905",
             "--visibility",
             "image",
-            // Shading at the samples at half a voxel, the slabs' shaded default before
-            // decision 0019.
+            // Shading at the samples (the slabs' shaded default before decision 0019), now at
+            // one voxel with two lights per slab (decision 0036).
             "--shade-at",
             "samples",
             "--phantom-size",
@@ -262,16 +262,39 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         "npy",
         // Re-recorded 2026-11-25 for the shaded slab kernel (tables and central differences
         // interpolated in the cell instead of the per-sample classifier): 99.6 dB from the old
-        // picture, largest difference 5.8e-4.
-        0x504aa980d99cd12e,
+        // picture, largest difference 5.8e-4. Re-recorded 2026-11-26 for decision 0036 (one-voxel
+        // slabs lit twice, at ±¼ of the step; the specular power by repeated squaring), and
+        // pre-integrated now that the samples-lit slabs are (`--preintegrate auto` takes it
+        // here).
+        0x163a5465191d27c4,
     ),
     (
-        // Every default (decision 0019: `auto` draws shaded composite with one-voxel slabs
-        // shaded at the voxels, VTK's order; decision 0018's cutoff (VTK's 1 − 255/32767); area anti-aliasing;
+        // Every default (decision 0036: `shade_at: auto` lights the samples, twice per
+        // one-voxel slab, at ¼ and ¾ of each pre-integrated segment).
+        "demo head, defaults (slabs lit at the samples, pre-integrated)",
+        &[
+            "--phantom-size",
+            "40",
+            "--size",
+            "48x40",
+            "--azimuth",
+            "30",
+            "--elevation",
+            "15",
+        ],
+        "npy",
+        // Recorded 2026-11-26.
+        0x4676ca9fdc76aaa9,
+    ),
+    (
+        // Every default before decision 0036, which lights the samples (decision 0019: `auto`
+        // drew shaded composite with one-voxel slabs shaded at the voxels, VTK's order; decision 0018's cutoff (VTK's 1 − 255/32767); area anti-aliasing;
         // decision 0020: on this 40³ grid a slab is thick enough for the automatic ramp's
         // ring risk to reach 4.6, so the slabs are pre-integrated; 2.2 at the demo's 84 × 128²).
-        "demo head, defaults (slabs shaded at the voxels, pre-integrated)",
+        "demo head, slabs shaded at the voxels, pre-integrated (the defaults before decision 0036)",
         &[
+            "--shade-at",
+            "voxels",
             "--phantom-size",
             "40",
             "--size",
@@ -293,6 +316,8 @@ const CASES: &[(&str, &[&str], &str, u64)] = &[
         // The same by point (the defaults before decision 0020).
         "demo head, slabs shaded at the voxels, by point",
         &[
+            "--shade-at",
+            "voxels",
             "--phantom-size",
             "40",
             "--size",

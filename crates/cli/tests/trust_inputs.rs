@@ -214,7 +214,9 @@ fn a_render_whose_normal_field_does_not_fit_is_an_error_not_an_abort() {
             .output()
             .unwrap()
     };
-    let o = limited(&[]);
+    // Lit at the voxels, as VTK lights them: the default lights the samples (decision 0036),
+    // which needs no normal field.
+    let o = limited(&["--shade-at", "voxels"]);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "not exit 1 (a signal?): {err}");
     assert!(

@@ -30,7 +30,7 @@ def test_composite_image(vol):
     assert 0 < rgba[..., 3].max() <= 1
     assert np.asarray(img).shape == (30, 40, 4)
     stats = img.stats
-    # Shaded composite: `auto` draws one-voxel slabs shaded at the voxels (decision 0019).
+    # Shaded composite: `auto` draws one-voxel slabs lit at the samples (decision 0036).
     assert stats["width"] == 40 and stats["renderer"] == "slab" and stats["total_ms"] > 0
     assert "volsplat.Image 40×30" in repr(img)
 
@@ -400,25 +400,29 @@ def test_visibility_and_slab(vol):
 
 
 def test_shade_at(vol):
-    """Shaded composite: `auto` draws slabs shaded at the voxels (decision 0019) at one voxel;
-    `shade_at="samples"` shades every sample, in the slabs under `auto` too (issue 33: the sheets
-    light the voxels, and say so when they draw it)."""
+    """Shaded composite: `auto` (the default) draws one-voxel slabs lit at the samples, twice per
+    slab (decision 0036); `shade_at="voxels"` lights the voxels as VTK does (decision 0019);
+    `shade_at="samples"` lights every sample, in the slabs under `auto` visibility too (issue 33:
+    the sheets light the voxels, and say so when they draw it)."""
     tf = volsplat.TransferFunction(
         color=[[0, 0.2, 0.3, 0.9], [3000, 1, 1, 1]],
         opacity=[[0, 0.0], [500, 0.0], [3000, 0.6]],
         shade=True,
     )
     auto = volsplat.render(vol, transfer_function=tf, size=48)
-    voxels = volsplat.render(vol, transfer_function=tf, size=48, visibility="image", slab=1.0)
+    voxels = volsplat.render(vol, transfer_function=tf, size=48, visibility="image",
+                             shade_at="voxels")
     samples = volsplat.render(vol, transfer_function=tf, size=48, visibility="image",
                               shade_at="samples")
     samples_auto = volsplat.render(vol, transfer_function=tf, size=48, shade_at="samples")
     assert auto.stats["renderer"] == "slab" and samples_auto.stats["renderer"] == "slab"
+    assert auto.stats["shade_at"] == "samples" and voxels.stats["shade_at"] == "voxels"
     np.testing.assert_array_equal(samples_auto.rgba, samples.rgba)
-    np.testing.assert_array_equal(auto.rgba, voxels.rgba)
-    assert samples.stats["sheet_spacing"] == pytest.approx(0.5)
+    np.testing.assert_array_equal(auto.rgba, samples.rgba)
+    assert samples.stats["sheet_spacing"] == pytest.approx(1.0)
+    assert voxels.stats["sheet_spacing"] == pytest.approx(1.0)
     assert auto.rgba[..., 3].max() > 0.05
-    assert not np.array_equal(samples.rgba, auto.rgba)
+    assert not np.array_equal(voxels.rgba, auto.rgba)
     with pytest.raises(volsplat.InvalidInputError, match="shade_at|shade-at"):
         volsplat.render(vol, transfer_function=tf, size=48, shade_at="corners")
 

@@ -748,6 +748,13 @@ fn simd_and_scalar_sampling_agree_bit_for_bit() {
             specular: 0.3,
             ..tf.clone()
         });
+        // A specular power that is not whole: the table, not repeated squaring (decision 0036).
+        let lit_table = lit_variants(&TransferFunction {
+            shade: true,
+            specular: 0.3,
+            specular_power: 7.5,
+            ..tf.clone()
+        });
         let (smp, vox) = (ShadeAt::Samples, ShadeAt::Voxels);
         for (mode, parallel, tables, shade_at, preintegrate) in [
             (RenderMode::Composite, true, &unshaded, smp, false),
@@ -759,6 +766,9 @@ fn simd_and_scalar_sampling_agree_bit_for_bit() {
             (RenderMode::Composite, true, &lit[0].1, smp, false),
             (RenderMode::Composite, false, &lit[0].1, smp, false),
             (RenderMode::Composite, true, &lit[1].1, smp, false),
+            (RenderMode::Composite, false, &lit_table[0].1, smp, false),
+            (RenderMode::Composite, true, &lit[0].1, smp, true),
+            (RenderMode::Composite, false, &lit[1].1, smp, true),
             (RenderMode::Composite, true, &lit[0].1, vox, false),
             (RenderMode::Composite, false, &lit[0].1, vox, false),
             (RenderMode::Composite, false, &lit[1].1, vox, false),
@@ -889,9 +899,9 @@ fn sheet_only_options_are_refused() {
 /// A CT's sharp skin ramp (opacity 0 → 0.05 per mm over 40 HU, bone 0.8 above 200 HU) on the
 /// CT-like head phantom: one point per one-voxel slab leaves rings where the skin cuts the
 /// planes; pre-integrating the segment between two planes removes them. Against the reference
-/// integrator (1/8 of a voxel), unshaded and shaded at the voxels, both projections, the
-/// segments must be clearly closer than the points (and, shaded, lit where their opacity is:
-/// above 52.8 dB); and `Preintegrate::Auto` must take them here and leave the fixtures' smooth
+/// integrator (1/8 of a voxel) in the matching order, unshaded and shaded at the voxels and at
+/// the samples, both projections, the segments must be clearly closer than the points (and,
+/// shaded at the voxels, lit where their opacity is: above 52.8 dB); and `Preintegrate::Auto` must take them here and leave the fixtures' smooth
 /// ramps on smooth blobs by point (decision 0020).
 #[test]
 fn preintegration_removes_the_rings_of_a_sharp_ramp() {
@@ -952,6 +962,8 @@ fn preintegration_removes_the_rings_of_a_sharp_ramp() {
         for (name, tables, shade_at) in [
             ("unshaded", &unshaded, ShadeAt::Samples),
             ("shaded at the voxels", &lit, ShadeAt::Voxels),
+            // Lit twice per segment, at ¼ and ¾ of the way back (decision 0036).
+            ("shaded at the samples", &lit, ShadeAt::Samples),
         ] {
             let cam = camera(vol.grid(), 27.0, 19.0, parallel);
             let proj = Projection::new(&cam, w, h).unwrap();
@@ -1014,8 +1026,16 @@ fn preintegration_removes_the_rings_of_a_sharp_ramp() {
             assert!(inside.iter().filter(|&&b| b).count() > w * h / 8);
             let (pp, ps) = (psnr(&point.image), psnr(&segment.image));
             eprintln!("{name} parallel={parallel}: point {pp:.1} dB, segment {ps:.1} dB");
+            // Lit at the samples, the segment gains less (3.3–3.7 dB): its two lights sit
+            // evenly on the segment, where its opacity is not (lit around the sample instead,
+            // at ±¼, the segment lost 1.1 dB to the point).
+            let gain = if name == "shaded at the samples" {
+                2.5
+            } else {
+                4.0
+            };
             assert!(
-                ps > pp + 4.0,
+                ps > pp + gain,
                 "{name} parallel={parallel}: {ps:.1} vs {pp:.1} dB"
             );
             // Shaded segments lit at their middle (`SEGMENT_LIGHT_AT`) score 53.2–53.4 dB here;

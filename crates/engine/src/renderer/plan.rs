@@ -14,13 +14,13 @@
 //! | 8 | `auto`, `visibility: "image"` | `Slab` whatever the options | `row_8_image_visibility` |
 //! | 9 | `auto`, `visibility: "sheet"` or `"every"` | `Sheets` / `SplatList` by projection | `row_9_sheet_visibility` |
 //! | 10 | `auto`, `visibility: "auto"`, an option only the sheets have: refinement ladder, `k_contour`, `subsample` > 1, `order: "btf"`, a kernel other than the Gaussian, `antialias: "swan-perpendicular"` or `"ewa"` | `Sheets` / `SplatList` by projection | `row_10_sheet_only_options` |
-//! | 11 | `auto`, `visibility: "auto"`, composite lit at the voxels (`shade_at: "voxels"`, the default) with a transfer function that depends on more than the density, which the slabs can light only at the samples (decision 0019) | `Sheets` / `SplatList` by projection | `row_11_voxel_lighting_beyond_the_slabs_keeps_the_sheets` |
-//! | 12 | `auto`, `visibility: "auto"` otherwise: unshaded composite, composite lit at the voxels, composite lit at the samples (`shade_at: "samples"`: the slabs light the samples themselves; issue 33), MIP, MinIP (decision 0016) | `Slab` | `row_12_auto_draws_slabs` |
+//! | 11 | `auto`, `visibility: "auto"`, shaded composite with `shade_at: "auto"` (the default) or `"voxels"` and a transfer function that depends on more than the density, which the slabs' kernel cannot light (decisions 0019, 0036) | `Sheets` / `SplatList` by projection | `row_11_voxel_lighting_beyond_the_slabs_keeps_the_sheets` |
+//! | 12 | `auto`, `visibility: "auto"` otherwise: unshaded composite, composite lit at the samples (`shade_at: "auto"` with a transfer function of the density, lit twice per slab, decision 0036; or `"samples"`: the slabs light the samples themselves, issue 33), composite lit at the voxels, MIP, MinIP (decision 0016) | `Slab` | `row_12_auto_draws_slabs` |
 //!
 //! Then the checks: a refinement ladder needs `Sheets`, `k_contour` needs `SplatList`
 //! (`checks_name_the_field`); `quality.level` above 0 with another renderer than `Slab` is a
 //! warning (`level_is_the_slabs_alone`). A `Slab` plan ([`SlabPlan`]) also fixes where the
-//! lights are evaluated (decision 0019), the slab thickness (`quality.slab`, else by mode:
+//! lights are evaluated (decisions 0019, 0036: [`shading`]), the slab thickness (`quality.slab`, else by mode:
 //! decision 0017) and the pyramid level (decision 0031; `slab_plan_*` tests).
 
 use super::stats::UsedRenderer;
@@ -200,15 +200,17 @@ fn choose(
             VisibilityChoice::Sheet | VisibilityChoice::Every => splatting,
             VisibilityChoice::Auto if sheet_only_option(request, refine) => splatting,
             VisibilityChoice::Auto => {
-                // Row 11: lit at the voxels (VTK's order, the default) with tables that depend
-                // on more than the density, which the slabs can only light at the samples: the
-                // sheets, which classify and light each voxel. Lights asked at the samples go to
-                // the slabs (row 12), the one renderer that lights the samples themselves
-                // (issue 33: the sheets were further from the exact integral than VTK).
+                // Row 11: lit at the voxels or `auto` (the default) with tables that depend on
+                // more than the density, which the slabs' kernel cannot light (their per-sample
+                // classifier can, several times slower): the sheets, which classify and light
+                // each voxel. Lights asked at the samples go to the slabs (row 12), the one
+                // renderer that lights the samples themselves (issue 33: the sheets were further
+                // from the exact integral than VTK).
                 let c = classification()?;
                 let voxels_beyond_the_slabs = request.mode == Mode::Composite
-                    && request.quality.shade_at == ShadeAtChoice::Voxels
-                    && shading(request.quality.shade_at, c) == Some(ShadeAt::Samples);
+                    && request.quality.shade_at != ShadeAtChoice::Samples
+                    && c.needs_gradient
+                    && !c.density_only;
                 if voxels_beyond_the_slabs {
                     splatting
                 } else {
@@ -264,9 +266,10 @@ fn check(request: &RenderRequest, renderer: UsedRenderer, refine: bool) -> Resul
     Ok(())
 }
 
-/// Where the slab renderer evaluates the lights for these tables (decision 0019): `None`
-/// unshaded (no gradient needed), at the voxels where asked and the classification depends on
-/// the density alone, at the samples otherwise (the slab renderer's per-sample classifier).
+/// Where the slab renderer evaluates the lights for these tables (decisions 0019, 0036):
+/// `None` unshaded (no gradient needed), at the voxels where asked and the classification
+/// depends on the density alone, at the samples otherwise: by the kernel, lit twice per slab,
+/// for tables of the density (`auto`'s choice), by the per-sample classifier for the others.
 pub(crate) fn shading(asked: ShadeAtChoice, c: Classification) -> Option<ShadeAt> {
     if !c.needs_gradient {
         None
@@ -543,9 +546,13 @@ mod tests {
     #[test]
     fn row_11_voxel_lighting_beyond_the_slabs_keeps_the_sheets() {
         let mut r = request();
-        r.quality.shade_at = ShadeAtChoice::Voxels;
-        assert_eq!(used(&r, false, SHADED_BY_GRADIENT), UsedRenderer::Sheets);
-        assert_eq!(used(&r, true, SHADED_BY_GRADIENT), UsedRenderer::SplatList);
+        for at in [ShadeAtChoice::Auto, ShadeAtChoice::Voxels] {
+            r.quality.shade_at = at;
+            assert_eq!(used(&r, false, SHADED_BY_GRADIENT), UsedRenderer::Sheets);
+            assert_eq!(used(&r, true, SHADED_BY_GRADIENT), UsedRenderer::SplatList);
+            // Tables of the density: the slabs (row 12).
+            assert_eq!(used(&r, false, SHADED), UsedRenderer::Slab);
+        }
         // Lights asked at the samples: the slabs light them (row 12), whatever the tables.
         r.quality.shade_at = ShadeAtChoice::Samples;
         for tables in [SHADED, SHADED_BY_GRADIENT] {
@@ -560,8 +567,14 @@ mod tests {
 
     #[test]
     fn row_12_auto_draws_slabs() {
-        let r = request();
-        for (c, shade_at) in [(UNSHADED, None), (SHADED, Some(ShadeAt::Voxels))] {
+        let mut r = request();
+        // `auto` lights the samples where the kernel can (decision 0036), `voxels` the voxels.
+        for (c, at, shade_at) in [
+            (UNSHADED, ShadeAtChoice::Auto, None),
+            (SHADED, ShadeAtChoice::Auto, Some(ShadeAt::Samples)),
+            (SHADED, ShadeAtChoice::Voxels, Some(ShadeAt::Voxels)),
+        ] {
+            r.quality.shade_at = at;
             for perspective in [false, true] {
                 let (p, asked) = plan_with(&r, perspective, false, c);
                 let p = p.unwrap();
@@ -658,8 +671,9 @@ mod tests {
         }
     }
 
-    /// Decisions 0017 and 0019: one voxel for composite unshaded or shaded at the voxels, half
-    /// a voxel for MIP, MinIP and shading at the samples; an explicit thickness wins.
+    /// Decisions 0017, 0019 and 0036: one voxel for composite (unshaded, shaded at the voxels
+    /// or at the samples, the latter lit twice per slab), half a voxel for MIP and MinIP; an
+    /// explicit thickness wins.
     #[test]
     fn slab_plan_thickness_by_mode() {
         let mut r = request();
@@ -667,7 +681,7 @@ mod tests {
         assert_eq!(slab_plan_of(&r, UNSHADED).0.thickness, 1.0);
         assert_eq!(slab_plan_of(&r, SHADED).0.thickness, 1.0);
         let (s, _) = slab_plan_of(&r, SHADED_BY_GRADIENT);
-        assert_eq!((s.thickness, s.shade_at), (0.5, Some(ShadeAt::Samples)));
+        assert_eq!((s.thickness, s.shade_at), (1.0, Some(ShadeAt::Samples)));
         r.mode = Mode::Mip;
         assert_eq!(slab_plan_of(&r, UNSHADED).0.thickness, 0.5);
         r.quality.slab = Some(2.0);

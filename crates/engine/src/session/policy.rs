@@ -254,14 +254,12 @@ impl PreviewPlan {
     }
 }
 
-/// The slab thickness the renderer picks for `request` when none is given, for unshaded
-/// requests and those shaded at the voxels (decisions 0017, 0019): 1 voxel for composite, ½
-/// for MIP and MinIP. Shaded-at-the-samples requests take ½ too; a preview only scales it.
+/// The slab thickness the renderer picks for `request` when none is given (decisions 0017,
+/// 0019, 0036): 1 voxel for composite (unshaded, or lit at the voxels or at the samples), ½
+/// for MIP and MinIP; a preview only scales it.
 fn default_slab_of(request: &RenderRequest) -> f64 {
     match request.mode {
-        Mode::Composite if request.quality.shade_at == crate::ShadeAtChoice::Voxels => {
-            volsplat_splat::slab::DEFAULT_SLAB_COMPOSITE
-        }
+        Mode::Composite => volsplat_splat::slab::DEFAULT_SLAB_COMPOSITE,
         _ => volsplat_splat::slab::DEFAULT_SLAB,
     }
 }

@@ -121,8 +121,9 @@ class Scene:
       ``"sabella"``, ``"nil"``.
     - quality: ``kernel`` (``"gaussian"``, ``"nearest"``, ``"tent"``, ``"bspline"``, …),
       ``antialias``, ``visibility`` (``"auto"``/``"image"``/``"sheet"``/``"every"``), ``slab`` (image-aligned slab
-      thickness in voxels; default ``None``: 1 for composite, 0.5 for MIP, MinIP and shading at
-      the samples), ``shade_at`` (``"voxels"``, the default, as VTK shades, or ``"samples"``),
+      thickness in voxels; default ``None``: 1 for composite, 0.5 for MIP and MinIP),
+      ``shade_at`` (``"auto"``, the default: at the samples where the slabs can, as
+      the exact integral; ``"voxels"``, as VTK shades; or ``"samples"``),
       ``preintegrate`` (``"auto"``, the default: by segment where the transfer function's ramp
       is sharp; ``"on"``; ``"off"``: one point per slab), ``level`` (``"full"``, the default;
       ``"auto"``: a preview from the resolution pyramid level whose voxel is about a pixel, its

@@ -89,7 +89,7 @@ pub struct RenderSettings {
     /// ([`crate::normals::ShadeAt`]; default at every sample, the exact integral's order).
     pub shade_at: crate::normals::ShadeAt,
     /// Image-aligned visibility, composite through density tables (unshaded, or shaded at the
-    /// voxels): whether each slab is classified by the segment of the ray from the previous
+    /// voxels or at the samples; decision 0036): whether each slab is classified by the segment of the ray from the previous
     /// plane's sample to this one (pre-integrated classification, Engel, Kraus & Ertl 2001)
     /// instead of by its one sample ([`Preintegrate`]; default [`Preintegrate::Off`]).
     pub preintegrate: Preintegrate,

@@ -7,7 +7,10 @@
 use super::avx2::{composite_run_avx2, extreme_row_avx2, sample_run_avx2};
 use super::math::{exp2_neg, trilinear};
 use super::path::boundary_factor;
-use super::shade::{SEGMENT_LIGHT_AT, shade_opacity, shaded_src, voxel_shaded_src};
+use super::shade::{
+    LIGHT_SHIFT, SEGMENT_LIGHT_AT, SEGMENT_SECOND_LIGHT, shade_opacity, shaded_src_two,
+    voxel_shaded_src,
+};
 use super::simd_available;
 use super::tables::{FrameTables, PostTable, ShadeTable};
 use super::view::{FRAC, Planes, View, Walk, clip_linear, to_fixed};
@@ -326,6 +329,16 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         (c, f)
     }
 
+    /// The step from the samples of row `y` on the plane at depth `d` back to the plane before
+    /// ([`RowCtx::back_s`], [`RowCtx::back_st`]): index units, at pixel `x` `back_s + x·back_st`.
+    pub(super) fn back_step(&self, y: usize, d: f64, walk: &Walk) -> ([f32; 3], [f32; 3]) {
+        let (s0, st0) = self.view.row(y, d - self.delta);
+        (
+            [0, 1, 2].map(|a| s0[a] as f32 - walk.s32[a]),
+            [0, 1, 2].map(|a| st0[a] as f32 - walk.st32[a]),
+        )
+    }
+
     /// One sample at pixel `x`: the scalar twin of [`sample_run_avx2`].
     #[inline(always)]
     fn sample_scalar(&self, walk: &Walk, x: usize) -> f32 {
@@ -404,12 +417,15 @@ impl<'a, T: Scalar> Ctx<'a, T> {
                 if lo > hi {
                     continue;
                 }
-                let (back_s, back_st) = if preint && matches!(post, Post::Voxel(..)) {
-                    let (s0, st0) = self.view.row(y, d - self.delta);
-                    (
-                        [0, 1, 2].map(|a| s0[a] as f32 - walk.s32[a]),
-                        [0, 1, 2].map(|a| st0[a] as f32 - walk.st32[a]),
-                    )
+                // The step back to the plane before: where pre-integration lit at the voxels
+                // lights a segment, and where the samples' two lights sit (decision 0036).
+                let steps = match post {
+                    Post::Voxel(..) => preint,
+                    Post::Shaded(_) => true,
+                    Post::Table(_) => false,
+                };
+                let (back_s, back_st) = if steps {
+                    self.back_step(y, d, &walk)
                 } else {
                     ([0.0; 3], [0.0; 3])
                 };
@@ -497,7 +513,23 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         let src = match post {
             Post::Table(t) if preint => Self::post_seg_src(t.segment(u, rho), k),
             Post::Table(t) => Self::post_src(t, rho, k, corrected),
-            Post::Shaded(t) => shaded_src(t, rho, self.gradient_lerp(cell, f), k, corrected),
+            Post::Shaded(t) => {
+                // Pre-integrated: the segment's entry, lit at ¼ and ¾ of the way back along it
+                // (where it is more than one value); else the sample's, lit at ±¼ of the step.
+                let (v, second) = if preint {
+                    let second = if u != rho {
+                        SEGMENT_SECOND_LIGHT
+                    } else {
+                        -LIGHT_SHIFT
+                    };
+                    (t.segment_entry(u, rho), second)
+                } else {
+                    (t.entry(rho), -LIGHT_SHIFT)
+                };
+                let [fa, fb] = light_fractions((row.back_s, row.back_st), x, f, second);
+                let g = [self.gradient_lerp(cell, fa), self.gradient_lerp(cell, fb)];
+                shaded_src_two(t, v, g, k, corrected)
+            }
             Post::Voxel(t, vs) => {
                 let (v, (cell, f)) = if preint {
                     let v = t.segment_entry(u, rho);
@@ -560,14 +592,14 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         })
     }
 
-    /// Whether the samples of `post` are pre-integrated: asked for ([`RenderSettings::preintegrate`])
-    /// and classified through a density table (unshaded, or shaded at the voxels; shading at
-    /// the samples keeps one point per slab).
+    /// Whether the samples of `post` are pre-integrated: asked for
+    /// ([`RenderSettings::preintegrate`]); every density table pre-integrates (unshaded, shaded
+    /// at the voxels, shaded at the samples).
     ///
     /// [`RenderSettings::preintegrate`]: crate::sheets::RenderSettings::preintegrate
     #[inline(always)]
-    pub(super) fn preint_for(&self, post: Post<'_>) -> bool {
-        self.preint && !matches!(post, Post::Shaded(_))
+    pub(super) fn preint_for(&self, _post: Post<'_>) -> bool {
+        self.preint
     }
 
     /// Calls `f(a, b)` for the runs of pixels `lo..=hi` (inside `walk.span`) whose cells lie in
@@ -712,6 +744,11 @@ impl<'a, T: Scalar> Ctx<'a, T> {
                 let y = y0 + r;
                 let walk = self.walk(y, d);
                 let mut span = self.clip_span(y, d, walk.span);
+                let back = if self.shade {
+                    self.back_step(y, d, &walk)
+                } else {
+                    ([0.0; 3], [0.0; 3])
+                };
                 let row_acc = &mut acc[r * w..(r + 1) * w];
                 let Some(lw) = shrink_live(&mut live[r], self.cutoff, |x| row_acc[x][3]) else {
                     continue;
@@ -740,16 +777,28 @@ impl<'a, T: Scalar> Ctx<'a, T> {
                     if self.classifier.density_opacity(rho) == Some(0.0) {
                         continue;
                     }
-                    let gradient = if self.shade {
-                        self.gradient_at(&walk, x)
-                    } else {
-                        Vec3::ZERO
-                    };
-                    let rgba = self.classifier.classify(&SampleInput {
+                    let input = |gradient| SampleInput {
                         density: rho,
                         gradient,
                         depth: depth01,
-                    });
+                    };
+                    let rgba = if self.shade {
+                        // Lit twice, at ±¼ of the slab's step (decision 0036), as the kernel
+                        // lights density tables: the two classifications averaged.
+                        let (c, f) = self.cell_f32(&walk, x);
+                        let [fa, fb] = light_fractions(back, x, f, -LIGHT_SHIFT);
+                        let ga = self.classifier.classify(&input(self.gradient_at(c, fa)));
+                        let gb = self.classifier.classify(&input(self.gradient_at(c, fb)));
+                        match (ga, gb) {
+                            (None, None) => None,
+                            (a, b) => {
+                                let (a, b) = (a.unwrap_or([0.0; 4]), b.unwrap_or([0.0; 4]));
+                                Some(std::array::from_fn(|ch| (a[ch] + b[ch]) * 0.5))
+                            }
+                        }
+                    } else {
+                        self.classifier.classify(&input(Vec3::ZERO))
+                    };
                     if let Some(rgba) = rgba {
                         let rgba = self.path_correct(rgba, k);
                         over_front_to_back(px, rgba);
@@ -778,6 +827,27 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         }
         (c, f)
     }
+}
+
+/// Where a sample lit at the samples is lit twice (decision 0036): the fractions
+/// `f + ¼·s` and `f + second·s` in its own cell (extrapolated where they leave it), with
+/// `s = back_s + x·back_st` the step from pixel `x`'s sample back to the plane before, in index
+/// units; `second` is `−¼` (the slab around the sample: [`LIGHT_SHIFT`]) or `¾` (a
+/// pre-integrated segment: [`SEGMENT_SECOND_LIGHT`]). The scalar twin of
+/// `ShadeSource::light_fractions` (`avx2/shade.rs`).
+#[inline(always)]
+pub(super) fn light_fractions(
+    (back_s, back_st): ([f32; 3], [f32; 3]),
+    x: usize,
+    f: [f32; 3],
+    second: f32,
+) -> [[f32; 3]; 2] {
+    let xf = x as f32;
+    let step: [f32; 3] = std::array::from_fn(|a| back_s[a] + xf * back_st[a]);
+    [
+        std::array::from_fn(|a| f[a] + step[a] * LIGHT_SHIFT),
+        std::array::from_fn(|a| f[a] + step[a] * second),
+    ]
 }
 
 /// Narrows a row's window of live pixels (those whose opacity `alpha(x)` is below `cutoff`)

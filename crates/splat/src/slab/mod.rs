@@ -134,16 +134,16 @@ pub const DEFAULT_SLAB_COMPOSITE: f64 = 1.0;
 
 /// The slab thickness the front ends use when none is asked for, in units of the smallest grid
 /// spacing, for `mode` and `shading` (`None`: unshaded; else where the lights are evaluated):
-/// [`DEFAULT_SLAB_COMPOSITE`] (1) for unshaded composite (one voxel stays closer to the exact
-/// integral than VTK's ray caster at half a voxel, at half the cost of [`DEFAULT_SLAB`]) and for
-/// composite shaded at the voxels (the interpolated light changes no faster than the values);
-/// [`DEFAULT_SLAB`] (½) for MIP and MinIP (a maximum sampled every voxel misses the peaks
-/// between samples) and for composite shaded at the samples (gradients change faster than the
-/// values, and popping rises at one voxel). The measurements behind each choice are in
-/// `docs/decisions/0017-slab-thickness-by-mode.md` and its amendment for decision 0019.
+/// [`DEFAULT_SLAB_COMPOSITE`] (1) for composite, unshaded (one voxel stays closer to the exact
+/// integral than VTK's ray caster at half a voxel, at half the cost of [`DEFAULT_SLAB`]), shaded
+/// at the voxels (the interpolated light changes no faster than the values) or shaded at the
+/// samples (each slab lit twice, at ±¼ of its step: decision 0036); [`DEFAULT_SLAB`] (½) for
+/// MIP and MinIP (a maximum sampled every voxel misses the peaks between samples). The
+/// measurements behind each choice are in `docs/decisions/0017-slab-thickness-by-mode.md`, its
+/// amendment for decision 0019, and decision 0036.
 pub fn default_slab(mode: RenderMode, shading: Option<ShadeAt>) -> f64 {
     match (mode, shading) {
-        (RenderMode::Composite, None | Some(ShadeAt::Voxels)) => DEFAULT_SLAB_COMPOSITE,
+        (RenderMode::Composite, _) => DEFAULT_SLAB_COMPOSITE,
         _ => DEFAULT_SLAB,
     }
 }

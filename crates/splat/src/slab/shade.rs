@@ -32,6 +32,47 @@ pub(crate) fn shaded_src(
 ) -> Option<Rgba> {
     let v = t.entry(rho);
     let a = shade_opacity(&v, k, corrected)?;
+    Some(premultiplied(lit_colour(t, &v, g, |x| t.spec(x)), a))
+}
+
+/// The premultiplied, shaded colour of a sample with [`ShadeTable`] entry `v` (at its density,
+/// [`ShadeTable::entry`], or its segment's, [`ShadeTable::segment_entry`]) in a slab of the
+/// image-aligned slabs lit at the samples (decision 0036): [`shaded_src`]'s colour lit at each
+/// of the two index-space gradients `g` (at `±¼` of the slab's step from the sample, or at ¼
+/// and ¾ of a pre-integrated segment: `light_fractions`, [`Ctx::gradient_lerp`]), each clamped to [0, 1], averaged, and multiplied by the sample's
+/// opacity; the specular power by [`ShadeTable::spec_at_sample`]. The light is then the
+/// two-point midpoint rule over the slab's extent, where one light at the sample is the
+/// one-point rule. The scalar twin of [`ShadeSource`]'s `src` ([`shade_light8`] twice, then
+/// `average8`): every operation in the same order.
+///
+/// [`ShadeSource`]: super::avx2::shade::ShadeSource
+/// [`shade_light8`]: super::avx2::shade::shade_light8
+#[inline(always)]
+pub(super) fn shaded_src_two(
+    t: &ShadeTable,
+    v: [f32; 8],
+    g: [[f32; 3]; 2],
+    k: f32,
+    corrected: bool,
+) -> Option<Rgba> {
+    let a = shade_opacity(&v, k, corrected)?;
+    let spec = |x| t.spec_at_sample(x);
+    let c0 = clamp01(lit_colour(t, &v, g[0], spec));
+    let c1 = clamp01(lit_colour(t, &v, g[1], spec));
+    Some(premultiplied(
+        [0, 1, 2].map(|ch| (c0[ch] + c1[ch]) * 0.5),
+        a,
+    ))
+}
+
+/// The colour of a sample with [`ShadeTable`] entry `v` lit at the index-space gradient `g`,
+/// before it is clamped: the emission, then per light the diffuse term `d·c_L·(N·L)` and the
+/// specular term `s·c_L·spec(N·H)` where `N·L > 0` (`|N·L|` two-sided). The scalar twin of
+/// [`lit_colour8`].
+///
+/// [`lit_colour8`]: super::avx2::shade::lit_colour8
+#[inline(always)]
+fn lit_colour(t: &ShadeTable, v: &[f32; 8], g: [f32; 3], spec: impl Fn(f32) -> f32) -> [f32; 3] {
     let m = &t.to_world;
     let gw: [f32; 3] = std::array::from_fn(|i| m[0][i] * g[0] + m[1][i] * g[1] + m[2][i] * g[2]);
     let g2 = gw[0] * gw[0] + gw[1] * gw[1] + gw[2] * gw[2];
@@ -57,7 +98,7 @@ pub(crate) fn shaded_src(
                 }
             }
             if t.specular && ndh > 0.0 {
-                let p = t.spec(ndh);
+                let p = spec(ndh);
                 for ch in 0..3 {
                     let s = t.spec_color.map_or(v[4 + ch], |c| c[ch]);
                     col[ch] += s * lc[ch] * p;
@@ -65,7 +106,7 @@ pub(crate) fn shaded_src(
             }
         }
     }
-    Some(premultiplied(col, a))
+    col
 }
 
 /// The premultiplied, shaded colour of a sample with [`ShadeTable`] entry `v` (at its density,
@@ -154,13 +195,30 @@ pub(super) fn shade_opacity(v: &[f32; 8], k: f32, corrected: bool) -> Option<f32
 /// `docs/decisions/0020-preintegration-for-sharp-ramps.md`, its amendment of 2026-11-25.
 pub(super) const SEGMENT_LIGHT_AT: f32 = 0.5;
 
+/// Lit at the samples: where a slab's two lights sit, as the fraction of the step between
+/// planes before and after the sample (decision 0036): at `±¼`, the midpoints of the slab's two
+/// halves, so that the light is the two-point midpoint rule over the slab.
+pub(super) const LIGHT_SHIFT: f32 = 0.25;
+
+/// Lit at the samples and pre-integrated: where the second light of a segment sits, as the
+/// fraction of the step back towards the plane before (the first is at [`LIGHT_SHIFT`]): the
+/// midpoints of the segment's two halves, as [`SEGMENT_LIGHT_AT`] is its middle.
+pub(super) const SEGMENT_SECOND_LIGHT: f32 = 0.75;
+
 /// The shaded colour `col` clamped to [0, 1] (as `maxps`/`minps` clamp) and multiplied by the
 /// opacity `a`: the premultiplied RGBA of a shaded sample. The scalar twin of
 /// `premultiplied8` (`avx2/shade.rs`).
 #[inline(always)]
 pub(super) fn premultiplied(col: [f32; 3], a: f32) -> Rgba {
-    let c = col.map(|c| min_ps(max_ps(c, 0.0), 1.0) * a);
+    let c = clamp01(col).map(|c| c * a);
     [c[0], c[1], c[2], a]
+}
+
+/// `col` clamped to [0, 1] as `maxps`/`minps` clamp (NaN to 0): the scalar twin of `clamp01_8`
+/// (`avx2/shade.rs`).
+#[inline(always)]
+fn clamp01(col: [f32; 3]) -> [f32; 3] {
+    col.map(|c| min_ps(max_ps(c, 0.0), 1.0))
 }
 
 impl<T: Scalar> Ctx<'_, T> {
@@ -183,8 +241,9 @@ impl<T: Scalar> Ctx<'_, T> {
         }
     }
 
-    /// The world gradient of the reconstruction at pixel `x` of a row (data units per world
-    /// unit): the tent kernel's interpolation of the voxels' central differences (one-sided on
+    /// The world gradient of the reconstruction in cell `c` at fractions `f` (data units per
+    /// world unit; `f` may leave [0, 1], where the cell's trilinear form is extrapolated: a
+    /// light's fractions, decision 0036): the tent kernel's interpolation of the voxels' central differences (one-sided on
     /// the faces of the grid), i.e. gradient splats gathered at the sample, which is what VTK's
     /// ray caster and the reference integrator shade with. Computed only for samples with
     /// opacity, by the per-sample classifier ([`Ctx::band_plain`]). Its corner weights are the
@@ -193,8 +252,7 @@ impl<T: Scalar> Ctx<'_, T> {
     /// per-sample classifier were recorded with this one).
     ///
     /// [`Ctx::band_plain`]: super::march::Ctx::band_plain
-    pub(super) fn gradient_at(&self, walk: &Walk, x: usize) -> Vec3 {
-        let (c, f) = self.cell_f32(walk, x);
+    pub(super) fn gradient_at(&self, c: [usize; 3], f: [f32; 3]) -> Vec3 {
         let mut g = [0.0f32; 3];
         for corner in 0..8usize {
             let mut w = 1.0f32;

@@ -105,9 +105,10 @@ impl<'a> FrameTables<'a> {
     }
 
     /// Whether the frame's samples are pre-integrated: composite, asked for and classified
-    /// through a table that pre-integrates (unshaded, or shaded at the voxels).
+    /// through a density table (unshaded, or shaded at the voxels or at the samples; not the
+    /// per-sample classifier).
     pub(super) fn preintegrated(&self) -> bool {
-        self.preint && (self.post.is_some() || self.voxel.is_some())
+        self.preint && (self.post.is_some() || self.shaded.is_some())
     }
 
     /// One flag per brick of `bricks`: whether a sample in it can have opacity (empty space,
@@ -121,7 +122,7 @@ impl<'a> FrameTables<'a> {
             (Some(t), _) if !self.preint => {
                 Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x)))
             }
-            (None, Some(t)) if !self.preint || self.voxel.is_none() => {
+            (None, Some(t)) if !self.preint => {
                 Some(bricks.active_in_table(&t.nonzero(), |x| t.axis.pos(x)))
             }
             _ => None,
@@ -427,6 +428,10 @@ pub(crate) struct ShadeTable {
     /// `x^n` at `x = i / SPEC` for `i` in `0..=SPEC`, the last repeated (as `classify`'s own
     /// table of 4097 entries).
     pub(super) spec_pow: Vec<f32>,
+    /// The specular power where it is a whole number in `1..=`[`ShadeTable::SPEC_INT_MAX`]:
+    /// the samples' specular term is then `x^n` by exact repeated squaring
+    /// ([`ShadeTable::spec_at_sample`], decision 0036) instead of the table.
+    pub(super) spec_int: Option<u32>,
     pub(super) lights: Vec<volsplat_core::FrameLight>,
     pub(super) diffuse: bool,
     pub(super) specular: bool,
@@ -441,6 +446,9 @@ pub(crate) struct ShadeTable {
 impl ShadeTable {
     const LEN: usize = 1024;
     pub(super) const SPEC: usize = 4096;
+    /// The largest whole specular power taken by repeated squaring (at most 2·log2 of it
+    /// multiplications; larger powers read the table).
+    pub(super) const SPEC_INT_MAX: u32 = 1024;
 
     /// `None` where the classifier's terms depend on more than the density (tables indexed by
     /// gradient magnitude or depth, a modulation that is not constant).
@@ -497,6 +505,8 @@ impl ShadeTable {
             rows,
             integ,
             spec_pow,
+            spec_int: (p.fract() == 0.0 && (1.0..=f64::from(Self::SPEC_INT_MAX)).contains(&p))
+                .then_some(p as u32),
             lights: classifier.lights().to_vec(),
             diffuse: sh.diffuse,
             specular: sh.specular,
@@ -558,6 +568,37 @@ impl ShadeTable {
         let f = t - i as f32;
         let (a, b) = (self.spec_pow[i], self.spec_pow[i + 1]);
         a + f * (b - a)
+    }
+
+    /// The specular power `x^n` of a sample lit at the samples ([`super::shade::shaded_src`]):
+    /// by exact repeated squaring ([`pow_int`]) where the power is whole ([`ShadeTable::spec_int`]),
+    /// else [`ShadeTable::spec`]. The scalar twin of the kernel's `spec_at_sample8`
+    /// (`avx2/shade.rs`).
+    #[inline(always)]
+    pub(super) fn spec_at_sample(&self, x: f32) -> f32 {
+        match self.spec_int {
+            Some(n) => pow_int(x, n),
+            None => self.spec(x),
+        }
+    }
+}
+
+/// `x^n` for `n ≥ 1` by repeated squaring, from the lowest bit of `n` up: `x^10 = x²·x⁸`, four
+/// multiplications, each rounded once (decision 0036; exact where the table interpolates). The
+/// scalar twin of `pow_int8` (`avx2/shade.rs`): the same multiplications in the same order.
+#[inline(always)]
+pub(super) fn pow_int(x: f32, n: u32) -> f32 {
+    let (mut base, mut n) = (x, n);
+    let mut acc: Option<f32> = None;
+    loop {
+        if n & 1 == 1 {
+            acc = Some(acc.map_or(base, |a| a * base));
+        }
+        n >>= 1;
+        if n == 0 {
+            return acc.unwrap_or(1.0);
+        }
+        base *= base;
     }
 }
 

@@ -427,6 +427,9 @@ pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar>(
                 sampler: &sampler,
                 inner_max: ctx.dims.map(|n| _mm256_set1_epi32(n as i32 - 3)),
                 safe_base: _mm256_set1_epi32((1 + ctx.stride[1] + ctx.stride[2]) as i32),
+                back_s: row.back_s.map(|v| _mm256_set1_ps(v)),
+                back_st: row.back_st.map(|v| _mm256_set1_ps(v)),
+                preint: ctx.preint_for(post),
             };
             unsafe { composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c) }
         }

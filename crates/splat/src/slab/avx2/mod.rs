@@ -11,10 +11,10 @@
 //! | [`composite_run_avx2`] and its skeleton `composite_groups_avx2` | `Ctx::composite_one` (`march.rs`) |
 //! | `composite::Run::slab_exponents` | `boundary_factor` (`path.rs`) |
 //! | `composite::PostSource`, `post_segment8`, `segment_average8` | `Ctx::post_src`, `PostTable::segment`, `segment_average` (`march.rs`, `tables.rs`) |
-//! | `shade::ShadeSource` (`shade_terms8`, `shade_light8`) | `Ctx::gradient_lerp`, `shaded_src` (`shade.rs`) |
+//! | `shade::ShadeSource` (`shade_terms8`, `lit_colour8`, `light_fractions`, `spec_at_sample8`, `pow_int8`) | `Ctx::gradient_lerp`, `shaded_src_two`, `lit_colour` (`shade.rs`), `light_fractions` (`march.rs`), `ShadeTable::spec_at_sample`, `pow_int` (`tables.rs`) |
 //! | `shade::VoxelShadeSource`, `light_cells`, `shade_segment8` | `voxel_shaded_src`, `Ctx::light_cell`, `ShadeTable::segment_entry` |
 //! | [`extreme_row_avx2`] | `Ctx::extreme_one` (`march.rs`) |
-//! | `table_pos8`, `lerp8`, `exp2_neg8`, `premultiplied8` | `TableAxis::pos`, `lerp`, `exp2_neg`, `premultiplied` |
+//! | `table_pos8`, `lerp8`, `exp2_neg8`, `premultiplied8`, `clamp01_8` | `TableAxis::pos`, `lerp`, `exp2_neg`, `premultiplied`, `clamp01` |
 //!
 //! Sampling is in [`sampler`], the composite skeleton and the unshaded classification in
 //! [`composite`], the shaded classifications in [`shade`]; the lane helpers shared by them are

@@ -5,19 +5,20 @@ use super::composite::{Source8, segment_average8};
 use super::sampler::{Cells8, Sampler8};
 use super::{dot8, exp2_neg8, interp8, lerp8, splat3, table_pos8};
 use crate::normals::VoxelShading;
-use crate::slab::shade::SEGMENT_LIGHT_AT;
+use crate::slab::shade::{LIGHT_SHIFT, SEGMENT_LIGHT_AT, SEGMENT_SECOND_LIGHT};
 use crate::slab::tables::ShadeTable;
 use volsplat_core::Scalar;
 
-/// Shaded classification ([`shade_terms8`], [`shade_light8`]) with the voxels' central differences gathered from the
-/// volume itself and interpolated in the sample's cell: lane `l` does exactly
-/// [`Ctx::gradient_lerp`]'s and [`shaded_src`]'s f32 operations. A cell's differences read
+/// Shaded classification lit at the samples ([`shade_terms8`], then [`lit_colour8`] twice:
+/// decision 0036) with the voxels' central differences gathered from the volume itself and
+/// interpolated in the sample's cell at the two lights' fractions: lane `l` does exactly
+/// [`Ctx::gradient_lerp`]'s and [`shaded_src_two`]'s f32 operations. A cell's differences read
 /// the 4×4×4 block around it without its edges: four rows of four voxels along x through the
 /// cell's own four (y, z) corners, and eight rows of two beside them (the rows one before and two
 /// after along y and z). So only interior cells (one voxel from every face) are read here;
 /// lanes on the faces take the scalar twin, whose differences are one-sided there.
 ///
-/// [`shaded_src`]: crate::slab::shade::shaded_src
+/// [`shaded_src_two`]: crate::slab::shade::shaded_src_two
 /// [`Ctx::gradient_lerp`]: crate::slab::march::Ctx::gradient_lerp
 pub(in crate::slab) struct ShadeSource<'a, T> {
     pub(super) t: &'a ShadeTable,
@@ -27,6 +28,16 @@ pub(in crate::slab) struct ShadeSource<'a, T> {
     /// The linear index of cell (1, 1, 1), read in place of lanes that are not interior (their
     /// results are dropped).
     pub(super) safe_base: std::arch::x86_64::__m256i,
+    /// [`RowCtx::back_s`], [`RowCtx::back_st`] broadcast: the step back to the plane before,
+    /// which places the two lights ([`ShadeSource::light_fractions`]).
+    ///
+    /// [`RowCtx::back_s`]: crate::slab::march::RowCtx::back_s
+    /// [`RowCtx::back_st`]: crate::slab::march::RowCtx::back_st
+    pub(super) back_s: [std::arch::x86_64::__m256; 3],
+    pub(super) back_st: [std::arch::x86_64::__m256; 3],
+    /// Classify the segment from `u` to `rho` ([`shade_segment8`]) and light it at ¼ and ¾ of
+    /// the way back ([`SEGMENT_SECOND_LIGHT`]).
+    pub(super) preint: bool,
 }
 
 impl<T: Scalar> ShadeSource<'_, T> {
@@ -47,14 +58,39 @@ impl<T: Scalar> ShadeSource<'_, T> {
         }
         _mm256_castsi256_ps(m)
     }
+
+    /// [`light_fractions`] on eight lanes: `frac + ¼·s` and `frac + second·s`, with
+    /// `s = back_s + xf·back_st`.
+    ///
+    /// [`light_fractions`]: crate::slab::march::light_fractions
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn light_fractions(
+        &self,
+        frac: [std::arch::x86_64::__m256; 3],
+        xf: std::arch::x86_64::__m256,
+        second: std::arch::x86_64::__m256,
+    ) -> [[std::arch::x86_64::__m256; 3]; 2] {
+        use std::arch::x86_64::*;
+        let first = _mm256_set1_ps(LIGHT_SHIFT);
+        let step: [__m256; 3] = std::array::from_fn(|a| {
+            _mm256_add_ps(self.back_s[a], _mm256_mul_ps(xf, self.back_st[a]))
+        });
+        [
+            std::array::from_fn(|a| _mm256_add_ps(frac[a], _mm256_mul_ps(step[a], first))),
+            std::array::from_fn(|a| _mm256_add_ps(frac[a], _mm256_mul_ps(step[a], second))),
+        ]
+    }
 }
 
 impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
     /// The rows' first voxels (`base` with lanes that are not interior moved to cell
-    /// (1, 1, 1)) and `c[j][k]`: voxels x − 1 … x + 2 of row (y + j, z + k).
+    /// (1, 1, 1)), `c[j][k]`: voxels x − 1 … x + 2 of row (y + j, z + k), and the pixel
+    /// columns.
     type Pre = (
         std::arch::x86_64::__m256i,
         [[[std::arch::x86_64::__m256; 4]; 2]; 2],
+        std::arch::x86_64::__m256,
     );
 
     #[inline]
@@ -97,7 +133,7 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         let c01 = lerp8(c[0][1][1], c[0][1][2], frac[0]);
         let c11 = lerp8(c[1][1][1], c[1][1][2], frac[0]);
         let rho = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
-        Some((rho, (base, c)))
+        Some((rho, (base, c, cells.xf)))
     }
 
     #[inline]
@@ -106,20 +142,35 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         &self,
         pre: &Self::Pre,
         frac: [std::arch::x86_64::__m256; 3],
-        _: std::arch::x86_64::__m256,
+        u: std::arch::x86_64::__m256,
         rho: std::arch::x86_64::__m256,
         k: std::arch::x86_64::__m256,
         corrected: std::arch::x86_64::__m256,
     ) -> ([std::arch::x86_64::__m256; 4], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
-        let pos = table_pos8(rho, self.t.axis);
-        // SAFETY: positions are clamped to [0, last], and row last + 1 exists.
-        let v = unsafe { interp8(&self.t.rows, pos, false) };
+        // SAFETY (both): the caller guarantees AVX2; positions are clamped to [0, last], and
+        // row last + 1 exists.
+        let (v, second) = if self.preint {
+            // Lanes whose segment is more than one value are lit at ¼ and ¾ of it.
+            let along = _mm256_cmp_ps::<_CMP_NEQ_UQ>(u, rho);
+            let second = _mm256_blendv_ps(
+                _mm256_set1_ps(-LIGHT_SHIFT),
+                _mm256_set1_ps(SEGMENT_SECOND_LIGHT),
+                along,
+            );
+            (unsafe { shade_segment8(self.t, u, rho) }, second)
+        } else {
+            let pos = table_pos8(rho, self.t.axis);
+            (
+                unsafe { interp8(&self.t.rows, pos, false) },
+                _mm256_set1_ps(-LIGHT_SHIFT),
+            )
+        };
         let (v, a, contributes) = shade_terms8(v, k, corrected);
         if _mm256_movemask_ps(contributes) == 0 {
             return ([_mm256_setzero_ps(); 4], contributes);
         }
-        let (base, c) = pre;
+        let (base, c, xf) = pre;
         let s = self.sampler;
         let (sy, sz) = (s.sy, s.sz);
         let (ny, nz) = (_mm256_sub_epi32(*base, sy), _mm256_sub_epi32(*base, sz));
@@ -169,16 +220,23 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
                 }
             }
         }
-        let mut g = [_mm256_setzero_ps(); 3];
-        for (ax, out) in g.iter_mut().enumerate() {
-            let e = &d[ax];
-            let c00 = lerp8(e[0][0][0], e[0][0][1], frac[0]);
-            let c10 = lerp8(e[0][1][0], e[0][1][1], frac[0]);
-            let c01 = lerp8(e[1][0][0], e[1][0][1], frac[0]);
-            let c11 = lerp8(e[1][1][0], e[1][1][1], frac[0]);
-            *out = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
-        }
-        (shade_light8(self.t, &v, a, contributes, g), contributes)
+        // The gradient at each light's fractions (`Ctx::gradient_lerp`), lit, clamped and
+        // averaged (`shaded_src_two`).
+        let gradient = |f: [__m256; 3]| -> [__m256; 3] {
+            std::array::from_fn(|ax| {
+                let e = &d[ax];
+                let c00 = lerp8(e[0][0][0], e[0][0][1], f[0]);
+                let c10 = lerp8(e[0][1][0], e[0][1][1], f[0]);
+                let c01 = lerp8(e[1][0][0], e[1][0][1], f[0]);
+                let c11 = lerp8(e[1][1][0], e[1][1][1], f[0]);
+                lerp8(lerp8(c00, c10, f[1]), lerp8(c01, c11, f[1]), f[2])
+            })
+        };
+        let [fa, fb] = self.light_fractions(frac, *xf, second);
+        let c0 = clamp01_8(lit_colour8(self.t, &v, contributes, gradient(fa)));
+        let c1 = clamp01_8(lit_colour8(self.t, &v, contributes, gradient(fb)));
+        let avg = std::array::from_fn(|ch| _mm256_mul_ps(_mm256_add_ps(c0[ch], c1[ch]), half));
+        (premultiplied8(avg, a), contributes)
     }
 }
 
@@ -433,20 +491,18 @@ pub(in crate::slab) fn shade_terms8(
     (v, a, contributes)
 }
 
-/// The second half of [`shaded_src`] on eight lanes (the conditions as masks): the
-/// premultiplied colours from the entries `v` and opacity `a` of [`shade_terms8`] and the
-/// interpolated index-space gradients `g`.
-///
-/// [`shaded_src`]: crate::slab::shade::shaded_src
+/// `lit_colour` (`slab/shade.rs`) on eight lanes (the conditions as masks): the colours,
+/// before they are clamped, of the samples with the entries `v` of [`shade_terms8`] lit at the
+/// interpolated index-space gradients `g` in the lanes that contribute, the specular power by
+/// [`spec_at_sample8`].
 #[inline]
 #[target_feature(enable = "avx2")]
-pub(in crate::slab) fn shade_light8(
+pub(in crate::slab) fn lit_colour8(
     t: &ShadeTable,
     v: &[std::arch::x86_64::__m256; 8],
-    a: std::arch::x86_64::__m256,
     contributes: std::arch::x86_64::__m256,
     g: [std::arch::x86_64::__m256; 3],
-) -> [std::arch::x86_64::__m256; 4] {
+) -> [std::arch::x86_64::__m256; 3] {
     use std::arch::x86_64::*;
     let zero = _mm256_setzero_ps();
     let one = _mm256_set1_ps(1.0);
@@ -469,7 +525,6 @@ pub(in crate::slab) fn shade_light8(
             _mm256_mul_ps(gw[2], inv),
         ];
         let sign = _mm256_set1_ps(-0.0);
-        let spec_max = _mm256_set1_ps(ShadeTable::SPEC as f32);
         for light in &t.lights {
             let lc = splat3(light.color.to_array());
             let mut ndl = dot8(n, splat3(light.l.to_array()));
@@ -491,20 +546,7 @@ pub(in crate::slab) fn shade_light8(
             }
             let sm = _mm256_and_ps(dm, _mm256_cmp_ps::<_CMP_GT_OQ>(ndh, zero));
             if t.specular && _mm256_movemask_ps(sm) != 0 {
-                // ShadeTable::spec, lane by lane (masked lanes clamp to a valid entry and are
-                // dropped by the mask).
-                let s = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(ndh, spec_max), zero), spec_max);
-                let i = _mm256_cvttps_epi32(s);
-                let f = _mm256_sub_ps(s, _mm256_cvtepi32_ps(i));
-                let tab = t.spec_pow.as_ptr();
-                // SAFETY: i ∈ [0, SPEC], and spec_pow has SPEC + 2 entries.
-                let (p0, p1) = unsafe {
-                    (
-                        _mm256_i32gather_ps::<4>(tab, i),
-                        _mm256_i32gather_ps::<4>(tab.add(1), i),
-                    )
-                };
-                let p = _mm256_add_ps(p0, _mm256_mul_ps(f, _mm256_sub_ps(p1, p0)));
+                let p = spec_at_sample8(t, ndh);
                 for ch in 0..3 {
                     let sc = match t.spec_color {
                         Some(c) => _mm256_set1_ps(c[ch]),
@@ -516,7 +558,54 @@ pub(in crate::slab) fn shade_light8(
             }
         }
     }
-    premultiplied8(col, a)
+    col
+}
+
+/// [`ShadeTable::spec_at_sample`] on eight lanes: [`pow_int8`] where the power is whole, else
+/// the table, lane by lane (lanes the caller masks out clamp to a valid entry).
+#[inline]
+#[target_feature(enable = "avx2")]
+fn spec_at_sample8(t: &ShadeTable, x: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    if let Some(n) = t.spec_int {
+        return pow_int8(x, n);
+    }
+    let zero = _mm256_setzero_ps();
+    let spec_max = _mm256_set1_ps(ShadeTable::SPEC as f32);
+    let s = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(x, spec_max), zero), spec_max);
+    let i = _mm256_cvttps_epi32(s);
+    let f = _mm256_sub_ps(s, _mm256_cvtepi32_ps(i));
+    let tab = t.spec_pow.as_ptr();
+    // SAFETY: i ∈ [0, SPEC], and spec_pow has SPEC + 2 entries.
+    let (p0, p1) = unsafe {
+        (
+            _mm256_i32gather_ps::<4>(tab, i),
+            _mm256_i32gather_ps::<4>(tab.add(1), i),
+        )
+    };
+    _mm256_add_ps(p0, _mm256_mul_ps(f, _mm256_sub_ps(p1, p0)))
+}
+
+/// [`pow_int`] on eight lanes: `x^n` (`n ≥ 1`) by repeated squaring, the same multiplications
+/// in the same order.
+///
+/// [`pow_int`]: crate::slab::tables::pow_int
+#[inline]
+#[target_feature(enable = "avx2")]
+fn pow_int8(x: std::arch::x86_64::__m256, n: u32) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let (mut base, mut n) = (x, n);
+    let mut acc: Option<__m256> = None;
+    loop {
+        if n & 1 == 1 {
+            acc = Some(acc.map_or(base, |a| _mm256_mul_ps(a, base)));
+        }
+        n >>= 1;
+        if n == 0 {
+            return acc.unwrap_or(_mm256_set1_ps(1.0));
+        }
+        base = _mm256_mul_ps(base, base);
+    }
 }
 
 /// The shaded colour `col` clamped to [0, 1] and multiplied by the opacity `a`, on eight lanes
@@ -530,7 +619,15 @@ fn premultiplied8(
     a: std::arch::x86_64::__m256,
 ) -> [std::arch::x86_64::__m256; 4] {
     use std::arch::x86_64::*;
-    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
-    let c = col.map(|c| _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(c, zero), one), a));
+    let c = clamp01_8(col).map(|c| _mm256_mul_ps(c, a));
     [c[0], c[1], c[2], a]
+}
+
+/// `col` clamped to [0, 1] (NaN to 0): the twin of `clamp01` (`slab/shade.rs`).
+#[inline]
+#[target_feature(enable = "avx2")]
+fn clamp01_8(col: [std::arch::x86_64::__m256; 3]) -> [std::arch::x86_64::__m256; 3] {
+    use std::arch::x86_64::*;
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    col.map(|c| _mm256_min_ps(_mm256_max_ps(c, zero), one))
 }
