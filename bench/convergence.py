@@ -16,7 +16,7 @@ For the composite, shaded and perspective scenes of `../shared/data/scenes`:
 2. **VTK's usual render**: sample distance 1/2 of the smallest spacing, at the size itself, with
    VTK's default threads (all cores);
 3. **volsplat** in each mode (default: `auto` = no flags, what a user gets (decisions 0016, 0017,
-   0019 and 0020: one-voxel slabs for composite, shaded at the voxels as VTK shades,
+   0019, 0020 and 0036: one-voxel slabs for composite, shaded at the samples twice per slab,
    pre-integrated where the transfer function's ramp is sharp); `sheet` = `--visibility sheet`,
    Westover's sheet buffers; `image` = `--visibility image --slab 0.5`; `point` and `segment` =
    one-voxel slabs classified by their one sample (`--preintegrate off`) or by the ray's segment
