@@ -29,6 +29,7 @@
 #![deny(missing_docs)]
 
 pub mod demo;
+pub mod distributed;
 pub mod error;
 pub mod movie;
 pub mod output;

@@ -1,0 +1,50 @@
+//! Sort-last rendering across processes (issue 32): a volume cut into bricks by a rule that
+//! does not depend on the number of processes, each process rendering the partial images of its
+//! bricks, and the partial images composited over a tree fixed by the bricks
+//! ([`BrickTree`]), so that the image is the same bits for any number of processes
+//! ([`composite_direct_send`]). The message passing is behind [`Communicator`]: in-process
+//! threads here ([`FakeCluster`]), MPI in `crates/mpi`.
+//!
+//! What is built: the tree, the assignment of bricks to ranks, the compositing protocol and its
+//! failure path. What is not yet: rendering one brick's partial image with the whole ray's
+//! global samples (it needs the brick seam of `docs/design/brick-seam.md`), and the MPI
+//! communicator.
+
+mod comm;
+mod composite;
+mod tree;
+
+pub use comm::{Communicator, FakeCluster, FakeComm};
+pub use composite::{Combine, Pixels, composite_direct_send, stripe_rows};
+pub use tree::{BrickTree, Eye, Node};
+
+/// What can go wrong while compositing across processes.
+#[derive(Debug, Clone, thiserror::Error)]
+#[non_exhaustive]
+pub enum DistributedError {
+    /// A rank could not render its bricks; every rank returns this, naming it.
+    #[error("rank {rank} failed: {why}")]
+    Rank {
+        /// The rank that failed.
+        rank: usize,
+        /// Its error, as text.
+        why: String,
+    },
+    /// A brick's partial image could not be rendered (returned by the `render` callback).
+    #[error("brick {brick}: {why}")]
+    Brick {
+        /// The brick's linear index.
+        brick: usize,
+        /// Why.
+        why: String,
+    },
+    /// The ranks disagree about the protocol (a bug, or a rank that exited).
+    #[error("compositing protocol: {0}")]
+    Protocol(&'static str),
+}
+
+/// The result type of this module.
+pub type Result<T> = std::result::Result<T, DistributedError>;
+
+#[cfg(test)]
+mod tests;

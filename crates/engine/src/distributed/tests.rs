@@ -1,0 +1,256 @@
+//! The compositing protocol on in-process ranks: the same bits for any number of ranks, the
+//! right visibility order, empty bricks skipped exactly, and a failing rank reported by all.
+
+use super::*;
+
+const W: usize = 13;
+const H: usize = 11;
+
+/// A deterministic partial image for brick `b`: premultiplied RGBA with opacity in [0, 0.9],
+/// or, for MIP/MinIP, NaN on about a fifth of the pixels; `None` for every fourth brick when
+/// `empties` (a brick with nothing visible).
+fn brick_image(b: usize, combine: Combine, empties: bool) -> Option<Pixels> {
+    if empties && b % 4 == 3 {
+        return None;
+    }
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64 ^ (b as u64 + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    Some(
+        (0..W * H)
+            .map(|_| {
+                let a = 0.9 * next();
+                let c = [next() * a, next() * a, next() * a, a];
+                match combine {
+                    Combine::Max | Combine::Min if next() < 0.2 => [f32::NAN; 4],
+                    _ => c,
+                }
+            })
+            .collect(),
+    )
+}
+
+fn run(
+    n: usize,
+    tree: &BrickTree,
+    eye: Eye,
+    combine: Combine,
+    empties: bool,
+) -> Vec<Result<Option<Pixels>>> {
+    FakeCluster { size: n }.run(|comm| {
+        let (a, b) = tree.rank_leaves(comm.rank(), comm.size());
+        let mine: Vec<usize> = tree.leaves[a..b].to_vec();
+        composite_direct_send(comm, tree, eye, combine, (W, H), &mut |brick| {
+            assert!(
+                mine.contains(&brick),
+                "rank {} rendered brick {brick}",
+                comm.rank()
+            );
+            Ok(brick_image(brick, combine, empties))
+        })
+    })
+}
+
+fn bits(p: &Pixels) -> Vec<u32> {
+    p.iter().flatten().map(|v| v.to_bits()).collect()
+}
+
+#[test]
+fn the_image_is_the_same_bits_for_any_number_of_ranks() {
+    let tree = BrickTree::new([3, 2, 2], 16).unwrap();
+    let eyes = [
+        Eye::Direction([0.3, -0.8, 0.5]),
+        Eye::Direction([-1.0, 0.1, -0.2]),
+        Eye::Point([20.0, 70.0, -30.0]),
+        Eye::Point([40.0, 10.0, 20.0]),
+    ];
+    for combine in [Combine::Over, Combine::Max, Combine::Min, Combine::Sum] {
+        for eye in eyes {
+            for empties in [false, true] {
+                let one = run(1, &tree, eye, combine, empties)
+                    .remove(0)
+                    .unwrap()
+                    .unwrap();
+                assert_eq!(one.len(), W * H);
+                for n in 2..=5 {
+                    let out = run(n, &tree, eye, combine, empties);
+                    let (first, rest) = out.split_first().unwrap();
+                    let image = first.as_ref().unwrap().as_ref().unwrap();
+                    assert_eq!(bits(image), bits(&one), "{combine:?} {eye:?} n={n}");
+                    for r in rest {
+                        assert!(r.as_ref().unwrap().is_none(), "only rank 0 has the image");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Along a row of bricks seen along ±x, the tree must composite in brick order (or reversed):
+/// equal, to rounding, to folding the bricks front to back one by one, and far from the wrong
+/// order.
+#[test]
+fn bricks_meet_in_visibility_order() {
+    let tree = BrickTree::new([5, 1, 1], 8).unwrap();
+    let fold = |order: &mut dyn Iterator<Item = usize>| {
+        let mut acc = vec![[0.0f32; 4]; W * H];
+        for b in order {
+            let img = brick_image(b, Combine::Over, false).unwrap();
+            for (a, p) in acc.iter_mut().zip(&img) {
+                *a = Combine::Over.apply(*a, *p);
+            }
+        }
+        acc
+    };
+    let max_diff = |a: &Pixels, b: &Pixels| {
+        a.iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max)
+    };
+    for (eye, order) in [
+        (Eye::Direction([1.0, 0.2, 0.1]), (0..5).collect::<Vec<_>>()),
+        (Eye::Direction([-1.0, 0.2, 0.1]), (0..5).rev().collect()),
+        (Eye::Point([-10.0, 4.0, 4.0]), (0..5).collect()),
+        (Eye::Point([100.0, 4.0, 4.0]), (0..5).rev().collect()),
+    ] {
+        for n in [1, 2, 3] {
+            let img = run(n, &tree, eye, Combine::Over, false)
+                .remove(0)
+                .unwrap()
+                .unwrap();
+            let right = fold(&mut order.iter().copied());
+            let wrong = fold(&mut order.iter().rev().copied());
+            assert!(max_diff(&img, &right) < 1e-5, "{eye:?} n={n}");
+            assert!(max_diff(&img, &wrong) > 1e-2, "{eye:?} n={n}");
+        }
+    }
+}
+
+/// An eye between the bricks: the bricks on each side are composited towards it, so neither
+/// brick order alone is right (checked against a fold in the order the eye sees them).
+#[test]
+fn an_eye_inside_the_grid_sees_both_sides_towards_it() {
+    let tree = BrickTree::new([4, 1, 1], 8).unwrap();
+    // The eye at x = 12 (inside brick 1): brick 1, then 0 and 2 (either order between them
+    // on one ray is impossible: they lie on opposite sides), then 3. Per the tree: the split at
+    // 16 puts {0, 1} in front of {2, 3}; inside {0, 1}, the split at 8 puts 1 in front of 0.
+    let img = run(2, &tree, Eye::Point([12.0, 4.0, 4.0]), Combine::Over, false)
+        .remove(0)
+        .unwrap()
+        .unwrap();
+    let mut acc = vec![[0.0f32; 4]; W * H];
+    for b in [1, 0, 2, 3] {
+        for (a, p) in acc
+            .iter_mut()
+            .zip(&brick_image(b, Combine::Over, false).unwrap())
+        {
+            *a = Combine::Over.apply(*a, *p);
+        }
+    }
+    let d = img
+        .iter()
+        .flatten()
+        .zip(acc.iter().flatten())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    assert!(d < 1e-5, "{d}");
+}
+
+/// Leaving an empty brick out is exact: the same bits as compositing a transparent image.
+#[test]
+fn empty_bricks_are_skipped_exactly() {
+    let tree = BrickTree::new([2, 2, 2], 8).unwrap();
+    let eye = Eye::Direction([0.4, 0.5, -0.7]);
+    for combine in [Combine::Over, Combine::Max, Combine::Sum] {
+        let skipped = run(3, &tree, eye, combine, true)
+            .remove(0)
+            .unwrap()
+            .unwrap();
+        let zeros = FakeCluster { size: 3 }
+            .run(|comm| {
+                composite_direct_send(comm, &tree, eye, combine, (W, H), &mut |b| {
+                    Ok(Some(
+                        brick_image(b, combine, true)
+                            .unwrap_or_else(|| vec![combine.empty(); W * H]),
+                    ))
+                })
+            })
+            .remove(0)
+            .unwrap()
+            .unwrap();
+        assert_eq!(bits(&skipped), bits(&zeros), "{combine:?}");
+    }
+    // Nothing visible anywhere: the empty image.
+    let none = FakeCluster { size: 2 }
+        .run(|comm| {
+            composite_direct_send(comm, &tree, eye, Combine::Over, (W, H), &mut |_| Ok(None))
+        })
+        .remove(0)
+        .unwrap()
+        .unwrap();
+    assert!(none.iter().all(|p| *p == [0.0; 4]));
+}
+
+/// A rank whose brick fails: every rank returns the error, naming that rank and brick, and
+/// none waits for the others (the test would hang).
+#[test]
+fn a_failing_rank_stops_every_rank_with_its_error() {
+    let tree = BrickTree::new([3, 3, 1], 8).unwrap();
+    let bad = tree.leaves[5];
+    for n in [1, 2, 4] {
+        let out = FakeCluster { size: n }.run(|comm| {
+            composite_direct_send(
+                comm,
+                &tree,
+                Eye::Direction([0.0, 0.0, 1.0]),
+                Combine::Over,
+                (W, H),
+                &mut |b| {
+                    if b == bad {
+                        Err(DistributedError::Brick {
+                            brick: b,
+                            why: "chunk 3/1/0: unexpected end of file".into(),
+                        })
+                    } else {
+                        Ok(brick_image(b, Combine::Over, false))
+                    }
+                },
+            )
+        });
+        let owner = (0..n)
+            .find(|&r| {
+                let (a, b) = tree.rank_leaves(r, n);
+                tree.leaves[a..b].contains(&bad)
+            })
+            .unwrap();
+        for r in out {
+            let e = r.unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("rank {owner} failed"))
+                    && e.contains(&format!("brick {bad}"))
+                    && e.contains("unexpected end of file"),
+                "n={n}: {e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn stripes_cover_the_rows_once() {
+    for h in [1, 7, 64] {
+        for n in 1..=9 {
+            let mut rows = Vec::new();
+            for s in 0..n {
+                let (a, b) = stripe_rows(s, n, h);
+                rows.extend(a..b);
+            }
+            assert_eq!(rows, (0..h).collect::<Vec<_>>());
+        }
+    }
+}
