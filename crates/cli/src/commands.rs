@@ -569,7 +569,10 @@ fn load_info(a: &InputArgs) -> Result<(String, volsplat::io::LoadedVolume)> {
             .with_limits(limits)
             .with_frame(a.frame)
             .with_array(a.array.clone())
-            .with_series(a.series.clone());
+            .with_series(a.series.clone())
+            .with_level(a.zarr_level)
+            .with_channel(a.channel)
+            .with_timepoint(a.timepoint);
         let loaded = volsplat::io::read_volume_with(path, &options)?;
         return Ok((path.display().to_string(), loaded));
     }
@@ -634,6 +637,26 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
             info.frames, info.frame
         ))?;
     }
+    if !info.levels.is_empty() {
+        emit(&format!(
+            "levels:    {} (--zarr-level N):",
+            info.levels.len()
+        ))?;
+        for (n, l) in info.levels.iter().enumerate() {
+            emit(&format!(
+                "  {n}: {} x {} x {}, spacing {} {} {}, chunks {:?}, {} (array `{}`)",
+                l.dims[0],
+                l.dims[1],
+                l.dims[2],
+                l.spacing[0],
+                l.spacing[1],
+                l.spacing[2],
+                l.chunks,
+                l.data_type,
+                l.path
+            ))?;
+        }
+    }
     if !info.arrays.is_empty() {
         emit(&format!(
             "arrays:    {} (--array NAME)",
@@ -664,6 +687,17 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
 /// `convert`: any readable volume to the format the output's name gives
 /// (`volsplat::io::write_volume`: NRRD, NIfTI, MetaImage or .npy), geometry kept.
 fn convert_cmd(a: ConvertArgs) -> Result<()> {
+    let zarr = a.output.to_str().is_some_and(|p| {
+        p.to_ascii_lowercase()
+            .trim_end_matches('/')
+            .ends_with(".zarr")
+    });
+    if zarr {
+        return convert_to_zarr(a);
+    }
+    if a.chunk != 64 || a.zarr_version != 2 {
+        bail!("--chunk and --zarr-version apply to .zarr outputs only");
+    }
     check_output_path(&a.output, "-o", &[])?;
     let options = volsplat::io::VolumeWriteOptions { compress: a.gzip };
     volsplat::io::volume_write_format(&a.output, &options)?;
@@ -682,6 +716,49 @@ fn convert_cmd(a: ConvertArgs) -> Result<()> {
             g.dims[0],
             g.dims[1],
             g.dims[2],
+            loaded.volume.scalar_type().name()
+        );
+    }
+    Ok(())
+}
+
+/// `convert … -o OUT.zarr`: an OME-Zarr pyramid of the volume (in memory: the volume is read
+/// whole, then each level halved from the one before).
+fn convert_to_zarr(a: ConvertArgs) -> Result<()> {
+    let out = &a.output;
+    if a.gzip {
+        bail!(
+            "-o {}: an OME-Zarr store is compressed with zstd; --gzip does not apply",
+            out.display()
+        );
+    }
+    let version = match a.zarr_version {
+        2 => volsplat::io::ZarrVersion::V2,
+        3 => volsplat::io::ZarrVersion::V3,
+        v => bail!("--zarr-version {v}: expected 2 (OME-Zarr 0.4) or 3 (OME-Zarr 0.5)"),
+    };
+    volsplat::io::zarr::check_zarr_output(out)?;
+    let (label, loaded) = load_info(&a.input)?;
+    let options = volsplat::io::ZarrWriteOptions::default()
+        .with_version(version)
+        .with_chunk(a.chunk);
+    let written = volsplat::io::write_zarr(out, &loaded.volume, &options)
+        .with_context(|| format!("writing {}", out.display()))?;
+    if !a.quiet {
+        for n in loaded.notes.iter().chain(&written.notes) {
+            say!("note: {n}");
+        }
+        let sizes: Vec<String> = written
+            .levels
+            .iter()
+            .map(|g| format!("{}×{}×{}", g.dims[0], g.dims[1], g.dims[2]))
+            .collect();
+        say!(
+            "wrote {} (OME-Zarr {}, {} levels: {}; {}, from {label})",
+            out.display(),
+            if a.zarr_version == 2 { "0.4" } else { "0.5" },
+            written.levels.len(),
+            sizes.join(", "),
             loaded.volume.scalar_type().name()
         );
     }

@@ -123,7 +123,7 @@ pub use image::{
     PngBitDepth, PngSettings, encode_png, encode_png_gray, rgb_codes, srgb_encode, write_png,
     write_png_gray,
 };
-pub use info::{VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
+pub use info::{LevelInfo, VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
 pub use json::{
     CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_camera_with, load_transfer_function,
     load_transfer_function_named, load_transfer_function_with, save_camera, save_transfer_function,

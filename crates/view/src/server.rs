@@ -160,6 +160,9 @@ impl Shared {
             frame: 0,
             array: None,
             series: None,
+            level: 0,
+            channel: 0,
+            timepoint: 0,
         };
         req.scene.camera = CameraSpec::default();
         req.scene.transfer_function = TransferSpec::Auto;

@@ -34,7 +34,8 @@ mod write;
 pub(crate) use store::is_zarr_store;
 pub use store::{ZarrLevel, ZarrSelection, ZarrStore};
 pub use write::{
-    MAX_LEVELS, WrittenZarr, ZarrVersion, ZarrWriteOptions, pyramid_grids, write_zarr,
+    MAX_LEVELS, WrittenZarr, ZarrVersion, ZarrWriteOptions, check_zarr_output, pyramid_grids,
+    write_zarr,
 };
 
 use crate::error::Result;

@@ -155,6 +155,13 @@ pub(crate) fn is_zarr_store(path: &Path) -> bool {
 }
 
 impl ZarrStore {
+    /// Whether `path` is a folder that looks like an OME-Zarr store (named `.zarr`, or
+    /// holding a `zarr.json` / `.zattrs` that mentions `multiscales`), as the readers'
+    /// dispatch decides. Opens nothing else.
+    pub fn is_store(path: impl AsRef<Path>) -> bool {
+        is_zarr_store(path.as_ref())
+    }
+
     /// Opens the store at `path` (a directory): parses the multiscales, opens each level's
     /// array metadata and checks shapes, chunk shapes, data types, scales and translations.
     /// Errors name the store, the metadata field and its value.

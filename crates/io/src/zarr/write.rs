@@ -295,6 +295,47 @@ fn commit_dir(tmp: &Path, path: &Path) -> Result<()> {
     }
 }
 
+/// Checks that [`write_zarr`] may write `path`: absent (its parent folder existing), or a
+/// folder holding a Zarr store (`.zgroup`, `.zattrs` or `zarr.json`), which is replaced. A
+/// regular file, or a folder without Zarr metadata, is refused (nothing is replaced that a
+/// user might want to keep). Callers may run it before a slow read.
+pub fn check_zarr_output(path: impl AsRef<Path>) -> Result<()> {
+    let path = path.as_ref();
+    match std::fs::symlink_metadata(path) {
+        Err(_) => {
+            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+                && !dir.is_dir()
+            {
+                return Err(IoError::invalid_argument(
+                    path,
+                    "output path",
+                    format!("the folder {} does not exist", dir.display()),
+                ));
+            }
+            Ok(())
+        }
+        Ok(m) if m.is_dir() => {
+            if [".zgroup", ".zattrs", "zarr.json"]
+                .iter()
+                .any(|f| path.join(f).is_file())
+            {
+                Ok(())
+            } else {
+                Err(IoError::invalid_argument(
+                    path,
+                    "output path",
+                    "is a folder that is not an OME-Zarr store; refusing to replace it",
+                ))
+            }
+        }
+        Ok(_) => Err(IoError::NotAFile {
+            path: path.to_path_buf(),
+            what: "output OME-Zarr store".into(),
+            kind: "an existing file that is not a folder; refusing to replace it",
+        }),
+    }
+}
+
 /// Writes `volume` as an OME-Zarr pyramid at `path` (a folder, by convention named `.zarr`):
 /// level 0 the volume itself, then the levels of [`pyramid_grids`], each computed from the one
 /// before by [`Volume::halved`], the renderer's own prefilter, so that level `l` of the store
@@ -327,6 +368,7 @@ pub fn write_zarr(
             format!("{}; 1 to 22 are accepted", options.zstd_level),
         ));
     }
+    check_zarr_output(path)?;
     let mut notes = Vec::new();
     let g = volume.grid();
     let mut volume = volume.clone();
