@@ -738,28 +738,77 @@ fn convert_to_zarr(a: ConvertArgs) -> Result<()> {
         v => bail!("--zarr-version {v}: expected 2 (OME-Zarr 0.4) or 3 (OME-Zarr 0.5)"),
     };
     volsplat::io::zarr::check_zarr_output(out)?;
-    let (label, loaded) = load_info(&a.input)?;
     let options = volsplat::io::ZarrWriteOptions::default()
         .with_version(version)
         .with_chunk(a.chunk);
-    let written = volsplat::io::write_zarr(out, &loaded.volume, &options)
-        .with_context(|| format!("writing {}", out.display()))?;
+    let converted = match volume_source(&a.input)? {
+        VolumeSource::File { path, raw, .. } => {
+            let read = volsplat::io::ReadOptions::default()
+                .with_limits(reader_limits(&a.input)?)
+                .with_frame(a.input.frame)
+                .with_array(a.input.array.clone())
+                .with_series(a.input.series.clone())
+                .with_level(a.input.zarr_level)
+                .with_channel(a.input.channel)
+                .with_timepoint(a.input.timepoint);
+            let spec = match &raw {
+                Some(r) => {
+                    let mut spec = volsplat::io::RawSpec::new(
+                        r.dims,
+                        volsplat::core::ScalarType::from_name(&r.scalar_type)?,
+                    );
+                    spec.spacing = r.spacing;
+                    spec.origin = r.origin;
+                    spec.big_endian = r.big_endian;
+                    spec.header_bytes = r.header_bytes;
+                    Some(spec)
+                }
+                None => None,
+            };
+            let label = path.display().to_string();
+            let c = volsplat::io::convert_to_zarr(&path, spec.as_ref(), &read, out, &options)
+                .with_context(|| format!("writing {}", out.display()))?;
+            (label, c)
+        }
+        _ => {
+            let (label, loaded) = load_info(&a.input)?;
+            let written = volsplat::io::write_zarr(out, &loaded.volume, &options)
+                .with_context(|| format!("writing {}", out.display()))?;
+            let mut notes = loaded.notes;
+            notes.extend(written.notes.iter().cloned());
+            let c = volsplat::io::ConvertedZarr {
+                written,
+                format: loaded.format,
+                scalar_type: loaded.volume.scalar_type(),
+                streamed: false,
+                notes,
+            };
+            (label, c)
+        }
+    };
+    let (label, c) = converted;
     if !a.quiet {
-        for n in loaded.notes.iter().chain(&written.notes) {
+        for n in &c.notes {
             say!("note: {n}");
         }
-        let sizes: Vec<String> = written
+        let sizes: Vec<String> = c
+            .written
             .levels
             .iter()
             .map(|g| format!("{}×{}×{}", g.dims[0], g.dims[1], g.dims[2]))
             .collect();
         say!(
-            "wrote {} (OME-Zarr {}, {} levels: {}; {}, from {label})",
+            "wrote {} (OME-Zarr {}, {} levels: {}; {}, from {label}{})",
             out.display(),
             if a.zarr_version == 2 { "0.4" } else { "0.5" },
-            written.levels.len(),
+            c.written.levels.len(),
             sizes.join(", "),
-            loaded.volume.scalar_type().name()
+            c.scalar_type.name(),
+            if c.streamed {
+                ", streamed slice by slice"
+            } else {
+                ""
+            }
         );
     }
     Ok(())

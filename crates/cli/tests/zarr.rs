@@ -43,6 +43,8 @@ fn convert_writes_a_pyramid_that_info_lists_and_render_reads() {
             said.contains("3 levels: 40×36×30, 21×19×16, 12×11×9"),
             "{said}"
         );
+        // An uncompressed NRRD is streamed slice by slice.
+        assert!(said.contains("streamed slice by slice"), "{said}");
         let text = stdout(&volsplat(&["info", s(&zarr)]));
         assert!(text.contains("levels:    3"), "{text}");
         assert!(text.contains("1: 21 x 19 x 16, spacing "), "{text}");
@@ -122,14 +124,7 @@ fn wrong_zarr_choices_are_clear_errors() {
             "apply to .zarr outputs only",
         ),
         (
-            &[
-                "convert",
-                s(&nrrd),
-                "-o",
-                s(&x_zarr),
-                "--zarr-version",
-                "4",
-            ],
+            &["convert", s(&nrrd), "-o", s(&x_zarr), "--zarr-version", "4"],
             "--zarr-version 4",
         ),
         (

@@ -22,15 +22,23 @@
 //!   or non-finite scales, missing multiscales, a level, channel or time point out of range
 //!   and corrupt chunks are errors naming the store, field and value.
 //!
-//! Writing ([`write_zarr`], [`ZarrWriteOptions`]): see [`write`](self::write_zarr).
+//! Writing ([`write_zarr`] from a volume in memory, [`convert_to_zarr`] from a file,
+//! [`ZarrWriteOptions`]): OME-Zarr 0.4 on Zarr v2 (blosc-zstd; the default) or 0.5 on Zarr v3
+//! (zstd), cubic chunks (64 by default), levels by the renderer's own prefilter
+//! ([`volsplat_core::Volume::halved`]) until one fits a chunk ([`pyramid_grids`]), written
+//! slice by slice (uncompressed raw and NRRD files are streamed: memory bounded by about a
+//! chunk's height of slices per level), into a temporary folder renamed at the end.
 //!
 //! [`ReadOptions::channel`]: crate::ReadOptions::channel
 //! [`ReadOptions::timepoint`]: crate::ReadOptions::timepoint
 
+mod convert;
 mod meta;
 mod store;
+mod stream;
 mod write;
 
+pub use convert::{ConvertedZarr, convert_to_zarr};
 pub(crate) use store::is_zarr_store;
 pub use store::{ZarrLevel, ZarrSelection, ZarrStore};
 pub use write::{

@@ -594,3 +594,102 @@ fn info_paths_are_documented_in_errors() {
     let e = ZarrStore::open(Path::new("/nonexistent/x.zarr"), &Limits::default()).unwrap_err();
     assert!(e.to_string().contains("x.zarr"), "{e}");
 }
+
+/// An attached-header NRRD of `v` (little-endian, raw or gzip), geometry in `spacings`.
+fn nrrd_of(path: &Path, v: &AnyVolume, gzip: bool) {
+    crate::write_nrrd(path, v, gzip).unwrap();
+}
+
+/// Every level of two stores, read back, is equal (samples and grids).
+fn assert_same_stores(a: &Path, b: &Path) {
+    let (sa, sb) = (
+        ZarrStore::open(a, &Limits::default()).unwrap(),
+        ZarrStore::open(b, &Limits::default()).unwrap(),
+    );
+    assert_eq!(sa.levels(), sb.levels());
+    for l in 0..sa.levels().len() {
+        let (va, vb) = (
+            sa.read_level(l, ZarrSelection::default()).unwrap(),
+            sb.read_level(l, ZarrSelection::default()).unwrap(),
+        );
+        assert_eq!(va, vb, "level {l}");
+    }
+}
+
+#[test]
+fn streamed_conversions_equal_whole_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let v = ramp_u16([37, 29, 45]);
+    let any: AnyVolume = v.clone().into();
+    let o = ZarrWriteOptions::default().with_chunk(8);
+    let whole = dir.path().join("whole.zarr");
+    write_zarr(&whole, &any, &o).unwrap();
+    // Uncompressed NRRD: streamed.
+    let nrrd = dir.path().join("v.nrrd");
+    nrrd_of(&nrrd, &any, false);
+    let out = dir.path().join("s.zarr");
+    let c = convert_to_zarr(&nrrd, None, &opts(), &out, &o).unwrap();
+    assert!(c.streamed);
+    assert_eq!(c.format, "NRRD");
+    assert_eq!(c.written.levels, pyramid_grids(v.grid(), 8));
+    assert_eq!(c.written.levels.len(), 5);
+    assert_same_stores(&whole, &out);
+    // Headerless raw, big-endian, with a header to skip: streamed too.
+    let raw = dir.path().join("v.raw");
+    let mut bytes = vec![9u8; 5];
+    bytes.extend(v.data().iter().flat_map(|x| x.to_be_bytes()));
+    std::fs::write(&raw, bytes).unwrap();
+    let mut spec = crate::RawSpec::new([37, 29, 45], volsplat_core::ScalarType::U16);
+    spec.spacing = v.grid().spacing;
+    spec.origin = v.grid().origin;
+    spec.big_endian = true;
+    spec.header_bytes = 5;
+    let out = dir.path().join("r.zarr");
+    let c = convert_to_zarr(&raw, Some(&spec), &opts(), &out, &o).unwrap();
+    assert!(c.streamed && c.format == "raw");
+    assert_same_stores(&whole, &out);
+    // Gzip NRRD: read whole, the same store.
+    let gz = dir.path().join("g.nrrd");
+    nrrd_of(&gz, &any, true);
+    let out = dir.path().join("g.zarr");
+    let c = convert_to_zarr(&gz, None, &opts(), &out, &o).unwrap();
+    assert!(!c.streamed);
+    assert_same_stores(&whole, &out);
+    // A truncated raw file is an error before anything is written.
+    std::fs::write(&raw, [0u8; 100]).unwrap();
+    let out = dir.path().join("t.zarr");
+    let e = convert_to_zarr(&raw, Some(&spec), &opts(), &out, &o).unwrap_err();
+    assert!(e.to_string().contains("size mismatch"), "{e}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn streamed_float_files_with_nan_are_converted_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = Grid::new([12, 10, 9], [1.0; 3], [0.0; 3], DMat3::IDENTITY).unwrap();
+    let mut v = Volume::<f32>::from_fn(g, |i, j, k| (i + 2 * j + 3 * k) as f32).unwrap();
+    let nrrd = dir.path().join("f.nrrd");
+    // The same file with two NaN samples (written by hand: Volume::new would replace them).
+    let mut data = v.data().to_vec();
+    data[5] = f32::NAN;
+    data[700] = f32::NAN;
+    let mut file =
+        b"NRRD0004\ntype: float\ndimension: 3\nsizes: 12 10 9\nencoding: raw\nendian: little\n\n"
+            .to_vec();
+    file.extend(data.iter().flat_map(|x| x.to_le_bytes()));
+    std::fs::write(&nrrd, file).unwrap();
+    let o = ZarrWriteOptions::default().with_chunk(4);
+    let out = dir.path().join("f.zarr");
+    let c = convert_to_zarr(&nrrd, None, &opts(), &out, &o).unwrap();
+    assert!(!c.streamed, "NaN samples: read whole");
+    assert!(c.notes.iter().any(|n| n.contains("NaN")), "{:?}", c.notes);
+    let whole = crate::read_volume(&nrrd).unwrap();
+    let back = read_volume_with(&out, &opts()).unwrap().volume;
+    assert_eq!(back.to_f32().data(), whole.to_f32().data());
+    // Without NaN the float file streams.
+    v.set_grid(v.grid().clone()).unwrap();
+    let clean = dir.path().join("c.nrrd");
+    nrrd_of(&clean, &v.into(), false);
+    let c = convert_to_zarr(&clean, None, &opts(), dir.path().join("c.zarr"), &o).unwrap();
+    assert!(c.streamed);
+}

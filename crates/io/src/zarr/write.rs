@@ -1,13 +1,14 @@
 //! Writing an OME-Zarr pyramid ([`write_zarr`]): OME-Zarr v0.4 on Zarr v2 (default) or v0.5
-//! on Zarr v3, levels by the renderer's own 2× prefilter ([`Volume::halved`]), written into a
+//! on Zarr v3, levels by the renderer's own 2× prefilter ([`volsplat_core::Volume::halved`]), written into a
 //! temporary folder beside the target and renamed over it at the end.
 
+use super::stream::Cascade;
 use crate::error::{IoError, Result};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use volsplat_core::glam::DMat3;
-use volsplat_core::{AnyVolume, Grid, Scalar, ScalarType, Volume};
+use volsplat_core::{AnyVolume, Grid, Scalar, ScalarType};
 use zarrs::array::{Array, Element};
 use zarrs::filesystem::FilesystemStore;
 
@@ -100,7 +101,7 @@ pub fn pyramid_grids(grid: &Grid, chunk: usize) -> Vec<Grid> {
     grids
 }
 
-fn zerr(path: &Path, what: impl Into<String>, e: impl std::fmt::Display) -> IoError {
+pub(super) fn zerr(path: &Path, what: impl Into<String>, e: impl std::fmt::Display) -> IoError {
     IoError::Zarr {
         path: path.to_path_buf(),
         what: what.into(),
@@ -193,55 +194,27 @@ fn write_json(path: &Path, file: &Path, v: &Value) -> Result<()> {
     std::fs::write(file, text).map_err(|e| IoError::os(file, "write", e))
 }
 
-/// Stores `v` as the array at `dir/name`, chunk by chunk (chunks of fill value 0 are not
-/// written, as the Zarr specification allows).
-fn write_level<T: Scalar + Element>(
+/// Writes the metadata of level `name`'s array (`dims`, x, y, z) into `dir/name` and opens
+/// it.
+fn create_level(
     path: &Path,
     store: &Arc<FilesystemStore>,
     dir: &Path,
     name: &str,
-    v: &Volume<T>,
+    dims: [usize; 3],
+    t: ScalarType,
     o: &ZarrWriteOptions,
-) -> Result<()> {
+) -> Result<Array<FilesystemStore>> {
     let adir = dir.join(name);
     std::fs::create_dir_all(&adir).map_err(|e| IoError::os(&adir, "create folder", e))?;
-    let dims = v.grid().dims;
-    let meta = array_metadata(dims, T::TYPE, o);
+    let meta = array_metadata(dims, t, o);
     let file = match o.version {
         ZarrVersion::V2 => adir.join(".zarray"),
         ZarrVersion::V3 => adir.join("zarr.json"),
     };
     write_json(path, &file, &meta)?;
-    let array = Array::open(store.clone(), &format!("/{name}"))
-        .map_err(|e| zerr(path, format!("open written array `{name}`"), e))?;
-    let c = o.chunk;
-    let counts = dims.map(|n| n.div_ceil(c));
-    let [nx, ny, _] = dims;
-    let data = v.data();
-    let zero = T::from_f64(0.0);
-    let mut chunk = vec![zero; c * c * c];
-    let csize = [dims[0].min(c), dims[1].min(c), dims[2].min(c)];
-    let chunk = &mut chunk[..csize[0] * csize[1] * csize[2]];
-    for cz in 0..counts[2] {
-        for cy in 0..counts[1] {
-            for cx in 0..counts[0] {
-                chunk.fill(zero);
-                let [x0, y0, z0] = [cx * csize[0], cy * csize[1], cz * csize[2]];
-                let xn = (dims[0] - x0).min(csize[0]);
-                for z in 0..(dims[2] - z0).min(csize[2]) {
-                    for y in 0..(dims[1] - y0).min(csize[1]) {
-                        let src = &data[((z0 + z) * ny + y0 + y) * nx + x0..][..xn];
-                        let dst = (z * csize[1] + y) * csize[0];
-                        chunk[dst..dst + xn].copy_from_slice(src);
-                    }
-                }
-                array
-                    .store_chunk(&[cz as u64, cy as u64, cx as u64], &*chunk)
-                    .map_err(|e| zerr(path, format!("write level `{name}` chunk"), e))?;
-            }
-        }
-    }
-    Ok(())
+    Array::open(store.clone(), &format!("/{name}"))
+        .map_err(|e| zerr(path, format!("open written array `{name}`"), e))
 }
 
 /// A fresh temporary folder beside `path`.
@@ -338,7 +311,7 @@ pub fn check_zarr_output(path: impl AsRef<Path>) -> Result<()> {
 
 /// Writes `volume` as an OME-Zarr pyramid at `path` (a folder, by convention named `.zarr`):
 /// level 0 the volume itself, then the levels of [`pyramid_grids`], each computed from the one
-/// before by [`Volume::halved`], the renderer's own prefilter, so that level `l` of the store
+/// before by [`volsplat_core::Volume::halved`], the renderer's own prefilter, so that level `l` of the store
 /// holds the same samples (bit for bit) and grid as level `l` of the renderer's in-memory
 /// pyramid. Axes z, y, x (`space`, `millimeter`), each level's `scale` its spacing and
 /// `translation` its origin (world coordinates of sample 0). A direction other than the
@@ -351,6 +324,30 @@ pub fn write_zarr(
     options: &ZarrWriteOptions,
 ) -> Result<WrittenZarr> {
     let path = path.as_ref();
+    let (grid, notes) = prepare(path, volume.grid(), options)?;
+    let grids = pyramid_grids(&grid, options.chunk);
+    in_temp_dir(path, |tmp| {
+        volsplat_core::with_volume!(volume, v => {
+            let slice = v.grid().dims[0] * v.grid().dims[1];
+            let data = v.data();
+            write_levels(path, tmp, &grids, options, &mut |k| {
+                Ok(data[k * slice..(k + 1) * slice].to_vec())
+            })
+        })
+    })?;
+    Ok(WrittenZarr {
+        levels: grids,
+        notes,
+    })
+}
+
+/// Checks the options and the output path; the grid to write (axis-aligned: a rotation is
+/// dropped, with a note).
+pub(super) fn prepare(
+    path: &Path,
+    g: &Grid,
+    options: &ZarrWriteOptions,
+) -> Result<(Grid, Vec<String>)> {
     if !(1..=1024).contains(&options.chunk) {
         return Err(IoError::invalid_argument(
             path,
@@ -370,43 +367,38 @@ pub fn write_zarr(
     }
     check_zarr_output(path)?;
     let mut notes = Vec::new();
-    let g = volume.grid();
-    let mut volume = volume.clone();
     if g.direction != DMat3::IDENTITY {
         notes.push(
             "the volume's direction matrix is not the identity; OME-Zarr stores no rotation, so \
              the store holds its axis-aligned grid (same spacing and origin)"
                 .to_string(),
         );
-        let aligned = Grid::new(g.dims, g.spacing, g.origin, DMat3::IDENTITY)
-            .map_err(|e| IoError::core(path, e))?;
-        volume
-            .set_grid(aligned)
-            .map_err(|e| IoError::core(path, e))?;
     }
-    let grids = pyramid_grids(volume.grid(), options.chunk);
+    let aligned = Grid::new(g.dims, g.spacing, g.origin, DMat3::IDENTITY)
+        .map_err(|e| IoError::core(path, e))?;
+    Ok((aligned, notes))
+}
+
+/// Runs `write` on a fresh temporary folder beside `path`, then puts it at `path`
+/// ([`commit_dir`]); on error the folder is removed and `path` is untouched.
+pub(super) fn in_temp_dir(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let tmp = temp_dir(path)?;
-    let result = (|| {
-        volsplat_core::with_volume!(&volume, v => write_levels(path, &tmp, v, &grids, options))?;
-        commit_dir(&tmp, path)
-    })();
+    let result = write(&tmp).and_then(|()| commit_dir(&tmp, path));
     if result.is_err() {
         let _ = std::fs::remove_dir_all(&tmp);
     }
-    result?;
-    Ok(WrittenZarr {
-        levels: grids,
-        notes,
-    })
+    result
 }
 
-/// Writes the group metadata and every level of `grids` into `dir`.
-fn write_levels<T: Scalar + Element>(
+/// Writes the group metadata and every level of `grids` into `dir`, level 0's slices coming
+/// from `next_slice(k)` (`k` = 0, 1, … in order; `nx · ny` samples, x fastest), the others
+/// computed slice by slice ([`Cascade`]).
+pub(super) fn write_levels<T: Scalar + Element>(
     path: &Path,
     dir: &Path,
-    v: &Volume<T>,
     grids: &[Grid],
     o: &ZarrWriteOptions,
+    next_slice: &mut dyn FnMut(usize) -> Result<Vec<T>>,
 ) -> Result<()> {
     let name = path
         .file_name()
@@ -427,15 +419,14 @@ fn write_levels<T: Scalar + Element>(
         }
     }
     let store = Arc::new(FilesystemStore::new(dir).map_err(|e| zerr(path, "open store", e))?);
-    write_level(path, &store, dir, "0", v, o)?;
-    let mut prev: Option<Volume<T>> = None;
-    for (l, g) in grids.iter().enumerate().skip(1) {
-        let from = prev.as_ref().unwrap_or(v);
-        let axes = from.grid().pyramid_axes();
-        let next = from.halved(axes).map_err(|e| IoError::core(path, e))?;
-        debug_assert_eq!(next.grid(), g);
-        write_level(path, &store, dir, &l.to_string(), &next, o)?;
-        prev = Some(next);
+    let arrays = grids
+        .iter()
+        .enumerate()
+        .map(|(l, g)| create_level(path, &store, dir, &l.to_string(), g.dims, T::TYPE, o))
+        .collect::<Result<Vec<_>>>()?;
+    let mut cascade = Cascade::<T>::new(path, arrays, grids, o.chunk);
+    for k in 0..grids[0].dims[2] {
+        cascade.push(next_slice(k)?)?;
     }
-    Ok(())
+    cascade.finish()
 }
