@@ -693,3 +693,115 @@ fn streamed_float_files_with_nan_are_converted_whole() {
     let c = convert_to_zarr(&clean, None, &opts(), dir.path().join("c.zarr"), &o).unwrap();
     assert!(c.streamed);
 }
+
+/// Random mutations of a small store's metadata (group and array JSON) and chunks, v2 and v3
+/// (sharded too): every read is a volume or an error, never a panic.
+#[test]
+fn corrupted_stores_are_errors_or_volumes_never_panics() {
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut rnd = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let v: AnyVolume = ramp_u16([20, 12, 10]).into();
+    for version in [ZarrVersion::V2, ZarrVersion::V3] {
+        let p = dir.path().join(format!("{version:?}.zarr"));
+        write_zarr(
+            &p,
+            &v,
+            &ZarrWriteOptions::default()
+                .with_chunk(8)
+                .with_version(version),
+        )
+        .unwrap();
+        let files: Vec<PathBuf> = match version {
+            ZarrVersion::V2 => vec![p.join(".zattrs"), p.join("0/.zarray"), p.join("0/0/0/0")],
+            _ => vec![
+                p.join("zarr.json"),
+                p.join("0/zarr.json"),
+                p.join("0/c/0/0/0"),
+            ],
+        };
+        for file in &files {
+            let valid = std::fs::read(file).unwrap();
+            for k in 0..150 {
+                let mut b = valid.clone();
+                match k % 4 {
+                    0 => b.truncate(rnd() as usize % (valid.len() + 1)),
+                    1 => {
+                        for _ in 0..1 + rnd() % 6 {
+                            let i = rnd() as usize % b.len();
+                            b[i] = rnd() as u8;
+                        }
+                    }
+                    2 => {
+                        // A digit of a number made huge, zero or negative.
+                        let digits: Vec<usize> =
+                            (0..b.len()).filter(|&i| b[i].is_ascii_digit()).collect();
+                        if let Some(&i) = digits.get(rnd() as usize % digits.len().max(1)) {
+                            let s: &[u8] =
+                                [&b"99999999999"[..], b"0", b"-1", b"1e308"][rnd() as usize % 4];
+                            b.splice(i..i + 1, s.iter().copied());
+                        }
+                    }
+                    _ => {
+                        let i = rnd() as usize % b.len();
+                        b.insert(i, rnd() as u8);
+                    }
+                }
+                std::fs::write(file, &b).unwrap();
+                for level in 0..2 {
+                    let _ = read_volume_with(&p, &opts().with_level(level));
+                }
+            }
+            std::fs::write(file, &valid).unwrap();
+        }
+        read_volume_with(&p, &opts()).unwrap();
+    }
+    // A sharded v3 array (written by zarrs from hand-written metadata), its shard corrupted.
+    let p = dir.path().join("sharded.zarr");
+    std::fs::create_dir_all(p.join("0")).unwrap();
+    let ms = json!({ "axes": axes("zyx"),
+        "datasets": [level("0", json!([1.0, 1.0, 1.0]), json!([0.0, 0.0, 0.0]))] });
+    let root = json!({ "zarr_format": 3, "node_type": "group",
+        "attributes": { "ome": { "version": "0.5", "multiscales": [ms] } } });
+    std::fs::write(p.join("zarr.json"), root.to_string()).unwrap();
+    let arr = json!({ "zarr_format": 3, "node_type": "array", "shape": [8, 8, 8],
+        "data_type": "uint16",
+        "chunk_grid": { "name": "regular", "configuration": { "chunk_shape": [8, 8, 8] } },
+        "chunk_key_encoding": { "name": "default", "configuration": { "separator": "/" } },
+        "fill_value": 0,
+        "codecs": [{ "name": "sharding_indexed", "configuration": {
+            "chunk_shape": [4, 4, 4],
+            "codecs": [{ "name": "bytes", "configuration": { "endian": "little" } },
+                       { "name": "zstd", "configuration": { "level": 1, "checksum": false } }],
+            "index_codecs": [{ "name": "bytes", "configuration": { "endian": "little" } },
+                             { "name": "crc32c" }] } }] });
+    std::fs::write(p.join("0/zarr.json"), arr.to_string()).unwrap();
+    let store = std::sync::Arc::new(zarrs::filesystem::FilesystemStore::new(&p).unwrap());
+    let a = zarrs::array::Array::open(store, "/0").unwrap();
+    let data: Vec<u16> = (0..512).map(|i| i as u16 * 3).collect();
+    a.store_chunk(&[0, 0, 0], &data[..]).unwrap();
+    let back = read_volume_with(&p, &opts()).unwrap().volume;
+    assert_eq!(
+        back.to_f32().data(),
+        data.iter().map(|&x| x as f32).collect::<Vec<_>>()
+    );
+    let shard = p.join("0/c/0/0/0");
+    let valid = std::fs::read(&shard).unwrap();
+    for k in 0..200 {
+        let mut b = valid.clone();
+        if k % 2 == 0 {
+            b.truncate(rnd() as usize % valid.len());
+        } else {
+            // Mostly the index at the end: offsets and lengths.
+            let i = valid.len() - 1 - rnd() as usize % valid.len().min(64 * 2 * 8 + 4);
+            b[i] = rnd() as u8;
+        }
+        std::fs::write(&shard, &b).unwrap();
+        let _ = read_volume_with(&p, &opts());
+    }
+}
