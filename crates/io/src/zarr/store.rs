@@ -470,6 +470,23 @@ impl ZarrStore {
         ))
     }
 
+    /// The level whose voxel is about `pixel` (mm, the size of a pixel at the focal plane):
+    /// the coarsest level whose smallest spacing is at most `slack · pixel`, 0 where none
+    /// coarser qualifies or `pixel` is not a positive finite number. With `slack` √2 this is
+    /// the renderer's own rule for its in-memory pyramid (`volsplat_splat::auto_level`,
+    /// decision 0031), so a store written by [`crate::write_zarr`] gives the same level; with
+    /// 1, the coarsest level whose finest voxel is no larger than a pixel. Metadata only.
+    pub fn auto_level(&self, pixel: f64, slack: f64) -> usize {
+        if !(pixel.is_finite() && pixel > 0.0) {
+            return 0;
+        }
+        let min = |l: &ZarrLevel| l.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
+        self.levels
+            .iter()
+            .rposition(|l| min(l) <= slack * pixel)
+            .unwrap_or(0)
+    }
+
     /// The per-dimension ranges (store order) of a region of `level`: spatial `[lo, hi)`
     /// (x, y, z), the selected channel and time point, index 0 of other axes. Checks every
     /// index against the shape.

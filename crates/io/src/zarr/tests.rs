@@ -805,3 +805,25 @@ fn corrupted_stores_are_errors_or_volumes_never_panics() {
         let _ = read_volume_with(&p, &opts());
     }
 }
+
+#[test]
+fn auto_level_is_the_coarsest_whose_voxel_fits_a_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.zarr");
+    let g = Grid::new([200, 200, 200], [0.5; 3], [0.0; 3], DMat3::IDENTITY).unwrap();
+    let v = Volume::<u8>::from_fn(g, |i, _, _| i as u8).unwrap();
+    write_zarr(&p, &v.into(), &ZarrWriteOptions::default()).unwrap();
+    let s = ZarrStore::open(&p, &Limits::default()).unwrap();
+    // Levels' spacings 0.5, 1, 2 (200 → 101 → 52 ≤ 64).
+    let sp: Vec<f64> = s.levels().iter().map(|l| l.spacing[0]).collect();
+    assert_eq!(sp, [0.5, 1.0, 2.0]);
+    assert_eq!(s.auto_level(0.4, 1.0), 0);
+    assert_eq!(s.auto_level(0.99, 1.0), 0);
+    assert_eq!(s.auto_level(1.0, 1.0), 1);
+    assert_eq!(s.auto_level(100.0, 1.0), 2);
+    let r2 = std::f64::consts::SQRT_2;
+    assert_eq!(s.auto_level(1.0 / r2 * 1.001, r2), 1);
+    assert_eq!(s.auto_level(1.0 / r2 * 0.999, r2), 0);
+    assert_eq!(s.auto_level(f64::NAN, 1.0), 0);
+    assert_eq!(s.auto_level(-1.0, 1.0), 0);
+}
