@@ -632,8 +632,14 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
         info.value_range[0], info.value_range[1]
     ))?;
     if info.frames > 1 {
+        // An OME-Zarr store's frames are its time points.
+        let flag = if info.levels.is_empty() {
+            "--frame N"
+        } else {
+            "--timepoint N"
+        };
         emit(&format!(
-            "frames:    {} (reading {}; --frame N)",
+            "frames:    {} (reading {}; {flag})",
             info.frames, info.frame
         ))?;
     }

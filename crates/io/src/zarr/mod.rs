@@ -5,6 +5,9 @@
 //! Reading ([`read_zarr_with`], [`ZarrStore`], through the `zarrs` crate; codecs blosc, zstd,
 //! gzip, sharding, crc32c, transpose):
 //!
+//! - **Layout.** The store's root group holds the `multiscales` (v0.4 `.zattrs`, v0.5
+//!   `zarr.json` `attributes.ome`); a bioformats2raw root (`bioformats2raw.layout`, no
+//!   multiscales) is read through its image `0`, with a note.
 //! - **Axes.** The `axes` metadata (time, channel or custom, then 2 or 3 spatial axes ordered
 //!   z, y, x) pick the volume: x, y, z are volsplat's i, j, k; [`ReadOptions::channel`] and
 //!   [`ReadOptions::timepoint`] pick the entry of the channel and time axes (0 by default);

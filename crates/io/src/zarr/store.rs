@@ -175,6 +175,25 @@ impl ZarrStore {
             });
         }
         let (attrs, zarr_version, file) = root_attributes(path, limits)?;
+        // bioformats2raw's layout: the image is the group `0` below a root without
+        // multiscales (https://ngff.openmicroscopy.org/0.4/#bf2raw).
+        let multiscales = attrs.get("multiscales").is_some()
+            || attrs
+                .get("ome")
+                .is_some_and(|o| o.get("multiscales").is_some());
+        let layout = attrs.get("bioformats2raw.layout").or_else(|| {
+            attrs
+                .get("ome")
+                .and_then(|o| o.get("bioformats2raw.layout"))
+        });
+        if !multiscales && layout.is_some() && path.join("0").is_dir() {
+            let mut s = ZarrStore::open(path.join("0"), limits)?;
+            s.notes.push(format!(
+                "bioformats2raw layout: image 0 of {} read",
+                path.display()
+            ));
+            return Ok(s);
+        }
         let ms = meta::parse(&file, &attrs)?;
         let store = Arc::new(FilesystemStore::new(path).map_err(|e| IoError::Zarr {
             path: path.to_path_buf(),

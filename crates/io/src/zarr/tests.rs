@@ -827,3 +827,25 @@ fn auto_level_is_the_coarsest_whose_voxel_fits_a_pixel() {
     assert_eq!(s.auto_level(f64::NAN, 1.0), 0);
     assert_eq!(s.auto_level(-1.0, 1.0), 0);
 }
+
+#[test]
+fn bioformats2raw_layouts_read_image_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("b2r.zarr");
+    std::fs::create_dir(&p).unwrap();
+    std::fs::write(p.join(".zgroup"), r#"{"zarr_format": 2}"#).unwrap();
+    std::fs::write(p.join(".zattrs"), r#"{"bioformats2raw.layout": 3}"#).unwrap();
+    let v: AnyVolume = ramp_u16([9, 8, 7]).into();
+    write_zarr(p.join("0"), &v, &ZarrWriteOptions::default()).unwrap();
+    let l = read_volume_with(&p, &opts()).unwrap();
+    assert_eq!(l.volume, v);
+    assert!(
+        l.notes.iter().any(|n| n.contains("bioformats2raw")),
+        "{:?}",
+        l.notes
+    );
+    // Without the layout attribute the root is not an image.
+    std::fs::write(p.join(".zattrs"), r#"{}"#).unwrap();
+    let e = read_volume_with(&p, &opts()).unwrap_err().to_string();
+    assert!(e.contains("multiscales"), "{e}");
+}
