@@ -137,6 +137,33 @@ fn root_attributes(path: &Path, limits: &Limits) -> Result<(serde_json::Value, u
     Ok((attrs, version, file))
 }
 
+/// Refuses a store, read under [`Limits::confine_to`], that holds a symbolic link leading
+/// out of the confinement folder (the Zarr library opens chunk files by path; decision 0033).
+/// Walks the store's real folders (links to folders are checked, not followed).
+fn check_links(path: &Path, c: &crate::confine::Confinement) -> Result<()> {
+    let mut stack = vec![path.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let entries = std::fs::read_dir(&dir).map_err(|e| IoError::os(&dir, "list folder", e))?;
+        for e in entries {
+            let e = e.map_err(|e| IoError::os(&dir, "list folder", e))?;
+            let p = e.path();
+            let kind = e.file_type().map_err(|e| IoError::os(&p, "stat", e))?;
+            if kind.is_symlink() {
+                let target = std::fs::read_link(&p).unwrap_or_default();
+                c.check(
+                    path,
+                    "a symbolic link inside the store",
+                    &format!("{} → {}", p.display(), target.display()),
+                    &p,
+                )?;
+            } else if kind.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Whether `path` is a directory that looks like an OME-Zarr store: its name ends in `.zarr`,
 /// or it holds a `zarr.json` or `.zattrs` that mentions `multiscales`.
 pub(crate) fn is_zarr_store(path: &Path) -> bool {
@@ -173,6 +200,9 @@ impl ZarrStore {
                 what: "OME-Zarr store (a directory)".into(),
                 kind: "not a directory",
             });
+        }
+        if let Some(c) = crate::confine::Confinement::of(path, limits)? {
+            check_links(path, &c)?;
         }
         let (attrs, zarr_version, file) = root_attributes(path, limits)?;
         // bioformats2raw's layout: the image is the group `0` below a root without

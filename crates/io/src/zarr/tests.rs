@@ -849,3 +849,30 @@ fn bioformats2raw_layouts_read_image_0() {
     let e = read_volume_with(&p, &opts()).unwrap_err().to_string();
     assert!(e.contains("multiscales"), "{e}");
 }
+
+/// Decision 0033: a store inside the folder reads are confined to may not reach out of it
+/// through a symbolic link (a chunk, or a level's folder).
+#[cfg(unix)]
+#[test]
+fn confined_reads_refuse_links_out_of_the_folder() {
+    let root = tempfile::tempdir().unwrap();
+    let data = root.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    let v: AnyVolume = ramp_u16([9, 8, 7]).into();
+    let store = data.join("s.zarr");
+    write_zarr(&store, &v, &ZarrWriteOptions::default()).unwrap();
+    let confined = opts().with_limits(Limits::default().with_confine_to(Some(data.clone())));
+    assert_eq!(read_volume_with(&store, &confined).unwrap().volume, v);
+    // A chunk replaced by a link to a file outside: refused (read unconfined, it would be used).
+    let outside = root.path().join("secret");
+    std::fs::copy(store.join("0/0/0/0"), &outside).unwrap();
+    std::fs::remove_file(store.join("0/0/0/0")).unwrap();
+    std::os::unix::fs::symlink(&outside, store.join("0/0/0/0")).unwrap();
+    let e = read_volume_with(&store, &confined).unwrap_err();
+    assert!(matches!(e, IoError::OutsideFolder { .. }), "{e}");
+    assert!(
+        e.to_string().contains("symbolic link inside the store"),
+        "{e}"
+    );
+    read_volume_with(&store, &opts()).unwrap();
+}
