@@ -194,12 +194,16 @@ impl ZarrStore {
     /// Errors name the store, the metadata field and its value.
     pub fn open(path: impl AsRef<Path>, limits: &Limits) -> Result<Self> {
         let path = path.as_ref();
-        if !path.is_dir() {
-            return Err(IoError::NotAFile {
-                path: path.to_path_buf(),
-                what: "OME-Zarr store (a directory)".into(),
-                kind: "not a directory",
-            });
+        match std::fs::metadata(path) {
+            Err(e) => return Err(IoError::os(path, "open OME-Zarr store", e)),
+            Ok(m) if !m.is_dir() => {
+                return Err(IoError::invalid_argument(
+                    path,
+                    "OME-Zarr store",
+                    "is a file; an OME-Zarr store is a folder",
+                ));
+            }
+            Ok(_) => {}
         }
         if let Some(c) = crate::confine::Confinement::of(path, limits)? {
             check_links(path, &c)?;

@@ -589,10 +589,18 @@ fn every_sample_type_round_trips_and_rotations_are_noted() {
 }
 
 #[test]
-fn info_paths_are_documented_in_errors() {
+fn missing_stores_and_files_named_zarr_are_clear_errors() {
     // A store path that does not exist names it.
     let e = ZarrStore::open(Path::new("/nonexistent/x.zarr"), &Limits::default()).unwrap_err();
+    assert!(
+        matches!(&e, IoError::Os { error, .. } if error.kind() == std::io::ErrorKind::NotFound)
+    );
     assert!(e.to_string().contains("x.zarr"), "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("f.zarr");
+    std::fs::write(&file, b"not a folder").unwrap();
+    let e = read_volume_with(&file, &opts()).unwrap_err().to_string();
+    assert!(e.contains("f.zarr") && e.contains("is a folder"), "{e}");
 }
 
 /// An attached-header NRRD of `v` (little-endian, raw or gzip), geometry in `spacings`.
