@@ -56,8 +56,9 @@ pub(crate) enum Command {
 pub(crate) struct InputArgs {
     /// Volume file: NRRD (.nrrd, .nhdr), MetaImage (.mha, .mhd), NIfTI (.nii, .nii.gz, .hdr),
     /// VTK image data (.vti), TIFF (.tif, .tiff, or a folder of TIFF slices), DICOM (a folder
-    /// of a series, or one of its files; --series chooses), or raw with --raw-dims. Omit for
-    /// the built-in MRI head.
+    /// of a series, or one of its files; --series chooses), an OME-Zarr store (.zarr;
+    /// --zarr-level, --channel, --timepoint choose), or raw with --raw-dims. Omit for the
+    /// built-in MRI head.
     pub input: Option<PathBuf>,
     /// Built-in volume to use when no INPUT is given. Default: `brain`, the MRI head built into
     /// the binary; `head` when only --phantom-size is given.
@@ -107,6 +108,35 @@ pub(crate) struct InputArgs {
     /// SeriesNumber (`volsplat info FOLDER` lists them).
     #[arg(long, value_name = "UID|NUMBER", help_heading = "Input")]
     pub series: Option<String>,
+    /// Which resolution level of an OME-Zarr store to load: 0 (full resolution, the default)
+    /// to the coarsest (`volsplat info STORE` lists them). Not the renderer's own pyramid
+    /// (--level), which is built from the volume loaded.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 0,
+        hide_short_help = true,
+        help_heading = "Input"
+    )]
+    pub zarr_level: usize,
+    /// Which channel of a multi-channel OME-Zarr image, from 0.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 0,
+        hide_short_help = true,
+        help_heading = "Input"
+    )]
+    pub channel: usize,
+    /// Which time point of an OME-Zarr image, from 0.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 0,
+        hide_short_help = true,
+        help_heading = "Input"
+    )]
+    pub timepoint: usize,
     /// Reader limits against untrusted or unusually large files, KEY=VALUE[,KEY=VALUE…]:
     /// voxels (default 2^34), header-bytes (1 MiB), json-bytes (16 MiB), xml-bytes (4 GiB);
     /// values may use exponents (voxels=4e10).
@@ -597,10 +627,18 @@ pub(crate) struct ConvertArgs {
     pub input: InputArgs,
     /// Output, by its extension: .nrrd (attached header, space left-posterior-superior), .nii or
     /// .nii.gz (NIfTI-1, sform and qform; geometry rounded to float32), .mha or .mhd (MetaImage
-    /// as ITK writes it; .mhd with a .raw/.zraw data file beside it), or .npy (the samples in
-    /// their own type, shape (z, y, x), no geometry).
+    /// as ITK writes it; .mhd with a .raw/.zraw data file beside it), .npy (the samples in
+    /// their own type, shape (z, y, x), no geometry), or .zarr (an OME-Zarr pyramid: levels
+    /// halved by the renderer's own prefilter until one fits a chunk; zstd-compressed).
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
+    /// .zarr output: chunk edge in samples (cubic chunks), 1 to 1024.
+    #[arg(long, value_name = "N", default_value_t = 64)]
+    pub chunk: usize,
+    /// .zarr output: 2 writes OME-Zarr 0.4 on Zarr v2 (blosc-zstd; read by zarr 2.x and 3.x,
+    /// ome-zarr-py, napari), 3 writes OME-Zarr 0.5 on Zarr v3 (zstd; zarr 3.x).
+    #[arg(long, value_name = "2|3", default_value_t = 2)]
+    pub zarr_version: u8,
     /// Compress the samples: NRRD gzip encoding, MetaImage zlib (.mhd: a .zraw data file). For
     /// NIfTI name the output .nii.gz; .npy is never compressed.
     #[arg(long)]

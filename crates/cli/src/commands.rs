@@ -569,7 +569,10 @@ fn load_info(a: &InputArgs) -> Result<(String, volsplat::io::LoadedVolume)> {
             .with_limits(limits)
             .with_frame(a.frame)
             .with_array(a.array.clone())
-            .with_series(a.series.clone());
+            .with_series(a.series.clone())
+            .with_level(a.zarr_level)
+            .with_channel(a.channel)
+            .with_timepoint(a.timepoint);
         let loaded = volsplat::io::read_volume_with(path, &options)?;
         return Ok((path.display().to_string(), loaded));
     }
@@ -629,10 +632,36 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
         info.value_range[0], info.value_range[1]
     ))?;
     if info.frames > 1 {
+        // An OME-Zarr store's frames are its time points.
+        let flag = if info.levels.is_empty() {
+            "--frame N"
+        } else {
+            "--timepoint N"
+        };
         emit(&format!(
-            "frames:    {} (reading {}; --frame N)",
+            "frames:    {} (reading {}; {flag})",
             info.frames, info.frame
         ))?;
+    }
+    if !info.levels.is_empty() {
+        emit(&format!(
+            "levels:    {} (--zarr-level N):",
+            info.levels.len()
+        ))?;
+        for (n, l) in info.levels.iter().enumerate() {
+            emit(&format!(
+                "  {n}: {} x {} x {}, spacing {} {} {}, chunks {:?}, {} (array `{}`)",
+                l.dims[0],
+                l.dims[1],
+                l.dims[2],
+                l.spacing[0],
+                l.spacing[1],
+                l.spacing[2],
+                l.chunks,
+                l.data_type,
+                l.path
+            ))?;
+        }
     }
     if !info.arrays.is_empty() {
         emit(&format!(
@@ -664,6 +693,17 @@ fn info_cmd(a: InfoArgs) -> Result<()> {
 /// `convert`: any readable volume to the format the output's name gives
 /// (`volsplat::io::write_volume`: NRRD, NIfTI, MetaImage or .npy), geometry kept.
 fn convert_cmd(a: ConvertArgs) -> Result<()> {
+    let zarr = a.output.to_str().is_some_and(|p| {
+        p.to_ascii_lowercase()
+            .trim_end_matches('/')
+            .ends_with(".zarr")
+    });
+    if zarr {
+        return convert_to_zarr(a);
+    }
+    if a.chunk != 64 || a.zarr_version != 2 {
+        bail!("--chunk and --zarr-version apply to .zarr outputs only");
+    }
     check_output_path(&a.output, "-o", &[])?;
     let options = volsplat::io::VolumeWriteOptions { compress: a.gzip };
     volsplat::io::volume_write_format(&a.output, &options)?;
@@ -683,6 +723,98 @@ fn convert_cmd(a: ConvertArgs) -> Result<()> {
             g.dims[1],
             g.dims[2],
             loaded.volume.scalar_type().name()
+        );
+    }
+    Ok(())
+}
+
+/// `convert … -o OUT.zarr`: an OME-Zarr pyramid of the volume (in memory: the volume is read
+/// whole, then each level halved from the one before).
+fn convert_to_zarr(a: ConvertArgs) -> Result<()> {
+    let out = &a.output;
+    if a.gzip {
+        bail!(
+            "-o {}: an OME-Zarr store is compressed with zstd; --gzip does not apply",
+            out.display()
+        );
+    }
+    let version = match a.zarr_version {
+        2 => volsplat::io::ZarrVersion::V2,
+        3 => volsplat::io::ZarrVersion::V3,
+        v => bail!("--zarr-version {v}: expected 2 (OME-Zarr 0.4) or 3 (OME-Zarr 0.5)"),
+    };
+    volsplat::io::zarr::check_zarr_output(out)?;
+    let options = volsplat::io::ZarrWriteOptions::default()
+        .with_version(version)
+        .with_chunk(a.chunk);
+    let converted = match volume_source(&a.input)? {
+        VolumeSource::File { path, raw, .. } => {
+            let read = volsplat::io::ReadOptions::default()
+                .with_limits(reader_limits(&a.input)?)
+                .with_frame(a.input.frame)
+                .with_array(a.input.array.clone())
+                .with_series(a.input.series.clone())
+                .with_level(a.input.zarr_level)
+                .with_channel(a.input.channel)
+                .with_timepoint(a.input.timepoint);
+            let spec = match &raw {
+                Some(r) => {
+                    let mut spec = volsplat::io::RawSpec::new(
+                        r.dims,
+                        volsplat::core::ScalarType::from_name(&r.scalar_type)?,
+                    );
+                    spec.spacing = r.spacing;
+                    spec.origin = r.origin;
+                    spec.big_endian = r.big_endian;
+                    spec.header_bytes = r.header_bytes;
+                    Some(spec)
+                }
+                None => None,
+            };
+            let label = path.display().to_string();
+            let c = volsplat::io::convert_to_zarr(&path, spec.as_ref(), &read, out, &options)
+                .with_context(|| format!("writing {}", out.display()))?;
+            (label, c)
+        }
+        _ => {
+            let (label, loaded) = load_info(&a.input)?;
+            let written = volsplat::io::write_zarr(out, &loaded.volume, &options)
+                .with_context(|| format!("writing {}", out.display()))?;
+            let mut notes = loaded.notes;
+            notes.extend(written.notes.iter().cloned());
+            let c = volsplat::io::ConvertedZarr {
+                written,
+                format: loaded.format,
+                scalar_type: loaded.volume.scalar_type(),
+                streamed: false,
+                notes,
+            };
+            (label, c)
+        }
+    };
+    let (label, c) = converted;
+    if !a.quiet {
+        for n in &c.notes {
+            say!("note: {n}");
+        }
+        let sizes: Vec<String> = c
+            .written
+            .levels
+            .iter()
+            .map(|g| format!("{}×{}×{}", g.dims[0], g.dims[1], g.dims[2]))
+            .collect();
+        say!(
+            "wrote {} (OME-Zarr {}, {} levels: {}; {}, from {label}{})",
+            out.display(),
+            if a.zarr_version == 2 { "0.4" } else { "0.5" },
+            c.written.levels.len(),
+            sizes.join(", "),
+            c.scalar_type.name(),
+            if c.streamed {
+                ", streamed slice by slice"
+            } else {
+                ""
+            }
         );
     }
     Ok(())

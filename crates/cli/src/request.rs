@@ -187,6 +187,9 @@ pub(crate) fn volume_source(a: &InputArgs) -> Result<VolumeSource> {
                 frame: a.frame,
                 array: a.array.clone(),
                 series: a.series.clone(),
+                level: a.zarr_level,
+                channel: a.channel,
+                timepoint: a.timepoint,
             }
         }
     })
@@ -294,6 +297,10 @@ fn apply_volume_flags(s: &mut Scene, input: &InputArgs, set: &dyn Fn(&str) -> bo
         "raw_dims",
         "frame",
         "array",
+        "series",
+        "zarr_level",
+        "channel",
+        "timepoint",
     ]
     .iter()
     .any(|id| set(id))

@@ -132,6 +132,9 @@ fn view_request(
             frame: 0,
             array: None,
             series: None,
+            level: 0,
+            channel: 0,
+            timepoint: 0,
         };
     }
     Ok(req)

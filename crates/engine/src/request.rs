@@ -1067,6 +1067,9 @@ mod scene_file_paths {
             frame: 0,
             array: None,
             series: None,
+            level: 0,
+            channel: 0,
+            timepoint: 0,
         };
         let file = dir.path().join("s.json");
         req.save(&file).unwrap();

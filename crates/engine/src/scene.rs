@@ -188,6 +188,16 @@ pub enum VolumeSource {
         /// SeriesNumber where that is unique (default: the only one).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         series: Option<String>,
+        /// Which resolution level of an OME-Zarr store, 0 (the full resolution, the default)
+        /// to the coarsest (`volsplat info STORE` lists them).
+        #[serde(default, skip_serializing_if = "is_zero")]
+        level: usize,
+        /// Which channel of a multi-channel OME-Zarr image, 0-based.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        channel: usize,
+        /// Which time point of an OME-Zarr image, 0-based.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        timepoint: usize,
     },
     /// A built-in phantom; `grid` as in [`make_phantom`].
     Phantom {
@@ -272,17 +282,29 @@ impl VolumeSource {
                 frame,
                 array,
                 series,
+                level,
+                channel,
+                timepoint,
             } => {
                 let options = volsplat_io::ReadOptions::default()
                     .with_frame(*frame)
                     .with_array(array.clone())
                     .with_series(series.clone())
+                    .with_level(*level)
+                    .with_channel(*channel)
+                    .with_timepoint(*timepoint)
                     .with_limits(limits.clone());
                 let loaded = volsplat_io::read_volume_with(path, &options)?;
                 let mut notes = loaded.notes;
                 if loaded.frames > 1 {
+                    // OME-Zarr counts time points; other formats frames.
+                    let flag = if loaded.format.starts_with("OME-Zarr") {
+                        "--timepoint"
+                    } else {
+                        "--frame"
+                    };
                     notes.push(format!(
-                        "{} holds {} volumes; rendering volume {} (choose with --frame)",
+                        "{} holds {} volumes; rendering volume {} (choose with {flag})",
                         path.display(),
                         loaded.frames,
                         loaded.frame

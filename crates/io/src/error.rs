@@ -225,6 +225,16 @@ pub enum IoError {
         /// Every image series found.
         series: Vec<crate::DicomSeries>,
     },
+    /// A Zarr store or chunk could not be opened or decoded (the `zarrs` crate's message).
+    #[error("{path}: Zarr: {what}: {message}", path = .path.display())]
+    Zarr {
+        /// The store (directory).
+        path: PathBuf,
+        /// What was being read, e.g. `level 1 (array \`1\`)`.
+        what: String,
+        /// The cause.
+        message: String,
+    },
     /// The file extension does not name a supported format.
     #[error(
         "{path}: unsupported file extension {extension:?}; supported: {supported}",

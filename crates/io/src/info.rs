@@ -23,7 +23,7 @@ pub const VOLUME_INFO_SCHEMA: u32 = 1;
 ///   "value_range": [-1024.0, 3071.0], "frames": 1, "frame": 0, "arrays": [],
 ///   "series_uid": "1.2.3", "series": [{ "uid": "1.2.3", "number": 3,
 ///   "description": "HEAD", "modality": "CT", "images": 120, "files": 120 }],
-///   "notes": ["..."] }
+///   "notes": ["..."], "levels": [] }
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct VolumeInfo {
@@ -64,10 +64,57 @@ pub struct VolumeInfo {
     pub series: Vec<DicomSeries>,
     /// Notes from the reader (conversions, assumptions, geometry source).
     pub notes: Vec<String>,
+    /// The resolution levels of an OME-Zarr store, full resolution first; empty for other
+    /// formats.
+    pub levels: Vec<LevelInfo>,
+}
+
+/// One level of an OME-Zarr store in [`VolumeInfo::levels`] (from [`crate::ZarrLevel`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LevelInfo {
+    /// The array's path inside the store.
+    pub path: String,
+    /// Samples along x, y, z.
+    pub dims: [u64; 3],
+    /// Distance between samples along x, y, z (mm).
+    pub spacing: [f64; 3],
+    /// World position (mm) of sample (0, 0, 0).
+    pub origin: [f64; 3],
+    /// The array's shape in store order (OME axes order, e.g. t, c, z, y, x).
+    pub shape: Vec<u64>,
+    /// The chunk (or shard) shape in store order.
+    pub chunks: Vec<u64>,
+    /// The data type as the store names it.
+    pub data_type: String,
+}
+
+/// The levels of the OME-Zarr store at `path`, or none (not a store, or unreadable metadata:
+/// the read reports that).
+fn zarr_levels(path: &Path) -> Vec<LevelInfo> {
+    if !crate::zarr::is_zarr_store(path) {
+        return Vec::new();
+    }
+    let Ok(store) = crate::ZarrStore::open(path, &crate::Limits::default()) else {
+        return Vec::new();
+    };
+    store
+        .levels()
+        .iter()
+        .map(|l| LevelInfo {
+            path: l.path.clone(),
+            dims: l.dims,
+            spacing: l.spacing,
+            origin: l.origin,
+            shape: l.shape.clone(),
+            chunks: l.chunks.clone(),
+            data_type: l.data_type.clone(),
+        })
+        .collect()
 }
 
 impl VolumeInfo {
-    /// Summarises a volume as read from `path`.
+    /// Summarises a volume as read from `path` (for an OME-Zarr store, with its levels, read
+    /// again from its metadata).
     pub fn new(path: &Path, loaded: &LoadedVolume) -> Self {
         let v = &loaded.volume;
         let g = v.grid();
@@ -97,6 +144,7 @@ impl VolumeInfo {
             series_uid: loaded.series_uid.clone(),
             series: loaded.series.clone(),
             notes: loaded.notes.clone(),
+            levels: zarr_levels(path),
         }
     }
 
@@ -160,6 +208,7 @@ mod tests {
             "series_uid",
             "series",
             "notes",
+            "levels",
         ] {
             assert!(v.get(k).is_some(), "missing {k}");
         }

@@ -29,6 +29,9 @@
 //!   slice normal, rescaled, enhanced multi-frame, uncompressed/deflate/RLE/JPEG transfer
 //!   syntaxes; [`list_dicom_series`] lists a folder's series ([`DicomSeries`]). See [`dicom`].
 //! - [`read_raw`] with a [`RawSpec`]: headerless raw files, optionally `.gz`.
+//! - [`read_zarr_with`], [`ZarrStore`]: OME-Zarr v0.4 (Zarr v2) and v0.5 (Zarr v3) stores,
+//!   any level (`level`), channel and time point ([`ReadOptions`]); [`ZarrStore::read_region`]
+//!   reads a box of a level. See [`zarr`].
 //!
 //! Writers (each atomic; geometry in the file's own frame, converted from LPS where it differs):
 //!
@@ -42,6 +45,9 @@
 //! - [`write_metaimage`]: MetaImage `.mha`, or `.mhd` with a `.raw`/`.zraw` data file, as ITK
 //!   writes it (LPS, `AnatomicalOrientation`), exact.
 //! - [`write_npy_volume`]: the samples only, shape (z, y, x).
+//! - [`write_zarr`] with [`ZarrWriteOptions`]: an OME-Zarr pyramid (v0.4 on Zarr v2, or v0.5
+//!   on Zarr v3), levels filtered as the renderer's own pyramid; written into a temporary
+//!   folder and renamed.
 //!
 //! Each volume reader has a `*_with` form of one shape, `read_*_with(path, &ReadOptions) ->
 //! LoadedVolume` ([`read_raw_with`] takes its [`RawSpec`] before the options; decision 0034),
@@ -105,6 +111,7 @@ mod read;
 pub mod tiff_stack;
 pub mod vti;
 mod write;
+pub mod zarr;
 
 pub use atomic::write_bytes_atomic;
 pub use dicom::{
@@ -116,7 +123,7 @@ pub use image::{
     PngBitDepth, PngSettings, encode_png, encode_png_gray, rgb_codes, srgb_encode, write_png,
     write_png_gray,
 };
-pub use info::{VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
+pub use info::{LevelInfo, VOLUME_INFO_SCHEMA, VolumeInfo, volume_info};
 pub use json::{
     CAMERA_FIELDS, MAX_JSON_BYTES, load_camera, load_camera_with, load_transfer_function,
     load_transfer_function_named, load_transfer_function_with, save_camera, save_transfer_function,
@@ -139,6 +146,10 @@ pub use vti::{read_vti, read_vti_with};
 pub use write::{
     VOLUME_WRITE_EXTENSIONS, VolumeWriteFormat, VolumeWriteOptions, WrittenVolume,
     volume_write_format, write_volume,
+};
+pub use zarr::{
+    ConvertedZarr, WrittenZarr, ZarrLevel, ZarrSelection, ZarrStore, ZarrVersion, ZarrWriteOptions,
+    convert_to_zarr, read_zarr_with, write_zarr,
 };
 
 #[cfg(test)]

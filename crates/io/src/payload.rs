@@ -220,11 +220,40 @@ fn open_at_payload(spec: &PayloadSpec<'_>) -> Result<OpenPayload> {
 /// headerless raw file (`exact`) must end where the samples end.
 fn read_raw_samples(spec: &PayloadSpec<'_>, data: OpenPayload, needed: u64) -> Result<Vec<u8>> {
     let path = spec.data_path;
-    let OpenPayload {
-        mut file,
-        file_len,
-        pos,
-    } = data;
+    let offset = raw_offset(spec, &data, needed)?;
+    let OpenPayload { mut file, .. } = data;
+    file.seek(SeekFrom::Start(offset))
+        .map_err(|e| IoError::os(path, "seek", e))?;
+    // `needed` fits in usize (checked by `needed_bytes`) and the file holds at least that much.
+    // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
+    let mut bytes = Vec::new();
+    bytes.try_reserve_exact(needed as usize).map_err(|_| {
+        let oom = std::io::ErrorKind::OutOfMemory.into();
+        IoError::os(path, "allocate the raw payload", oom)
+    })?;
+    // Into the reserved capacity (no zero-filling pass; `take` keeps it from growing).
+    let got = (&mut file)
+        .take(needed)
+        .read_to_end(&mut bytes)
+        .map_err(|e| IoError::os(path, "read raw payload", e))?;
+    if (got as u64) < needed {
+        return Err(IoError::Truncated {
+            path: path.to_path_buf(),
+            what: format!("raw payload starting at byte {offset}"),
+            expected: needed,
+            actual: got as u64,
+            unit: "bytes",
+        });
+    }
+    Ok(bytes)
+}
+
+/// Where the `needed` bytes of an uncompressed payload start: after the byte skip, or at the
+/// file's last bytes (`ByteSkip::FromEnd`); checked against the file's size (exactly, for a
+/// headerless raw file).
+fn raw_offset(spec: &PayloadSpec<'_>, data: &OpenPayload, needed: u64) -> Result<u64> {
+    let path = spec.data_path;
+    let (file_len, pos) = (data.file_len, data.pos);
     let offset = match spec.byte_skip {
         ByteSkip::Bytes(b) => pos.saturating_add(b),
         ByteSkip::FromEnd => {
@@ -261,30 +290,90 @@ fn read_raw_samples(spec: &PayloadSpec<'_>, data: OpenPayload, needed: u64) -> R
             unit: "bytes",
         });
     }
-    file.seek(SeekFrom::Start(offset))
-        .map_err(|e| IoError::os(path, "seek", e))?;
-    // `needed` fits in usize (checked by `needed_bytes`) and the file holds at least that much.
-    // Fallible: a file too big for memory is an error (`OutOfMemory`), not an abort.
-    let mut bytes = Vec::new();
-    bytes.try_reserve_exact(needed as usize).map_err(|_| {
-        let oom = std::io::ErrorKind::OutOfMemory.into();
-        IoError::os(path, "allocate the raw payload", oom)
-    })?;
-    // Into the reserved capacity (no zero-filling pass; `take` keeps it from growing).
-    let got = (&mut file)
-        .take(needed)
-        .read_to_end(&mut bytes)
-        .map_err(|e| IoError::os(path, "read raw payload", e))?;
-    if (got as u64) < needed {
-        return Err(IoError::Truncated {
+    Ok(offset)
+}
+
+/// An uncompressed payload read one z slice at a time (`convert -o X.zarr` streams large
+/// raw and NRRD files through it: memory bounded by a slice, not the volume). The sizes are
+/// checked against the file before the first slice is read, as for a whole read.
+pub(crate) struct RawSlices {
+    file: std::io::BufReader<File>,
+    path: std::path::PathBuf,
+    file_type: FileType,
+    big_endian: bool,
+    /// Samples per slice (`nx · ny`).
+    slice: usize,
+    /// Slices left to read.
+    left: usize,
+    /// The slices' grid (one slice thick).
+    grid: Grid,
+}
+
+impl RawSlices {
+    /// Opens `spec` (raw encoding) for slices of `grid`.
+    pub(crate) fn open(spec: &PayloadSpec<'_>, grid: &Grid) -> Result<Self> {
+        debug_assert_eq!(spec.encoding, Encoding::Raw);
+        let path = spec.data_path;
+        let needed = needed_bytes(spec, grid)?;
+        let data = open_at_payload(spec)?;
+        let offset = raw_offset(spec, &data, needed)?;
+        let mut file = data.file;
+        file.seek(SeekFrom::Start(offset))
+            .map_err(|e| IoError::os(path, "seek", e))?;
+        let [nx, ny, nz] = grid.dims;
+        let one = Grid::new([nx, ny, 1], grid.spacing, grid.origin, grid.direction)
+            .map_err(|e| IoError::core(path, e))?;
+        Ok(RawSlices {
+            file: std::io::BufReader::with_capacity(1 << 20, file),
             path: path.to_path_buf(),
-            what: format!("raw payload starting at byte {offset}"),
-            expected: needed,
-            actual: got as u64,
-            unit: "bytes",
-        });
+            file_type: spec.file_type,
+            big_endian: spec.big_endian,
+            slice: nx * ny,
+            left: nz,
+            grid: one,
+        })
     }
-    Ok(bytes)
+
+    /// The next slice, decoded as a whole read decodes it (`int32`, `uint32`, `double` to
+    /// `f32`; non-finite floats replaced within the slice: callers check a float file has
+    /// none first, [`RawSlices::count_non_finite`]).
+    pub(crate) fn next_slice(&mut self) -> Result<AnyVolume> {
+        if self.left == 0 {
+            return Err(IoError::invalid_argument(
+                &self.path,
+                "slice",
+                "read past the last slice",
+            ));
+        }
+        self.left -= 1;
+        let n = self.slice * self.file_type.size_bytes() as usize;
+        let mut bytes = vec![0u8; n];
+        self.file
+            .read_exact(&mut bytes)
+            .map_err(|e| IoError::os(&self.path, "read raw payload", e))?;
+        decode(
+            bytes,
+            self.file_type,
+            self.big_endian,
+            self.grid.clone(),
+            &self.path,
+        )
+    }
+
+    /// Samples that are NaN or infinite in the whole payload (0 for integer types), reading
+    /// every slice; consumes the reader.
+    pub(crate) fn count_non_finite(mut self) -> Result<u64> {
+        if !matches!(self.file_type, FileType::F32 | FileType::F64) {
+            return Ok(0);
+        }
+        let mut count = 0;
+        while self.left > 0 {
+            if let Some(n) = self.next_slice()?.non_finite() {
+                count += n.count() as u64;
+            }
+        }
+        Ok(count)
+    }
 }
 
 /// The `needed` bytes of a gzip (or, for [`Encoding::ZlibOrGzip`], zlib) payload after the

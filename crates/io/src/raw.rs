@@ -72,6 +72,34 @@ pub fn read_raw_with(
 
 /// Reads a raw file laid out as `spec` says, within `limits`.
 fn read_raw_file(path: &Path, spec: &RawSpec, limits: &Limits) -> Result<AnyVolume> {
+    let (payload, grid) = raw_payload(path, spec, limits)?;
+    read_payload(&payload, grid)
+}
+
+/// The headerless raw file at `path` opened for reading one z slice at a time (`convert -o
+/// X.zarr`), with its grid; `None` for a gzipped file (read it whole).
+pub(crate) fn raw_slices(
+    path: &Path,
+    spec: &RawSpec,
+    options: &ReadOptions,
+) -> Result<Option<(crate::payload::RawSlices, Grid)>> {
+    options.refuse_all_but_limits(path, "raw")?;
+    let (payload, grid) = raw_payload(path, spec, &options.limits)?;
+    if payload.encoding != Encoding::Raw {
+        return Ok(None);
+    }
+    Ok(Some((
+        crate::payload::RawSlices::open(&payload, &grid)?,
+        grid,
+    )))
+}
+
+/// The payload of a headerless raw file and its grid, checked.
+fn raw_payload<'a>(
+    path: &'a Path,
+    spec: &RawSpec,
+    limits: &Limits,
+) -> Result<(PayloadSpec<'a>, Grid)> {
     crate::confine::Confinement::of(path, limits)?;
     let dims_text = format!("{:?}", spec.dims);
     checked_voxel_count(
@@ -97,7 +125,7 @@ fn read_raw_file(path: &Path, spec: &RawSpec, limits: &Limits) -> Result<AnyVolu
         big_endian: spec.big_endian,
         exact: true,
     };
-    read_payload(&payload, grid)
+    Ok((payload, grid))
 }
 
 #[cfg(test)]

@@ -10,11 +10,11 @@ use volsplat_core::AnyVolume;
 /// The file-name endings [`read_volume`] understands (without the leading dot; compare
 /// case-insensitively with the end of the file name, so `nii.gz` matches `brain.NII.GZ`).
 pub const VOLUME_EXTENSIONS: &[&str] = &[
-    "nrrd", "nhdr", "mha", "mhd", "nii", "nii.gz", "hdr", "vti", "tif", "tiff", "dcm",
+    "nrrd", "nhdr", "mha", "mhd", "nii", "nii.gz", "hdr", "vti", "tif", "tiff", "dcm", "zarr",
 ];
 
 const SUPPORTED: &str = ".nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr (+ .img), .vti, \
-     .tif, .tiff, .dcm or any DICOM file, a folder of DICOM or TIFF files (a headerless raw file: \
+     .tif, .tiff, .dcm or any DICOM file, an OME-Zarr store (.zarr), a folder of DICOM or TIFF files (a headerless raw file: \
      give its layout with --raw-dims X,Y,Z, --raw-type and --raw-spacing)";
 
 /// The volume file formats, as told by the file name (`#[non_exhaustive]`: more may come).
@@ -33,6 +33,8 @@ pub enum VolumeFormat {
     Tiff,
     /// A DICOM file, `.dcm` (its series is read: [`crate::read_dicom_with`]).
     Dicom,
+    /// An OME-Zarr store, a directory `.zarr` ([`crate::read_zarr_with`]).
+    Zarr,
 }
 
 impl VolumeFormat {
@@ -51,6 +53,8 @@ impl VolumeFormat {
             VolumeFormat::Tiff
         } else if ends(".dcm") {
             VolumeFormat::Dicom
+        } else if ends(".zarr") {
+            VolumeFormat::Zarr
         } else {
             return None;
         })
@@ -66,6 +70,7 @@ impl VolumeFormat {
             VolumeFormat::Vti => "VTK image data",
             VolumeFormat::Tiff => "TIFF",
             VolumeFormat::Dicom => "DICOM",
+            VolumeFormat::Zarr => "OME-Zarr",
         }
     }
 }
@@ -98,6 +103,17 @@ pub struct ReadOptions {
     /// SeriesNumber where that is unique (default: the only series, or the series of the file
     /// given). Naming a series for another format is an error.
     pub series: Option<String>,
+    /// The resolution level of a multiscale (OME-Zarr) store, 0 (the default) being the full
+    /// resolution. A level past the last is an error listing the levels; a level other than 0
+    /// for another format is an error too.
+    pub level: usize,
+    /// The channel of a multi-channel OME-Zarr image (its `channel` axis), from 0; default 0.
+    /// Out of range, or other than 0 for another format, is an error.
+    pub channel: usize,
+    /// The time point of an OME-Zarr image (its `time` axis), from 0; default 0. Out of
+    /// range, or other than 0 for another format, is an error (4-D NIfTI and ImageJ
+    /// hyperstacks choose theirs with [`ReadOptions::frame`]).
+    pub timepoint: usize,
 }
 
 /// A volume as read, with what the file said about it.
@@ -151,6 +167,47 @@ impl ReadOptions {
         self
     }
 
+    /// These options with [`ReadOptions::level`] set (0: full resolution).
+    pub fn with_level(mut self, level: usize) -> Self {
+        self.level = level;
+        self
+    }
+
+    /// These options with [`ReadOptions::channel`] set (0-based).
+    pub fn with_channel(mut self, channel: usize) -> Self {
+        self.channel = channel;
+        self
+    }
+
+    /// These options with [`ReadOptions::timepoint`] set (0-based).
+    pub fn with_timepoint(mut self, timepoint: usize) -> Self {
+        self.timepoint = timepoint;
+        self
+    }
+
+    /// Refuses a [`ReadOptions::level`], [`ReadOptions::channel`] or
+    /// [`ReadOptions::timepoint`] other than 0 for a reader of anything but OME-Zarr (`format`
+    /// names the reader's format in the message).
+    pub(crate) fn refuse_multiscale(&self, path: &Path, format: &str) -> Result<()> {
+        for (what, value) in [
+            ("level", self.level),
+            ("channel", self.channel),
+            ("timepoint", self.timepoint),
+        ] {
+            if value != 0 {
+                return Err(IoError::invalid_argument(
+                    path,
+                    what,
+                    format!(
+                        "{what} {value} requested: choosing a {what} applies to OME-Zarr \
+                         stores only, not to {format}"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Refuses [`ReadOptions::series`] for a reader of anything but DICOM.
     pub(crate) fn refuse_series(&self, path: &Path) -> Result<()> {
         if self.series.is_some() {
@@ -164,8 +221,10 @@ impl ReadOptions {
     }
 
     /// Refuses [`ReadOptions::array`] for a reader of anything but VTK `.vti` (`format` names
-    /// the reader's format in the message).
+    /// the reader's format in the message), and the OME-Zarr options
+    /// ([`ReadOptions::refuse_multiscale`]).
     pub(crate) fn refuse_array(&self, path: &Path, format: &str) -> Result<()> {
+        self.refuse_multiscale(path, format)?;
         if self.array.is_some() {
             return Err(IoError::invalid_argument(
                 path,
@@ -221,7 +280,9 @@ impl LoadedVolume {
 /// ([`crate::read_nifti`]), `.vti` ([`crate::read_vti`]), `.tif`, `.tiff`
 /// ([`crate::read_tiff`]); a folder holding `.tif`/`.tiff` files is a stack of slices
 /// ([`crate::read_tiff_dir`]); a folder holding DICOM files, a `.dcm` file, or a file of
-/// another name that starts like a DICOM file is a DICOM series ([`crate::read_dicom_with`]).
+/// another name that starts like a DICOM file is a DICOM series ([`crate::read_dicom_with`]);
+/// a folder named `.zarr`, or holding a `zarr.json` / `.zattrs` with OME multiscales, is an
+/// OME-Zarr store ([`crate::read_zarr_with`]).
 /// Headerless raw files need a [`crate::RawSpec`]: use [`crate::read_raw`]. Any other ending,
 /// or another folder, is an error listing the supported ones.
 pub fn read_volume(path: impl AsRef<Path>) -> Result<AnyVolume> {
@@ -241,6 +302,9 @@ pub fn read_volume_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result
 /// [`read_volume_with`] by format, before the notes every format shares. Each reader refuses
 /// the options that do not apply to its format.
 fn read_any(path: &Path, options: &ReadOptions) -> Result<LoadedVolume> {
+    if crate::zarr::is_zarr_store(path) {
+        return crate::zarr::read_zarr_with(path, options);
+    }
     if path.is_dir() && crate::tiff_stack::tiff_files(path)?.is_empty() {
         if crate::dicom::dir_has_dicom(path)? {
             return crate::dicom::read_dicom_with(path, options);
@@ -275,6 +339,7 @@ fn read_any(path: &Path, options: &ReadOptions) -> Result<LoadedVolume> {
         VolumeFormat::Vti => crate::read_vti_with(path, options),
         VolumeFormat::Tiff => crate::read_tiff_with(path, options),
         VolumeFormat::Dicom => crate::dicom::read_dicom_with(path, options),
+        VolumeFormat::Zarr => crate::read_zarr_with(path, options),
     }
 }
 
@@ -478,7 +543,19 @@ mod tests {
                 frame: 2,
                 array: Some("a".into()),
                 series: Some("7".into()),
+                level: 0,
+                channel: 0,
+                timepoint: 0,
             }
+        );
+        let z = ReadOptions::default()
+            .with_level(2)
+            .with_channel(1)
+            .with_timepoint(3);
+        assert_eq!((z.level, z.channel, z.timepoint), (2, 1, 3));
+        assert_eq!(
+            z.with_level(0).with_channel(0).with_timepoint(0),
+            ReadOptions::default()
         );
         let back = o.with_array(None).with_series(None).with_frame(0);
         assert_eq!(back.limits.max_voxels, 5);

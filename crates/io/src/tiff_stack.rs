@@ -62,6 +62,7 @@ pub fn read_tiff_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<L
 pub fn read_tiff_dir(dir: impl AsRef<Path>, options: &ReadOptions) -> Result<LoadedVolume> {
     let dir = dir.as_ref();
     options.refuse_series(dir)?;
+    options.refuse_multiscale(dir, "TIFF")?;
     if options.array.is_some() || options.frame != 0 {
         return Err(IoError::invalid_argument(
             dir,

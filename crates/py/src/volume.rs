@@ -998,7 +998,8 @@ fn limits(
 /// Reads a volume file (the formats of the command line). See `volsplat.load`.
 #[pyfunction]
 #[pyo3(signature = (path, *, frame=0, array=None, series=None, raw_json=None, axes="zyx",
-    max_voxels=None, max_header_bytes=None, max_json_bytes=None, max_xml_bytes=None))]
+    max_voxels=None, max_header_bytes=None, max_json_bytes=None, max_xml_bytes=None, level=0,
+    channel=0, timepoint=0))]
 #[allow(clippy::too_many_arguments)]
 pub fn load(
     py: Python<'_>,
@@ -1012,6 +1013,9 @@ pub fn load(
     max_header_bytes: Option<usize>,
     max_json_bytes: Option<u64>,
     max_xml_bytes: Option<u64>,
+    level: usize,
+    channel: usize,
+    timepoint: usize,
 ) -> PyResult<Volume> {
     let axes = Axes::parse(axes)?;
     let limits = limits(max_voxels, max_header_bytes, max_json_bytes, max_xml_bytes);
@@ -1026,9 +1030,10 @@ pub fn load(
     };
     if let Some(r) = &raw {
         ScalarType::from_name(&r.scalar_type).map_err(errors::from_core)?;
-        if frame != 0 || array.is_some() || series.is_some() {
+        if frame != 0 || array.is_some() || series.is_some() || level + channel + timepoint != 0 {
             return Err(invalid(
-                "frame, array and series do not apply to headerless raw files",
+                "frame, array, series, level, channel and timepoint do not apply to headerless \
+                 raw files",
             ));
         }
     }
@@ -1038,6 +1043,9 @@ pub fn load(
         frame,
         array: array.clone(),
         series: series.clone(),
+        level,
+        channel,
+        timepoint,
     };
     if raw.is_some() {
         let (data, notes) = py
@@ -1058,6 +1066,9 @@ pub fn load(
         .with_frame(frame)
         .with_array(array)
         .with_series(series)
+        .with_level(level)
+        .with_channel(channel)
+        .with_timepoint(timepoint)
         .with_limits(limits);
     let loaded = py
         .detach(|| volsplat::io::read_volume_with(&path, &options))

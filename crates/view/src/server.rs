@@ -160,6 +160,9 @@ impl Shared {
             frame: 0,
             array: None,
             series: None,
+            level: 0,
+            channel: 0,
+            timepoint: 0,
         };
         req.scene.camera = CameraSpec::default();
         req.scene.transfer_function = TransferSpec::Auto;
@@ -220,8 +223,9 @@ pub fn check_data_dir(dir: &Path) -> std::result::Result<(), String> {
     }
 }
 
-/// Regular files of `dir` whose names have a volume extension volsplat reads, sorted; hidden
-/// files and links that leave the folder are left out. Files whose headers name a file outside
+/// Regular files of `dir` whose names have a volume extension volsplat reads, and OME-Zarr
+/// stores (folders named `.zarr`), sorted; hidden files and links that leave the folder are
+/// left out. Files whose headers name a file outside
 /// the folder are listed: opening one is refused with the reader's error (reading every
 /// header at each listing would be slow on large folders).
 pub fn list_volumes(dir: &Path) -> Vec<String> {
@@ -242,8 +246,9 @@ pub fn list_volumes(dir: &Path) -> Vec<String> {
             let known = volsplat::io::VOLUME_EXTENSIONS
                 .iter()
                 .any(|ext| lower.ends_with(&format!(".{ext}")));
-            (crate::protocol::is_plain_name(&name) && path.is_file() && inside && known)
-                .then_some(name)
+            // An OME-Zarr store is a folder named `.zarr`.
+            let readable = path.is_file() || (lower.ends_with(".zarr") && path.is_dir());
+            (crate::protocol::is_plain_name(&name) && readable && inside && known).then_some(name)
         })
         .collect();
     names.sort();

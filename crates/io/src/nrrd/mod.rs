@@ -85,6 +85,33 @@ pub fn read_nrrd_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<L
 /// byte order, the world grid (converted to LPS), the skips, where the data lie; then the
 /// payload.
 fn read_nrrd_file(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String>)> {
+    with_payload(path, limits, |spec, grid, notes| {
+        Ok((read_payload(spec, grid)?, notes))
+    })
+}
+
+/// The NRRD file at `path` opened for reading one z slice at a time (`convert -o X.zarr`),
+/// with its grid and notes; `None` for encodings other than raw (read those whole).
+pub(crate) fn nrrd_slices(
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Option<(crate::payload::RawSlices, Grid, Vec<String>)>> {
+    options.refuse_all_but_limits(path, "NRRD")?;
+    with_payload(path, &options.limits, |spec, grid, notes| {
+        if spec.encoding != Encoding::Raw {
+            return Ok(None);
+        }
+        let slices = crate::payload::RawSlices::open(spec, &grid)?;
+        Ok(Some((slices, grid, notes)))
+    })
+}
+
+/// Parses the header of `path` and calls `f` with its payload, grid and notes.
+fn with_payload<R>(
+    path: &Path,
+    limits: &Limits,
+    f: impl FnOnce(&PayloadSpec<'_>, Grid, Vec<String>) -> Result<R>,
+) -> Result<R> {
     let confine = Confinement::of(path, limits)?;
     let header = read_header(path, limits.max_header_bytes, |n, line| {
         if n > 1 && line.trim().is_empty() {
@@ -111,7 +138,7 @@ fn read_nrrd_file(path: &Path, limits: &Limits) -> Result<(AnyVolume, Vec<String
         big_endian: samples.big_endian,
         exact: false,
     };
-    Ok((read_payload(&spec, grid)?, notes))
+    f(&spec, grid, notes)
 }
 
 /// The header's fields by canonical name ([`canonical_field`]).

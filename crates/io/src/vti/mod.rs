@@ -58,6 +58,7 @@ pub fn read_vti_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Lo
     let path = path.as_ref();
     options.refuse_series(path)?;
     options.refuse_frame(path)?;
+    options.refuse_multiscale(path, "VTK image data")?;
     let bytes = read_whole_file(path, &options.limits)?;
     // Split off <AppendedData>: raw appended data are not XML.
     let (xml_bytes, appended) = split_appended(path, &bytes)?;

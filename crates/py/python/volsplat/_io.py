@@ -83,12 +83,15 @@ def load(
     max_header_bytes: Optional[int] = None,
     max_json_bytes: Optional[int] = None,
     max_xml_bytes: Optional[int] = None,
+    level: int = 0,
+    channel: int = 0,
+    timepoint: int = 0,
 ) -> Volume:
     """Reads a volume file with the command line's readers, by file name: NRRD (``.nrrd``,
     ``.nhdr``), MetaImage (``.mha``, ``.mhd``), NIfTI-1/2 (``.nii``, ``.nii.gz``,
     ``.hdr``/``.img``), VTK image data (``.vti``), TIFF stacks (``.tif``/``.tiff``, or a folder
-    of slices), DICOM series (a folder, or one file of the series), or headerless raw with
-    ``raw={...}``.
+    of slices), DICOM series (a folder, or one file of the series), OME-Zarr stores (a
+    ``.zarr`` folder, OME-Zarr 0.4 and 0.5), or headerless raw with ``raw={...}``.
 
     Medical volumes are put in the LPS patient frame (NIfTI and RAS NRRD converted, as the
     command line does), so a scan renders alike whichever format it came in.
@@ -99,6 +102,10 @@ def load(
     - ``array``: which point-data array of a ``.vti`` file (``--array``).
     - ``series``: which DICOM series of a folder holding several (``--series``): its
       SeriesInstanceUID or SeriesNumber.
+    - ``level``: which resolution level of an OME-Zarr store (``--zarr-level``), 0 (full
+      resolution) to the coarsest; ``channel`` and ``timepoint`` (``--channel``,
+      ``--timepoint``): which channel and time point of a multi-dimensional OME-Zarr image.
+      Other formats refuse values other than 0.
     - ``raw``: layout of a headerless raw file: ``{"dims": (x, y, z), "dtype": "uint16",
       "spacing": (x, y, z), "origin": (x, y, z), "big_endian": False, "header_bytes": 0}``
       (``--raw-dims``, ``--raw-type``, ``--raw-spacing``, ``--raw-big-endian``,
@@ -121,6 +128,9 @@ def load(
         max_header_bytes=max_header_bytes,
         max_json_bytes=max_json_bytes,
         max_xml_bytes=max_xml_bytes,
+        level=int(level),
+        channel=int(channel),
+        timepoint=int(timepoint),
     )
 
 

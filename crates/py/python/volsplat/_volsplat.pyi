@@ -223,6 +223,9 @@ def load(
     max_header_bytes: Optional[int] = None,
     max_json_bytes: Optional[int] = None,
     max_xml_bytes: Optional[int] = None,
+    level: int = 0,
+    channel: int = 0,
+    timepoint: int = 0,
 ) -> Volume: ...
 def phantom(name: Optional[str] = None, grid: Any = None, *, axes: str = "zyx") -> Volume: ...
 def load_camera(path: _Path) -> Tuple[str, List[str]]: ...

@@ -1,0 +1,155 @@
+//! OME-Zarr on the command line (issue 31): `convert -o X.zarr` writes a pyramid, `info` lists
+//! its levels, `render` and `convert` read any level with `--zarr-level`, scene files keep the
+//! choice, and wrong choices are clear errors.
+
+use std::path::Path;
+
+mod util;
+use util::{stderr, stdout, volsplat};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn convert_writes_a_pyramid_that_info_lists_and_render_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let nrrd = dir.path().join("sl.nrrd");
+    let o = volsplat(&[
+        "phantom",
+        "shepp-logan",
+        "--grid",
+        "40,36,30",
+        "-o",
+        s(&nrrd),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for version in ["2", "3"] {
+        let zarr = dir.path().join(format!("sl{version}.zarr"));
+        let o = volsplat(&[
+            "convert",
+            s(&nrrd),
+            "-o",
+            s(&zarr),
+            "--chunk",
+            "16",
+            "--zarr-version",
+            version,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        // 40×36×30 → 21×19×16 → 12×11×9 (fits one 16³ chunk: the last level).
+        let said = stderr(&o);
+        assert!(
+            said.contains("3 levels: 40×36×30, 21×19×16, 12×11×9"),
+            "{said}"
+        );
+        // An uncompressed NRRD is streamed slice by slice.
+        assert!(said.contains("streamed slice by slice"), "{said}");
+        let text = stdout(&volsplat(&["info", s(&zarr)]));
+        assert!(text.contains("levels:    3"), "{text}");
+        assert!(text.contains("1: 21 x 19 x 16, spacing "), "{text}");
+        assert!(text.contains("chunks [16, 16, 16], float32"), "{text}");
+        assert!(text.contains("dims:      40 x 36 x 30"), "{text}");
+        let text = stdout(&volsplat(&["info", s(&zarr), "--zarr-level", "2"]));
+        assert!(text.contains("dims:      12 x 11 x 9"), "{text}");
+        let json = stdout(&volsplat(&["info", s(&zarr), "--json"]));
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(v["levels"].as_array().unwrap().len(), 3);
+        assert_eq!(v["levels"][2]["dims"], serde_json::json!([12, 11, 9]));
+        // Level 0 holds the NRRD's samples: converting back gives the same file content.
+        let back = dir.path().join(format!("back{version}.nrrd"));
+        let o = volsplat(&["convert", s(&zarr), "-o", s(&back)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let a = stdout(&volsplat(&["info", s(&nrrd), "--json"]));
+        let b = stdout(&volsplat(&["info", s(&back), "--json"]));
+        let (a, b): (serde_json::Value, serde_json::Value) = (
+            serde_json::from_str(&a).unwrap(),
+            serde_json::from_str(&b).unwrap(),
+        );
+        for k in ["dims", "spacing", "origin", "value_range", "scalar_type"] {
+            assert_eq!(a[k], b[k], "{k}");
+        }
+    }
+    let zarr = dir.path().join("sl2.zarr");
+    let png = dir.path().join("l1.png");
+    let scene = dir.path().join("l1.json");
+    let o = volsplat(&[
+        "render",
+        s(&zarr),
+        "--zarr-level",
+        "1",
+        "--size",
+        "24x24",
+        "-o",
+        s(&png),
+        "--save-scene",
+        s(&scene),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&scene).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["scene"]["volume"]["file"]["level"], 1, "{text}");
+    // The scene renders the same picture again.
+    let png2 = dir.path().join("l1b.png");
+    let o = volsplat(&["render", "--scene", s(&scene), "-o", s(&png2)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::read(&png).unwrap(), std::fs::read(&png2).unwrap());
+}
+
+#[test]
+fn wrong_zarr_choices_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let nrrd = dir.path().join("b.nrrd");
+    let o = volsplat(&["phantom", "blobs", "--grid", "20", "-o", s(&nrrd)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let zarr = dir.path().join("b.zarr");
+    let o = volsplat(&["convert", s(&nrrd), "-o", s(&zarr)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let x_zarr = dir.path().join("x.zarr");
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &["info", s(&zarr), "--zarr-level", "5"],
+            "level 5 requested, but the store holds 1 levels",
+        ),
+        (
+            &["info", s(&zarr), "--channel", "1"],
+            "channel 1 requested, but the store holds 1",
+        ),
+        (
+            &["info", s(&nrrd), "--zarr-level", "1"],
+            "applies to OME-Zarr stores only, not to NRRD",
+        ),
+        (
+            &["convert", s(&nrrd), "-o", "x.nrrd", "--chunk", "32"],
+            "apply to .zarr outputs only",
+        ),
+        (
+            &["convert", s(&nrrd), "-o", s(&x_zarr), "--zarr-version", "4"],
+            "--zarr-version 4",
+        ),
+        (
+            &["convert", s(&nrrd), "-o", s(&zarr), "--gzip"],
+            "--gzip does not apply",
+        ),
+    ];
+    for (args, want) in cases {
+        let o = volsplat(args);
+        assert!(!o.status.success(), "{args:?}");
+        let e = stderr(&o);
+        assert!(e.contains(want), "{args:?}: {e}");
+        assert!(!e.contains("panicked"), "{e}");
+    }
+    // A folder that is not a store is not replaced.
+    let other = dir.path().join("keep.zarr");
+    std::fs::create_dir(&other).unwrap();
+    std::fs::write(other.join("data.txt"), b"keep").unwrap();
+    let o = volsplat(&["convert", s(&nrrd), "-o", s(&other)]);
+    // Named .zarr, it looks like a store by name; a folder without Zarr metadata is refused.
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("not an OME-Zarr store"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read(other.join("data.txt")).unwrap(), b"keep");
+}
