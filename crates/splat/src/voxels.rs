@@ -49,9 +49,16 @@ pub(crate) struct Linear<'a, T> {
 impl<'a, T: Scalar> Linear<'a, T> {
     /// The addressing of `volume`'s samples.
     pub(crate) fn new(volume: &'a Volume<T>) -> Self {
-        let dims = volume.grid().dims;
+        Linear::from_parts(volume.data(), volume.grid().dims)
+    }
+
+    /// The addressing of `data`, the samples of a grid of `dims` voxels, i fastest
+    /// (`data.len()` is `dims.x·dims.y·dims.z`, as [`Volume::data`]).
+    #[inline(always)]
+    pub(crate) fn from_parts(data: &'a [T], dims: [usize; 3]) -> Self {
+        debug_assert_eq!(data.len(), dims.iter().product::<usize>());
         Linear {
-            data: volume.data(),
+            data,
             stride: [1, dims[0], dims[0] * dims[1]],
             up: [
                 usize::from(dims[0] > 1),
