@@ -48,6 +48,17 @@ pub enum CoreError {
         /// Comma-separated list of valid names.
         known: String,
     },
+    /// A brick of a [`crate::source::BrickSource`] could not be served: its key lies outside
+    /// the level, or the store failed to read or decode it.
+    #[error("level {level}, brick {brick:?}: {cause}")]
+    Brick {
+        /// Pyramid level (0 = full resolution).
+        level: u8,
+        /// Brick coordinates along i, j, k (bricks, not voxels).
+        brick: [u32; 3],
+        /// What went wrong, for a user.
+        cause: String,
+    },
 }
 
 impl CoreError {

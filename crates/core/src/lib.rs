@@ -15,6 +15,8 @@
 //!   Crawfis–Max cubic splat).
 //! - [`image`]: premultiplied RGBA [`Image`], [`ScalarImage`], and the *over* operators.
 //! - [`phantom`]: analytic test volumes with closed-form line integrals (the built-in demo data).
+//! - [`source`]: the brick seam: [`BrickSource`] (bricks of a fixed size with a one-voxel halo,
+//!   per-brick ranges, pyramid levels), its [`BrickLayout`], and the in-memory [`InMemory`].
 //! - [`scenes`]: synthetic stand-ins for the test scenes of Swan et al. 1997, Fig. 7
 //!   (checkerboard sheet, terrain, confocal-like filaments) with matching transfer functions.
 //!
@@ -31,6 +33,7 @@ pub mod kernel;
 pub mod phantom;
 pub mod presets;
 pub mod scenes;
+pub mod source;
 pub mod transfer;
 pub mod volume;
 
@@ -46,6 +49,7 @@ pub use error::{CoreError, Result};
 pub use image::{Image, Rgba, ScalarImage};
 pub use kernel::Kernel;
 pub use presets::{AutoTransfer, BackgroundRule, Histogram, Preset};
+pub use source::{Brick, BrickKey, BrickLayout, BrickSource, InMemory};
 pub use transfer::TransferFunction;
 pub use volume::{AnyVolume, Grid, NonFiniteSamples, Scalar, ScalarType, Volume};
 

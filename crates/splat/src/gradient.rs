@@ -7,12 +7,14 @@
 // out of the dense renderer's classification loop, +0.35 ms per 512² frame of the built-in MRI
 // (`bench --visibility sheet --orbit 0`, 2 threads: classify 5.7 against 5.3-5.5 ms).
 
+use crate::voxels::{Linear, Voxels};
 use volsplat_core::Scalar;
 use volsplat_core::glam::{Mat3, Vec3};
 
 /// World-space gradient at full-resolution voxel `p`: central differences divided by
 /// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
 /// by the direction matrix (`docs/architecture.md`, the LPS world frame). Data units per world unit.
+/// [`gradient_in`] over the volume's samples `data` ([`Linear`]).
 #[inline(always)]
 pub(crate) fn gradient_at<T: Scalar>(
     data: &[T],
@@ -21,9 +23,25 @@ pub(crate) fn gradient_at<T: Scalar>(
     direction: Mat3,
     p: [usize; 3],
 ) -> Vec3 {
+    let vox = Linear::from_parts(data, dims_full);
+    gradient_in(&vox, dims_full, inv_spacing_full, direction, p)
+}
+
+/// [`gradient_at`] reading the voxels through `vox` (brick seam, docs/design/brick-seam.md
+/// §2.2): faces are tested on the global index `p` against `dims_full`, the values loaded at
+/// [`Voxels::linear`]`(p) ± stride`.
+#[inline(always)]
+pub(crate) fn gradient_in<T: Scalar>(
+    vox: &impl Voxels<T>,
+    dims_full: [usize; 3],
+    inv_spacing_full: [f32; 3],
+    direction: Mat3,
+    p: [usize; 3],
+) -> Vec3 {
     let [nx, ny, nz] = dims_full;
-    let lin = p[0] + nx * (p[1] + ny * p[2]);
-    let strides = [1, nx, nx * ny];
+    let lin = vox.linear(p);
+    let strides = vox.stride();
+    let data = vox.data();
     if p[0] > 0 && p[1] > 0 && p[2] > 0 && p[0] + 1 < nx && p[1] + 1 < ny && p[2] + 1 < nz {
         // Interior: central differences on all three axes, no border cases.
         let d = |s: usize| data[lin + s].to_f32() - data[lin - s].to_f32();
@@ -36,7 +54,7 @@ pub(crate) fn gradient_at<T: Scalar>(
     }
     // On a face: `index_gradient`'s differences, each then times its inverse spacing (the same
     // operations in the same order as `(ρ(hi) − ρ(lo)) · half · 1/spacing`).
-    let g = index_gradient(data, dims_full, p);
+    let g = index_gradient_in(vox, dims_full, p);
     direction
         * Vec3::new(
             g[0] * inv_spacing_full[0],
@@ -47,16 +65,28 @@ pub(crate) fn gradient_at<T: Scalar>(
 
 /// Central differences at full-resolution voxel `p` in index units (data units per voxel
 /// step): `(ρ(p + e) − ρ(p − e)) · ½`, one-sided `(ρ(p + e) − ρ(p)) · 1` on the faces, 0 along an
-/// axis of one voxel. [`gradient_at`] before its spacing and direction.
+/// axis of one voxel. [`gradient_at`] before its spacing and direction. [`index_gradient_in`]
+/// over the volume's samples `data` ([`Linear`]).
 #[inline(always)]
 pub(crate) fn index_gradient<T: Scalar>(
     data: &[T],
     dims_full: [usize; 3],
     p: [usize; 3],
 ) -> [f32; 3] {
-    let [nx, ny, _] = dims_full;
-    let lin = p[0] + nx * (p[1] + ny * p[2]);
-    let strides = [1, nx, nx * ny];
+    index_gradient_in(&Linear::from_parts(data, dims_full), dims_full, p)
+}
+
+/// [`index_gradient`] reading the voxels through `vox`: faces tested on the global `p`, values
+/// loaded at [`Voxels::linear`]`(p) ± stride`.
+#[inline(always)]
+pub(crate) fn index_gradient_in<T: Scalar>(
+    vox: &impl Voxels<T>,
+    dims_full: [usize; 3],
+    p: [usize; 3],
+) -> [f32; 3] {
+    let lin = vox.linear(p);
+    let strides = vox.stride();
+    let data = vox.data();
     let mut g = [0.0f32; 3];
     for c in 0..3 {
         let n = dims_full[c];

@@ -44,6 +44,7 @@ pub mod sheets;
 pub mod slab;
 #[cfg(test)]
 mod test_fixtures;
+mod voxels;
 
 pub use aa::Antialias;
 pub use bricks::BrickGrid;

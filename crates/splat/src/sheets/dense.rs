@@ -14,9 +14,10 @@ use crate::clip::LatticeClip;
 use crate::error::Result;
 use crate::footprint::{FootprintTable, LocatedPlanes};
 use crate::geometry::{Order, SplatGeometry};
-use crate::gradient::{gradient_at, index_gradient};
+use crate::gradient::{gradient_in, index_gradient_in};
 use crate::mipcull::MipTiles;
 use crate::row::deposit_row;
+use crate::voxels::{Linear, Voxels};
 use std::time::Instant;
 use volsplat_core::crio::FrameClassifier;
 use volsplat_core::glam::{Mat3, Vec3};
@@ -151,7 +152,8 @@ impl<T: Scalar> SheetPass for Dense<'_, T> {
 
 /// Read-only state for classifying sheets.
 struct ClassifyContext<'a, T> {
-    data: &'a [T],
+    /// Where the voxels' values are loaded from ([`Linear`]: the volume's samples).
+    vox: Linear<'a, T>,
     dims_full: [usize; 3],
     /// Grid direction matrix (columns: world directions of the i, j, k axes).
     direction: Mat3,
@@ -226,7 +228,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
             zero_lut,
             lut_offset,
             shade,
-            data: volume.data(),
+            vox: Linear::new(volume),
             dims_full: grid.dims,
             direction: grid.direction.as_mat3(),
             inv_spacing_full: grid.spacing.map(|s| (1.0 / s) as f32),
@@ -249,8 +251,8 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
 
     #[inline]
     fn gradient(&self, p: [usize; 3]) -> Vec3 {
-        gradient_at(
-            self.data,
+        gradient_in(
+            &self.vox,
             self.dims_full,
             self.inv_spacing_full,
             self.direction,
@@ -278,8 +280,8 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         }
         out.buckets.resize_with(self.n_bands, Vec::new);
         let (mut splatted, mut skipped) = (0u64, 0u64);
-        let [nx, ny, _] = self.dims_full;
-        let data_stride = [1, nx, nx * ny];
+        let data = self.vox.data();
+        let data_stride = self.vox.stride();
         let (su, sv) = (data_stride[ua] * stride, data_stride[va] * stride);
         let sheet_lin = data_stride[sa] * stride * sheet;
         let ds = geom.sheet_spacing as f32;
@@ -302,7 +304,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                     ui
                 };
                 let lin = row_lin + u * su;
-                let density = self.data[lin].to_f32();
+                let density = data[lin].to_f32();
                 // Shade first (§5.2): cull zero opacity before anything else is computed.
                 if self.cull && self.is_transparent(density) {
                     continue;
@@ -420,7 +422,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
     ) -> Option<Rgba> {
         let value: Rgba = match (self.mode, &self.shade) {
             (RenderMode::Composite, Some(t)) => {
-                let g = index_gradient(self.data, self.dims_full, at());
+                let g = index_gradient_in(&self.vox, self.dims_full, at());
                 match crate::slab::shaded_src(t, density, g, 1.0, false) {
                     Some(c) => c,
                     None if self.cull => return None,

@@ -18,6 +18,7 @@ use crate::bricks::BrickGrid;
 use crate::error::{Result, SplatError};
 use crate::normals::VoxelShading;
 use crate::sheets::{Progress, RenderMode, RenderSettings};
+use crate::voxels::{Linear, Voxels};
 use rayon::prelude::*;
 use volsplat_core::glam::{DVec3, Vec3};
 use volsplat_core::image::{Rgba, over_front_to_back};
@@ -51,7 +52,8 @@ impl Counters {
 }
 
 pub(super) struct Ctx<'a, T> {
-    pub(super) data: &'a [T],
+    /// Where the voxels' values are loaded from ([`Linear`]: the volume's samples).
+    pub(super) vox: Linear<'a, T>,
     pub(super) dims: [usize; 3],
     /// The upper corner of the box the rays cross, in the index space of the view
     /// ([`drawn_geometry`]): `n − 1`, or 1 along an axis of one sample (its voxel, `[0, 1]`
@@ -61,10 +63,6 @@ pub(super) struct Ctx<'a, T> {
     pub(super) box_hi: [i64; 3],
     /// Largest cell index per axis (`max(n, 2) − 2`).
     pub(super) max_cell: [i64; 3],
-    /// Index strides per axis.
-    pub(super) stride: [usize; 3],
-    /// Offset to the next voxel per axis (0 along an axis of one voxel).
-    pub(super) up: [usize; 3],
     /// Sample eight pixels at a time with AVX2 (the CPU has it, and indices fit in i32).
     pub(super) simd: bool,
     /// Per index axis: the world direction of that axis divided by its spacing (a derivative
@@ -126,18 +124,12 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         let composite = settings.mode == RenderMode::Composite;
         let all_active = active.iter().all(|&a| a);
         Ctx {
-            data: volume.data(),
+            vox: Linear::new(volume),
             dims,
             box_hi: planes.geo.dims.map(|n| n as i64 - 1),
             max_cell: dims.map(|n| n.max(2) as i64 - 2),
             simd: settings.simd && simd_available() && volume.data().len() < i32::MAX as usize,
             grad_to_world: tables.grad_to_world,
-            stride: [1, dims[0], dims[0] * dims[1]],
-            up: [
-                usize::from(dims[0] > 1),
-                usize::from(dims[1] > 1) * dims[0],
-                usize::from(dims[2] > 1) * dims[0] * dims[1],
-            ],
             bricks,
             active_bytes: active.iter().map(|&a| u8::from(a)).chain([0; 3]).collect(),
             active,
@@ -349,13 +341,7 @@ impl<'a, T: Scalar> Ctx<'a, T> {
     /// The trilinear sample in cell `c` at fractions `f`.
     #[inline(always)]
     fn sample_cell(&self, c: [usize; 3], f: [f32; 3]) -> f32 {
-        trilinear(self.data, self.base(c), self.up, f)
-    }
-
-    /// Linear index of voxel `c`.
-    #[inline(always)]
-    pub(super) fn base(&self, c: [usize; 3]) -> usize {
-        c[0] + c[1] * self.stride[1] + c[2] * self.stride[2]
+        trilinear(&self.vox, self.vox.cell_base(c), f)
     }
 
     /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through every plane.
@@ -542,8 +528,8 @@ impl<'a, T: Scalar> Ctx<'a, T> {
                 } else {
                     (t.entry(rho), (cell, f))
                 };
-                let base = self.base(cell);
-                let [ux, uy, uz] = self.up;
+                let base = self.vox.cell_base(cell);
+                let [ux, uy, uz] = self.vox.up();
                 let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
                 let codes = offs.map(|o| self.codes[base + o]);
                 voxel_shaded_src(t, vs, v, &codes, f, k, corrected)

@@ -1,6 +1,7 @@
 //! Scalar arithmetic shared by the scalar twins: the libm-free `log2` and `exp2`, the
 //! trilinear interpolation, and `maxps`/`minps` as the AVX2 kernels compute them.
 
+use crate::voxels::Voxels;
 use volsplat_core::Scalar;
 
 /// `log2(y)` for `y` in `(0, 1]`: the exponent plus the series of `log2((1 + t)/(1 − t))`,
@@ -38,14 +39,15 @@ pub(super) fn exp2_neg(z: f32) -> f32 {
     f32::from_bits(((i + 127) as u32) << 23) * p * std::f32::consts::FRAC_1_SQRT_2
 }
 
-/// The trilinear interpolation of `data` (a grid with the volume's strides) in the cell whose
-/// lower corner has linear index `base`, at fractions `f`; `up` is the offset to the next voxel
-/// per axis. [`Sampler8::sample`] does the same operations in the same order.
+/// The trilinear interpolation of the voxels `vox` in the cell whose lower corner is at `base`
+/// ([`Voxels::cell_base`]), at fractions `f`; the other corners lie at [`Voxels::up`] offsets.
+/// [`Sampler8::sample`] does the same operations in the same order.
 ///
 /// [`Sampler8::sample`]: super::avx2::sampler::Sampler8::sample
 #[inline(always)]
-pub(super) fn trilinear<U: Scalar>(data: &[U], base: usize, up: [usize; 3], f: [f32; 3]) -> f32 {
-    let [ux, uy, uz] = up;
+pub(super) fn trilinear<U: Scalar>(vox: &impl Voxels<U>, base: usize, f: [f32; 3]) -> f32 {
+    let [ux, uy, uz] = vox.up();
+    let data = vox.data();
     let v = |o: usize| data[base + o].to_f32();
     let c00 = lerp(v(0), v(ux), f[0]);
     let c10 = lerp(v(uy), v(uy + ux), f[0]);

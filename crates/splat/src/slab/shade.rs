@@ -6,6 +6,7 @@ use super::math::{exp2_neg, lerp, max_ps, min_ps};
 use super::tables::ShadeTable;
 use super::view::Walk;
 use crate::normals::VoxelShading;
+use crate::voxels::Voxels;
 use volsplat_core::Scalar;
 use volsplat_core::glam::Vec3;
 use volsplat_core::image::Rgba;
@@ -230,8 +231,9 @@ impl<T: Scalar> Ctx<'_, T> {
     /// [`Ctx::gradient_lerp`].
     #[inline(always)]
     fn difference(&self, at: usize, p: usize, a: usize) -> (f32, bool) {
-        let s = self.stride[a];
-        let v = |q: usize| self.data[q].to_f32();
+        let s = self.vox.stride()[a];
+        let data = self.vox.data();
+        let v = |q: usize| data[q].to_f32();
         if p == 0 {
             (v(at + s) - v(at), false)
         } else if p == self.dims[a] - 1 {
@@ -265,7 +267,7 @@ impl<T: Scalar> Ctx<'_, T> {
             if w == 0.0 {
                 continue;
             }
-            let here = p[0] + p[1] * self.stride[1] + p[2] * self.stride[2];
+            let here = self.vox.linear(p);
             for a in 0..3 {
                 if self.dims[a] < 2 {
                     continue;
@@ -286,8 +288,8 @@ impl<T: Scalar> Ctx<'_, T> {
     /// [`ShadeSource`]: super::avx2::shade::ShadeSource
     #[inline(always)]
     pub(super) fn gradient_lerp(&self, c: [usize; 3], f: [f32; 3]) -> [f32; 3] {
-        let base = self.base(c);
-        let [ux, uy, uz] = self.up;
+        let base = self.vox.cell_base(c);
+        let [ux, uy, uz] = self.vox.up();
         // Corner k of the cell is (k & 1, k >> 1 & 1, k >> 2) voxels from its lower corner.
         let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
         let mut g = [0.0f32; 3];

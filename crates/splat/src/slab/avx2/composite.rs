@@ -6,6 +6,7 @@ use super::{exp2_neg8, first_lanes, interp8, lanes, table_pos8};
 use crate::slab::march::{Counters, Ctx, Post, RowCtx};
 use crate::slab::tables::{PostTable, SEGMENT_MIN_ENTRIES, TableAxis};
 use crate::slab::view::Walk;
+use crate::voxels::Voxels;
 use std::arch::x86_64::*;
 use volsplat_core::Scalar;
 
@@ -414,7 +415,7 @@ pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar>(
                 vs,
                 sampler: &sampler,
                 codes: ctx.codes.as_ptr() as *const i32,
-                x_shift: _mm_cvtsi32_si128(16 * ctx.up[0] as i32),
+                x_shift: _mm_cvtsi32_si128(16 * ctx.vox.up()[0] as i32),
                 preint: ctx.preint_for(post),
                 back_s: row.back_s.map(|v| _mm256_set1_ps(v)),
                 back_st: row.back_st.map(|v| _mm256_set1_ps(v)),
@@ -426,7 +427,9 @@ pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar>(
                 t,
                 sampler: &sampler,
                 inner_max: ctx.dims.map(|n| _mm256_set1_epi32(n as i32 - 3)),
-                safe_base: _mm256_set1_epi32((1 + ctx.stride[1] + ctx.stride[2]) as i32),
+                safe_base: _mm256_set1_epi32(
+                    (1 + ctx.vox.stride()[1] + ctx.vox.stride()[2]) as i32,
+                ),
                 back_s: row.back_s.map(|v| _mm256_set1_ps(v)),
                 back_st: row.back_st.map(|v| _mm256_set1_ps(v)),
                 preint: ctx.preint_for(post),

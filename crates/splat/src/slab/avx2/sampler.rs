@@ -3,6 +3,7 @@
 use super::super::march::Ctx;
 use super::super::view::Walk;
 use crate::bricks::BRICK;
+use crate::voxels::Voxels;
 use volsplat_core::Scalar;
 
 /// Trilinear samples of one row of one plane, eight pixels at a time with AVX2: lane `l` does
@@ -64,11 +65,11 @@ impl<T: Scalar> Sampler8<T> {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn new(ctx: &Ctx<'_, T>, walk: &Walk) -> Self {
         use std::arch::x86_64::*;
-        let data = ctx.data;
+        let data = ctx.vox.data();
         let bytes = std::mem::size_of::<T>();
         // Largest index whose 4-byte read stays inside the data.
         let safe_last = std::mem::size_of_val(data).saturating_sub(4) / bytes;
-        let [ux, uy, uz] = ctx.up;
+        let [ux, uy, uz] = ctx.vox.up();
         Sampler8 {
             ptr: data.as_ptr() as *const i32,
             kind: T::TYPE,
@@ -77,8 +78,8 @@ impl<T: Scalar> Sampler8<T> {
             s: walk.s32.map(|v| _mm256_set1_ps(v)),
             st: walk.st32.map(|v| _mm256_set1_ps(v)),
             maxc: ctx.max_cell.map(|m| _mm256_set1_epi32(m as i32)),
-            sy: _mm256_set1_epi32(ctx.stride[1] as i32),
-            sz: _mm256_set1_epi32(ctx.stride[2] as i32),
+            sy: _mm256_set1_epi32(ctx.vox.stride()[1] as i32),
+            sz: _mm256_set1_epi32(ctx.vox.stride()[2] as i32),
             last_ok: _mm256_set1_epi32(safe_last as i32),
             x_shift: _mm_cvtsi32_si128((8 * bytes * ux).min(32) as i32),
             bdims: [

@@ -1,0 +1,709 @@
+//! The brick seam (docs/design/brick-seam.md §2.1, issue 31 item 1): a level of a volume cut
+//! into bricks of a fixed size with a one-voxel halo, served by a [`BrickSource`].
+//!
+//! All positions here are **index space** of one pyramid level: voxel `p = (i, j, k)` with
+//! `0 ≤ p < dims` (as [`Grid::dims`]), cell `c` the cube whose lower corner is voxel `c`. A brick
+//! `b` owns the cells `[B·b, B·b + B)` per axis and so the voxels `[B·b, B·b + B]`, the upper face
+//! shared with the next brick (as the splat crate's `BrickGrid`, whose 8³ blocks every brick holds
+//! whole). A slot holds its voxels `[B·b − H, B·b + B + H]`, H = 1, so that every stencil the
+//! renderers use (trilinear corners, central differences) stays inside one brick.
+//!
+//! An axis of one voxel (decision 0023) has one degenerate cell, cell 0 (the kernels read it with
+//! a zero step to the next voxel); it belongs to brick 0.
+
+use std::ops::Range;
+use std::sync::Arc;
+
+use crate::error::{CoreError, Result};
+use crate::volume::{Grid, Scalar, Volume};
+
+/// Halo width, in voxels, around the voxels a brick owns (each side, each axis).
+pub const HALO: usize = 1;
+
+/// Side of the skip blocks whose ranges a [`Brick`] carries ([`Brick::ranges8`]), in cells: the
+/// splat crate's `BrickGrid` block.
+pub const BLOCK: usize = 8;
+
+/// Which brick: pyramid level and brick coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BrickKey {
+    /// Pyramid level (0 = full resolution).
+    pub level: u8,
+    /// Brick coordinates along i, j, k, in bricks, each below [`BrickLayout::dims`].
+    pub b: [u32; 3],
+}
+
+impl BrickKey {
+    /// The error for this key, with `cause`.
+    pub fn error(self, cause: impl Into<String>) -> CoreError {
+        CoreError::Brick {
+            level: self.level,
+            brick: self.b,
+            cause: cause.into(),
+        }
+    }
+}
+
+/// How one level is cut into bricks: `B` cells per brick side (a power of two and a multiple of
+/// 8, so every 8³ skip block lies in one brick), a halo of [`HALO`] voxels, and
+/// `max(ceil((n − 1) / B), 1)` bricks per axis of `n` voxels (as `BrickGrid`). A slot holds
+/// `E = B + 1 + 2H` voxels per axis, always the full `E³` (edge bricks are padded), so the slot
+/// strides `[1, E, E²]` are the same for every brick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BrickLayout {
+    grid: Grid,
+    level: u8,
+    size: usize,
+    shift: u32,
+    dims: [usize; 3],
+}
+
+impl BrickLayout {
+    /// The layout of level `level`, of geometry `grid`, in bricks of `size` cells per side.
+    ///
+    /// Errors (naming `brick size`) if `size` is 0, not a power of two, not a multiple of 8, or
+    /// so large that a slot (`E³` voxels) would exceed `i32::MAX` voxels (the arena limit of the
+    /// AVX2 gathers).
+    pub fn new(grid: Grid, level: u8, size: usize) -> Result<Self> {
+        if size == 0 || !size.is_power_of_two() || !size.is_multiple_of(BLOCK) {
+            return Err(CoreError::invalid(
+                "brick size",
+                size,
+                "must be a power of two and a multiple of 8 (cells per brick side)",
+            ));
+        }
+        let e = size as u128 + 1 + 2 * HALO as u128;
+        let slot = e
+            .checked_mul(e)
+            .and_then(|s| s.checked_mul(e))
+            .unwrap_or(u128::MAX);
+        if slot > i32::MAX as u128 {
+            return Err(CoreError::TooLarge {
+                what: format!("voxels per brick slot at brick size {size}"),
+                value: slot,
+                limit: i32::MAX as u128,
+            });
+        }
+        let dims = grid.dims.map(|n| n.saturating_sub(1).div_ceil(size).max(1));
+        Ok(BrickLayout {
+            grid,
+            level,
+            size,
+            shift: size.trailing_zeros(),
+            dims,
+        })
+    }
+
+    /// The level's geometry.
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    /// The pyramid level this layout cuts (0 = full resolution).
+    pub fn level(&self) -> u8 {
+        self.level
+    }
+
+    /// `B`: cells per brick side.
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    /// `log2 B`: a cell's brick is `c >> shift` per axis.
+    pub fn shift(&self) -> u32 {
+        self.shift
+    }
+
+    /// `H`: halo voxels each side ([`HALO`]).
+    pub fn halo(&self) -> usize {
+        HALO
+    }
+
+    /// Bricks per axis (i, j, k): `max(ceil((n − 1) / B), 1)`.
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Number of bricks in the level.
+    pub fn brick_count(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// `E = B + 1 + 2H`: voxels per slot side.
+    pub fn extent(&self) -> usize {
+        self.size + 1 + 2 * HALO
+    }
+
+    /// `E³`: voxels per slot.
+    pub fn slot_len(&self) -> usize {
+        let e = self.extent();
+        e * e * e
+    }
+
+    /// Slot strides `[1, E, E²]` (voxels), the same for every brick.
+    pub fn slot_strides(&self) -> [usize; 3] {
+        let e = self.extent();
+        [1, e, e * e]
+    }
+
+    /// Cells per axis: `max(n − 1, 1)` (an axis of one voxel has the degenerate cell 0).
+    pub fn cells(&self) -> [usize; 3] {
+        self.grid.dims.map(|n| n.saturating_sub(1).max(1))
+    }
+
+    /// The key of brick `b` of this level; `None` if `b` lies outside [`BrickLayout::dims`].
+    pub fn key(&self, b: [usize; 3]) -> Option<BrickKey> {
+        if (0..3).any(|a| b[a] >= self.dims[a]) {
+            return None;
+        }
+        Some(BrickKey {
+            level: self.level,
+            b: b.map(|x| x as u32),
+        })
+    }
+
+    /// Checks that `key` is a brick of this layout, returning its coordinates.
+    pub fn check(&self, key: BrickKey) -> Result<[usize; 3]> {
+        if key.level != self.level {
+            return Err(key.error(format!("not a brick of level {}", self.level)));
+        }
+        let b = key.b.map(|x| x as usize);
+        if (0..3).any(|a| b[a] >= self.dims[a]) {
+            return Err(key.error(format!(
+                "outside the level's {}×{}×{} bricks",
+                self.dims[0], self.dims[1], self.dims[2]
+            )));
+        }
+        Ok(b)
+    }
+
+    /// The brick owning cell `c` (index space of the level); `None` if `c` is not a cell of the
+    /// level (beyond [`BrickLayout::cells`]).
+    pub fn brick_of_cell(&self, c: [usize; 3]) -> Option<BrickKey> {
+        let cells = self.cells();
+        if (0..3).any(|a| c[a] >= cells[a]) {
+            return None;
+        }
+        self.key(c.map(|x| x >> self.shift))
+    }
+
+    /// The brick serving a stencil centred on voxel `p` (central differences: `p ± 1`, which its
+    /// halo holds): `min(p >> log2 B, dims − 1)`; `None` if `p` is not a voxel of the level.
+    pub fn brick_of_voxel(&self, p: [usize; 3]) -> Option<BrickKey> {
+        if (0..3).any(|a| p[a] >= self.grid.dims[a]) {
+            return None;
+        }
+        self.key(std::array::from_fn(|a| {
+            (p[a] >> self.shift).min(self.dims[a] - 1)
+        }))
+    }
+
+    /// The cells brick `b` owns per axis, `[B·b, B·b + B)` clamped to [`BrickLayout::cells`]
+    /// (index space). Errors if `key` is not a brick of this layout.
+    pub fn owned_cells(&self, key: BrickKey) -> Result<[Range<usize>; 3]> {
+        let b = self.check(key)?;
+        let cells = self.cells();
+        Ok(std::array::from_fn(|a| {
+            let lo = b[a] * self.size;
+            lo..(lo + self.size).min(cells[a])
+        }))
+    }
+
+    /// The voxels brick `b` owns per axis, `[B·b, B·b + B]` clamped to the level (the upper face
+    /// is shared with the next brick), as half-open ranges of voxel indices.
+    pub fn owned_voxels(&self, key: BrickKey) -> Result<[Range<usize>; 3]> {
+        let b = self.check(key)?;
+        let n = self.grid.dims;
+        Ok(std::array::from_fn(|a| {
+            let lo = b[a] * self.size;
+            lo..(lo + self.size + 1).min(n[a])
+        }))
+    }
+
+    /// The voxels a slot holds per axis, `[B·b − H, B·b + B + H]` clamped to the level, as
+    /// half-open ranges of voxel indices.
+    pub fn halo_voxels(&self, key: BrickKey) -> Result<[Range<usize>; 3]> {
+        let b = self.check(key)?;
+        let n = self.grid.dims;
+        Ok(std::array::from_fn(|a| {
+            let lo = b[a] * self.size;
+            lo.saturating_sub(HALO)..(lo + self.size + 1 + HALO).min(n[a])
+        }))
+    }
+
+    /// The slot index of voxel `p` (index space of the level) in brick `key`'s slot:
+    /// `Σ (p − B·b + H)·[1, E, E²]`. `None` if `p` lies outside the slot (or `key` outside the
+    /// layout).
+    pub fn slot_index(&self, key: BrickKey, p: [usize; 3]) -> Option<usize> {
+        let b = self.check(key).ok()?;
+        let e = self.extent();
+        let s = self.slot_strides();
+        let mut at = 0;
+        for a in 0..3 {
+            let l = (p[a] + HALO).checked_sub(b[a] * self.size)?;
+            if l >= e {
+                return None;
+            }
+            at += l * s[a];
+        }
+        Some(at)
+    }
+}
+
+/// A resident brick: the voxels `[B·b − H, B·b + B + H]` of its level at slot index
+/// `(p − B·b + H)·[1, E, E²]` ([`BrickLayout::slot_index`]), plus its skip-block and value ranges.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Brick<T> {
+    /// Which brick.
+    pub key: BrickKey,
+    /// The full `E³` slot, i fastest. Slot positions outside the level (edge bricks) hold the
+    /// nearest voxel of the level (the clamped index): finite values inside the level's range,
+    /// which no kernel reads (faces are tested on global indices).
+    pub data: Box<[T]>,
+    /// `[min, max]` (data units) of each 8³ skip block the brick owns, `(B/8)³` of them, i
+    /// fastest. Block `q` (global block index `(B/8)·b + q`) covers the voxels `[8q, 8q + 8]`
+    /// clamped to the level, as `BrickGrid`; a block beyond the level is empty, `[+∞, −∞]`.
+    /// NaN voxels are ignored (as `f32::min`/`max` do).
+    pub ranges8: Box<[[f32; 2]]>,
+    /// `[min, max]` (data units) of the voxels the brick owns ([`BrickLayout::owned_voxels`]),
+    /// halo excluded: the union of [`Brick::ranges8`].
+    pub range: [f32; 2],
+}
+
+/// A source of bricks for one volume and its pyramid levels (docs/design/brick-seam.md §2.1).
+///
+/// Reads are fallible (a store can fail); renderers call them only at serial points, never inside
+/// their parallel loops.
+pub trait BrickSource<T: Scalar>: Send + Sync {
+    /// The geometry of each level; level 0 is full resolution.
+    fn levels(&self) -> &[Grid];
+
+    /// How level `level` is cut into bricks; `None` if there is no such level.
+    fn layout(&self, level: usize) -> Option<&BrickLayout>;
+
+    /// `[min, max]` (data units) of the voxels brick `key` owns, where known without reading a
+    /// store (a sidecar, a resident copy); `None` when unknown or `key` is not a brick.
+    fn brick_range(&self, key: BrickKey) -> Option<[f32; 2]>;
+
+    /// The brick, read and decoded. Errors ([`CoreError::Brick`]) name the level, the brick and
+    /// the cause.
+    fn brick(&self, key: BrickKey) -> Result<Arc<Brick<T>>>;
+
+    /// Zero-copy fast path: the whole level as one in-memory volume, where there is one.
+    fn whole(&self, level: usize) -> Result<Option<Arc<Volume<T>>>> {
+        let _ = level;
+        Ok(None)
+    }
+}
+
+/// A [`BrickSource`] over one in-memory [`Volume`]: one level, served whole with no copy
+/// ([`BrickSource::whole`]); [`BrickSource::brick`] copies a region (for tests and streaming
+/// passes; no in-memory render calls it).
+#[derive(Debug, Clone)]
+pub struct InMemory<T> {
+    volume: Arc<Volume<T>>,
+    levels: [Grid; 1],
+    layout: BrickLayout,
+}
+
+impl<T: Scalar> InMemory<T> {
+    /// `volume` cut into bricks of `size` cells per side. Errors as [`BrickLayout::new`].
+    pub fn new(volume: Arc<Volume<T>>, size: usize) -> Result<Self> {
+        let grid = volume.grid().clone();
+        let layout = BrickLayout::new(grid.clone(), 0, size)?;
+        Ok(InMemory {
+            volume,
+            levels: [grid],
+            layout,
+        })
+    }
+
+    /// The volume.
+    pub fn volume(&self) -> &Arc<Volume<T>> {
+        &self.volume
+    }
+}
+
+impl<T: Scalar> BrickSource<T> for InMemory<T> {
+    fn levels(&self) -> &[Grid] {
+        &self.levels
+    }
+
+    fn layout(&self, level: usize) -> Option<&BrickLayout> {
+        (level == 0).then_some(&self.layout)
+    }
+
+    fn brick_range(&self, key: BrickKey) -> Option<[f32; 2]> {
+        let owned = self.layout.owned_voxels(key).ok()?;
+        let n = self.volume.grid().dims;
+        let data = self.volume.data();
+        let mut r = [f32::INFINITY, f32::NEG_INFINITY];
+        for k in owned[2].clone() {
+            for j in owned[1].clone() {
+                let row = (k * n[1] + j) * n[0];
+                for v in &data[row + owned[0].start..row + owned[0].end] {
+                    let v = v.to_f32();
+                    r = [r[0].min(v), r[1].max(v)];
+                }
+            }
+        }
+        Some(r)
+    }
+
+    fn brick(&self, key: BrickKey) -> Result<Arc<Brick<T>>> {
+        let b = self.layout.check(key)?;
+        let data = copy_slot(&self.layout, &self.volume, b)
+            .ok_or_else(|| key.error("cannot allocate the brick's slot"))?;
+        let ranges8 = block_ranges(&self.layout, b, &data);
+        let range = ranges8
+            .iter()
+            .fold([f32::INFINITY, f32::NEG_INFINITY], |r, q| {
+                [r[0].min(q[0]), r[1].max(q[1])]
+            });
+        Ok(Arc::new(Brick {
+            key,
+            data,
+            ranges8,
+            range,
+        }))
+    }
+
+    fn whole(&self, level: usize) -> Result<Option<Arc<Volume<T>>>> {
+        Ok((level == 0).then(|| self.volume.clone()))
+    }
+}
+
+/// The `E³` slot of brick `b`: voxel `B·b − H + l` (clamped to the level) at slot position `l`.
+/// `None` if the slot cannot be allocated.
+fn copy_slot<T: Scalar>(
+    layout: &BrickLayout,
+    volume: &Volume<T>,
+    b: [usize; 3],
+) -> Option<Box<[T]>> {
+    let e = layout.extent();
+    let n = volume.grid().dims;
+    let data = volume.data();
+    let mut out = Vec::new();
+    out.try_reserve_exact(layout.slot_len()).ok()?;
+    // Global index of slot position l along axis a, clamped to the level.
+    let at = |a: usize, l: usize| {
+        (b[a] * layout.size() + l)
+            .saturating_sub(HALO)
+            .min(n[a] - 1)
+    };
+    for lz in 0..e {
+        let k = at(2, lz);
+        for ly in 0..e {
+            let row = (k * n[1] + at(1, ly)) * n[0];
+            out.extend((0..e).map(|lx| data[row + at(0, lx)]));
+        }
+    }
+    Some(out.into_boxed_slice())
+}
+
+/// The ranges of brick `b`'s 8³ blocks, read from its slot ([`Brick::ranges8`]).
+fn block_ranges<T: Scalar>(layout: &BrickLayout, b: [usize; 3], slot: &[T]) -> Box<[[f32; 2]]> {
+    let q = layout.size() / BLOCK;
+    let n = layout.grid().dims;
+    let s = layout.slot_strides();
+    let blocks = n.map(|n| n.saturating_sub(1).div_ceil(BLOCK).max(1));
+    let mut out = Vec::with_capacity(q * q * q);
+    for qk in 0..q {
+        for qj in 0..q {
+            for qi in 0..q {
+                let g = [qi, qj, qk];
+                let g: [usize; 3] = std::array::from_fn(|a| b[a] * q + g[a]);
+                let mut r = [f32::INFINITY, f32::NEG_INFINITY];
+                if (0..3).all(|a| g[a] < blocks[a]) {
+                    // Voxels [8g, 8g + 8] clamped, at slot-local (p − B·b + H).
+                    let span: [Range<usize>; 3] = std::array::from_fn(|a| {
+                        let lo = g[a] * BLOCK;
+                        let base = b[a] * layout.size();
+                        lo - base + HALO..(lo + BLOCK).min(n[a] - 1) - base + HALO + 1
+                    });
+                    for z in span[2].clone() {
+                        for y in span[1].clone() {
+                            for x in span[0].clone() {
+                                let v = slot[x + y * s[1] + z * s[2]].to_f32();
+                                r = [r[0].min(v), r[1].max(v)];
+                            }
+                        }
+                    }
+                }
+                out.push(r);
+            }
+        }
+    }
+    out.into_boxed_slice()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout(dims: [usize; 3], size: usize) -> BrickLayout {
+        BrickLayout::new(Grid::with_dims(dims).unwrap(), 0, size).unwrap()
+    }
+
+    fn keys(l: &BrickLayout) -> Vec<BrickKey> {
+        let d = l.dims();
+        let mut out = Vec::new();
+        for k in 0..d[2] {
+            for j in 0..d[1] {
+                for i in 0..d[0] {
+                    out.push(l.key([i, j, k]).unwrap());
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn bricks_per_axis_follow_brick_grid() {
+        // (n, B, bricks): ceil((n − 1) / B), at least 1.
+        for (n, b, want) in [
+            (1, 8, 1),
+            (2, 8, 1),
+            (8, 8, 1),
+            (9, 8, 1),
+            (10, 8, 2),
+            (17, 8, 2),
+            (18, 8, 3),
+            (37, 8, 5),
+            (37, 16, 3),
+            (65, 64, 1),
+            (66, 64, 2),
+            (200, 64, 4),
+            (129, 128, 1),
+            (130, 128, 2),
+        ] {
+            let l = layout([n, 1, 2], b);
+            assert_eq!(l.dims(), [want, 1, 1], "n = {n}, B = {b}");
+            assert_eq!(l.extent(), b + 3);
+            assert_eq!(l.slot_strides(), [1, b + 3, (b + 3) * (b + 3)]);
+            assert_eq!(l.slot_len(), (b + 3).pow(3));
+        }
+    }
+
+    #[test]
+    fn every_cell_belongs_to_exactly_one_brick_and_halos_clamp_at_faces() {
+        for size in [8, 16, 64, 128] {
+            for dims in [
+                [1, 2, 9],
+                [37, 20, 9],
+                [2, 1, 130],
+                [129, 17, 1],
+                [200, 65, 8],
+            ] {
+                let l = layout(dims, size);
+                let cells = l.cells();
+                let all = keys(&l);
+                for a in 0..3 {
+                    // Walk one axis at a time (the ranges are per axis).
+                    for c in 0..cells[a] {
+                        let mut p = [0; 3];
+                        p[a] = c;
+                        let owner = l.brick_of_cell(p).unwrap();
+                        let owning = all
+                            .iter()
+                            .filter(|&&k| {
+                                let r = l.owned_cells(k).unwrap();
+                                (0..3).all(|x| r[x].contains(&p[x]))
+                            })
+                            .count();
+                        assert_eq!(owning, 1, "cell {p:?} in {dims:?} at B = {size}");
+                        let r = l.owned_cells(owner).unwrap();
+                        assert!(r[a].contains(&c));
+                        // Its stencil: voxels c − 1 … c + 2, clamped, lie in the owner's halo.
+                        let h = l.halo_voxels(owner).unwrap();
+                        let lo = c.saturating_sub(1);
+                        let hi = (c + 2).min(dims[a] - 1);
+                        assert!(h[a].contains(&lo) && h[a].contains(&hi), "{c} in {h:?}");
+                        for q in [lo, hi] {
+                            let mut v = [0; 3];
+                            v[a] = q;
+                            let s = l.slot_index(owner, v).unwrap();
+                            assert!(s < l.slot_len());
+                        }
+                    }
+                    assert!(
+                        l.brick_of_cell(std::array::from_fn(|x| cells[x] * (x == a) as usize))
+                            .is_none()
+                    );
+                }
+                for &k in &all {
+                    let o = l.owned_voxels(k).unwrap();
+                    let h = l.halo_voxels(k).unwrap();
+                    for a in 0..3 {
+                        let b = k.b[a] as usize;
+                        assert_eq!(o[a].start, b * size);
+                        assert_eq!(h[a].start, (b * size).saturating_sub(1));
+                        assert_eq!(h[a].end, (b * size + size + 2).min(dims[a]));
+                        if b == 0 {
+                            assert_eq!(h[a].start, 0, "halo clamps at the low face");
+                        }
+                        if b + 1 == l.dims()[a] {
+                            assert_eq!(o[a].end, dims[a], "the last brick reaches the face");
+                            assert_eq!(h[a].end, dims[a], "halo clamps at the high face");
+                        } else {
+                            assert_eq!(o[a].end, b * size + size + 1, "shared upper face");
+                        }
+                        assert!(h[a].end - h[a].start <= l.extent());
+                    }
+                }
+                // Voxel-centred stencils: the chosen brick's halo holds p ± 1.
+                for a in 0..3 {
+                    for q in 0..dims[a] {
+                        let mut p = [0; 3];
+                        p[a] = q;
+                        let k = l.brick_of_voxel(p).unwrap();
+                        let h = l.halo_voxels(k).unwrap();
+                        assert!(h[a].contains(&q.saturating_sub(1)));
+                        assert!(h[a].contains(&(q + 1).min(dims[a] - 1)));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_hostile_brick_size_is_a_typed_error() {
+        let g = Grid::with_dims([37, 20, 9]).unwrap();
+        for size in [0, 1, 4, 12, 24, 48, 100, 1 << 11, usize::MAX / 2 + 1] {
+            let e = BrickLayout::new(g.clone(), 0, size).unwrap_err();
+            assert!(e.to_string().contains("brick size"), "{size}: {e}");
+        }
+        for size in [8, 16, 32, 64, 128, 1024] {
+            assert!(BrickLayout::new(g.clone(), 0, size).is_ok());
+        }
+    }
+
+    #[test]
+    fn keys_outside_the_level_are_errors_naming_level_and_brick() {
+        let v = Arc::new(
+            Volume::from_fn(Grid::with_dims([37, 20, 9]).unwrap(), |_, _, _| 0u8).unwrap(),
+        );
+        let s = InMemory::new(v, 8).unwrap();
+        assert_eq!(s.layout(0).unwrap().dims(), [5, 3, 1]);
+        for key in [
+            BrickKey {
+                level: 0,
+                b: [5, 0, 0],
+            },
+            BrickKey {
+                level: 0,
+                b: [0, 3, 0],
+            },
+            BrickKey {
+                level: 0,
+                b: [0, 0, 1],
+            },
+            BrickKey {
+                level: 1,
+                b: [0, 0, 0],
+            },
+        ] {
+            let e = s.brick(key).unwrap_err();
+            assert!(
+                matches!(e, CoreError::Brick { level, brick, .. } if level == key.level && brick == key.b),
+                "{e}"
+            );
+            assert!(
+                e.to_string().contains(&format!("level {}", key.level)),
+                "{e}"
+            );
+            assert!(s.brick_range(key).is_none());
+        }
+        assert!(s.layout(1).is_none());
+        assert!(s.whole(1).unwrap().is_none());
+    }
+
+    #[test]
+    fn in_memory_bricks_equal_the_volume_voxel_for_voxel() {
+        let dims = [37, 20, 9];
+        // Distinct values everywhere (a wrong voxel cannot pass), some negative.
+        let v = Volume::from_fn(Grid::with_dims(dims).unwrap(), |i, j, k| {
+            (i + 37 * (j + 20 * k)) as f32 - 3000.0
+        })
+        .unwrap();
+        let v = Arc::new(v);
+        let s = InMemory::new(v.clone(), 8).unwrap();
+        assert!(
+            Arc::ptr_eq(&s.whole(0).unwrap().unwrap(), &v),
+            "whole is the volume, no copy"
+        );
+        let l = s.layout(0).unwrap().clone();
+        let e = l.extent();
+        let mut seen = 0;
+        for key in keys(&l) {
+            let brick = s.brick(key).unwrap();
+            assert_eq!(brick.key, key);
+            assert_eq!(brick.data.len(), e * e * e);
+            let h = l.halo_voxels(key).unwrap();
+            for k in h[2].clone() {
+                for j in h[1].clone() {
+                    for i in h[0].clone() {
+                        let at = l.slot_index(key, [i, j, k]).unwrap();
+                        assert_eq!(brick.data[at], v.get(i, j, k), "{key:?} voxel {i},{j},{k}");
+                        seen += 1;
+                    }
+                }
+            }
+            // Padding: the clamped voxel.
+            let b = key.b.map(|x| x as usize);
+            for (at, &got) in brick.data.iter().enumerate() {
+                let l3 = [at % e, at / e % e, at / (e * e)];
+                let p: [usize; 3] =
+                    std::array::from_fn(|a| (b[a] * 8 + l3[a]).saturating_sub(1).min(dims[a] - 1));
+                assert_eq!(got, v.get(p[0], p[1], p[2]));
+            }
+            // Ranges: brute force over the owned voxels (the values grow with i, j, k).
+            let o = l.owned_voxels(key).unwrap();
+            let lo = v.get(o[0].start, o[1].start, o[2].start);
+            let hi = v.get(o[0].end - 1, o[1].end - 1, o[2].end - 1);
+            assert_eq!(brick.range, [lo, hi], "{key:?}");
+            assert_eq!(s.brick_range(key), Some([lo, hi]));
+            assert_eq!(brick.ranges8.len(), 1);
+            assert_eq!(brick.ranges8[0], [lo, hi]);
+        }
+        // Halo counts: per axis the sum of the clamped halo widths.
+        let per_axis = |n: usize, nb: usize| -> usize {
+            (0..nb)
+                .map(|b| (b * 8 + 10).min(n) - (b * 8).saturating_sub(1))
+                .sum()
+        };
+        assert_eq!(seen, per_axis(37, 5) * per_axis(20, 3) * per_axis(9, 1));
+    }
+
+    #[test]
+    fn block_ranges_match_brute_force_and_empty_blocks_beyond_the_level() {
+        let dims = [21, 9, 1];
+        let v = Volume::from_fn(Grid::with_dims(dims).unwrap(), |i, j, _| {
+            ((i * 7 + j * 13) % 11) as u16
+        })
+        .unwrap();
+        let s = InMemory::new(Arc::new(v.clone()), 16).unwrap();
+        let l = s.layout(0).unwrap();
+        assert_eq!(l.dims(), [2, 1, 1]);
+        for key in keys(l) {
+            let brick = s.brick(key).unwrap();
+            assert_eq!(brick.ranges8.len(), 8);
+            for (q, r) in brick.ranges8.iter().enumerate() {
+                let g = [key.b[0] as usize * 2 + q % 2, q / 2 % 2, q / 4];
+                let blocks = [3, 1, 1];
+                if (0..3).any(|a| g[a] >= blocks[a]) {
+                    assert_eq!(*r, [f32::INFINITY, f32::NEG_INFINITY], "{key:?} {q}");
+                    continue;
+                }
+                let mut want = [f32::INFINITY, f32::NEG_INFINITY];
+                for j in g[1] * 8..=(g[1] * 8 + 8).min(dims[1] - 1) {
+                    for i in g[0] * 8..=(g[0] * 8 + 8).min(dims[0] - 1) {
+                        let x = v.get(i, j, 0) as f32;
+                        want = [want[0].min(x), want[1].max(x)];
+                    }
+                }
+                assert_eq!(*r, want, "{key:?} block {g:?}");
+            }
+        }
+    }
+}
