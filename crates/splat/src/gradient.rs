@@ -3,32 +3,19 @@
 //! ([`crate::normals::NormalField`]). The image-aligned slabs difference their own samples
 //! ([`crate::slab`]).
 
-// Both are `#[inline(always)]`: in their own module, plain `#[inline]` left `index_gradient`
+// Both are `#[inline(always)]`: in their own module, plain `#[inline]` left `index_gradient_in`
 // out of the dense renderer's classification loop, +0.35 ms per 512² frame of the built-in MRI
 // (`bench --visibility sheet --orbit 0`, 2 threads: classify 5.7 against 5.3-5.5 ms).
 
-use crate::voxels::{Linear, Voxels};
+use crate::voxels::Voxels;
 use volsplat_core::Scalar;
 use volsplat_core::glam::{Mat3, Vec3};
 
-/// World-space gradient at full-resolution voxel `p`: central differences divided by
-/// 2·spacing (one-sided differences divided by spacing at the border), rotated into world
-/// by the direction matrix (`docs/architecture.md`, the LPS world frame). Data units per world unit.
-/// [`gradient_in`] over the volume's samples `data` ([`Linear`]).
-#[inline(always)]
-pub(crate) fn gradient_at<T: Scalar>(
-    data: &[T],
-    dims_full: [usize; 3],
-    inv_spacing_full: [f32; 3],
-    direction: Mat3,
-    p: [usize; 3],
-) -> Vec3 {
-    let vox = Linear::from_parts(data, dims_full);
-    gradient_in(&vox, dims_full, inv_spacing_full, direction, p)
-}
-
-/// [`gradient_at`] reading the voxels through `vox` (brick seam, docs/design/brick-seam.md
-/// §2.2): faces are tested on the global index `p` against `dims_full`, the values loaded at
+/// World-space gradient at full-resolution voxel `p`, reading the voxels through `vox` (the
+/// brick seam, docs/design/brick-seam.md §2.2: [`Linear`](crate::voxels::Linear) today): central differences divided by
+/// 2·spacing (one-sided differences divided by spacing at the border), rotated into world by the
+/// direction matrix (`docs/architecture.md`, the LPS world frame). Data units per world unit.
+/// Faces are tested on the global index `p` against `dims_full`, the values loaded at
 /// [`Voxels::linear`]`(p) ± stride`.
 #[inline(always)]
 pub(crate) fn gradient_in<T: Scalar>(
@@ -52,7 +39,7 @@ pub(crate) fn gradient_in<T: Scalar>(
         ) * 0.5;
         return direction * g;
     }
-    // On a face: `index_gradient`'s differences, each then times its inverse spacing (the same
+    // On a face: `index_gradient_in`'s differences, each then times its inverse spacing (the same
     // operations in the same order as `(ρ(hi) − ρ(lo)) · half · 1/spacing`).
     let g = index_gradient_in(vox, dims_full, p);
     direction
@@ -64,20 +51,10 @@ pub(crate) fn gradient_in<T: Scalar>(
 }
 
 /// Central differences at full-resolution voxel `p` in index units (data units per voxel
-/// step): `(ρ(p + e) − ρ(p − e)) · ½`, one-sided `(ρ(p + e) − ρ(p)) · 1` on the faces, 0 along an
-/// axis of one voxel. [`gradient_at`] before its spacing and direction. [`index_gradient_in`]
-/// over the volume's samples `data` ([`Linear`]).
-#[inline(always)]
-pub(crate) fn index_gradient<T: Scalar>(
-    data: &[T],
-    dims_full: [usize; 3],
-    p: [usize; 3],
-) -> [f32; 3] {
-    index_gradient_in(&Linear::from_parts(data, dims_full), dims_full, p)
-}
-
-/// [`index_gradient`] reading the voxels through `vox`: faces tested on the global `p`, values
-/// loaded at [`Voxels::linear`]`(p) ± stride`.
+/// step), reading the voxels through `vox`: `(ρ(p + e) − ρ(p − e)) · ½`, one-sided
+/// `(ρ(p + e) − ρ(p)) · 1` on the faces, 0 along an axis of one voxel; [`gradient_in`] before its
+/// spacing and direction. Faces tested on the global `p`, values loaded at
+/// [`Voxels::linear`]`(p) ± stride`.
 #[inline(always)]
 pub(crate) fn index_gradient_in<T: Scalar>(
     vox: &impl Voxels<T>,
@@ -109,6 +86,7 @@ pub(crate) fn index_gradient_in<T: Scalar>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::voxels::Linear;
 
     /// Both helpers compute, bit for bit, the differences as the renderers wrote them before
     /// they shared these helpers: per axis `(ρ(hi) − ρ(lo)) · h · 1/spacing` with `h` ½
@@ -157,13 +135,14 @@ mod tests {
                             world = Vec3::new(d(0) * inv[0], d(1) * inv[1], d(2) * inv[2]) * 0.5;
                         }
                         let want = direction * world;
-                        let got = gradient_at(&data, dims, inv, direction, p);
+                        let vox = Linear::from_parts(&data, dims);
+                        let got = gradient_in(&vox, dims, inv, direction, p);
                         assert_eq!(
                             got.to_array().map(f32::to_bits),
                             want.to_array().map(f32::to_bits),
                             "{dims:?} {p:?}"
                         );
-                        let got = index_gradient(&data, dims, p);
+                        let got = index_gradient_in(&Linear::from_parts(&data, dims), dims, p);
                         assert_eq!(
                             got.map(f32::to_bits),
                             idx.map(f32::to_bits),

@@ -39,12 +39,13 @@ use crate::clip::LatticeClip;
 use crate::error::{Result, SplatError, try_filled, try_with_capacity};
 use crate::footprint::metric_from;
 use crate::geometry::{Order, sheet_axis};
-use crate::gradient::gradient_at;
+use crate::gradient::gradient_in;
 use crate::sheets::{
     BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
     SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SheetPass, SpanCtx, deposit, div_band, drive, ms,
     refuse_image_aligned, scale_kept, validate, xray_weight,
 };
+use crate::voxels::{Linear, Voxels};
 use rayon::prelude::*;
 use std::sync::OnceLock;
 use std::time::Instant;
@@ -190,7 +191,9 @@ impl SplatList {
         }
         let frame = Camera::default().frame();
         let classifier = FrameClassifier::new(tables, &frame, tables.opacity_unit_distance);
-        let data = volume.data();
+        // Read through `Voxels` (the brick seam, docs/design/brick-seam.md C4): today's
+        // addressing; a bricked source would hand a `Slotted` here.
+        let vox = Linear::new(volume);
         let direction = grid.direction.as_mat3();
         let inv_spacing = grid.spacing.map(|v| (1.0 / v) as f32);
         let full = grid.dims;
@@ -203,7 +206,7 @@ impl SplatList {
                 for j in 0..dims[1] {
                     for i in 0..dims[0] {
                         let p = [i * stride, j * stride, k * stride];
-                        let density = data[p[0] + full[0] * (p[1] + full[1] * p[2])].to_f32();
+                        let density = vox.data()[vox.linear(p)].to_f32();
                         let opacity_at = |gradient: Vec3| {
                             let at = |depth: f32| {
                                 classifier.opacity(&SampleInput {
@@ -222,7 +225,7 @@ impl SplatList {
                         {
                             continue;
                         }
-                        let gradient = gradient_at(data, full, inv_spacing, direction, p);
+                        let gradient = gradient_in(&vox, full, inv_spacing, direction, p);
                         if !every {
                             let a = opacity_at(gradient);
                             if a.is_nan() || a <= threshold {

@@ -28,8 +28,9 @@
 //! [`volsplat_core::FrameClassifier::classify`]).
 
 use crate::error::{Result, try_filled};
-use crate::gradient::index_gradient;
+use crate::gradient::index_gradient_in;
 use crate::slab::ShadeTable;
+use crate::voxels::Linear;
 use rayon::prelude::*;
 use volsplat_core::glam::Vec3;
 use volsplat_core::{Scalar, Volume};
@@ -86,6 +87,8 @@ impl NormalField {
         let dims = grid.dims;
         let grad_to_world = grad_to_world(grid);
         let data = volume.data();
+        // Read through `Voxels` (the brick seam, docs/design/brick-seam.md C4).
+        let vox = Linear::new(volume);
         let (nx, ny) = (dims[0], dims[1]);
         let m = grad_to_world;
         let mut codes = try_filled(
@@ -99,7 +102,7 @@ impl NormalField {
             .for_each(|(k, slice)| {
                 for j in 0..ny {
                     for i in 0..nx {
-                        let g = index_gradient(data, dims, [i, j, k]);
+                        let g = index_gradient_in(&vox, dims, [i, j, k]);
                         let gw: [f32; 3] = std::array::from_fn(|c| {
                             m[0][c] * g[0] + m[1][c] * g[1] + m[2][c] * g[2]
                         });
