@@ -109,16 +109,18 @@ pub(crate) struct InputArgs {
     #[arg(long, value_name = "UID|NUMBER", help_heading = "Input")]
     pub series: Option<String>,
     /// Which resolution level of an OME-Zarr store to load: 0 (full resolution, the default)
-    /// to the coarsest (`volsplat info STORE` lists them). Not the renderer's own pyramid
-    /// (--level), which is built from the volume loaded.
+    /// to the coarsest (`volsplat info STORE` lists them), or `auto` when rendering: the
+    /// coarsest level whose voxel is no larger than a pixel at the focal plane, chosen per
+    /// frame from the camera. Not the renderer's own pyramid (--level), which is built from the
+    /// volume loaded.
     #[arg(
         long,
-        value_name = "N",
-        default_value_t = 0,
+        value_name = "N|auto",
+        default_value_t = volsplat::StoreLevel::Index(0),
         hide_short_help = true,
         help_heading = "Input"
     )]
-    pub zarr_level: usize,
+    pub zarr_level: volsplat::StoreLevel,
     /// Which channel of a multi-channel OME-Zarr image, from 0.
     #[arg(
         long,

@@ -570,7 +570,7 @@ fn load_info(a: &InputArgs) -> Result<(String, volsplat::io::LoadedVolume)> {
             .with_frame(a.frame)
             .with_array(a.array.clone())
             .with_series(a.series.clone())
-            .with_level(a.zarr_level)
+            .with_level(level_number(a.zarr_level)?)
             .with_channel(a.channel)
             .with_timepoint(a.timepoint);
         let loaded = volsplat::io::read_volume_with(path, &options)?;
@@ -754,7 +754,7 @@ fn convert_to_zarr(a: ConvertArgs) -> Result<()> {
                 .with_frame(a.input.frame)
                 .with_array(a.input.array.clone())
                 .with_series(a.input.series.clone())
-                .with_level(a.input.zarr_level)
+                .with_level(level_number(a.input.zarr_level)?)
                 .with_channel(a.input.channel)
                 .with_timepoint(a.input.timepoint);
             let spec = match &raw {
@@ -975,6 +975,16 @@ fn texture_bench_cmd(a: TextureBenchArgs) -> Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+/// `--zarr-level` as a number: `auto` needs a camera, which `info` and `convert` have not.
+fn level_number(level: volsplat::StoreLevel) -> Result<usize> {
+    level.index().ok_or_else(|| {
+        anyhow::anyhow!(
+            "--zarr-level auto is chosen from the camera when rendering; info and convert take a \
+             level number (`volsplat info STORE` lists them)"
+        )
+    })
 }
 
 #[cfg(test)]

@@ -132,7 +132,7 @@ fn view_request(
             frame: 0,
             array: None,
             series: None,
-            level: 0,
+            level: volsplat::StoreLevel::Index(0),
             channel: 0,
             timepoint: 0,
         };

@@ -153,3 +153,86 @@ fn wrong_zarr_choices_are_clear_errors() {
     );
     assert_eq!(std::fs::read(other.join("data.txt")).unwrap(), b"keep");
 }
+
+/// `--zarr-level auto` (issue 31 item 5): the coarsest level whose voxel is no larger than a
+/// pixel at the focal plane, per frame. A small image of the whole volume takes a coarse level,
+/// a large or zoomed one the full level; the picture is the bits of the level given by number,
+/// a note says which, scene files keep `"auto"`, and `info`/`convert` refuse it.
+#[test]
+fn zarr_level_auto_follows_the_pixel_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let nrrd = dir.path().join("b.nrrd");
+    let o = volsplat(&["phantom", "blobs", "--grid", "64,64,64", "-o", s(&nrrd)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let zarr = dir.path().join("b.zarr");
+    let o = volsplat(&["convert", s(&nrrd), "-o", s(&zarr), "--chunk", "16"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let render = |extra: &[&str], out: &str| {
+        let path = dir.path().join(out);
+        let mut args = vec!["render", s(&zarr), "-o", s(&path)];
+        args.extend_from_slice(extra);
+        let o = volsplat(&args);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        (std::fs::read(&path).unwrap(), stderr(&o))
+    };
+    // 64 voxels across about 32 pixels: a pixel spans about two voxels, so level 1 (spacing 2).
+    let (auto_small, said) = render(&["--zarr-level", "auto", "--size", "32"], "a.npy");
+    assert!(said.contains("OME-Zarr level auto: level 1 of"), "{said}");
+    let (one, _) = render(&["--zarr-level", "1", "--size", "32"], "one.npy");
+    assert!(auto_small == one, "auto drew another picture than level 1");
+    // 64 voxels across 256 pixels: the full level.
+    let (auto_big, said) = render(&["--zarr-level", "auto", "--size", "256"], "b.npy");
+    assert!(said.contains("OME-Zarr level auto: level 0 of"), "{said}");
+    let (zero, _) = render(&["--size", "256"], "zero.npy");
+    assert!(auto_big == zero, "auto drew another picture than level 0");
+    // Zoomed in 4× at 32 pixels: finer than without the zoom.
+    let (_, said) = render(
+        &["--zarr-level", "auto", "--size", "32", "--zoom", "4"],
+        "z.npy",
+    );
+    assert!(said.contains("OME-Zarr level auto: level 0 of"), "{said}");
+    // Scene files keep the choice, not the level it resolved to.
+    let scene = dir.path().join("s.json");
+    render(
+        &[
+            "--zarr-level",
+            "auto",
+            "--size",
+            "32",
+            "--save-scene",
+            s(&scene),
+        ],
+        "s.npy",
+    );
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(text.contains("\"level\": \"auto\""), "{text}");
+    let again = dir.path().join("again.npy");
+    let o = volsplat(&["render", "--scene", s(&scene), "-o", s(&again)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("OME-Zarr level auto: level 1 of"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        std::fs::read(&again).unwrap() == one,
+        "the scene file drew another picture"
+    );
+    // No camera: a clear refusal.
+    let o = volsplat(&["info", s(&zarr), "--zarr-level", "auto"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--zarr-level auto is chosen from the camera"),
+        "{}",
+        stderr(&o)
+    );
+    let o = volsplat(&[
+        "render",
+        s(&nrrd),
+        "--zarr-level",
+        "auto",
+        "-o",
+        s(&dir.path().join("n.png")),
+    ]);
+    assert!(!o.status.success(), "level auto on an NRRD file");
+}

@@ -53,7 +53,7 @@ pub use request::{
 };
 pub use scene::{
     CameraSpec, Clipping, CropBox, CropUnits, LightSpec, PhantomKind, PlaneSpec, RawLayout, Scene,
-    ShadingTerms, TransferSpec, VolumeSource, make_phantom,
+    ShadingTerms, StoreLevel, TransferSpec, VolumeSource, make_phantom,
 };
 
 pub use write::{

@@ -1067,7 +1067,7 @@ mod scene_file_paths {
             frame: 0,
             array: None,
             series: None,
-            level: 0,
+            level: crate::scene::StoreLevel::Index(0),
             channel: 0,
             timepoint: 0,
         };

@@ -161,6 +161,86 @@ fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
+/// Which resolution level of an OME-Zarr store a [`VolumeSource::File`] reads (issue 31).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StoreLevel {
+    /// Level `n`, 0 (the full resolution, the default) to the coarsest (`volsplat info STORE`
+    /// lists them). In scene files: the number.
+    Index(usize),
+    /// The coarsest level whose smallest voxel spacing is no larger than a pixel at the camera's
+    /// focal plane: chosen by the renderer for each frame from the camera and the image size
+    /// (`Renderer::render`), from the store's metadata alone. In scene files: `"auto"`.
+    Auto,
+}
+
+impl Default for StoreLevel {
+    fn default() -> Self {
+        StoreLevel::Index(0)
+    }
+}
+
+impl StoreLevel {
+    /// Level 0, the full resolution (the default, left out of scene files).
+    pub fn is_full(&self) -> bool {
+        *self == StoreLevel::Index(0)
+    }
+
+    /// The level number, or `None` for [`StoreLevel::Auto`].
+    pub fn index(self) -> Option<usize> {
+        match self {
+            StoreLevel::Index(n) => Some(n),
+            StoreLevel::Auto => None,
+        }
+    }
+}
+
+impl std::fmt::Display for StoreLevel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StoreLevel::Index(n) => write!(f, "{n}"),
+            StoreLevel::Auto => f.write_str("auto"),
+        }
+    }
+}
+
+impl std::str::FromStr for StoreLevel {
+    type Err = String;
+
+    /// `auto` or a level number.
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(StoreLevel::Auto);
+        }
+        s.parse()
+            .map(StoreLevel::Index)
+            .map_err(|_| format!("expected \"auto\" or a level number, got {s:?}"))
+    }
+}
+
+impl Serialize for StoreLevel {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            StoreLevel::Index(n) => s.serialize_u64(*n as u64),
+            StoreLevel::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for StoreLevel {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Number(usize),
+            Text(String),
+        }
+        match Raw::deserialize(d)? {
+            Raw::Number(n) => Ok(StoreLevel::Index(n)),
+            Raw::Text(t) => t.parse().map_err(serde::de::Error::custom),
+        }
+    }
+}
+
 fn unit_spacing() -> [f64; 3] {
     [1.0; 3]
 }
@@ -188,10 +268,11 @@ pub enum VolumeSource {
         /// SeriesNumber where that is unique (default: the only one).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         series: Option<String>,
-        /// Which resolution level of an OME-Zarr store, 0 (the full resolution, the default)
-        /// to the coarsest (`volsplat info STORE` lists them).
-        #[serde(default, skip_serializing_if = "is_zero")]
-        level: usize,
+        /// Which resolution level of an OME-Zarr store: a number, 0 (the full resolution, the
+        /// default) to the coarsest (`volsplat info STORE` lists them), or `"auto"`
+        /// ([`StoreLevel::Auto`], chosen per frame from the camera).
+        #[serde(default, skip_serializing_if = "StoreLevel::is_full")]
+        level: StoreLevel,
         /// Which channel of a multi-channel OME-Zarr image, 0-based.
         #[serde(default, skip_serializing_if = "is_zero")]
         channel: usize,
@@ -286,11 +367,18 @@ impl VolumeSource {
                 channel,
                 timepoint,
             } => {
+                let Some(level) = level.index() else {
+                    return Err(EngineError::request(
+                        "volume.level",
+                        "\"auto\" is chosen from the camera when a frame is rendered \
+                         (Renderer::render); to load a volume, give a level number",
+                    ));
+                };
                 let options = volsplat_io::ReadOptions::default()
                     .with_frame(*frame)
                     .with_array(array.clone())
                     .with_series(series.clone())
-                    .with_level(*level)
+                    .with_level(level)
                     .with_channel(*channel)
                     .with_timepoint(*timepoint)
                     .with_limits(limits.clone());

@@ -304,7 +304,7 @@ fn the_renderers_reader_limits_reach_the_reader() {
             frame: 0,
             array: None,
             series: None,
-            level: 0,
+            level: volsplat::StoreLevel::Index(0),
             channel: 0,
             timepoint: 0,
         },

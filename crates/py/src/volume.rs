@@ -1043,7 +1043,7 @@ pub fn load(
         frame,
         array: array.clone(),
         series: series.clone(),
-        level,
+        level: volsplat::StoreLevel::Index(level),
         channel,
         timepoint,
     };

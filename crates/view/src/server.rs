@@ -160,7 +160,7 @@ impl Shared {
             frame: 0,
             array: None,
             series: None,
-            level: 0,
+            level: volsplat::StoreLevel::Index(0),
             channel: 0,
             timepoint: 0,
         };

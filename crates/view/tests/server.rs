@@ -649,7 +649,7 @@ fn data_files_outside_the_data_folder_are_refused() {
         frame: 0,
         array: None,
         series: None,
-        level: 0,
+        level: volsplat::StoreLevel::Index(0),
         channel: 0,
         timepoint: 0,
     };

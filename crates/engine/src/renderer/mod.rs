@@ -15,7 +15,7 @@ pub use stats::{DisplayStats, Progress, SheetAxis, Stage, Stats, UsedRenderer, r
 
 use crate::error::{EngineError, Result};
 use crate::request::{Mode, RenderRequest};
-use crate::scene::VolumeSource;
+use crate::scene::{StoreLevel, VolumeSource};
 use cache::{
     AutoTf, Cached, DisplayKey, ListKey, Loaded, TablesKey, build_pool, cached, resolve_tf,
 };
@@ -157,9 +157,47 @@ impl Renderer {
         Ok(*cached(&mut self.range, source.clone(), || Ok(vol.value_range()))?.value)
     }
 
+    /// `request`'s volume source, with an OME-Zarr level `auto` ([`StoreLevel::Auto`]) made a
+    /// level number, and a note saying which: the coarsest level whose smallest spacing is no
+    /// larger than a pixel at the focal plane of the camera resolved against the store's full
+    /// level (issue 31 item 5; metadata only, read again for each frame so that zooming in
+    /// reads a finer level). Other sources as they are.
+    fn concrete_source(&self, request: &RenderRequest) -> Result<(VolumeSource, Option<String>)> {
+        let source = &request.scene.volume;
+        let VolumeSource::File {
+            path,
+            raw: None,
+            level: StoreLevel::Auto,
+            ..
+        } = source
+        else {
+            return Ok((source.clone(), None));
+        };
+        let store = volsplat_io::ZarrStore::open(path, &self.limits)?;
+        let full = store.grid(0)?;
+        let camera = request.scene.camera.resolve(full.drawn_bounds_world())?;
+        let pixel = volsplat_splat::focal_pixel_size(&camera, request.width, request.height)?;
+        let level = store.auto_level(pixel, 1.0);
+        let mut concrete = source.clone();
+        if let VolumeSource::File { level: l, .. } = &mut concrete {
+            *l = StoreLevel::Index(level);
+        }
+        let spacing = store.levels()[level]
+            .spacing
+            .iter()
+            .fold(f64::INFINITY, |m, &s| m.min(s));
+        let note = format!(
+            "OME-Zarr level auto: level {level} of {} (smallest spacing {spacing:.4} mm) for a \
+             pixel of {pixel:.4} mm at the focal plane",
+            store.levels().len()
+        );
+        Ok((concrete, Some(note)))
+    }
+
     /// The camera `request` resolves to (loads the volume for its bounds if needed).
     pub fn camera(&mut self, request: &RenderRequest) -> Result<Camera> {
-        let vol = self.volume(&request.scene.volume)?;
+        let (source, _) = self.concrete_source(request)?;
+        let vol = self.volume(&source)?;
         request
             .scene
             .camera
@@ -168,8 +206,9 @@ impl Renderer {
 
     /// The transfer function `request` resolves to for its volume and mode.
     pub fn transfer_function(&mut self, request: &RenderRequest) -> Result<TransferFunction> {
-        let vol = self.volume(&request.scene.volume)?;
-        let range = self.range(&request.scene.volume, &vol)?;
+        let (source, _) = self.concrete_source(request)?;
+        let vol = self.volume(&source)?;
+        let range = self.range(&source, &vol)?;
         Ok(resolve_tf(request, &vol, range, &mut self.auto_tf)?.tf)
     }
 
@@ -212,12 +251,16 @@ impl Renderer {
         let t0 = Instant::now();
         request.validate()?;
         report(progress, 0.0, Stage::Load)?;
-        let source = &request.scene.volume;
+        let (source, level_note) = self.concrete_source(request)?;
+        let source = &source;
         let loaded = self.load(source)?;
         let (vol, fresh_volume) = (Arc::clone(&loaded.value.volume), loaded.fresh);
         // The reader's notes come with the frame that loaded the volume.
         let mut notes = if fresh_volume {
-            loaded.value.notes.clone()
+            level_note
+                .into_iter()
+                .chain(loaded.value.notes.clone())
+                .collect()
         } else {
             Vec::new()
         };
