@@ -1128,3 +1128,34 @@ fn a_plane_on_a_face_keeps_the_whole_path() {
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
+
+/// A brick's partial image (`owned_cells`, issue 32): composite only, with a box of cells on the
+/// 8³ blocks; anything else is refused by name, and a box covering every cell draws the whole
+/// picture, bit for bit.
+#[test]
+fn owned_cells_are_checked_and_the_whole_box_is_the_whole_picture() {
+    let vol = volume(30);
+    let cam = camera(vol.grid(), 20.0, 10.0, true);
+    let tables = shaded_tables();
+    let mut s = settings(40, 36, RenderMode::Composite);
+    let whole = slabs(&vol, &cam, &tables, &s);
+    s.owned_cells = Some([[0; 3], [29; 3]]);
+    assert_eq!(
+        slabs(&vol, &cam, &tables, &s).image.pixels(),
+        whole.image.pixels()
+    );
+    for (mode, cells) in [
+        (RenderMode::Composite, [[4, 0, 0], [16, 16, 16]]),
+        (RenderMode::Composite, [[0, 0, 0], [12, 16, 16]]),
+        (RenderMode::Composite, [[8, 0, 0], [8, 16, 16]]),
+        (RenderMode::Mip, [[0, 0, 0], [16, 16, 16]]),
+    ] {
+        let mut s = settings(40, 36, mode);
+        s.owned_cells = Some(cells);
+        let e = render_slabs(&vol, &cam, &tables, &s, None, &mut |_| true).unwrap_err();
+        assert!(
+            e.to_string().contains("owned_cells"),
+            "{mode:?} {cells:?}: {e}"
+        );
+    }
+}

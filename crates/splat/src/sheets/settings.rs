@@ -99,6 +99,13 @@ pub struct RenderSettings {
     /// relative to air, `μ/μ_water · 1000` (a digitally reconstructed radiograph; air and
     /// padding below −1000 HU add nothing). See [`xray_weight`].
     pub xray_offset: Option<f32>,
+    /// Image-aligned slabs, composite: draw only the samples whose cell lies in the box of cells
+    /// `[lo, hi)` (index units, per axis), as one brick's partial image of a sort-last render
+    /// (issue 32, `volsplat::distributed`): every sample keeps its global position, slab factor
+    /// and classification, so the bricks' partial images, composited front to back, are the
+    /// whole ray's. `lo` must be a multiple of 8 (the empty-space blocks) and `hi` too, or past
+    /// the last cell. `None` (the default): every cell.
+    pub owned_cells: Option<[[usize; 3]; 2]>,
 }
 
 /// The value an X-ray integrates for a sample of value `v` ([`RenderSettings::xray_offset`]):
@@ -151,6 +158,7 @@ impl Default for RenderSettings {
             shade_at: crate::normals::ShadeAt::Samples,
             preintegrate: Preintegrate::Off,
             xray_offset: None,
+            owned_cells: None,
         }
     }
 }

@@ -204,7 +204,10 @@ pub fn render_slabs<T: Scalar>(
         bricks,
         &mut owned_normals,
     )?;
-    let active = frame_tables.active_bricks(bricks, tables);
+    let mut active = frame_tables.active_bricks(bricks, tables);
+    if let Some(owned) = settings.owned_cells {
+        keep_owned_blocks(&mut active, bricks, owned);
+    }
     let mut stats = RenderStats {
         preintegrated: frame_tables.preintegrated(),
         ring_risk: f64::from(frame_tables.risk),
@@ -242,6 +245,19 @@ pub fn render_slabs<T: Scalar>(
     })
 }
 
+/// Restricts `active` (one flag per 8³ block of cells, [`BrickGrid::index`]) to the blocks in
+/// the box of cells `[lo, hi)` ([`RenderSettings::owned_cells`], checked by [`check_settings`]):
+/// the slab march skips the others cell by cell, in the scalar path and the kernels alike, so
+/// each sample is drawn by exactly the one box that holds its cell.
+fn keep_owned_blocks(active: &mut [bool], bricks: &BrickGrid, [lo, hi]: [[usize; 3]; 2]) {
+    let [nx, ny, _] = bricks.dims;
+    for (b, flag) in active.iter_mut().enumerate() {
+        let block = [b % nx, b / nx % ny, b / (nx * ny)];
+        let inside = (0..3).all(|a| block[a] * 8 >= lo[a] && block[a] * 8 < hi[a]);
+        *flag &= inside;
+    }
+}
+
 /// The settings [`render_slabs`] cannot draw, for a volume of `dims` voxels: those
 /// [`validate`] refuses, X-ray, subsampling, back-to-front order, a slab thickness outside
 /// `[0.01, 16]` and an empty volume.
@@ -254,6 +270,19 @@ fn check_settings(settings: &RenderSettings, dims: [usize; 3]) -> Result<()> {
             expected: "composite, mip or minip with image-aligned slabs (X-ray line integrals \
                        are exact in the sheet renderers)",
         });
+    }
+    if let Some([lo, hi]) = settings.owned_cells {
+        let cells = dims.map(|n| n.saturating_sub(1).max(1));
+        let fits = (0..3)
+            .all(|a| lo[a] % 8 == 0 && lo[a] < hi[a] && (hi[a] % 8 == 0 || hi[a] >= cells[a]));
+        if settings.mode != RenderMode::Composite || !fits {
+            return Err(SplatError::Setting {
+                name: "owned_cells",
+                value: format!("{lo:?}..{hi:?} ({:?})", settings.mode),
+                expected: "composite, a box of cells whose bounds are multiples of 8 (the upper \
+                           one may pass the last cell)",
+            });
+        }
     }
     if settings.subsample != 1 {
         return Err(SplatError::Setting {
