@@ -17,10 +17,12 @@
 
 mod comm;
 mod composite;
+mod render;
 mod tree;
 
 pub use comm::{Communicator, FakeCluster, FakeComm};
 pub use composite::{Combine, Pixels, composite_direct_send, stripe_rows};
+pub use render::render_sort_last;
 pub use tree::{BrickTree, Eye, Node};
 
 /// What can go wrong while compositing across processes.
@@ -46,6 +48,12 @@ pub enum DistributedError {
     /// The ranks disagree about the protocol (a bug, or a rank that exited).
     #[error("compositing protocol: {0}")]
     Protocol(&'static str),
+    /// A setting of the sort-last render is out of range (the message names it).
+    #[error("invalid setting: {0}")]
+    Setting(String),
+    /// The engine could not load or resolve the request.
+    #[error("{0}")]
+    Engine(String),
 }
 
 /// The result type of this module.

@@ -41,6 +41,8 @@ pub(super) struct Frame<'a> {
     pub(super) t_prep: Instant,
     /// Whether the plan built the classification tables.
     pub(super) tables_fresh: bool,
+    /// A brick's cells, where only they are drawn ([`super::Renderer::render_brick`]).
+    pub(super) owned_cells: Option<[[usize; 3]; 2]>,
 }
 
 impl Frame<'_> {
@@ -196,6 +198,7 @@ impl Renderer {
         let mut settings = f.request.splat_settings();
         settings.clip = f.request.scene.clipping.world_planes(vol.grid())?;
         settings.slab = plan.thickness;
+        settings.owned_cells = f.owned_cells;
         // Coarse levels are built here, once per volume, so that their cost counts as
         // preparation.
         let pyramid = Arc::clone(

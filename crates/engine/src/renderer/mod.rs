@@ -221,7 +221,7 @@ impl Renderer {
         request: &RenderRequest,
         progress: &mut (dyn FnMut(&Progress) -> bool + Send),
     ) -> Result<Output> {
-        self.render_inner(request, progress, None)
+        self.render_inner(request, progress, None, None)
     }
 
     /// Like [`Renderer::render`] with the dense sheet renderer's successive refinement
@@ -237,16 +237,31 @@ impl Renderer {
             steps: ladder,
             on_preview,
         };
-        self.render_inner(request, &mut |_| true, Some(ladder))
+        self.render_inner(request, &mut |_| true, Some(ladder), None)
+    }
+
+    /// One brick's partial image of `request` for sort-last rendering
+    /// ([`crate::distributed`]): only the samples whose cell lies in `owned_cells` (`[lo, hi)`,
+    /// index units of the full level; [`volsplat_splat::RenderSettings::owned_cells`]) are
+    /// drawn, each at its global position. The request must be drawn by the image-aligned
+    /// slabs at the full level, in composite (an error naming `renderer` otherwise).
+    pub fn render_brick(
+        &mut self,
+        request: &RenderRequest,
+        owned_cells: [[usize; 3]; 2],
+        progress: &mut (dyn FnMut(&Progress) -> bool + Send),
+    ) -> Result<Output> {
+        self.render_inner(request, progress, None, Some(owned_cells))
     }
 
     /// Loads, resolves the camera and transfer function, plans, draws with the planned
-    /// renderer, and checks the picture.
+    /// renderer (only the cells of `owned`, where given), and checks the picture.
     fn render_inner(
         &mut self,
         request: &RenderRequest,
         progress: &mut (dyn FnMut(&Progress) -> bool + Send),
         ladder: Option<Ladder<'_>>,
+        owned: Option<[[usize; 3]; 2]>,
     ) -> Result<Output> {
         let t0 = Instant::now();
         request.validate()?;
@@ -301,7 +316,18 @@ impl Renderer {
             pool: &pool,
             t_prep,
             tables_fresh,
+            owned_cells: owned,
         };
+        if owned.is_some() {
+            let slabs_at_full = matches!(&plan.draw, Draw::Slabs(p) if p.level == 0);
+            if !slabs_at_full || request.mode != Mode::Composite {
+                return Err(EngineError::request(
+                    "renderer",
+                    "a brick's partial image is drawn by the image-aligned slabs at the full \
+                     level, in composite (visibility image or auto, quality.level full)",
+                ));
+            }
+        }
         let drawn = match &plan.draw {
             Draw::Display(kind) => self.draw_display(&frame, *kind, progress)?,
             Draw::Slabs(slabs) => self.draw_slabs(&frame, slabs, progress)?,
