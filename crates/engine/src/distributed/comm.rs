@@ -1,7 +1,7 @@
 //! The message passing that sort-last compositing needs ([`Communicator`]), and an in-process
 //! implementation with one thread per rank ([`FakeCluster`]) for tests and for running the
 //! protocol without MPI. The MPI implementation lives in `crates/mpi` (issue 32), outside the
-//! default workspace.
+//! default workspace (MPI point-to-point calls with buffered sends).
 
 use super::{DistributedError, Result};
 use std::sync::Mutex;
@@ -11,7 +11,7 @@ use std::sync::mpsc::{Receiver, Sender, channel};
 /// the order they were sent (as MPI guarantees for one communicator and tag). A send must not
 /// wait for the matching receive (buffered, or non-blocking with the wait deferred), because
 /// every rank sends to every other before it receives.
-pub trait Communicator: Sync {
+pub trait Communicator {
     /// This process's rank, in `0..size()`.
     fn rank(&self) -> usize;
     /// The number of ranks (≥ 1).

@@ -12,8 +12,8 @@
 //! single-process render and the same bits for any rank count, `tests.rs`). What is not yet: a
 //! rank reading only its bricks (the brick seam's `BrickCache`, `docs/design/brick-seam.md`),
 //! pre-integration across a brick face (a brick's first sample has no previous one), early
-//! termination across bricks (each brick's image runs to its own opacity), MIP/MinIP bricks, and
-//! the MPI communicator.
+//! termination across bricks (each brick's image runs to its own opacity) and MIP/MinIP bricks.
+//! The MPI communicator and the `volsplat-mpi` binary are in `crates/mpi`.
 
 mod comm;
 mod composite;
