@@ -100,6 +100,11 @@ pub(super) struct Ctx<'a, T> {
     pub(super) cutoff: f32,
     pub(super) j0: i64,
     pub(super) n_planes: usize,
+    /// The planes the composite march visits, `[first, end)`: all of them, or those that can
+    /// meet a brick's cells ([`RenderSettings::owned_cells`]).
+    ///
+    /// [`RenderSettings::owned_cells`]: crate::sheets::RenderSettings::owned_cells
+    pub(super) plane_range: (usize, usize),
     pub(super) delta: f64,
     pub(super) dmin: f64,
     pub(super) depth_scale: f64,
@@ -151,6 +156,7 @@ impl<'a, T: Scalar> Ctx<'a, T> {
             cutoff: settings.opacity_cutoff,
             j0: planes.j0,
             n_planes: planes.n_planes,
+            plane_range: (0, planes.n_planes),
             delta: planes.delta,
             dmin: planes.dmin,
             depth_scale: if planes.dmax > planes.dmin {
@@ -383,7 +389,7 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         } else {
             (Vec::new(), Vec::new())
         };
-        for p in 0..self.n_planes {
+        for p in self.plane_range.0..self.plane_range.1 {
             let d = self.depth(p);
             let mut any_live = false;
             for (r, live_r) in live.iter_mut().enumerate() {
@@ -722,7 +728,7 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         let kf = self.path_factors(y0, rows);
         let (din, dout) = self.ray_extents(y0, rows);
         let half = (0.5 * self.delta) as f32;
-        for p in 0..self.n_planes {
+        for p in self.plane_range.0..self.plane_range.1 {
             let d = self.depth(p);
             let depth01 = ((d - self.dmin) * self.depth_scale).clamp(0.0, 1.0) as f32;
             let mut any_live = false;

@@ -217,7 +217,10 @@ pub fn render_slabs<T: Scalar>(
         threads: rayon::current_num_threads(),
         ..RenderStats::default()
     };
-    let ctx = Ctx::new(
+    let owned_planes = settings
+        .owned_cells
+        .map(|owned| planes_meeting(owned, grid, &proj, planes.j0, planes.delta, planes.n_planes));
+    let mut ctx = Ctx::new(
         volume,
         settings,
         planes,
@@ -226,6 +229,9 @@ pub fn render_slabs<T: Scalar>(
         bricks,
         active,
     );
+    if let Some(range) = owned_planes {
+        ctx.plane_range = range;
+    }
     stats.setup_ms = ms(t_start);
     // The march, band by band of the image.
     let t_render = Instant::now();
@@ -256,6 +262,36 @@ fn keep_owned_blocks(active: &mut [bool], bricks: &BrickGrid, [lo, hi]: [[usize;
         let inside = (0..3).all(|a| block[a] * 8 >= lo[a] && block[a] * 8 < hi[a]);
         *flag &= inside;
     }
+}
+
+/// The planes (indices from the first, `j0`, `delta` apart along the view) that can meet the
+/// box of cells `[lo, hi)` of `grid`, `[first, end)` clamped to the `n` planes: those between
+/// the box's nearest and farthest corner, one more each side. The others hold none of the box's
+/// samples, so skipping them changes no bit of a brick's partial image and saves the march
+/// through them.
+fn planes_meeting(
+    [lo, hi]: [[usize; 3]; 2],
+    grid: &volsplat_core::Grid,
+    proj: &Projection,
+    j0: i64,
+    delta: f64,
+    n: usize,
+) -> (usize, usize) {
+    let frame = proj.frame();
+    let top = grid.dims.map(|d| d.saturating_sub(1).max(1));
+    let hi = [0, 1, 2].map(|a| hi[a].min(top[a]));
+    let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    for corner in 0..8 {
+        let p = volsplat_core::glam::DVec3::from(
+            [0, 1, 2].map(|a| (if corner >> a & 1 == 1 { hi[a] } else { lo[a] }) as f64),
+        );
+        let d = (grid.world_from_index(p) - frame.eye).dot(frame.forward);
+        dmin = dmin.min(d);
+        dmax = dmax.max(d);
+    }
+    let first = ((dmin / delta).floor() as i64 - j0 - 1).clamp(0, n as i64) as usize;
+    let end = ((dmax / delta).ceil() as i64 - j0 + 2).clamp(0, n as i64) as usize;
+    (first, end.max(first))
 }
 
 /// The settings [`render_slabs`] cannot draw, for a volume of `dims` voxels: those
