@@ -214,6 +214,30 @@ impl Grid {
         })
     }
 
+    /// The grids of a resolution pyramid over this grid: itself, then each level halved
+    /// ([`Grid::halved`]) along its [`Grid::pyramid_axes`], ending when no axis qualifies, after
+    /// the first level for which `last(level)` holds, or at `max_levels` levels. Geometry only:
+    /// no sample is read. The one rule of the renderer's in-memory pyramid and of the OME-Zarr
+    /// pyramids volsplat writes, so that level `l` is the same grid in both.
+    pub fn pyramid_grids(&self, max_levels: usize, last: impl Fn(&Grid) -> bool) -> Vec<Grid> {
+        let mut grids = vec![self.clone()];
+        while grids.len() < max_levels {
+            let top = &grids[grids.len() - 1];
+            if last(top) {
+                break;
+            }
+            let axes = top.pyramid_axes();
+            if !axes.contains(&true) {
+                break;
+            }
+            match top.halved(axes) {
+                Ok(g) => grids.push(g),
+                Err(_) => break,
+            }
+        }
+        grids
+    }
+
     /// The grid of the level that halves `axes` ([`Volume::halved`]): along a halved axis of
     /// `n` samples, `⌈n/2⌉ + 1` samples at twice the spacing, sample `m` centred on the fine
     /// index `2m − ½` (the centre of the filter's taps `2m − 2 … 2m + 1`), so the origin moves

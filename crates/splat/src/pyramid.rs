@@ -41,19 +41,7 @@ pub const AUTO_LEVEL_SLACK: f64 = std::f64::consts::SQRT_2;
 /// ([`Grid::halved`]) along its [`Grid::pyramid_axes`] until no axis qualifies or
 /// [`MAX_LEVELS`] are reached. Geometry only: no sample is read.
 pub fn level_grids(grid: &Grid) -> Vec<Grid> {
-    let mut grids = vec![grid.clone()];
-    while grids.len() < MAX_LEVELS {
-        let last = &grids[grids.len() - 1];
-        let axes = last.pyramid_axes();
-        if !axes.contains(&true) {
-            break;
-        }
-        match last.halved(axes) {
-            Ok(g) => grids.push(g),
-            Err(_) => break,
-        }
-    }
-    grids
+    grid.pyramid_grids(MAX_LEVELS, |_| false)
 }
 
 /// The size of a pixel (world units) at the camera's focal point for a `width × height` image:

@@ -83,22 +83,7 @@ pub const MAX_LEVELS: usize = 16;
 /// for halving (fewer than 8 samples, or too coarse against the finest axis), or at
 /// [`MAX_LEVELS`] levels.
 pub fn pyramid_grids(grid: &Grid, chunk: usize) -> Vec<Grid> {
-    let mut grids = vec![grid.clone()];
-    while grids.len() < MAX_LEVELS {
-        let last = &grids[grids.len() - 1];
-        if last.dims.iter().all(|&n| n <= chunk) {
-            break;
-        }
-        let axes = last.pyramid_axes();
-        if !axes.contains(&true) {
-            break;
-        }
-        match last.halved(axes) {
-            Ok(g) => grids.push(g),
-            Err(_) => break,
-        }
-    }
-    grids
+    grid.pyramid_grids(MAX_LEVELS, |g| g.dims.iter().all(|&n| n <= chunk))
 }
 
 pub(super) fn zerr(path: &Path, what: impl Into<String>, e: impl std::fmt::Display) -> IoError {
