@@ -72,7 +72,8 @@ impl Communicator for FakeComm {
 
 impl FakeCluster {
     /// Runs `f` on every rank, each in its own thread, and returns the ranks' results in rank
-    /// order. A rank that panics makes this panic after the others have finished or failed.
+    /// order. A rank that panics makes this panic with that rank's panic, after the others have
+    /// finished or failed.
     pub fn run<T: Send>(self, f: impl Fn(&FakeComm) -> T + Sync) -> Vec<T> {
         let n = self.size.max(1);
         // senders[a][b] sends from a to b; receivers[b][a] receives at b from a.
@@ -100,7 +101,7 @@ impl FakeCluster {
             let handles: Vec<_> = comms.iter().map(|c| s.spawn(|| f(c))).collect();
             handles
                 .into_iter()
-                .map(|h| h.join().expect("a rank panicked"))
+                .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
                 .collect()
         })
     }
