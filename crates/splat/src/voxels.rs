@@ -7,6 +7,7 @@
 //! the seam. A bricked addressing (`Slotted`, commit C6) will place each brick in a slot of an
 //! arena with the same interface.
 
+use volsplat_core::source::{BrickLayout, HALO};
 use volsplat_core::{Scalar, Volume};
 
 /// An addressing of the voxels of one level: positions in [`Voxels::data`] of voxels given by
@@ -38,6 +39,28 @@ pub(crate) trait Voxels<T>: Sync {
 
     /// What the positions index.
     fn data(&self) -> &[T];
+
+    /// The slot table of a bricked addressing ([`Slotted`]), `None` for one array
+    /// ([`Linear`]): the AVX2 kernels locate each lane's brick with it.
+    fn slots(&self) -> Option<Slots<'_>> {
+        None
+    }
+}
+
+/// How [`Slotted`] places bricks, for the AVX2 kernels: a cell `c` of brick `b = c >> shift`
+/// has its lower corner at `bases[(b_k·bdims_j + b_j)·bdims_i + b_i] + Σ ((c & mask) + H)·[1, E, E²]`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Slots<'a> {
+    /// Per brick of the level (i fastest): the position of its slot's first voxel in
+    /// [`Voxels::data`] (0 for a brick that is not resident: slot 0, a valid read whose values
+    /// no live lane uses).
+    pub(crate) bases: &'a [u32],
+    /// `log2 B`.
+    pub(crate) shift: u32,
+    /// Bricks per axis.
+    pub(crate) bdims: [usize; 3],
+    /// `E = B + 3`: voxels per slot side.
+    pub(crate) e: usize,
 }
 
 /// Today's addressing: voxel `p` at `p·[1, nx, nx·ny]` in the volume's samples.
@@ -95,6 +118,157 @@ impl<T: Scalar> Voxels<T> for Linear<'_, T> {
     #[inline(always)]
     fn data(&self) -> &[T] {
         self.data
+    }
+}
+
+/// A bricked addressing (docs/design/brick-seam.md §2.2): the resident bricks of one level,
+/// each a slot of `E³` voxels (`E = B + 1 + 2H`, [`BrickLayout::extent`]) in one arena, placed by
+/// a table of slot bases per brick. Voxel `p`, read as a corner of cell `c` (`p = c` or `c + 1`
+/// per axis, and their neighbours `± 1`), is at `bases[brick(c)] + Σ ((c & (B − 1)) + H + δ)·[1, E, E²]`;
+/// the halo of one voxel holds every stencil the kernels read around a cell, so no sample reads
+/// two bricks. Only resident bricks may be read by samples that are used; others read slot 0.
+///
+/// [`BrickLayout::extent`]: volsplat_core::source::BrickLayout::extent
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Slotted<'a, T> {
+    arena: &'a [T],
+    slots: Slots<'a>,
+    mask: usize,
+    stride: [usize; 3],
+    up: [usize; 3],
+}
+
+impl<'a, T: Scalar> Slotted<'a, T> {
+    /// The addressing of `arena` (slots of `layout.extent()³` voxels, i fastest) through
+    /// `bases` (one per brick of `layout`, i fastest, each `slot·E³`).
+    pub(crate) fn new(arena: &'a [T], bases: &'a [u32], layout: &BrickLayout) -> Self {
+        let e = layout.extent();
+        let bdims = layout.dims();
+        debug_assert_eq!(bases.len(), bdims.iter().product::<usize>());
+        let dims = layout.grid().dims;
+        let stride = [1, e, e * e];
+        Slotted {
+            arena,
+            slots: Slots {
+                bases,
+                shift: layout.shift(),
+                bdims,
+                e,
+            },
+            mask: layout.size() - 1,
+            stride,
+            up: [0, 1, 2].map(|a| usize::from(dims[a] > 1) * stride[a]),
+        }
+    }
+
+    #[inline(always)]
+    fn slot(&self, b: [usize; 3]) -> usize {
+        let d = self.slots.bdims;
+        self.slots.bases[(b[2] * d[1] + b[1]) * d[0] + b[0]] as usize
+    }
+}
+
+impl<T: Scalar> Voxels<T> for Slotted<'_, T> {
+    #[inline(always)]
+    fn linear(&self, p: [usize; 3]) -> usize {
+        let sh = self.slots.shift;
+        let b: [usize; 3] = std::array::from_fn(|a| (p[a] >> sh).min(self.slots.bdims[a] - 1));
+        let mut at = self.slot(b);
+        for a in 0..3 {
+            at += (p[a] - (b[a] << sh) + HALO) * self.stride[a];
+        }
+        at
+    }
+
+    #[inline(always)]
+    fn cell_base(&self, c: [usize; 3]) -> usize {
+        let sh = self.slots.shift;
+        let mut at = self.slot(c.map(|x| x >> sh));
+        for a in 0..3 {
+            at += ((c[a] & self.mask) + HALO) * self.stride[a];
+        }
+        at
+    }
+
+    #[inline(always)]
+    fn stride(&self) -> &[usize; 3] {
+        &self.stride
+    }
+
+    #[inline(always)]
+    fn up(&self) -> [usize; 3] {
+        self.up
+    }
+
+    #[inline(always)]
+    fn data(&self) -> &[T] {
+        self.arena
+    }
+
+    fn slots(&self) -> Option<Slots<'_>> {
+        Some(self.slots)
+    }
+}
+
+/// The addressing a frame's march is compiled for: [`Linear`] or [`Slotted`], chosen at run
+/// time (one branch per voxel address, always taken the same way in a frame). One type, not
+/// a type parameter of the march: the AVX2 kernels compiled twice (once per addressing) were
+/// no longer inlined into one another, and a shaded frame spent 17 % of its time moving their
+/// 600-byte groups of samples (`memmove`, measured with perf on Colin27; +25 % per frame).
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Vox<'a, T> {
+    /// One array in memory.
+    Linear(Linear<'a, T>),
+    /// Resident bricks.
+    Slotted(Slotted<'a, T>),
+}
+
+impl<T: Scalar> Voxels<T> for Vox<'_, T> {
+    #[inline(always)]
+    fn linear(&self, p: [usize; 3]) -> usize {
+        match self {
+            Vox::Linear(l) => l.linear(p),
+            Vox::Slotted(s) => s.linear(p),
+        }
+    }
+
+    #[inline(always)]
+    fn cell_base(&self, c: [usize; 3]) -> usize {
+        match self {
+            Vox::Linear(l) => l.cell_base(c),
+            Vox::Slotted(s) => s.cell_base(c),
+        }
+    }
+
+    #[inline(always)]
+    fn stride(&self) -> &[usize; 3] {
+        match self {
+            Vox::Linear(l) => l.stride(),
+            Vox::Slotted(s) => s.stride(),
+        }
+    }
+
+    #[inline(always)]
+    fn up(&self) -> [usize; 3] {
+        match self {
+            Vox::Linear(l) => l.up(),
+            Vox::Slotted(s) => s.up(),
+        }
+    }
+
+    #[inline(always)]
+    fn data(&self) -> &[T] {
+        match self {
+            Vox::Linear(l) => l.data(),
+            Vox::Slotted(s) => s.data(),
+        }
+    }
+
+    fn slots(&self) -> Option<Slots<'_>> {
+        match self {
+            Vox::Linear(_) => None,
+            Vox::Slotted(s) => s.slots(),
+        }
     }
 }
 

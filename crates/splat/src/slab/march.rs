@@ -18,11 +18,11 @@ use crate::bricks::BrickGrid;
 use crate::error::{Result, SplatError};
 use crate::normals::VoxelShading;
 use crate::sheets::{Progress, RenderMode, RenderSettings};
-use crate::voxels::{Linear, Voxels};
+use crate::voxels::{Vox, Voxels};
 use rayon::prelude::*;
 use volsplat_core::glam::{DVec3, Vec3};
 use volsplat_core::image::{Rgba, over_front_to_back};
-use volsplat_core::{FrameClassifier, SampleInput, Scalar, Volume};
+use volsplat_core::{FrameClassifier, SampleInput, Scalar};
 
 /// The most rows of one band of the slabs' parallel decomposition (`RenderSettings::band_height`
 /// caps it further; `docs/decisions/0016-image-aligned-post-classified-slabs.md`).
@@ -51,9 +51,8 @@ impl Counters {
     }
 }
 
-pub(super) struct Ctx<'a, T> {
-    /// Where the voxels' values are loaded from ([`Linear`]: the volume's samples).
-    pub(super) vox: Linear<'a, T>,
+/// What a frame's march reads beside the voxels: the planes, the tables, the bricks' flags.
+pub(super) struct Frame<'a> {
     pub(super) dims: [usize; 3],
     /// The upper corner of the box the rays cross, in the index space of the view
     /// ([`drawn_geometry`]): `n − 1`, or 1 along an axis of one sample (its voxel, `[0, 1]`
@@ -112,11 +111,44 @@ pub(super) struct Ctx<'a, T> {
     pub(super) clip: Vec<(DVec3, f64)>,
 }
 
-impl<'a, T: Scalar> Ctx<'a, T> {
-    /// The march of one frame of `volume` under `settings`: through `planes`, classified by
-    /// `classifier` through `tables`, skipping the bricks of `bricks` that `active` leaves out.
+/// The march of one frame: its [`Frame`] and where the voxels are loaded from (`V`:
+/// [`Vox`]: an array in memory or resident bricks).
+pub(super) struct Ctx<'a, T, V = Vox<'a, T>> {
+    pub(super) f: &'a Frame<'a>,
+    /// Where the voxels' values are loaded from.
+    pub(super) vox: V,
+    _t: std::marker::PhantomData<fn() -> T>,
+}
+
+impl<'a, T, V> std::ops::Deref for Ctx<'a, T, V> {
+    type Target = Frame<'a>;
+
+    #[inline(always)]
+    fn deref(&self) -> &Frame<'a> {
+        self.f
+    }
+}
+
+impl<'a, T: Scalar, V: Voxels<T>> Ctx<'a, T, V> {
+    /// The march of `frame` reading its voxels through `vox`.
+    pub(super) fn new(frame: &'a Frame<'a>, vox: V) -> Self {
+        Ctx {
+            f: frame,
+            vox,
+            _t: std::marker::PhantomData,
+        }
+    }
+}
+
+impl<'a> Frame<'a> {
+    /// The march of one frame of a volume of geometry `grid` under `settings`: through
+    /// `planes`, classified by `classifier` through `tables`, skipping the bricks of `bricks`
+    /// that `active` leaves out. `data_len`: the number of samples the addressing indexes
+    /// (the AVX2 kernels need it below `i32::MAX`).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
-        volume: &'a Volume<T>,
+        grid: &volsplat_core::Grid,
+        data_len: usize,
         settings: &RenderSettings,
         planes: Planes,
         tables: &'a FrameTables<'a>,
@@ -124,16 +156,14 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         bricks: &'a BrickGrid,
         active: Vec<bool>,
     ) -> Self {
-        let grid = volume.grid();
         let dims = grid.dims;
         let composite = settings.mode == RenderMode::Composite;
         let all_active = active.iter().all(|&a| a);
-        Ctx {
-            vox: Linear::new(volume),
+        Frame {
             dims,
             box_hi: planes.geo.dims.map(|n| n as i64 - 1),
             max_cell: dims.map(|n| n.max(2) as i64 - 2),
-            simd: settings.simd && simd_available() && volume.data().len() < i32::MAX as usize,
+            simd: settings.simd && simd_available() && data_len < i32::MAX as usize,
             grad_to_world: tables.grad_to_world,
             bricks,
             active_bytes: active.iter().map(|&a| u8::from(a)).chain([0; 3]).collect(),
@@ -172,7 +202,9 @@ impl<'a, T: Scalar> Ctx<'a, T> {
                 .collect(),
         }
     }
+}
 
+impl<'a, T: Scalar, V: Voxels<T>> Ctx<'a, T, V> {
     /// Marches the image of `settings.height` rows, band by band, through every plane: the
     /// bands go to the threads in groups, and `progress` is called after each group with
     /// `sheets_done`/`sheets_total` counting bands (`false` cancels with
@@ -184,20 +216,10 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         progress: &mut dyn FnMut(&Progress) -> bool,
     ) -> Result<(Vec<Rgba>, Counters)> {
         let (w, h) = (settings.width, settings.height);
-        let init: Rgba = match settings.mode {
-            RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
-            _ => [0.0; 4],
-        };
-        let mut acc = vec![init; w * h];
-        // Bands of at most `SLAB_BAND_ROWS` rows: a band's work is very uneven here (a band
-        // through an opaque object stops after a few planes, one beside it runs through the
-        // whole volume), so many small bands balance the threads better than a few large ones.
-        // The image does not depend on the band height (every pixel's arithmetic is its own).
-        let band_h = settings.band_height.min(SLAB_BAND_ROWS);
+        let mut acc = vec![self.acc_init(); w * h];
+        let band_h = self.band_rows(settings);
         let n_bands = h.div_ceil(band_h);
-        // Bands handed to the threads between two progress reports: the threads wait for the
-        // slowest band of a group, so a group holds several bands per thread.
-        let group = (BANDS_PER_THREAD * rayon::current_num_threads()).max(2 * BANDS_PER_THREAD);
+        let group = self.group_bands();
         let mut done = 0;
         let mut counters = Counters::default();
         let chunks: Vec<(usize, &mut [Rgba])> = acc.chunks_mut(band_h * w).enumerate().collect();
@@ -205,11 +227,7 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         while chunks.peek().is_some() {
             let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group).collect();
             let n = batch.len();
-            let c = batch
-                .into_par_iter()
-                .map(|(b, rows)| self.band(b * band_h, rows))
-                .reduce(Counters::default, Counters::add);
-            counters = counters.add(c);
+            counters = counters.add(self.run_bands(batch, band_h));
             done += n;
             // The accumulation of finished bands is only visible after the loop (the bands hold
             // it mutably); the callback gets the count.
@@ -224,10 +242,46 @@ impl<'a, T: Scalar> Ctx<'a, T> {
         Ok((acc, counters))
     }
 
+    /// Marches the bands of `batch` (band index, its rows' pixels; `band_h` rows a band) in
+    /// parallel.
+    pub(super) fn run_bands(&self, batch: Vec<(usize, &mut [Rgba])>, band_h: usize) -> Counters {
+        batch
+            .into_par_iter()
+            .map(|(b, rows)| self.band(b * band_h, rows))
+            .reduce(Counters::default, Counters::add)
+    }
+}
+
+impl Frame<'_> {
+    /// A pixel before the march: transparent black, or for MIP/MinIP NaN in the first
+    /// channel (no plane met the volume yet).
+    pub(super) fn acc_init(&self) -> Rgba {
+        match self.mode {
+            RenderMode::Mip | RenderMode::Minip => [f32::NAN, 0.0, 0.0, 0.0],
+            _ => [0.0; 4],
+        }
+    }
+
+    /// Rows per band: at most `SLAB_BAND_ROWS`. A band's work is very uneven here (a band
+    /// through an opaque object stops after a few planes, one beside it runs through the whole
+    /// volume), so many small bands balance the threads better than a few large ones. The
+    /// image does not depend on the band height (every pixel's arithmetic is its own).
+    pub(super) fn band_rows(&self, settings: &RenderSettings) -> usize {
+        settings.band_height.min(SLAB_BAND_ROWS)
+    }
+
+    /// Bands handed to the threads between two progress reports: the threads wait for the
+    /// slowest band of a group, so a group holds several bands per thread.
+    pub(super) fn group_bands(&self) -> usize {
+        (BANDS_PER_THREAD * rayon::current_num_threads()).max(2 * BANDS_PER_THREAD)
+    }
+
     pub(super) fn depth(&self, plane: usize) -> f64 {
         (self.j0 + plane as i64) as f64 * self.delta
     }
+}
 
+impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// Row `y` of the plane at depth `d` in 32.32 fixed-point index coordinates (VTK's ray
     /// caster steps in 15-bit fixed point): integer steps are exact, so a pixel's position is
     /// the same whichever pixels around it are skipped. The span holds the pixels whose point
@@ -461,6 +515,29 @@ impl<'a, T: Scalar> Ctx<'a, T> {
             *px = [band.r[i], band.g[i], band.b[i], band.a[i]];
         }
         c
+    }
+
+    /// [`Ctx::composite_one`] for the pixels `x + l`, `l < n`, whose bit `l` of `lanes` is set:
+    /// the lanes of an AVX2 group that its source cannot read. Out of line, so that the
+    /// kernel's group loop stays small enough to be inlined whole (measured with perf: inlined,
+    /// the shaded kernel lost 20 %).
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn composite_lanes(
+        &self,
+        walk: &Walk,
+        x: usize,
+        n: usize,
+        lanes: i32,
+        row: &mut RowCtx<'_>,
+        post: Post<'_>,
+        c: &mut Counters,
+    ) {
+        for l in 0..n {
+            if lanes >> l & 1 == 1 {
+                self.composite_one(walk, x + l, row, post, c);
+            }
+        }
     }
 
     /// Samples, classifies and composites pixel `x` of a row ([`Ctx::band_post`]): the scalar

@@ -91,6 +91,7 @@
 //! - `avx2` (x86-64 only): the kernels eight pixels at a time, each naming its scalar twin;
 //! - `supersample`: the anti-aliasing of minified views ([`WHOLE_RAYS_FROM`]).
 
+mod bricked;
 mod march;
 mod math;
 mod path;
@@ -113,7 +114,8 @@ use crate::normals::ShadeAt;
 use crate::sheets::{
     Progress, RenderMode, RenderSettings, RenderStats, Rendered, finish, ms, validate,
 };
-use march::Ctx;
+use crate::voxels::{Linear, Vox};
+use march::{Ctx, Frame};
 use std::time::Instant;
 use supersample::{render_supersampled, supersampling};
 use tables::FrameTables;
@@ -175,29 +177,77 @@ pub fn render_slabs<T: Scalar>(
     bricks: Option<&BrickGrid>,
     progress: &mut dyn FnMut(&Progress) -> bool,
 ) -> Result<Rendered> {
-    let t_start = Instant::now();
-    let grid = volume.grid();
-    check_settings(settings, grid.dims)?;
     let owned;
     let bricks = match bricks {
-        Some(b) if b.volume_dims == grid.dims => b,
+        Some(b) if b.volume_dims == volume.grid().dims => b,
         _ => {
+            check_settings(settings, volume.grid().dims)?;
             owned = BrickGrid::build(volume);
             &owned
         }
     };
+    render_slabs_in(
+        &mut Access::Whole(volume),
+        camera,
+        tables,
+        settings,
+        bricks,
+        progress,
+    )
+}
+
+/// Where a frame reads its voxels: a volume in memory, or the resident bricks of a level
+/// ([`bricked::Resident`], made resident band group by band group).
+pub(crate) enum Access<'v, T> {
+    Whole(&'v Volume<T>),
+    Bricked(&'v mut dyn bricked::Resident<T>),
+}
+
+impl<T: Scalar> Access<'_, T> {
+    fn grid(&self) -> &volsplat_core::Grid {
+        match self {
+            Access::Whole(v) => v.grid(),
+            Access::Bricked(r) => r.layout().grid(),
+        }
+    }
+}
+
+/// [`render_slabs`] reading the voxels through `access`; `bricks` is the level's brick grid.
+pub(crate) fn render_slabs_in<T: Scalar>(
+    access: &mut Access<'_, T>,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+    bricks: &BrickGrid,
+    progress: &mut dyn FnMut(&Progress) -> bool,
+) -> Result<Rendered> {
+    let t_start = Instant::now();
+    let grid = access.grid().clone();
+    check_settings(settings, grid.dims)?;
+    if bricks.volume_dims != grid.dims {
+        return Err(SplatError::Setting {
+            name: "bricks",
+            value: format!("{:?}", bricks.volume_dims),
+            expected: "the brick grid of the volume rendered",
+        });
+    }
     let proj = Projection::new(camera, settings.width, settings.height)?;
     let min_spacing = grid.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
-    let ss = supersampling(settings, &proj, grid, min_spacing);
+    let ss = supersampling(settings, &proj, &grid, min_spacing);
     if ss > 1.0 {
-        return render_supersampled(volume, camera, tables, settings, Some(bricks), progress, ss);
+        return render_supersampled(access, camera, tables, settings, bricks, progress, ss);
     }
     // Set-up: the planes, the frame's classification, the bricks that can have opacity.
-    let planes = Planes::place(settings, &proj, grid, min_spacing)?;
+    let planes = Planes::place(settings, &proj, &grid, min_spacing)?;
     let classifier = FrameClassifier::new(tables, proj.frame(), planes.delta);
     let mut owned_normals = None;
+    let whole = match access {
+        Access::Whole(v) => Some(&**v),
+        Access::Bricked(_) => None,
+    };
     let frame_tables = FrameTables::build(
-        volume,
+        &grid,
+        whole,
         tables,
         &classifier,
         settings,
@@ -217,11 +267,23 @@ pub fn render_slabs<T: Scalar>(
         threads: rayon::current_num_threads(),
         ..RenderStats::default()
     };
-    let owned_planes = settings
-        .owned_cells
-        .map(|owned| planes_meeting(owned, grid, &proj, planes.j0, planes.delta, planes.n_planes));
-    let mut ctx = Ctx::new(
-        volume,
+    let owned_planes = settings.owned_cells.map(|owned| {
+        planes_meeting(
+            owned,
+            &grid,
+            &proj,
+            planes.j0,
+            planes.delta,
+            planes.n_planes,
+        )
+    });
+    let data_len = match access {
+        Access::Whole(v) => v.data().len(),
+        Access::Bricked(r) => r.arena().len(),
+    };
+    let mut frame = Frame::new(
+        &grid,
+        data_len,
         settings,
         planes,
         &frame_tables,
@@ -230,12 +292,17 @@ pub fn render_slabs<T: Scalar>(
         active,
     );
     if let Some(range) = owned_planes {
-        ctx.plane_range = range;
+        frame.plane_range = range;
     }
     stats.setup_ms = ms(t_start);
     // The march, band by band of the image.
     let t_render = Instant::now();
-    let (acc, counters) = ctx.march_bands(settings, progress)?;
+    let (acc, counters) = match access {
+        Access::Whole(v) => {
+            Ctx::new(&frame, Vox::Linear(Linear::new(v))).march_bands(settings, progress)?
+        }
+        Access::Bricked(r) => bricked::march(&frame, &mut **r, settings, progress)?,
+    };
     stats.classify_ms = ms(t_render);
     // The finish: counters into stats, the accumulation into the picture.
     stats.voxels = counters.samples;

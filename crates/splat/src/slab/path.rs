@@ -3,10 +3,11 @@
 
 use super::march::Ctx;
 use super::math::{exp2_neg, log2_unit};
+use crate::voxels::Voxels;
 use volsplat_core::Scalar;
 use volsplat_core::image::Rgba;
 
-impl<T: Scalar> Ctx<'_, T> {
+impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// Perspective: the slab's path along the ray through a pixel is `Δ·k`, `k = √(1 + u² + v²)`
     /// ([`Ctx::path_factors`]), so the opacity (corrected for `Δ`) becomes `1 − (1 − α)^k` and
     /// the colour scales with it. `k = 1` (orthographic) changes nothing.

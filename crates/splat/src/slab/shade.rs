@@ -222,7 +222,7 @@ fn clamp01(col: [f32; 3]) -> [f32; 3] {
     col.map(|c| min_ps(max_ps(c, 0.0), 1.0))
 }
 
-impl<T: Scalar> Ctx<'_, T> {
+impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// The difference of the voxels around the voxel with linear index `at` (index `p`) along
     /// axis `a` (of two voxels or more), and whether it is central: `(ρ(p + 1) − ρ(p − 1), true)`
     /// inside the grid, one-sided on its faces (`ρ(p + 1) − ρ(p)` at `p = 0`, `ρ(p) − ρ(p − 1)`
@@ -256,18 +256,23 @@ impl<T: Scalar> Ctx<'_, T> {
     /// [`Ctx::band_plain`]: super::march::Ctx::band_plain
     pub(super) fn gradient_at(&self, c: [usize; 3], f: [f32; 3]) -> Vec3 {
         let mut g = [0.0f32; 3];
+        // The corners are reached from the cell's anchor (in bricks, its own slot, whose halo
+        // holds every difference's stencil), not each from its own brick.
+        let base = self.vox.cell_base(c);
+        let up = self.vox.up();
         for corner in 0..8usize {
             let mut w = 1.0f32;
             let mut p = [0usize; 3];
+            let mut here = base;
             for a in 0..3 {
-                let up = corner >> a & 1 == 1;
-                p[a] = c[a] + usize::from(up && self.dims[a] > 1);
-                w *= if up { f[a] } else { 1.0 - f[a] };
+                let is_up = corner >> a & 1 == 1;
+                p[a] = c[a] + usize::from(is_up && self.dims[a] > 1);
+                here += if is_up { up[a] } else { 0 };
+                w *= if is_up { f[a] } else { 1.0 - f[a] };
             }
             if w == 0.0 {
                 continue;
             }
-            let here = self.vox.linear(p);
             for a in 0..3 {
                 if self.dims[a] < 2 {
                     continue;

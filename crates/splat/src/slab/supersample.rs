@@ -1,11 +1,11 @@
 //! Anti-aliasing of minified views: more rays than pixels where a pixel spans more than a
 //! voxel, filtered down to the picture (decision 0020).
 
-use super::render_slabs;
+use super::{Access, render_slabs_in};
 use crate::bricks::BrickGrid;
 use crate::error::Result;
 use crate::sheets::{Progress, RenderSettings, Rendered, validate};
-use volsplat_core::{Camera, CrioTables, Image, Projection, Scalar, ScalarImage, Volume};
+use volsplat_core::{Camera, CrioTables, Image, Projection, Scalar, ScalarImage};
 
 /// Sub-pixel rays per pixel and axis for the anti-aliasing of minified views, from `r`, the
 /// pixel's size at the volume's centre over the smallest voxel spacing: 1 where a voxel spans a
@@ -73,11 +73,11 @@ fn area_weights(n: usize, fine: usize, step: f64, offset: f64) -> Vec<(usize, Ve
 /// columns as keep the camera's aspect without narrowing the view, each pixel the mean of the
 /// fine pixels over its area, weighted by the part of it each covers.
 pub(super) fn render_supersampled<T: Scalar>(
-    volume: &Volume<T>,
+    volume: &mut Access<'_, T>,
     camera: &Camera,
     tables: &CrioTables,
     settings: &RenderSettings,
-    bricks: Option<&BrickGrid>,
+    bricks: &BrickGrid,
     progress: &mut dyn FnMut(&Progress) -> bool,
     ss: f64,
 ) -> Result<Rendered> {
@@ -105,7 +105,7 @@ pub(super) fn render_supersampled<T: Scalar>(
         ..settings.clone()
     };
     validate(&fine)?;
-    let out = render_slabs(volume, camera, tables, &fine, bricks, progress)?;
+    let out = render_slabs_in(volume, camera, tables, &fine, bricks, progress)?;
     let x_off = 0.5 * (fw as f64 * step - w as f64);
     let (wx, wy) = (
         area_weights(w, fw, step, x_off),
@@ -163,11 +163,11 @@ pub(super) fn render_supersampled<T: Scalar>(
 
 /// [`render_supersampled`] for a whole factor: `ss × ss` rays per pixel, box-averaged.
 fn render_box_supersampled<T: Scalar>(
-    volume: &Volume<T>,
+    volume: &mut Access<'_, T>,
     camera: &Camera,
     tables: &CrioTables,
     settings: &RenderSettings,
-    bricks: Option<&BrickGrid>,
+    bricks: &BrickGrid,
     progress: &mut dyn FnMut(&Progress) -> bool,
     ss: usize,
 ) -> Result<Rendered> {
@@ -178,7 +178,7 @@ fn render_box_supersampled<T: Scalar>(
         ..settings.clone()
     };
     validate(&fine)?;
-    let out = render_slabs(volume, camera, tables, &fine, bricks, progress)?;
+    let out = render_slabs_in(volume, camera, tables, &fine, bricks, progress)?;
     let (w, h) = (settings.width, settings.height);
     let fw = fine.width;
     let inv = 1.0 / (ss * ss) as f32;

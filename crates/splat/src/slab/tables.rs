@@ -10,7 +10,7 @@ use crate::normals::{NormalField, ShadeAt, VoxelShading};
 use crate::sheets::{Preintegrate, RenderMode, RenderSettings};
 use volsplat_core::glam::Vec3;
 use volsplat_core::image::Rgba;
-use volsplat_core::{CrioTables, FrameClassifier, SampleInput, Scalar, Volume};
+use volsplat_core::{CrioTables, FrameClassifier, Grid, SampleInput, Scalar, Volume};
 
 /// How one frame classifies its samples (decisions 0016, 0019, 0020): through a density table
 /// where the transfer function depends on the density alone (unshaded, [`PostTable`]; shaded,
@@ -42,14 +42,14 @@ impl<'a> FrameTables<'a> {
     /// it keeps them across frames, else are built into `owned_normals`; an error where they
     /// cannot be allocated.
     pub(super) fn build<T: Scalar>(
-        volume: &Volume<T>,
+        grid: &Grid,
+        volume: Option<&Volume<T>>,
         tables: &CrioTables,
         classifier: &FrameClassifier,
         settings: &RenderSettings,
         bricks: &'a BrickGrid,
         owned_normals: &'a mut Option<NormalField>,
     ) -> Result<Self> {
-        let grid = volume.grid();
         let composite = settings.mode == RenderMode::Composite;
         let shade = composite && classifier.needs_gradient;
         let post = (composite && !shade)
@@ -65,6 +65,16 @@ impl<'a> FrameTables<'a> {
         // kept with the brick grid across frames, and the frame's lights applied to every code.
         let (voxel, codes): (Option<VoxelShading>, &[u16]) = match &shaded {
             Some(t) if settings.shade_at == ShadeAt::Voxels => {
+                // The direction codes are a field of the whole volume: bricked frames light
+                // the samples instead (the engine's plan; this is its check).
+                let Some(volume) = volume else {
+                    return Err(crate::error::SplatError::Setting {
+                        name: "shade_at",
+                        value: "voxels".into(),
+                        expected: "samples for a volume read in bricks (the voxels' direction \
+                                   codes are a field of the whole volume)",
+                    });
+                };
                 let field = match bricks.normals(volume)? {
                     Some(f) => f,
                     None => owned_normals.insert(NormalField::build(volume)?),

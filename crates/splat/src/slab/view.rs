@@ -169,6 +169,18 @@ impl View {
         }
     }
 
+    /// Index-space position of the point at pixel coordinates `(x, y)` (continuous: pixel
+    /// `(i, j)`'s centre is `(i, j)`, as [`View::row`] places it) on the plane at depth `d`:
+    /// affine in each of `x`, `y` and `d` (the bricks a band of rows needs, `super::bricked`).
+    pub(super) fn point(&self, x: f64, y: f64, d: f64) -> DVec3 {
+        let (u, v) = self.offsets(x, y);
+        if self.perspective {
+            self.eye_q + (self.fwd_q + self.right_q * u + self.up_q * v) * d
+        } else {
+            self.eye_q + self.fwd_q * d + self.right_q * u + self.up_q * v
+        }
+    }
+
     /// World position of pixel `(x, 0)`'s point at depth `d` and the world step per pixel along
     /// x (for clipping planes).
     pub(super) fn row_world(&self, y: usize, d: f64) -> (DVec3, DVec3) {

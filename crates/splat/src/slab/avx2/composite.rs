@@ -29,8 +29,8 @@ use volsplat_core::Scalar;
 #[inline]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
-pub(super) unsafe fn composite_groups_avx2<T: Scalar, S: Source8<T>>(
-    ctx: &Ctx<'_, T>,
+pub(super) unsafe fn composite_groups_avx2<T: Scalar, V: Voxels<T>, S: Source8<T>>(
+    ctx: &Ctx<'_, T, V>,
     walk: &Walk,
     sampler: &Sampler8<T>,
     (a, b): (usize, usize),
@@ -115,8 +115,8 @@ enum Group<P> {
 
 /// One run of [`composite_groups_avx2`] through one row of one plane: what every group reads,
 /// with the row's constants broadcast to eight lanes.
-struct Run<'r, 'a, T, S> {
-    ctx: &'r Ctx<'a, T>,
+struct Run<'r, 'a, T, V, S> {
+    ctx: &'r Ctx<'a, T, V>,
     walk: &'r Walk,
     sampler: &'r Sampler8<T>,
     post: Post<'r>,
@@ -143,12 +143,12 @@ struct Run<'r, 'a, T, S> {
     next_stamp: __m256i,
 }
 
-impl<'r, 'a, T: Scalar, S: Source8<T>> Run<'r, 'a, T, S> {
+impl<'r, 'a, T: Scalar, V: Voxels<T>, S: Source8<T>> Run<'r, 'a, T, V, S> {
     /// The run through `row`, classified by `src` (for `post`).
     #[inline]
     #[target_feature(enable = "avx2")]
     fn new(
-        ctx: &'r Ctx<'a, T>,
+        ctx: &'r Ctx<'a, T, V>,
         walk: &'r Walk,
         sampler: &'r Sampler8<T>,
         row: &RowCtx<'_>,
@@ -214,11 +214,8 @@ impl<'r, 'a, T: Scalar, S: Source8<T>> Run<'r, 'a, T, S> {
         if unsafe { self.src.scalar_lanes(&cells, live) } {
             // The scalar twin takes the group's live lanes (the others are counted above or
             // contribute nothing); its pixels are none of the chunk's.
-            for l in 0..n {
-                if live_bits >> l & 1 == 1 {
-                    self.ctx.composite_one(self.walk, x + l, row, self.post, c);
-                }
-            }
+            self.ctx
+                .composite_lanes(self.walk, x, n, live_bits, row, self.post, c);
             return Group::Done;
         }
         let base = unsafe { self.sampler.base_of(&cells) };
@@ -385,8 +382,8 @@ impl<'r, 'a, T: Scalar, S: Source8<T>> Run<'r, 'a, T, S> {
 /// # Safety
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
-pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar>(
-    ctx: &Ctx<'_, T>,
+pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar, V: Voxels<T>>(
+    ctx: &Ctx<'_, T, V>,
     walk: &Walk,
     a: usize,
     b: usize,

@@ -29,6 +29,7 @@ pub(super) use composite::composite_run_avx2;
 use super::march::{Counters, Ctx};
 use super::tables::TableAxis;
 use super::view::Walk;
+use crate::voxels::Voxels;
 use sampler::Sampler8;
 use volsplat_core::Scalar;
 
@@ -39,8 +40,8 @@ use volsplat_core::Scalar;
 /// # Safety
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
-pub(super) unsafe fn sample_run_avx2<T: Scalar>(
-    ctx: &Ctx<'_, T>,
+pub(super) unsafe fn sample_run_avx2<T: Scalar, V: Voxels<T>>(
+    ctx: &Ctx<'_, T, V>,
     walk: &Walk,
     a: usize,
     b: usize,
@@ -80,8 +81,8 @@ pub(super) unsafe fn sample_run_avx2<T: Scalar>(
 /// # Safety
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
-pub(super) unsafe fn extreme_row_avx2<T: Scalar>(
-    ctx: &Ctx<'_, T>,
+pub(super) unsafe fn extreme_row_avx2<T: Scalar, V: Voxels<T>>(
+    ctx: &Ctx<'_, T, V>,
     walk: &Walk,
     lo: usize,
     hi: usize,

@@ -1,0 +1,345 @@
+//! The slab march over resident bricks (docs/design/brick-seam.md §2.3, issue 31 item 4): the
+//! bands of the image go in groups, as in [`Ctx::march_bands`]; before each group the bricks
+//! its rays can sample are made resident (the serial point where a read may fail), and the
+//! group marches reading them through [`Slotted`]. Every pixel's arithmetic is the in-memory
+//! march's (cells, fractions and face tests from global indices; the same voxel values), so
+//! the image is the same bits whatever the budget, the grouping or the thread count.
+//!
+//! **Which bricks a band needs.** The sample points of the rows `y0 … y1 − 1` on the planes
+//! `first … last` are `P(x, y, d)`, affine in each of the pixel column `x`, the row `y` and
+//! the depth `d` (`View::point`), so they lie in the convex hull of the eight points at the
+//! ends of the three ranges, a hexahedron with planar faces (a frustum piece in perspective,
+//! a parallelepiped in orthographic views). It is widened by half a pixel, half a plane and a
+//! voxel each way (rounding of the f32 positions), and a brick is needed where its box of
+//! cells meets it (the box outside none of the six faces nor the hull's bounds). A sample's
+//! cell is the floor of its position, clamped to the grid, so a sample at position `q` reads
+//! the brick whose cells' box holds `q`; the halo holds the rest of its stencil. Composite
+//! needs only bricks with an active 8³ block (the march samples no other: live lanes are in
+//! active blocks, and the other lanes of an AVX2 group read slot 0 and are dropped); MIP and
+//! MinIP sample every block.
+
+use super::march::{Counters, Ctx, Frame};
+use super::view::View;
+use crate::error::{Result, SplatError};
+use crate::sheets::{Progress, RenderMode, RenderSettings};
+use crate::voxels::{Slotted, Vox};
+use std::sync::Arc;
+use volsplat_core::Scalar;
+use volsplat_core::glam::DVec3;
+use volsplat_core::image::Rgba;
+use volsplat_core::source::{Brick, BrickKey, BrickLayout};
+
+/// The bricks of one level that a frame may read, made resident on demand: the brick cache
+/// (`crate::cache::BrickCache`), or every brick at once in tests.
+pub(crate) trait Resident<T>: Sync {
+    /// How the level is cut into bricks.
+    fn layout(&self) -> &BrickLayout;
+    /// How many bricks can be resident at once.
+    fn capacity(&self) -> usize;
+    /// Reads the bricks of `keys` that are not resident, without placing them (read-ahead:
+    /// called while a group marches, reading the arena).
+    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>>;
+    /// Makes every brick of `keys` (at most [`Resident::capacity`]) resident, placing the
+    /// `fetched` ones and reading the rest.
+    fn make_resident_with(&mut self, keys: &[BrickKey], fetched: Vec<Arc<Brick<T>>>) -> Result<()>;
+    /// The slots, `E³` voxels each, padded so that a 4-byte read at the last voxel stays
+    /// inside.
+    fn arena(&self) -> &[T];
+    /// Per brick of the layout (i fastest), its slot's first position in the arena (0 where
+    /// not resident).
+    fn bases(&self) -> &[u32];
+}
+
+/// Marches `frame` band group by band group, each group's bricks made resident in `res`
+/// first (module docs). The result is
+/// [`Ctx::march_bands`]'s.
+pub(super) fn march<T: Scalar>(
+    frame: &Frame<'_>,
+    res: &mut dyn Resident<T>,
+    settings: &RenderSettings,
+    progress: &mut dyn FnMut(&Progress) -> bool,
+) -> Result<(Vec<Rgba>, Counters)> {
+    let layout = res.layout().clone();
+    let (w, h) = (settings.width, settings.height);
+    let mut acc = vec![frame.acc_init(); w * h];
+    let band_h = frame.band_rows(settings);
+    let n_bands = h.div_ceil(band_h);
+    let needed = needed_bricks(frame, &layout);
+    let planes = match frame.mode {
+        RenderMode::Composite => frame.plane_range,
+        _ => (0, frame.n_planes),
+    };
+    let per_band: Vec<Vec<u32>> = (0..n_bands)
+        .map(|b| {
+            let rows = (b * band_h, ((b + 1) * band_h).min(h));
+            band_bricks(frame, &layout, rows, planes, &needed)
+        })
+        .collect();
+    let groups = group_bands(&per_band, res.capacity(), frame.group_bands(), &layout)?;
+    let keys_of = |g: &Group| -> Vec<BrickKey> {
+        g.bricks
+            .iter()
+            .map(|&i| key_of(&layout, i as usize))
+            .collect()
+    };
+    let mut counters = Counters::default();
+    let mut chunks = acc.chunks_mut(band_h * w).enumerate();
+    let mut done = 0;
+    let mut fetched = Vec::new();
+    for (g, group) in groups.iter().enumerate() {
+        res.make_resident_with(&keys_of(group), std::mem::take(&mut fetched))?;
+        let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group.bands).collect();
+        let next = groups.get(g + 1).map(keys_of);
+        let ctx = Ctx::new(
+            frame,
+            Vox::Slotted(Slotted::new(res.arena(), res.bases(), &layout)),
+        );
+        // Read-ahead: the next group's bricks are read while this one marches.
+        let res_ref: &dyn Resident<T> = &*res;
+        let (c, ahead) = rayon::join(
+            || ctx.run_bands(batch, band_h),
+            || next.map(|keys| res_ref.fetch(&keys)).transpose(),
+        );
+        fetched = ahead?.unwrap_or_default();
+        counters = counters.add(c);
+        done += group.bands;
+        if !progress(&Progress {
+            sheets_done: done,
+            sheets_total: n_bands,
+            accumulation: &[],
+        }) {
+            return Err(SplatError::Cancelled);
+        }
+    }
+    Ok((acc, counters))
+}
+
+/// A run of consecutive bands marched together, and the bricks (indices, i fastest) they need.
+struct Group {
+    bands: usize,
+    bricks: Vec<u32>,
+}
+
+/// Cuts the bands into runs of at most `max_bands` whose bricks fit `capacity` together;
+/// an error naming the budget where one band alone needs more.
+fn group_bands(
+    per_band: &[Vec<u32>],
+    capacity: usize,
+    max_bands: usize,
+    layout: &BrickLayout,
+) -> Result<Vec<Group>> {
+    let mut groups = Vec::new();
+    let mut cur = Group {
+        bands: 0,
+        bricks: Vec::new(),
+    };
+    for set in per_band {
+        if set.len() > capacity {
+            return Err(SplatError::Setting {
+                name: "memory",
+                value: format!(
+                    "{capacity} bricks of {}³ voxels ({} bytes each)",
+                    layout.extent(),
+                    layout.slot_len()
+                ),
+                expected: "room for the bricks of one band of rows; \
+                           raise the memory budget or lower the image height",
+            });
+        }
+        let union = merge(&cur.bricks, set);
+        if cur.bands > 0 && (union.len() > capacity || cur.bands == max_bands) {
+            groups.push(std::mem::replace(
+                &mut cur,
+                Group {
+                    bands: 1,
+                    bricks: set.clone(),
+                },
+            ));
+        } else {
+            cur.bands += 1;
+            cur.bricks = union;
+        }
+    }
+    if cur.bands > 0 {
+        groups.push(cur);
+    }
+    Ok(groups)
+}
+
+/// The sorted union of two sorted lists.
+fn merge(a: &[u32], b: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() || j < b.len() {
+        let x = match (a.get(i), b.get(j)) {
+            (Some(&x), Some(&y)) if x == y => {
+                i += 1;
+                j += 1;
+                x
+            }
+            (Some(&x), Some(&y)) if x < y => {
+                i += 1;
+                x
+            }
+            (Some(&x), None) => {
+                i += 1;
+                x
+            }
+            (_, Some(&y)) => {
+                j += 1;
+                y
+            }
+            (None, None) => unreachable!(),
+        };
+        out.push(x);
+    }
+    out
+}
+
+/// The key of brick index `i` (i fastest over `layout.dims()`).
+fn key_of(layout: &BrickLayout, i: usize) -> BrickKey {
+    let d = layout.dims();
+    BrickKey {
+        level: layout.level(),
+        b: [i % d[0], i / d[0] % d[1], i / (d[0] * d[1])].map(|x| x as u32),
+    }
+}
+
+/// Per brick (i fastest): whether the frame can sample it. Composite skipping empty space
+/// samples only the active 8³ blocks ([`Frame::active`]); the other modes sample all.
+fn needed_bricks(frame: &Frame<'_>, layout: &BrickLayout) -> Vec<bool> {
+    let d = layout.dims();
+    let n = d[0] * d[1] * d[2];
+    if frame.mode != RenderMode::Composite || !frame.skip_empty {
+        return vec![true; n];
+    }
+    let per = layout.size() / crate::bricks::BRICK;
+    let bd = frame.bricks.dims;
+    let mut needed = vec![false; n];
+    for (q, &on) in frame.active.iter().enumerate() {
+        if on {
+            let blk = [q % bd[0], q / bd[0] % bd[1], q / (bd[0] * bd[1])];
+            let b = blk.map(|x| x / per);
+            needed[(b[2] * d[1] + b[1]) * d[0] + b[0]] = true;
+        }
+    }
+    needed
+}
+
+/// The bricks (indices, sorted) whose cells the rows `[y0, y1)` can sample on the planes
+/// `[first, end)` (module docs), among those `needed`.
+fn band_bricks(
+    frame: &Frame<'_>,
+    layout: &BrickLayout,
+    (y0, y1): (usize, usize),
+    (first, end): (usize, usize),
+    needed: &[bool],
+) -> Vec<u32> {
+    if first >= end || y0 >= y1 {
+        return Vec::new();
+    }
+    let hull = Hull::new(
+        &frame.view,
+        (-0.5, frame.width as f64 - 0.5),
+        (y0 as f64 - 0.5, y1 as f64 - 0.5),
+        (
+            frame.depth(first) - 0.5 * frame.delta,
+            frame.depth(end - 1) + 0.5 * frame.delta,
+        ),
+    );
+    let d = layout.dims();
+    let size = layout.size() as f64;
+    // The bricks within the hull's bounds (widened by a voxel), then each against its faces.
+    let range: [(usize, usize); 3] = std::array::from_fn(|a| {
+        let lo = ((hull.lo[a] - 1.0) / size).floor().max(0.0);
+        let hi = ((hull.hi[a] + 1.0) / size).floor();
+        if hi < 0.0 || lo >= d[a] as f64 {
+            return (1, 0);
+        }
+        (lo as usize, (hi as usize).min(d[a] - 1))
+    });
+    let mut out = Vec::new();
+    for bk in range[2].0..=range[2].1 {
+        for bj in range[1].0..=range[1].1 {
+            for bi in range[0].0..=range[0].1 {
+                let i = (bk * d[1] + bj) * d[0] + bi;
+                if !needed[i] {
+                    continue;
+                }
+                let b = [bi, bj, bk];
+                let lo = DVec3::from(b.map(|x| x as f64 * size - 1.0));
+                let hi = DVec3::from(b.map(|x| (x + 1) as f64 * size + 1.0));
+                if hull.meets_box(lo, hi) {
+                    out.push(i as u32);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The convex hull of the sample points of a band (module docs): its bounds and its six
+/// faces as outward planes `n·p ≤ c`.
+struct Hull {
+    lo: DVec3,
+    hi: DVec3,
+    faces: Vec<(DVec3, f64)>,
+}
+
+impl Hull {
+    /// The hull of `view.point(x, y, d)` over the three ranges.
+    fn new(view: &View, xs: (f64, f64), ys: (f64, f64), ds: (f64, f64)) -> Self {
+        let pick = |r: (f64, f64), hi: bool| if hi { r.1 } else { r.0 };
+        // Corner `c`: bit 0 picks x, bit 1 y, bit 2 d.
+        let corner: [DVec3; 8] = std::array::from_fn(|c| {
+            view.point(
+                pick(xs, c & 1 == 1),
+                pick(ys, c & 2 == 2),
+                pick(ds, c & 4 == 4),
+            )
+        });
+        let lo = corner.iter().fold(DVec3::INFINITY, |m, p| m.min(*p));
+        let hi = corner.iter().fold(DVec3::NEG_INFINITY, |m, p| m.max(*p));
+        let centre = corner.iter().fold(DVec3::ZERO, |s, p| s + *p) / 8.0;
+        let mut faces = Vec::with_capacity(6);
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for side in [0, 1] {
+                let at = |bu: usize, bv: usize| corner[side << axis | bu << u | bv << v];
+                let p0 = at(0, 0);
+                let n = (at(1, 0) - p0).cross(at(0, 1) - p0);
+                let len = n.length();
+                if !(len > 0.0 && len.is_finite()) {
+                    continue; // A degenerate face bounds nothing; the others still do.
+                }
+                let mut n = n / len;
+                if n.dot(centre - p0) > 0.0 {
+                    n = -n;
+                }
+                faces.push((n, n.dot(p0)));
+            }
+        }
+        Hull { lo, hi, faces }
+    }
+
+    /// Whether the box `[lo, hi]` may meet the hull: it lies beyond none of its bounds and
+    /// none of its faces (conservative: a box near an edge may pass).
+    fn meets_box(&self, lo: DVec3, hi: DVec3) -> bool {
+        if (0..3).any(|a| hi[a] < self.lo[a] || lo[a] > self.hi[a]) {
+            return false;
+        }
+        self.faces.iter().all(|&(n, c)| {
+            // The box's corner furthest against the normal.
+            let p = DVec3::new(
+                if n.x < 0.0 { hi.x } else { lo.x },
+                if n.y < 0.0 { hi.y } else { lo.y },
+                if n.z < 0.0 { hi.z } else { lo.z },
+            );
+            n.dot(p) <= c
+        })
+    }
+}
+
+#[cfg(test)]
+#[path = "bricked_tests.rs"]
+mod tests;
