@@ -270,6 +270,67 @@ pub struct Brick<T> {
     pub range: [f32; 2],
 }
 
+impl<T: Scalar> Brick<T> {
+    /// Brick `key` of `layout`, cut from `region`: the box of voxels `[region_lo, region_lo +
+    /// region_dims)` of the level (index space), x fastest, which must hold the brick's halo box
+    /// ([`BrickLayout::halo_voxels`]; the whole level, as [`InMemory`] passes it, or exactly the
+    /// halo box, as a store reads it). The slot holds voxel `B·b − H + l` clamped to the level at
+    /// slot position `l` (edge padding repeats the nearest voxel of the level); the ranges are
+    /// those of [`Brick::ranges8`] and [`Brick::range`], read from the slot.
+    ///
+    /// Errors ([`CoreError::Brick`] naming the level and brick): `key` not a brick of `layout`;
+    /// a region that does not hold the halo box, lies outside the level or whose length is not
+    /// `region_dims`' product; a slot that cannot be allocated.
+    pub fn from_region(
+        layout: &BrickLayout,
+        key: BrickKey,
+        region: &[T],
+        region_lo: [usize; 3],
+        region_dims: [usize; 3],
+    ) -> Result<Brick<T>> {
+        let b = layout.check(key)?;
+        let halo = layout.halo_voxels(key)?;
+        let n = layout.grid().dims;
+        let fits = (0..3).all(|a| {
+            region_lo[a] <= halo[a].start
+                && region_lo[a]
+                    .checked_add(region_dims[a])
+                    .is_some_and(|end| halo[a].end <= end && end <= n[a])
+        });
+        if !fits {
+            return Err(key.error(format!(
+                "the region of {region_dims:?} voxels at {region_lo:?} does not hold the brick's \
+                 voxels [{}, {}) × [{}, {}) × [{}, {}) inside the level's {n:?}",
+                halo[0].start, halo[0].end, halo[1].start, halo[1].end, halo[2].start, halo[2].end
+            )));
+        }
+        let want = region_dims
+            .iter()
+            .try_fold(1usize, |p, &d| p.checked_mul(d));
+        if want != Some(region.len()) {
+            return Err(key.error(format!(
+                "the region holds {} samples where {region_dims:?} needs {}",
+                region.len(),
+                want.map_or_else(|| "more than usize".into(), |w| w.to_string())
+            )));
+        }
+        let data = copy_slot(layout, b, region, region_lo, region_dims)
+            .ok_or_else(|| key.error("cannot allocate the brick's slot"))?;
+        let ranges8 = block_ranges(layout, key, &data)?;
+        let range = ranges8
+            .iter()
+            .fold([f32::INFINITY, f32::NEG_INFINITY], |r, q| {
+                [r[0].min(q[0]), r[1].max(q[1])]
+            });
+        Ok(Brick {
+            key,
+            data,
+            ranges8,
+            range,
+        })
+    }
+}
+
 /// A source of bricks for one volume and its pyramid levels (docs/design/brick-seam.md §2.1).
 ///
 /// Reads are fallible (a store can fail); renderers call them only at serial points, never inside
@@ -351,21 +412,8 @@ impl<T: Scalar> BrickSource<T> for InMemory<T> {
     }
 
     fn brick(&self, key: BrickKey) -> Result<Arc<Brick<T>>> {
-        let b = self.layout.check(key)?;
-        let data = copy_slot(&self.layout, &self.volume, b)
-            .ok_or_else(|| key.error("cannot allocate the brick's slot"))?;
-        let ranges8 = block_ranges(&self.layout, b, &data);
-        let range = ranges8
-            .iter()
-            .fold([f32::INFINITY, f32::NEG_INFINITY], |r, q| {
-                [r[0].min(q[0]), r[1].max(q[1])]
-            });
-        Ok(Arc::new(Brick {
-            key,
-            data,
-            ranges8,
-            range,
-        }))
+        let n = self.volume.grid().dims;
+        Brick::from_region(&self.layout, key, self.volume.data(), [0; 3], n).map(Arc::new)
     }
 
     fn whole(&self, level: usize) -> Result<Option<Arc<Volume<T>>>> {
@@ -373,68 +421,96 @@ impl<T: Scalar> BrickSource<T> for InMemory<T> {
     }
 }
 
-/// The `E³` slot of brick `b`: voxel `B·b − H + l` (clamped to the level) at slot position `l`.
-/// `None` if the slot cannot be allocated.
+/// The `E³` slot of brick `b`: voxel `B·b − H + l` (clamped to the level) at slot position `l`,
+/// read from `region` (the voxels `[lo, lo + dims)`, x fastest, holding the halo box: checked
+/// by [`Brick::from_region`]). `None` if the slot cannot be allocated.
 fn copy_slot<T: Scalar>(
     layout: &BrickLayout,
-    volume: &Volume<T>,
     b: [usize; 3],
+    region: &[T],
+    lo: [usize; 3],
+    dims: [usize; 3],
 ) -> Option<Box<[T]>> {
     let e = layout.extent();
-    let n = volume.grid().dims;
-    let data = volume.data();
+    let n = layout.grid().dims;
     let mut out = Vec::new();
     out.try_reserve_exact(layout.slot_len()).ok()?;
-    // Global index of slot position l along axis a, clamped to the level.
+    // Region index of slot position l along axis a: the global index clamped to the level,
+    // less the region's origin.
     let at = |a: usize, l: usize| {
         (b[a] * layout.size() + l)
             .saturating_sub(HALO)
             .min(n[a] - 1)
+            - lo[a]
     };
     for lz in 0..e {
         let k = at(2, lz);
         for ly in 0..e {
-            let row = (k * n[1] + at(1, ly)) * n[0];
-            out.extend((0..e).map(|lx| data[row + at(0, lx)]));
+            let row = (k * dims[1] + at(1, ly)) * dims[0];
+            out.extend((0..e).map(|lx| region[row + at(0, lx)]));
         }
     }
     Some(out.into_boxed_slice())
 }
 
-/// The ranges of brick `b`'s 8³ blocks, read from its slot ([`Brick::ranges8`]).
-fn block_ranges<T: Scalar>(layout: &BrickLayout, b: [usize; 3], slot: &[T]) -> Box<[[f32; 2]]> {
-    let q = layout.size() / BLOCK;
-    let n = layout.grid().dims;
+impl BrickLayout {
+    /// Skip blocks per brick side: `B / 8`.
+    pub fn blocks_per_brick(&self) -> usize {
+        self.size / BLOCK
+    }
+
+    /// The voxels of skip block `q` of brick `key` (`q` indexes [`Brick::ranges8`]: `(B/8)³`
+    /// blocks, i fastest) as slot-local ranges (slot position `p − B·b + H` per axis): global
+    /// block `g = (B/8)·b + q` covers the voxels `[8g, 8g + 8]` clamped to the level, as the
+    /// splat crate's `BrickGrid`. `None` for a block beyond the level (or `q` out of range).
+    /// Errors if `key` is not a brick of this layout.
+    pub fn block_span(&self, key: BrickKey, q: usize) -> Result<Option<[Range<usize>; 3]>> {
+        let b = self.check(key)?;
+        let per = self.blocks_per_brick();
+        if q >= per * per * per {
+            return Ok(None);
+        }
+        let n = self.grid.dims;
+        let local = [q % per, q / per % per, q / (per * per)];
+        let g: [usize; 3] = std::array::from_fn(|a| b[a] * per + local[a]);
+        let blocks = n.map(|n| n.saturating_sub(1).div_ceil(BLOCK).max(1));
+        if (0..3).any(|a| g[a] >= blocks[a]) {
+            return Ok(None);
+        }
+        Ok(Some(std::array::from_fn(|a| {
+            let lo = g[a] * BLOCK;
+            let base = b[a] * self.size;
+            lo - base + HALO..(lo + BLOCK).min(n[a] - 1) - base + HALO + 1
+        })))
+    }
+}
+
+/// The ranges of brick `key`'s 8³ blocks, read from its slot ([`Brick::ranges8`]).
+fn block_ranges<T: Scalar>(
+    layout: &BrickLayout,
+    key: BrickKey,
+    slot: &[T],
+) -> Result<Box<[[f32; 2]]>> {
+    let per = layout.blocks_per_brick();
     let s = layout.slot_strides();
-    let blocks = n.map(|n| n.saturating_sub(1).div_ceil(BLOCK).max(1));
-    let mut out = Vec::with_capacity(q * q * q);
-    for qk in 0..q {
-        for qj in 0..q {
-            for qi in 0..q {
-                let g = [qi, qj, qk];
-                let g: [usize; 3] = std::array::from_fn(|a| b[a] * q + g[a]);
-                let mut r = [f32::INFINITY, f32::NEG_INFINITY];
-                if (0..3).all(|a| g[a] < blocks[a]) {
-                    // Voxels [8g, 8g + 8] clamped, at slot-local (p − B·b + H).
-                    let span: [Range<usize>; 3] = std::array::from_fn(|a| {
-                        let lo = g[a] * BLOCK;
-                        let base = b[a] * layout.size();
-                        lo - base + HALO..(lo + BLOCK).min(n[a] - 1) - base + HALO + 1
-                    });
-                    for z in span[2].clone() {
-                        for y in span[1].clone() {
-                            for x in span[0].clone() {
-                                let v = slot[x + y * s[1] + z * s[2]].to_f32();
-                                r = [r[0].min(v), r[1].max(v)];
-                            }
-                        }
+    let mut out = Vec::new();
+    out.try_reserve_exact(per * per * per)
+        .map_err(|_| key.error("cannot allocate the brick's block ranges"))?;
+    for q in 0..per * per * per {
+        let mut r = [f32::INFINITY, f32::NEG_INFINITY];
+        if let Some(span) = layout.block_span(key, q)? {
+            for z in span[2].clone() {
+                for y in span[1].clone() {
+                    for x in span[0].clone() {
+                        let v = slot[x + y * s[1] + z * s[2]].to_f32();
+                        r = [r[0].min(v), r[1].max(v)];
                     }
                 }
-                out.push(r);
             }
         }
+        out.push(r);
     }
-    out.into_boxed_slice()
+    Ok(out.into_boxed_slice())
 }
 
 #[cfg(test)]
@@ -703,6 +779,52 @@ mod tests {
                     }
                 }
                 assert_eq!(*r, want, "{key:?} block {g:?}");
+            }
+        }
+    }
+    #[test]
+    fn bricks_from_their_halo_box_equal_bricks_from_the_whole_level() {
+        for (dims, size) in [
+            ([37, 20, 9], 8),
+            ([37, 20, 9], 16),
+            ([1, 5, 9], 8),
+            ([66, 3, 2], 64),
+        ] {
+            let v = Volume::from_fn(Grid::with_dims(dims).unwrap(), |i, j, k| {
+                ((i * 31 + j * 17 + k * 7) % 251) as i16 - 100
+            })
+            .unwrap();
+            let s = InMemory::new(Arc::new(v.clone()), size).unwrap();
+            let l = s.layout(0).unwrap();
+            for key in keys(l) {
+                let h = l.halo_voxels(key).unwrap();
+                let mut region = Vec::new();
+                for k in h[2].clone() {
+                    for j in h[1].clone() {
+                        for i in h[0].clone() {
+                            region.push(v.get(i, j, k));
+                        }
+                    }
+                }
+                let lo = h.clone().map(|r| r.start);
+                let hd = h.clone().map(|r| r.len());
+                let b = Brick::from_region(l, key, &region, lo, hd).unwrap();
+                assert_eq!(b, *s.brick(key).unwrap(), "{dims:?} B = {size} {key:?}");
+                // A region one voxel short of the halo box, or of the wrong length: errors
+                // naming the brick, no panic.
+                for a in 0..3 {
+                    let mut short = hd;
+                    short[a] -= 1;
+                    let e = Brick::from_region(l, key, &region, lo, short).unwrap_err();
+                    assert!(
+                        matches!(e, CoreError::Brick { brick, .. } if brick == key.b),
+                        "{e}"
+                    );
+                }
+                let e = Brick::from_region(l, key, &region[1..], lo, hd).unwrap_err();
+                assert!(e.to_string().contains("samples"), "{e}");
+                let e = Brick::from_region(l, key, &region, lo.map(|x| x + 1), hd).unwrap_err();
+                assert!(e.to_string().contains("does not hold"), "{e}");
             }
         }
     }

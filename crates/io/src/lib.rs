@@ -148,8 +148,8 @@ pub use write::{
     volume_write_format, write_volume,
 };
 pub use zarr::{
-    ConvertedZarr, WrittenZarr, ZarrLevel, ZarrSelection, ZarrStore, ZarrVersion, ZarrWriteOptions,
-    convert_to_zarr, read_zarr_with, write_zarr,
+    ConvertedZarr, WrittenZarr, ZarrLevel, ZarrSelection, ZarrSource, ZarrStore, ZarrVersion,
+    ZarrWriteOptions, convert_to_zarr, read_zarr_with, write_zarr,
 };
 
 #[cfg(test)]

@@ -86,6 +86,59 @@ impl BrickGrid {
         }
     }
 
+    /// The grid of a level cut by `layout`, from its bricks' 8³-block ranges: `ranges8` holds
+    /// [`volsplat_core::Brick::ranges8`] of every brick, `(B/8)³` per brick, bricks in index
+    /// order (`(b_k·d_j + b_j)·d_i + b_i` over [`BrickLayout::dims`], as
+    /// [`crate::cache::LevelScan::ranges8`]). Block `g` of the grid is block `g mod (B/8)` of
+    /// brick `g div (B/8)`: both cover the voxels `[8g, 8g + 8]` clamped to the level, so the
+    /// grid equals [`BrickGrid::build`] of the level read whole (min and max are exact and
+    /// order-free; only the sign of a zero bound may differ, which `==` does not see).
+    ///
+    /// Errors ([`crate::SplatError::Core`], naming `ranges8`) if `ranges8` is not `(B/8)³` per
+    /// brick of the layout.
+    ///
+    /// [`BrickLayout::dims`]: volsplat_core::BrickLayout::dims
+    pub fn from_ranges8(
+        layout: &volsplat_core::BrickLayout,
+        ranges8: &[[f32; 2]],
+    ) -> crate::Result<Self> {
+        let per = layout.blocks_per_brick();
+        let per3 = per * per * per;
+        if ranges8.len() != layout.brick_count() * per3 {
+            return Err(volsplat_core::CoreError::invalid(
+                "ranges8",
+                ranges8.len(),
+                format!(
+                    "must hold {per3} block ranges for each of the level's {} bricks",
+                    layout.brick_count()
+                ),
+            )
+            .into());
+        }
+        let n = layout.grid().dims;
+        let dims = n.map(|d| d.saturating_sub(1).div_ceil(BRICK).max(1));
+        let bd = layout.dims();
+        let mut ranges =
+            crate::error::try_with_capacity(dims.iter().product(), "the skip-block ranges")?;
+        for gk in 0..dims[2] {
+            for gj in 0..dims[1] {
+                for gi in 0..dims[0] {
+                    let g = [gi, gj, gk];
+                    let b: [usize; 3] = std::array::from_fn(|a| g[a] / per);
+                    let q: [usize; 3] = std::array::from_fn(|a| g[a] % per);
+                    let brick = (b[2] * bd[1] + b[1]) * bd[0] + b[0];
+                    ranges.push(ranges8[brick * per3 + (q[2] * per + q[1]) * per + q[0]]);
+                }
+            }
+        }
+        Ok(BrickGrid {
+            dims,
+            ranges,
+            volume_dims: n,
+            normals: std::sync::OnceLock::new(),
+        })
+    }
+
     /// The direction codes of `volume`'s voxels ([`crate::normals::NormalField`]), built on the
     /// first call and kept; `None` if the grid was not built for a volume of this shape (or the
     /// kept field was built for other axes or spacings), in which case the caller builds its own.

@@ -76,6 +76,23 @@ pub enum SplatError {
         /// Bytes asked for.
         bytes: usize,
     },
+    /// The brick cache's byte budget holds fewer slots than the bricks needed at once
+    /// ([`crate::cache::BrickCache`]).
+    #[error(
+        "the brick cache's budget of {budget} bytes holds {capacity} slots of {slot_bytes} bytes \
+         (one brick with its halo), but {needed} bricks are needed at once; raise the memory \
+         budget or use smaller bricks"
+    )]
+    Budget {
+        /// The budget, bytes.
+        budget: u64,
+        /// Bytes of one slot (`E³` samples).
+        slot_bytes: u64,
+        /// Slots the budget holds (after the arena's caps).
+        capacity: usize,
+        /// Bricks needed at once.
+        needed: usize,
+    },
     /// Two images that must match in size do not.
     #[error("image size mismatch: {what} is {got:?}, expected {expected:?} (width, height)")]
     SizeMismatch {

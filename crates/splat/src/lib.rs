@@ -28,6 +28,7 @@
 
 pub mod aa;
 pub mod bricks;
+pub mod cache;
 pub mod clip;
 mod dispatch;
 pub mod error;
@@ -48,6 +49,7 @@ mod voxels;
 
 pub use aa::Antialias;
 pub use bricks::BrickGrid;
+pub use cache::{BrickCache, CacheStats, LevelScan, scan_level};
 pub use clip::ClipPlane;
 pub use dispatch::render_by_visibility;
 pub use error::{Result, SplatError};

@@ -37,11 +37,13 @@
 
 mod convert;
 mod meta;
+mod source;
 mod store;
 mod stream;
 mod write;
 
 pub use convert::{ConvertedZarr, convert_to_zarr};
+pub use source::ZarrSource;
 pub(crate) use store::is_zarr_store;
 pub use store::{ZarrLevel, ZarrSelection, ZarrStore};
 pub use write::{

@@ -1,0 +1,547 @@
+//! [`ZarrSource`]: the levels of an OME-Zarr store served brick by brick (the brick seam,
+//! `docs/design/brick-seam.md` §4; issue 31 item 4), for a bounded cache that reads only the
+//! bricks a frame needs.
+
+use super::store::{ZarrSelection, ZarrStore};
+use crate::error::{IoError, Result};
+use std::marker::PhantomData;
+use std::sync::Arc;
+use volsplat_core::source::{Brick, BrickKey, BrickLayout, BrickSource};
+use volsplat_core::{Grid, Scalar, ScalarType};
+use zarrs::array::ElementOwned;
+
+/// A [`BrickSource`] over every level of an OME-Zarr store (one channel and time point, bricks
+/// of `B` cells per side, halo 1): [`BrickSource::brick`] reads the brick's halo box
+/// ([`BrickLayout::halo_voxels`], clamped to the level) with one
+/// [`ZarrStore::read_region`] and cuts the slot with [`Brick::from_region`], so a brick holds
+/// the same samples as the brick of the level read whole ([`ZarrStore::read_level`]) and served
+/// by [`volsplat_core::InMemory`]. Chunks absent from the store read as the fill value.
+/// [`BrickSource::whole`] is `None`: nothing is read whole.
+///
+/// **Float levels** (decision 0030): a volume read whole replaces NaN and −∞ by the level's
+/// lowest finite sample and +∞ by its highest. A brick cannot know those extremes, so a float
+/// brick holding a non-finite sample is an error until the level's finite range is given
+/// ([`ZarrSource::with_finite_range`], from a ranges scan of [`ZarrSource::as_stored`], e.g.
+/// `volsplat_splat::cache::scan_level`); with it, bricks are replaced exactly as
+/// [`volsplat_core::Volume::new`] replaces the whole level.
+#[derive(Debug, Clone)]
+pub struct ZarrSource<T> {
+    store: Arc<ZarrStore>,
+    selection: ZarrSelection,
+    grids: Vec<Grid>,
+    layouts: Vec<BrickLayout>,
+    /// Per level: `[lowest, highest]` finite sample (data units), where given.
+    finite: Vec<Option<[f32; 2]>>,
+    /// Serve the samples as stored (non-finite floats kept), for a ranges scan.
+    as_stored: bool,
+    _sample: PhantomData<fn() -> T>,
+}
+
+impl<T: Scalar + ElementOwned> ZarrSource<T> {
+    /// The levels of `store` (channel and time point `selection`) cut into bricks of `size`
+    /// cells per side (a power of two and a multiple of 8, as [`BrickLayout::new`]); level `l`'s
+    /// geometry is [`ZarrStore::grid`]`(l)`. Metadata only: no sample is read.
+    ///
+    /// Errors naming the store: a level whose samples do not read as `T`
+    /// ([`volsplat_core::ScalarType`] of [`super::ZarrLevel::scalar_type`]), a channel or time
+    /// point the store does not hold, a level beyond the limits, more than 256 levels, a bad
+    /// brick size.
+    pub fn new(store: Arc<ZarrStore>, selection: ZarrSelection, size: usize) -> Result<Self> {
+        let path = store.path().to_path_buf();
+        let n = store.levels().len();
+        if n > usize::from(u8::MAX) + 1 {
+            return Err(IoError::invalid_argument(
+                &path,
+                "levels",
+                format!("the store holds {n} levels; a brick source serves at most 256"),
+            ));
+        }
+        for (which, index, count) in [
+            ("channel", selection.channel, store.channels()),
+            ("timepoint", selection.timepoint, store.timepoints()),
+        ] {
+            if index as u64 >= count {
+                return Err(IoError::invalid_argument(
+                    &path,
+                    which,
+                    format!(
+                        "{which} {index} requested, but the store holds {count} (0 to {})",
+                        count - 1
+                    ),
+                ));
+            }
+        }
+        let mut grids = Vec::with_capacity(n);
+        let mut layouts = Vec::with_capacity(n);
+        for (l, level) in store.levels().iter().enumerate() {
+            if level.scalar_type != Some(T::TYPE) {
+                return Err(IoError::invalid_argument(
+                    &path,
+                    "sample type",
+                    format!(
+                        "level {l} (array `{}`) holds {} samples, read as {}; a brick source of \
+                         {} was asked for",
+                        level.path,
+                        level.data_type,
+                        level.scalar_type.map_or("nothing", ScalarType::name),
+                        T::TYPE.name()
+                    ),
+                ));
+            }
+            let grid = store.grid(l)?;
+            let layout = BrickLayout::new(grid.clone(), l as u8, size)
+                .map_err(|e| IoError::core(&path, e))?;
+            grids.push(grid);
+            layouts.push(layout);
+        }
+        Ok(ZarrSource {
+            store,
+            selection,
+            grids,
+            layouts,
+            finite: vec![None; n],
+            as_stored: false,
+            _sample: PhantomData,
+        })
+    }
+
+    /// The store.
+    pub fn store(&self) -> &Arc<ZarrStore> {
+        &self.store
+    }
+
+    /// The channel and time point served.
+    pub fn selection(&self) -> ZarrSelection {
+        self.selection
+    }
+
+    /// This source with level `level`'s finite sample range `[lowest, highest]` (data units: the
+    /// lowest and highest finite samples of the whole level, as a ranges scan of
+    /// [`ZarrSource::as_stored`] finds them): NaN and −∞ samples of the level's bricks become
+    /// `lowest`, +∞ become `highest` (decision 0030), as [`volsplat_core::Volume::new`] does for
+    /// the level read whole. Errors (naming the store and `finite range`) for a level the store
+    /// lacks, a bound that is not finite, or `lowest > highest`.
+    pub fn with_finite_range(mut self, level: usize, range: [f32; 2]) -> Result<Self> {
+        let path = self.store.path();
+        if level >= self.layouts.len() {
+            return Err(IoError::invalid_argument(
+                path,
+                "level",
+                format!(
+                    "level {level} requested, but the store holds {} levels",
+                    self.layouts.len()
+                ),
+            ));
+        }
+        if !(range[0].is_finite() && range[1].is_finite() && range[0] <= range[1]) {
+            return Err(IoError::invalid_argument(
+                path,
+                "finite range",
+                format!("{range:?} for level {level}: must be two finite values, lowest ≤ highest"),
+            ));
+        }
+        self.finite[level] = Some(range);
+        Ok(self)
+    }
+
+    /// Level `level`'s finite sample range given by [`ZarrSource::with_finite_range`], if any.
+    pub fn finite_range(&self, level: usize) -> Option<[f32; 2]> {
+        self.finite.get(level).copied().flatten()
+    }
+
+    /// A copy of this source that serves the samples as stored: non-finite floats are kept
+    /// (and so enter the bricks' ranges as ±∞; NaN is ignored by the ranges), never an error.
+    /// For the ranges scan that finds each level's finite range, not for rendering.
+    pub fn as_stored(&self) -> Self {
+        ZarrSource {
+            as_stored: true,
+            ..self.clone()
+        }
+    }
+
+    /// Replaces `region`'s non-finite samples (float levels) by level `level`'s finite range, or
+    /// errors (the cause, for the brick's error) if there are some and no range was given.
+    fn replace_non_finite(
+        &self,
+        level: usize,
+        region: &mut [T],
+    ) -> std::result::Result<(), String> {
+        if T::TYPE != ScalarType::F32 || self.as_stored {
+            return Ok(());
+        }
+        if region.iter().all(|v| v.to_f32().is_finite()) {
+            return Ok(());
+        }
+        let Some([lo, hi]) = self.finite[level] else {
+            let bad = region.iter().filter(|v| !v.to_f32().is_finite()).count();
+            return Err(format!(
+                "{bad} samples of the brick's box are NaN or infinite, which become the level's \
+                 finite extremes (decision 0030); scan the level's ranges first (a brick-by-brick \
+                 pass, e.g. volsplat_splat::cache::scan_level over ZarrSource::as_stored) and give \
+                 ZarrSource::with_finite_range its finite range"
+            ));
+        };
+        let (lo, hi) = (T::from_f64(f64::from(lo)), T::from_f64(f64::from(hi)));
+        for v in region.iter_mut() {
+            let x = v.to_f32();
+            if x.is_nan() || x == f32::NEG_INFINITY {
+                *v = lo;
+            } else if x == f32::INFINITY {
+                *v = hi;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl<T: Scalar + ElementOwned> BrickSource<T> for ZarrSource<T> {
+    fn levels(&self) -> &[Grid] {
+        &self.grids
+    }
+
+    fn layout(&self, level: usize) -> Option<&BrickLayout> {
+        self.layouts.get(level)
+    }
+
+    /// Unknown without reading the store: always `None`.
+    fn brick_range(&self, _key: BrickKey) -> Option<[f32; 2]> {
+        None
+    }
+
+    fn brick(&self, key: BrickKey) -> volsplat_core::Result<Arc<Brick<T>>> {
+        let level = usize::from(key.level);
+        let layout = self.layouts.get(level).ok_or_else(|| {
+            key.error(format!(
+                "the store {} holds {} levels",
+                self.store.path().display(),
+                self.layouts.len()
+            ))
+        })?;
+        let halo = layout.halo_voxels(key)?;
+        let lo = halo.clone().map(|r| r.start);
+        let dims = halo.map(|r| r.len());
+        let mut region = self
+            .store
+            .read_region::<T>(
+                level,
+                self.selection,
+                lo.map(|x| x as u64),
+                std::array::from_fn(|a| (lo[a] + dims[a]) as u64),
+            )
+            .map_err(|e| key.error(e.to_string()))?;
+        self.replace_non_finite(level, &mut region)
+            .map_err(|cause| key.error(format!("{}: {cause}", self.store.path().display())))?;
+        Brick::from_region(layout, key, &region, lo, dims).map(Arc::new)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::zarr::{ZarrVersion, ZarrWriteOptions, write_zarr};
+    use crate::{Limits, ZarrStore};
+    use std::path::{Path, PathBuf};
+    use volsplat_core::glam::DMat3;
+    use volsplat_core::{AnyVolume, CoreError, InMemory, Volume};
+
+    /// Distinct-ish samples of every type: `f(i, j, k)` in `T`'s range.
+    fn volume<T: Scalar>(dims: [usize; 3]) -> Volume<T> {
+        let grid = Grid::new(dims, [0.5; 3], [1.0, -2.0, 3.0], DMat3::IDENTITY).unwrap();
+        Volume::from_fn(grid, |i, j, k| {
+            T::from_f64(((i * 7 + j * 13 + k * 101) % 251) as f64 - 100.0)
+        })
+        .unwrap()
+    }
+
+    fn write(dir: &Path, v: AnyVolume, chunk: usize, version: ZarrVersion) -> PathBuf {
+        let p = dir.join(format!("s{chunk}.zarr"));
+        let o = ZarrWriteOptions::default()
+            .with_chunk(chunk)
+            .with_version(version);
+        write_zarr(&p, &v, &o).unwrap();
+        p
+    }
+
+    fn keys(l: &BrickLayout) -> Vec<BrickKey> {
+        let d = l.dims();
+        let mut out = Vec::new();
+        for k in 0..d[2] {
+            for j in 0..d[1] {
+                for i in 0..d[0] {
+                    out.push(l.key([i, j, k]).unwrap());
+                }
+            }
+        }
+        out
+    }
+
+    /// Every brick of levels 0 and 1 equals the brick of the level read whole, served in memory.
+    fn assert_bricks_equal_whole<T: Scalar + ElementOwned>(
+        store: &Arc<ZarrStore>,
+        source: &ZarrSource<T>,
+        size: usize,
+    ) -> usize {
+        let mut n = 0;
+        for level in 0..2 {
+            // The level read whole, as `ZarrStore::read_level` reads it.
+            let d = store.levels()[level].dims;
+            let data = store
+                .read_region::<T>(level, ZarrSelection::default(), [0; 3], d)
+                .unwrap();
+            let whole = Volume::new(store.grid(level).unwrap(), data).unwrap();
+            let mem = InMemory::new(Arc::new(whole), size).unwrap();
+            let l = source.layout(level).unwrap();
+            assert_eq!(l.grid(), mem.layout(0).unwrap().grid());
+            assert_eq!(l.dims(), mem.layout(0).unwrap().dims());
+            for key in keys(l) {
+                let got = source.brick(key).unwrap();
+                let want = mem.brick(BrickKey { level: 0, ..key }).unwrap();
+                assert_eq!(got.key, key);
+                assert!(got.data == want.data, "level {level} {key:?} B = {size}");
+                assert_eq!(got.ranges8, want.ranges8, "level {level} {key:?}");
+                assert_eq!(got.range, want.range, "level {level} {key:?}");
+                n += 1;
+            }
+        }
+        assert!(source.whole(0).unwrap().is_none());
+        n
+    }
+
+    fn every_brick_equals_the_in_memory_brick<T: Scalar + ElementOwned>()
+    where
+        AnyVolume: From<Volume<T>>,
+    {
+        let dir = tempfile::tempdir().unwrap();
+        for (chunk, version) in [(16, ZarrVersion::V2), (32, ZarrVersion::V3)] {
+            let p = write(dir.path(), volume::<T>([45, 37, 34]).into(), chunk, version);
+            let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
+            assert!(store.levels().len() >= 2, "{chunk}");
+            for size in [8, 16, 64] {
+                let s =
+                    ZarrSource::<T>::new(store.clone(), ZarrSelection::default(), size).unwrap();
+                assert_eq!(s.levels().len(), store.levels().len());
+                let n = assert_bricks_equal_whole(&store, &s, size);
+                assert!(n >= 2, "{n}");
+            }
+        }
+    }
+
+    #[test]
+    fn zarr_bricks_equal_in_memory_bricks_u8() {
+        every_brick_equals_the_in_memory_brick::<u8>();
+    }
+
+    #[test]
+    fn zarr_bricks_equal_in_memory_bricks_i16() {
+        every_brick_equals_the_in_memory_brick::<i16>();
+    }
+
+    #[test]
+    fn zarr_bricks_equal_in_memory_bricks_u16() {
+        every_brick_equals_the_in_memory_brick::<u16>();
+    }
+
+    #[test]
+    fn zarr_bricks_equal_in_memory_bricks_f32() {
+        every_brick_equals_the_in_memory_brick::<f32>();
+    }
+
+    /// Writes `values` at voxels `at` (x, y, z) of level `level`, through zarrs.
+    fn poke(p: &Path, level: usize, at: &[([u64; 3], f32)]) {
+        let store = Arc::new(zarrs::filesystem::FilesystemStore::new(p).unwrap());
+        let a = zarrs::array::Array::open(store, &format!("/{level}")).unwrap();
+        for &([x, y, z], v) in at {
+            let s = zarrs::array::ArraySubset::new_with_ranges(&[z..z + 1, y..y + 1, x..x + 1]);
+            a.store_array_subset(&s, &[v][..]).unwrap();
+        }
+    }
+
+    #[test]
+    fn float_bricks_with_nan_and_infinities_equal_the_replaced_whole_level() {
+        let dir = tempfile::tempdir().unwrap();
+        for (chunk, version) in [(16, ZarrVersion::V2), (32, ZarrVersion::V3)] {
+            let p = write(
+                dir.path(),
+                volume::<f32>([45, 37, 34]).into(),
+                chunk,
+                version,
+            );
+            // NaN, +∞ and −∞ on level 0, a NaN on level 1 (on a brick seam at B = 8 and 16).
+            poke(
+                &p,
+                0,
+                &[
+                    ([3, 4, 5], f32::NAN),
+                    ([16, 8, 0], f32::INFINITY),
+                    ([44, 36, 33], f32::NEG_INFINITY),
+                ],
+            );
+            poke(&p, 1, &[([8, 8, 8], f32::NAN)]);
+            let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
+            // The finite range of each level, found by hand from the samples as stored.
+            let finite = |l: usize| {
+                let d = store.levels()[l].dims;
+                let raw = store
+                    .read_region::<f32>(l, ZarrSelection::default(), [0; 3], d)
+                    .unwrap();
+                assert!(
+                    raw.iter().any(|x| !x.is_finite()),
+                    "level {l} holds non-finite"
+                );
+                raw.iter()
+                    .filter(|x| x.is_finite())
+                    .fold([f32::INFINITY, f32::NEG_INFINITY], |r, &x| {
+                        [r[0].min(x), r[1].max(x)]
+                    })
+            };
+            for size in [8, 16, 64] {
+                let plain =
+                    ZarrSource::<f32>::new(store.clone(), ZarrSelection::default(), size).unwrap();
+                // Without the range: the bricks holding them are errors naming the brick and the
+                // scan; the others read.
+                let l0 = plain.layout(0).unwrap().clone();
+                let bad = l0.brick_of_voxel([3, 4, 5]).unwrap();
+                let e = plain.brick(bad).unwrap_err();
+                assert!(
+                    matches!(e, CoreError::Brick { level: 0, brick, .. } if brick == bad.b),
+                    "{e}"
+                );
+                let text = e.to_string();
+                assert!(
+                    text.contains("scan") && text.contains(".zarr") && text.contains("level 0"),
+                    "{text}"
+                );
+                let far = l0.brick_of_voxel([30, 30, 30]).unwrap();
+                if far != bad {
+                    plain.brick(far).unwrap();
+                }
+                // As stored: the NaN is there.
+                let raw = plain.as_stored().brick(bad).unwrap();
+                assert!(raw.data[l0.slot_index(bad, [3, 4, 5]).unwrap()].is_nan());
+                let s = plain
+                    .clone()
+                    .with_finite_range(0, finite(0))
+                    .unwrap()
+                    .with_finite_range(1, finite(1))
+                    .unwrap();
+                assert_bricks_equal_whole(&store, &s, size);
+                // Bad ranges are refused.
+                for r in [[1.0, 0.0], [f32::NAN, 1.0], [0.0, f32::INFINITY]] {
+                    let e = plain.clone().with_finite_range(0, r).unwrap_err();
+                    assert!(e.to_string().contains("finite range"), "{e}");
+                }
+                assert!(plain.clone().with_finite_range(9, [0.0, 1.0]).is_err());
+            }
+        }
+    }
+
+    #[test]
+    fn a_deleted_chunk_reads_as_the_fill_value() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(
+            dir.path(),
+            volume::<u16>([40, 20, 20]).into(),
+            16,
+            ZarrVersion::V2,
+        );
+        // Chunk (z 0, y 0, x 1): voxels x 16..32, y 0..16, z 0..16.
+        std::fs::remove_file(p.join("0/0/0/1")).unwrap();
+        let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
+        let s = ZarrSource::<u16>::new(store.clone(), ZarrSelection::default(), 8).unwrap();
+        assert_bricks_equal_whole(&store, &s, 8);
+        let l = s.layout(0).unwrap();
+        let key = l.brick_of_voxel([20, 5, 5]).unwrap();
+        let b = s.brick(key).unwrap();
+        assert_eq!(b.data[l.slot_index(key, [20, 5, 5]).unwrap()], 0);
+        assert_ne!(b.data[l.slot_index(key, [15, 5, 5]).unwrap()], 0);
+    }
+
+    #[test]
+    fn a_corrupt_chunk_is_an_error_naming_level_brick_and_store() {
+        for version in [ZarrVersion::V2, ZarrVersion::V3] {
+            let dir = tempfile::tempdir().unwrap();
+            let p = write(dir.path(), volume::<i16>([40, 20, 20]).into(), 16, version);
+            let chunk = match version {
+                ZarrVersion::V2 => p.join("1/0/0/0"),
+                _ => p.join("1/c/0/0/0"),
+            };
+            let mut bytes = std::fs::read(&chunk).unwrap();
+            bytes.truncate(bytes.len() / 2);
+            bytes.extend([0xA5; 7]);
+            std::fs::write(&chunk, &bytes).unwrap();
+            let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
+            let s = ZarrSource::<i16>::new(store, ZarrSelection::default(), 8).unwrap();
+            let key = s.layout(1).unwrap().key([0, 0, 0]).unwrap();
+            let e = s.brick(key).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    CoreError::Brick {
+                        level: 1,
+                        brick: [0, 0, 0],
+                        ..
+                    }
+                ),
+                "{e}"
+            );
+            let text = e.to_string();
+            assert!(
+                text.contains("s16.zarr") && text.contains("level 1"),
+                "{text}"
+            );
+            // Level 0 reads.
+            for key in keys(s.layout(0).unwrap()) {
+                s.brick(key).unwrap();
+            }
+        }
+    }
+
+    #[test]
+    fn wrong_types_selections_and_keys_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(
+            dir.path(),
+            volume::<u16>([20, 12, 10]).into(),
+            8,
+            ZarrVersion::V2,
+        );
+        let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
+        let e = ZarrSource::<u8>::new(store.clone(), ZarrSelection::default(), 8).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains("sample type") && text.contains("uint16"),
+            "{text}"
+        );
+        let sel = ZarrSelection {
+            channel: 1,
+            timepoint: 0,
+        };
+        let e = ZarrSource::<u16>::new(store.clone(), sel, 8).unwrap_err();
+        assert!(e.to_string().contains("channel 1"), "{e}");
+        let e = ZarrSource::<u16>::new(store.clone(), ZarrSelection::default(), 12).unwrap_err();
+        assert!(e.to_string().contains("brick size"), "{e}");
+        let s = ZarrSource::<u16>::new(store.clone(), ZarrSelection::default(), 8).unwrap();
+        let n = store.levels().len() as u8;
+        for key in [
+            BrickKey {
+                level: n,
+                b: [0; 3],
+            },
+            BrickKey {
+                level: 0,
+                b: [9, 0, 0],
+            },
+        ] {
+            let e = s.brick(key).unwrap_err();
+            assert!(matches!(e, CoreError::Brick { .. }), "{e}");
+        }
+        assert!(s.layout(n as usize).is_none());
+        assert!(
+            s.brick_range(BrickKey {
+                level: 0,
+                b: [0; 3]
+            })
+            .is_none()
+        );
+    }
+}

@@ -1,0 +1,639 @@
+//! Out-of-core bricks (issue 31 item 4; `docs/design/brick-seam.md` §2.3, §3 C7, §4): a
+//! [`BrickCache`] holds the bricks of one level of a [`BrickSource`] in an arena of fixed slots
+//! under a byte budget, least recently used bricks evicted, so that a frame reads only the
+//! bricks it needs; [`scan_level`] reads a level once, brick by brick, for its skip-block
+//! ranges ([`crate::BrickGrid::from_ranges8`]) and its finite range (decision 0030).
+//!
+//! Positions are index space of the level, as in [`volsplat_core::source`]. A brick's *index*
+//! is `(b_k·d_j + b_j)·d_i + b_i` over [`BrickLayout::dims`] `d` ([`BrickCache::index`]).
+//!
+//! Determinism: reads run in parallel (rayon) but results are placed in key order, slots are
+//! chosen from the cache's state alone (free slots lowest first, then least recently used,
+//! lowest slot first), so the arena, the bases and the stats do not depend on the thread count.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rayon::prelude::*;
+use volsplat_core::source::{Brick, BrickKey, BrickLayout, BrickSource, HALO};
+use volsplat_core::{CoreError, NonFiniteSamples, Scalar};
+
+use crate::error::{Result, SplatError, try_filled};
+
+/// No slot / no brick.
+const NONE: u32 = u32::MAX;
+
+/// Bytes of bricks read at once by one [`BrickCache::make_resident`] batch (a fixed number of
+/// bricks, whatever the thread count, so that a failing read leaves the same state for any).
+const BATCH_BYTES: usize = 64 << 20;
+
+/// Counters of a [`BrickCache`] since it was made.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CacheStats {
+    /// Bricks read from the source ([`BrickSource::brick`] calls that succeeded, by
+    /// [`BrickCache::make_resident`] and [`BrickCache::fetch`]).
+    pub reads: u64,
+    /// Requested bricks that were already resident (each distinct key of a
+    /// [`BrickCache::make_resident`] call counts once).
+    pub hits: u64,
+    /// Resident bricks whose slot was given to another brick.
+    pub evictions: u64,
+    /// Decoded bytes read: `E³ · size_of::<T>()` per brick read (the slot, halo and padding
+    /// included; a store's compressed bytes are not known here).
+    pub bytes_read: u64,
+    /// Bricks resident now.
+    pub resident: usize,
+    /// Slots in the arena.
+    pub capacity: usize,
+}
+
+/// The bricks of one level of a [`BrickSource`], held in an arena of at most a byte budget:
+/// `capacity` slots of `E³` samples (`E = B + 3`, [`BrickLayout::extent`]), slot `s` at arena
+/// offset `s·E³`, plus a few samples of padding so that a 4-byte read starting at the last
+/// sample stays inside (the AVX2 gathers read 8- and 16-bit samples as 4-byte words). A frame
+/// calls [`BrickCache::make_resident`] with the bricks it needs at a serial point, then reads
+/// [`BrickCache::arena`] at [`BrickCache::bases`] (the `Slotted` addressing of the design's
+/// §2.2); nothing moves until the next call.
+pub struct BrickCache<T: Scalar> {
+    source: Arc<dyn BrickSource<T>>,
+    level: usize,
+    layout: BrickLayout,
+    slot_len: usize,
+    budget: u64,
+    capacity: usize,
+    arena: Vec<T>,
+    /// Per slot: the brick index it holds, or [`NONE`].
+    owner: Vec<u32>,
+    /// Per slot: the clock of the last call that asked for its brick.
+    stamp: Vec<u64>,
+    /// Per brick index: its slot, or [`NONE`].
+    slot_of: Vec<u32>,
+    /// Per brick index: `slot·E³` if resident, else 0.
+    bases: Vec<u32>,
+    clock: u64,
+    reads: AtomicU64,
+    bytes_read: AtomicU64,
+    hits: u64,
+    evictions: u64,
+}
+
+impl<T: Scalar> std::fmt::Debug for BrickCache<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BrickCache")
+            .field("level", &self.level)
+            .field("layout", &self.layout)
+            .field("budget", &self.budget)
+            .field("stats", &self.stats())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Padding samples after the last slot: a 4-byte read starting at the last sample stays inside.
+fn padding<T>() -> usize {
+    let size = std::mem::size_of::<T>();
+    4usize.saturating_sub(size).div_ceil(size)
+}
+
+/// Slots of `slot_len` samples of `size` bytes (plus `pad` samples after the last) that
+/// `budget` bytes hold, at most `bricks`, and at most what keeps the arena within
+/// `i32::MAX − 8` samples.
+fn slots(budget: u64, slot_len: usize, size: usize, pad: usize, bricks: usize) -> usize {
+    let slot_bytes = (slot_len * size) as u64;
+    let by_budget = budget.saturating_sub((pad * size) as u64) / slot_bytes;
+    let by_offsets = (i32::MAX as usize - 8 - pad) / slot_len;
+    usize::try_from(by_budget)
+        .unwrap_or(usize::MAX)
+        .min(by_offsets)
+        .min(bricks)
+}
+
+/// The layout of `level` of `source`, or an error naming the level.
+fn layout_of<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Result<BrickLayout> {
+    source.layout(level).cloned().ok_or_else(|| {
+        SplatError::Core(CoreError::invalid(
+            "level",
+            level,
+            format!("the brick source has {} levels", source.levels().len()),
+        ))
+    })
+}
+
+/// Brick index of `b` over `dims`, i fastest.
+fn index_in(dims: [usize; 3], b: [usize; 3]) -> usize {
+    (b[2] * dims[1] + b[1]) * dims[0] + b[0]
+}
+
+impl<T: Scalar> BrickCache<T> {
+    /// The bricks of `level` of `source`, held in an arena of at most `budget` bytes (the arena
+    /// is allocated whole here, fallibly). Capacity: the slots the budget holds, at most the
+    /// level's brick count, and at most what keeps the arena within `i32::MAX − 8` samples (the
+    /// AVX2 gathers' i32 offsets).
+    ///
+    /// Errors: [`SplatError::Budget`] naming the budget and the slot size if it holds no slot;
+    /// a level the source lacks ([`SplatError::Core`]); [`SplatError::OutOfMemory`].
+    pub fn new(source: Arc<dyn BrickSource<T>>, level: usize, budget: u64) -> Result<Self> {
+        let layout = layout_of(&*source, level)?;
+        let size = std::mem::size_of::<T>();
+        let slot_len = layout.slot_len();
+        let pad = padding::<T>();
+        let slot_bytes = (slot_len * size) as u64;
+        let capacity = slots(budget, slot_len, size, pad, layout.brick_count());
+        if capacity == 0 {
+            return Err(SplatError::Budget {
+                budget,
+                slot_bytes,
+                capacity: 0,
+                needed: 1,
+            });
+        }
+        let count = layout.brick_count();
+        Ok(BrickCache {
+            arena: try_filled(
+                capacity * slot_len + pad,
+                T::from_f64(0.0),
+                "the brick cache's arena",
+            )?,
+            owner: try_filled(capacity, NONE, "the brick cache's slot table")?,
+            stamp: try_filled(capacity, 0, "the brick cache's slot table")?,
+            slot_of: try_filled(count, NONE, "the brick cache's brick table")?,
+            bases: try_filled(count, 0, "the brick cache's brick table")?,
+            source,
+            level,
+            layout,
+            slot_len,
+            budget,
+            capacity,
+            clock: 0,
+            reads: AtomicU64::new(0),
+            bytes_read: AtomicU64::new(0),
+            hits: 0,
+            evictions: 0,
+        })
+    }
+
+    /// How the level is cut into bricks.
+    pub fn layout(&self) -> &BrickLayout {
+        &self.layout
+    }
+
+    /// The level served.
+    pub fn level(&self) -> usize {
+        self.level
+    }
+
+    /// Slots in the arena: the most bricks resident at once.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// The index of brick `b` (brick coordinates, each below [`BrickLayout::dims`]): `(b_k·d_j +
+    /// b_j)·d_i + b_i`, the order of [`BrickCache::bases`].
+    pub fn index(&self, b: [usize; 3]) -> usize {
+        index_in(self.layout.dims(), b)
+    }
+
+    /// The arena: [`BrickCache::capacity`] slots of `E³` samples (slot `s` at `s·E³`, i
+    /// fastest, as [`Brick::data`]), then padding (a 4-byte read at the last sample stays
+    /// inside). A resident brick's slot holds exactly its [`Brick::data`]; other slots hold
+    /// stale or zero samples.
+    pub fn arena(&self) -> &[T] {
+        &self.arena
+    }
+
+    /// Per brick index ([`BrickCache::index`]): the arena offset `slot·E³` of its slot if it is
+    /// resident, 0 otherwise (check [`BrickCache::is_resident`]: slot 0's brick has base 0 too).
+    pub fn bases(&self) -> &[u32] {
+        &self.bases
+    }
+
+    /// Whether brick `key` is resident (false for a key of another level or outside the level).
+    pub fn is_resident(&self, key: BrickKey) -> bool {
+        self.layout
+            .check(key)
+            .is_ok_and(|b| self.slot_of[self.index(b)] != NONE)
+    }
+
+    /// The counters since the cache was made.
+    pub fn stats(&self) -> CacheStats {
+        CacheStats {
+            reads: self.reads.load(Ordering::Relaxed),
+            hits: self.hits,
+            evictions: self.evictions,
+            bytes_read: self.bytes_read.load(Ordering::Relaxed),
+            resident: self.owner.iter().filter(|&&o| o != NONE).count(),
+            capacity: self.capacity,
+        }
+    }
+
+    /// Bytes of the arena (slots and padding).
+    pub fn arena_bytes(&self) -> u64 {
+        (self.arena.len() * std::mem::size_of::<T>()) as u64
+    }
+
+    /// `keys` checked against the layout, sorted and deduplicated, with their brick indices.
+    fn plan(&self, keys: &[BrickKey]) -> Result<Vec<(BrickKey, usize)>> {
+        let mut out = keys
+            .iter()
+            .map(|&k| Ok((k, self.index(self.layout.check(k)?))))
+            .collect::<Result<Vec<_>>>()?;
+        out.sort_unstable();
+        out.dedup();
+        Ok(out)
+    }
+
+    /// Reads brick `key` from the source, checks it and counts it.
+    fn read(&self, key: BrickKey) -> Result<Arc<Brick<T>>> {
+        let brick = self.source.brick(key)?;
+        self.check_brick(key, &brick)?;
+        self.reads.fetch_add(1, Ordering::Relaxed);
+        self.bytes_read.fetch_add(
+            (brick.data.len() * std::mem::size_of::<T>()) as u64,
+            Ordering::Relaxed,
+        );
+        Ok(brick)
+    }
+
+    /// A brick the source served for `key` must be that brick, with a full slot.
+    fn check_brick(&self, key: BrickKey, brick: &Brick<T>) -> Result<()> {
+        if brick.key != key || brick.data.len() != self.slot_len {
+            return Err(key
+                .error(format!(
+                    "the brick source served brick {:?} of level {} with {} samples, where {} \
+                     (E³) were expected",
+                    brick.key.b,
+                    brick.key.level,
+                    brick.data.len(),
+                    self.slot_len
+                ))
+                .into());
+        }
+        Ok(())
+    }
+
+    /// Reads the bricks of `keys` that are not resident (in parallel; duplicates read once),
+    /// without placing them, in key order: for read-ahead on another thread while a frame reads
+    /// the arena. Pass them to [`BrickCache::make_resident_with`]. Errors as
+    /// [`BrickCache::make_resident`]'s reads.
+    pub fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>> {
+        let missing: Vec<BrickKey> = self
+            .plan(keys)?
+            .into_iter()
+            .filter(|&(_, i)| self.slot_of[i] == NONE)
+            .map(|(k, _)| k)
+            .collect();
+        missing.par_iter().map(|&k| self.read(k)).collect()
+    }
+
+    /// Makes the bricks of `keys` resident (duplicates count once): reads the missing ones from
+    /// the source (in parallel, placed in key order), each into a free slot or, when none is
+    /// left, the slot of the least recently used brick not in `keys`. Bases of evicted bricks
+    /// become 0.
+    ///
+    /// Errors: [`SplatError::Budget`] if more distinct bricks are asked for than
+    /// [`BrickCache::capacity`] (nothing read); a key outside the level or a failed read
+    /// ([`SplatError::Core`] with [`CoreError::Brick`] naming level and brick). After a read
+    /// error the cache is consistent: every brick marked resident holds its data (the bricks
+    /// of batches read before the failure may have been placed).
+    pub fn make_resident(&mut self, keys: &[BrickKey]) -> Result<()> {
+        self.make_resident_with(keys, Vec::new())
+    }
+
+    /// As [`BrickCache::make_resident`], taking the bricks in `fetched` (from
+    /// [`BrickCache::fetch`]) instead of reading them; bricks of `fetched` not asked for, or
+    /// already resident, are dropped. A fetched brick that is not the brick of its key at this
+    /// level with a full slot is an error.
+    pub fn make_resident_with(
+        &mut self,
+        keys: &[BrickKey],
+        fetched: Vec<Arc<Brick<T>>>,
+    ) -> Result<()> {
+        let wanted = self.plan(keys)?;
+        if wanted.len() > self.capacity {
+            return Err(SplatError::Budget {
+                budget: self.budget,
+                slot_bytes: (self.slot_len * std::mem::size_of::<T>()) as u64,
+                capacity: self.capacity,
+                needed: wanted.len(),
+            });
+        }
+        self.clock += 1;
+        let now = self.clock;
+        let mut missing = Vec::new();
+        for &(key, i) in &wanted {
+            match self.slot_of[i] {
+                NONE => missing.push((key, i)),
+                s => {
+                    self.stamp[s as usize] = now;
+                    self.hits += 1;
+                }
+            }
+        }
+        // Free slots first (lowest first), then the least recently used (lowest slot first
+        // among equals); the bricks asked for now carry `now` and are never victims.
+        let mut victims: Vec<(u64, usize)> = (0..self.capacity)
+            .filter(|&s| self.owner[s] == NONE || self.stamp[s] < now)
+            .map(|s| {
+                let age = if self.owner[s] == NONE {
+                    0
+                } else {
+                    self.stamp[s] + 1
+                };
+                (age, s)
+            })
+            .collect();
+        victims.sort_unstable();
+        let mut victims = victims.into_iter().map(|(_, s)| s);
+        let mut given: BTreeMap<BrickKey, Arc<Brick<T>>> = BTreeMap::new();
+        for b in fetched {
+            given.insert(b.key, b);
+        }
+        let per_batch = (BATCH_BYTES / (self.slot_len * std::mem::size_of::<T>())).clamp(1, 64);
+        for batch in missing.chunks(per_batch) {
+            let bricks = batch
+                .par_iter()
+                .map(|&(key, _)| match given.get(&key) {
+                    Some(b) => {
+                        self.check_brick(key, b)?;
+                        Ok(b.clone())
+                    }
+                    None => self.read(key),
+                })
+                .collect::<Result<Vec<_>>>()?;
+            for (&(key, i), brick) in batch.iter().zip(bricks) {
+                let Some(slot) = victims.next() else {
+                    // Unreachable: wanted ≤ capacity leaves a victim for every missing brick.
+                    return Err(key.error("no free slot in the brick cache").into());
+                };
+                self.place(slot, i, &brick.data, now);
+            }
+        }
+        Ok(())
+    }
+
+    /// Puts `data` (brick index `i`) in `slot`, evicting its brick.
+    fn place(&mut self, slot: usize, i: usize, data: &[T], now: u64) {
+        let old = self.owner[slot];
+        if old != NONE {
+            self.slot_of[old as usize] = NONE;
+            self.bases[old as usize] = 0;
+            self.evictions += 1;
+        }
+        let base = slot * self.slot_len;
+        self.arena[base..base + self.slot_len].copy_from_slice(data);
+        self.owner[slot] = i as u32;
+        self.slot_of[i] = slot as u32;
+        self.bases[i] = base as u32;
+        self.stamp[slot] = now;
+    }
+}
+
+/// What [`scan_level`] learnt of a level: per-brick and per-8³-block ranges (after the
+/// replacement of non-finite floats, decision 0030, so that they equal the ranges of the level
+/// read whole into a [`volsplat_core::Volume`]), the finite range and what was not finite.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LevelScan {
+    /// How the level was cut.
+    pub layout: BrickLayout,
+    /// `[min, max]` (data units) of each brick's 8³ blocks ([`Brick::ranges8`]): `(B/8)³` per
+    /// brick, bricks in index order ([`BrickCache::index`]); `[+∞, −∞]` for blocks beyond the
+    /// level.
+    pub ranges8: Vec<[f32; 2]>,
+    /// `[min, max]` (data units) of each brick's owned voxels ([`Brick::range`]), in index order.
+    pub ranges: Vec<[f32; 2]>,
+    /// `[lowest, highest]` finite sample of the level (data units); `None` if no sample is
+    /// finite. For a float store, what [`BrickSource`]s replace NaN and ±∞ by.
+    pub finite: Option<[f32; 2]>,
+    /// The non-finite samples of the level (each voxel counted once) and what they become, as
+    /// [`volsplat_core::Volume::non_finite`] reports them for the level read whole; `None` if
+    /// every sample is finite (always for integer types, and for a source that already
+    /// replaced them).
+    pub non_finite: Option<NonFiniteSamples>,
+    /// Bricks read (every brick of the level, once).
+    pub bricks: usize,
+    /// Decoded bytes read (`E³ · size_of::<T>()` per brick).
+    pub bytes_read: u64,
+}
+
+impl LevelScan {
+    /// The 8³-block ranges of brick index `i` ([`BrickCache::index`]); empty if `i` is not a
+    /// brick of the level.
+    pub fn ranges8_of(&self, i: usize) -> &[[f32; 2]] {
+        let per = self.layout.blocks_per_brick().pow(3);
+        self.ranges8.get(i * per..(i + 1) * per).unwrap_or(&[])
+    }
+
+    /// `[min, max]` of the level (data units, after replacement): the union of
+    /// [`LevelScan::ranges`].
+    pub fn value_range(&self) -> [f32; 2] {
+        self.ranges
+            .iter()
+            .fold([f32::INFINITY, f32::NEG_INFINITY], |r, q| {
+                [r[0].min(q[0]), r[1].max(q[1])]
+            })
+    }
+
+    /// The level's skip-block grid, equal to [`crate::BrickGrid::build`] of the level read
+    /// whole ([`crate::BrickGrid::from_ranges8`]).
+    pub fn brick_grid(&self) -> Result<crate::BrickGrid> {
+        crate::BrickGrid::from_ranges8(&self.layout, &self.ranges8)
+    }
+}
+
+/// What one brick told the scan.
+struct BrickSummary {
+    ranges8: Box<[[f32; 2]]>,
+    /// Per block, where the brick held non-finite samples: (NaN or −∞ inside, +∞ inside); the
+    /// block's range in `ranges8` is then over its finite samples only.
+    flags: Option<Vec<(bool, bool)>>,
+    nan: usize,
+    pos_inf: usize,
+    neg_inf: usize,
+}
+
+/// The summary of `brick` (as served: non-finite samples kept).
+fn summarise<T: Scalar>(layout: &BrickLayout, brick: &Brick<T>) -> Result<BrickSummary> {
+    if brick.data.iter().all(|v| v.to_f32().is_finite()) {
+        return Ok(BrickSummary {
+            ranges8: brick.ranges8.clone(),
+            flags: None,
+            nan: 0,
+            pos_inf: 0,
+            neg_inf: 0,
+        });
+    }
+    let key = brick.key;
+    let s = layout.slot_strides();
+    let at = |x: usize, y: usize, z: usize| brick.data[x + y * s[1] + z * s[2]].to_f32();
+    let per = layout.blocks_per_brick().pow(3);
+    let mut ranges8 = Vec::with_capacity(per);
+    let mut flags = Vec::with_capacity(per);
+    for q in 0..per {
+        let mut r = [f32::INFINITY, f32::NEG_INFINITY];
+        let (mut low, mut high) = (false, false);
+        if let Some(span) = layout.block_span(key, q)? {
+            for z in span[2].clone() {
+                for y in span[1].clone() {
+                    for x in span[0].clone() {
+                        let v = at(x, y, z);
+                        if v.is_finite() {
+                            r = [r[0].min(v), r[1].max(v)];
+                        } else if v == f32::INFINITY {
+                            high = true;
+                        } else {
+                            low = true;
+                        }
+                    }
+                }
+            }
+        }
+        ranges8.push(r);
+        flags.push((low, high));
+    }
+    // Counts over the voxels this brick alone owns: [B·b, B·b + B), and the level's last voxel
+    // in the last brick along each axis.
+    let own = layout.owned_voxels(key)?;
+    let base = key.b.map(|b| b as usize * layout.size());
+    let last = layout.dims();
+    let span: [std::ops::Range<usize>; 3] = std::array::from_fn(|a| {
+        let end = if key.b[a] as usize + 1 == last[a] {
+            own[a].end
+        } else {
+            own[a].end - 1
+        };
+        own[a].start - base[a] + HALO..end - base[a] + HALO
+    });
+    let (mut nan, mut pos_inf, mut neg_inf) = (0, 0, 0);
+    for z in span[2].clone() {
+        for y in span[1].clone() {
+            for x in span[0].clone() {
+                let v = at(x, y, z);
+                if v.is_nan() {
+                    nan += 1;
+                } else if v == f32::INFINITY {
+                    pos_inf += 1;
+                } else if v == f32::NEG_INFINITY {
+                    neg_inf += 1;
+                }
+            }
+        }
+    }
+    Ok(BrickSummary {
+        ranges8: ranges8.into_boxed_slice(),
+        flags: Some(flags),
+        nan,
+        pos_inf,
+        neg_inf,
+    })
+}
+
+/// Reads every brick of `level` of `source` once, in parallel batches of two bricks per thread
+/// (so at most that many bricks are held at once), and returns the level's ranges
+/// ([`LevelScan`]). Serve the samples as stored (e.g. `ZarrSource::as_stored` for a float
+/// store): non-finite samples are found and counted, and the ranges are those after their
+/// replacement by the level's finite extremes (NaN and −∞ the lowest, +∞ the highest;
+/// decision 0030), so they equal the ranges of the level read whole. The result does not
+/// depend on the thread count.
+///
+/// Errors: a level the source lacks; a failed read (the brick's [`CoreError::Brick`]); a
+/// level with non-finite samples and no finite one (as [`volsplat_core::Volume::new`]).
+pub fn scan_level<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Result<LevelScan> {
+    let layout = layout_of(source, level)?;
+    let d = layout.dims();
+    let keys: Vec<BrickKey> = (0..layout.brick_count())
+        .filter_map(|i| layout.key([i % d[0], i / d[0] % d[1], i / (d[0] * d[1])]))
+        .collect();
+    let batch = 2 * rayon::current_num_threads().max(1);
+    let mut summaries = Vec::with_capacity(keys.len());
+    let mut bytes_read = 0u64;
+    for chunk in keys.chunks(batch) {
+        let part = chunk
+            .par_iter()
+            .map(|&k| {
+                let brick = source.brick(k)?;
+                if brick.key != k || brick.data.len() != layout.slot_len() {
+                    return Err(k
+                        .error("the brick source served another brick or a short slot")
+                        .into());
+                }
+                let bytes = (brick.data.len() * std::mem::size_of::<T>()) as u64;
+                Ok((summarise(&layout, &brick)?, bytes))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        for (s, b) in part {
+            bytes_read += b;
+            summaries.push(s);
+        }
+    }
+    finish_scan(layout, summaries, bytes_read)
+}
+
+/// Folds the bricks' summaries (in index order) into the level's scan: the finite range, then
+/// the blocks holding non-finite samples widened by what those become.
+fn finish_scan(
+    layout: BrickLayout,
+    summaries: Vec<BrickSummary>,
+    bytes_read: u64,
+) -> Result<LevelScan> {
+    let fold = |r: [f32; 2], q: &[f32; 2]| [r[0].min(q[0]), r[1].max(q[1])];
+    let empty = [f32::INFINITY, f32::NEG_INFINITY];
+    let lohi = summaries
+        .iter()
+        .flat_map(|s| s.ranges8.iter())
+        .fold(empty, fold);
+    let finite = (lohi[0] <= lohi[1]).then_some(lohi);
+    let (nan, pos_inf, neg_inf) = summaries.iter().fold((0, 0, 0), |c, s| {
+        (c.0 + s.nan, c.1 + s.pos_inf, c.2 + s.neg_inf)
+    });
+    let non_finite = if nan + pos_inf + neg_inf == 0 {
+        None
+    } else {
+        let Some([lowest, highest]) = finite else {
+            return Err(CoreError::invalid(
+                "samples",
+                format!("{nan} NaN, {pos_inf} +inf and {neg_inf} -inf"),
+                format!(
+                    "no sample of level {} is finite, so it holds no value to draw",
+                    layout.level()
+                ),
+            )
+            .into());
+        };
+        Some(NonFiniteSamples {
+            nan,
+            pos_inf,
+            neg_inf,
+            lowest,
+            highest,
+        })
+    };
+    let mut ranges8 = Vec::with_capacity(summaries.len() * layout.blocks_per_brick().pow(3));
+    let mut ranges = Vec::with_capacity(summaries.len());
+    for s in &summaries {
+        let start = ranges8.len();
+        ranges8.extend_from_slice(&s.ranges8);
+        if let (Some(flags), Some(nf)) = (&s.flags, &non_finite) {
+            for (r, &(low, high)) in ranges8[start..].iter_mut().zip(flags) {
+                if low {
+                    *r = fold(*r, &[nf.lowest, nf.lowest]);
+                }
+                if high {
+                    *r = fold(*r, &[nf.highest, nf.highest]);
+                }
+            }
+        }
+        ranges.push(ranges8[start..].iter().fold(empty, fold));
+    }
+    Ok(LevelScan {
+        ranges8,
+        ranges,
+        finite,
+        non_finite,
+        bricks: summaries.len(),
+        bytes_read,
+        layout,
+    })
+}
+
+#[cfg(test)]
+mod tests;
