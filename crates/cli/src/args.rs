@@ -420,6 +420,12 @@ pub(crate) struct RenderOptions {
     /// Worker threads (default: all cores).
     #[arg(long, help_heading = "Performance")]
     pub threads: Option<usize>,
+    /// OME-Zarr stores: read the level in bricks through a cache of at most SIZE (bytes, or
+    /// with KiB, MiB, GiB; K, M, G), out of core, instead of whole. The picture is the same
+    /// bits. Default: whole, unless the level is larger than half the available memory.
+    /// Drawn by the image-aligned slabs (composite, MIP, MinIP).
+    #[arg(long, value_name = "SIZE", value_parser = parse_size, help_heading = "Performance")]
+    pub memory: Option<u64>,
     /// Render from a sparse splat list (Swan et al. §5): the visible voxels (every voxel for
     /// MIP and MinIP) are extracted once and reused for every frame. Perspective views use it where image-aligned slabs are not
     /// chosen (X-ray, sheet-only options, --visibility sheet or every).
@@ -716,4 +722,43 @@ pub(crate) struct TextureBenchArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+}
+
+/// A size in bytes: a whole number, optionally followed by `KiB`, `MiB`, `GiB`, `TiB` (or `K`,
+/// `M`, `G`, `T`, `KB`, `MB`, `GB`, `TB`, all powers of 1024, as memory is counted).
+pub(crate) fn parse_size(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let n: u64 = num
+        .parse()
+        .map_err(|_| format!("`{text}` is not a size (a whole number, then KiB, MiB or GiB)"))?;
+    let shift = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 0,
+        "k" | "kb" | "kib" => 10,
+        "m" | "mb" | "mib" => 20,
+        "g" | "gb" | "gib" => 30,
+        "t" | "tb" | "tib" => 40,
+        u => return Err(format!("`{u}` is not a size unit (KiB, MiB, GiB, TiB)")),
+    };
+    n.checked_mul(1u64 << shift)
+        .filter(|&b| b > 0)
+        .ok_or_else(|| format!("`{text}` must be a size above 0 and below 16 EiB"))
+}
+
+#[cfg(test)]
+mod size_tests {
+    use super::parse_size;
+
+    #[test]
+    fn sizes_parse_in_powers_of_1024_and_bad_ones_are_errors() {
+        assert_eq!(parse_size("2GiB"), Ok(2 << 30));
+        assert_eq!(parse_size("512MiB"), Ok(512 << 20));
+        assert_eq!(parse_size("16M"), Ok(16 << 20));
+        assert_eq!(parse_size("4096"), Ok(4096));
+        assert_eq!(parse_size("1 kb"), Ok(1024));
+        for bad in ["", "0", "GiB", "2 PiB", "-1G", "1.5G", "99999999999999T"] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+    }
 }

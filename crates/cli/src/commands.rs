@@ -353,6 +353,7 @@ fn flag_of(field: &str) -> Option<&'static str> {
         "mode" => "--mode",
         "renderer" => "--renderer",
         "threads" => "--threads",
+        "memory" => "--memory",
         "quality.subsample" => "--subsample",
         "quality.opacity_cutoff" => "--opacity-cutoff",
         "quality.slab" => "--slab",

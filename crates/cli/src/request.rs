@@ -526,6 +526,9 @@ fn apply_renderer_and_quality_flags(
     if set("threads") {
         req.threads = o.threads;
     }
+    if set("memory") {
+        req.memory = o.memory;
+    }
     if set("draw_k") {
         req.k_contour = draw_k.map(|c| triple::<f32>(c, "--draw-k")).transpose()?;
     }

@@ -630,6 +630,12 @@ pub struct RenderRequest {
     /// Worker threads (`None`: all cores). Output does not depend on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub threads: Option<usize>,
+    /// OME-Zarr stores: read the level in bricks through a cache of at most this many bytes
+    /// (out of core, `docs/decisions/0039-out-of-core-slabs.md`), whatever its size. `None`: in
+    /// memory, unless the level is larger than half the memory the system reports available,
+    /// which then is the budget. Output does not depend on it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub memory: Option<u64>,
     /// How the render is written as an image file (background, sRGB, bit depth, grey window).
     #[serde(default)]
     pub output: OutputOptions,
@@ -648,6 +654,7 @@ impl RenderRequest {
             display: DisplayOptions::default(),
             k_contour: None,
             threads: None,
+            memory: None,
             output: OutputOptions::default(),
         }
     }

@@ -172,6 +172,11 @@ impl<T: Scalar> BrickCache<T> {
         })
     }
 
+    /// The byte budget the arena was sized from.
+    pub fn budget(&self) -> u64 {
+        self.budget
+    }
+
     /// How the level is cut into bricks.
     pub fn layout(&self) -> &BrickLayout {
         &self.layout

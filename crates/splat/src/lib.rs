@@ -64,4 +64,4 @@ pub use sheets::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
     render_any, render_with_progress, xray_weight,
 };
-pub use slab::{render_slabs, render_slabs_any};
+pub use slab::{render_slabs, render_slabs_any, render_slabs_bricked};

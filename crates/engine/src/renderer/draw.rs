@@ -85,14 +85,14 @@ pub(super) fn render_fraction(f: f64) -> f64 {
 }
 
 /// The fraction of a splatting render done: sheets (or slab bands) finished of all.
-fn sheets_done(p: &volsplat_splat::Progress) -> f64 {
+pub(super) fn sheets_done(p: &volsplat_splat::Progress) -> f64 {
     p.sheets_done as f64 / p.sheets_total.max(1) as f64
 }
 
 /// Runs `draw`, handing it a callback that forwards the render stage's fraction done (in
 /// [0, 1]) to the caller's `progress` as [`Stage::Render`]; a `false` from `progress` stops the
 /// renderer and is [`EngineError::Cancelled`], whatever the renderer then returns.
-fn forward<R, E: Into<EngineError>>(
+pub(super) fn forward<R, E: Into<EngineError>>(
     progress: &mut (dyn FnMut(&Progress) -> bool + Send),
     draw: impl FnOnce(&mut (dyn FnMut(f64) -> bool + Send)) -> std::result::Result<R, E>,
 ) -> Result<R> {
@@ -113,7 +113,7 @@ fn forward<R, E: Into<EngineError>>(
 
 impl Renderer {
     /// The classification tables of `request` with `tf`, and whether they were built now.
-    fn tables(
+    pub(super) fn tables(
         &mut self,
         request: &RenderRequest,
         tf: &TransferFunction,
@@ -498,7 +498,11 @@ fn splatting_stats(rendered: &Rendered, settings: &RenderSettings) -> Stats {
 /// times: a sample is classified and composited where it is taken), the tent reconstruction,
 /// area anti-aliasing where the view is minified (decision 0020), and the plan's lights and
 /// level. Where the lights were evaluated, pre-integration and ring risk are composite's.
-fn slab_stats(s: &volsplat_splat::RenderStats, plan: &SlabPlan, composite: bool) -> Stats {
+pub(super) fn slab_stats(
+    s: &volsplat_splat::RenderStats,
+    plan: &SlabPlan,
+    composite: bool,
+) -> Stats {
     let supersampled = s.supersampling > 1.0;
     Stats {
         render_ms: s.total_ms,

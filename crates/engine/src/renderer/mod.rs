@@ -8,6 +8,7 @@
 
 mod cache;
 mod draw;
+mod paged;
 mod plan;
 mod stats;
 
@@ -115,6 +116,9 @@ pub struct Renderer {
     auto_tf: Option<Cached<VolumeSource, AutoTf>>,
     /// The volume's value range (a pass over every voxel), per volume: (lowest, highest).
     range: Option<Cached<VolumeSource, (f64, f64)>>,
+    /// An OME-Zarr level read out of core: its brick cache and ranges, per store level and
+    /// budget ([`RenderRequest::memory`]).
+    paged: paged::PagedSlot,
     limits: volsplat_io::Limits,
 }
 
@@ -268,6 +272,16 @@ impl Renderer {
         report(progress, 0.0, Stage::Load)?;
         let (source, level_note) = self.concrete_source(request)?;
         let source = &source;
+        if let Some(budget) = self.paged_budget(request, source)? {
+            if owned.is_some() || ladder.is_some() {
+                return Err(EngineError::request(
+                    "memory",
+                    "a store read out of core is drawn whole by the image-aligned slabs \
+                     (not by bricks for sort-last rendering, nor by a refinement ladder)",
+                ));
+            }
+            return self.render_paged(request, source, budget, level_note, progress);
+        }
         let loaded = self.load(source)?;
         let (vol, fresh_volume) = (Arc::clone(&loaded.value.volume), loaded.fresh);
         // The reader's notes come with the frame that loaded the volume.

@@ -36,6 +36,8 @@ pub(crate) trait Resident<T>: Sync {
     fn layout(&self) -> &BrickLayout;
     /// How many bricks can be resident at once.
     fn capacity(&self) -> usize;
+    /// The memory budget the capacity comes from, bytes (for errors).
+    fn budget(&self) -> u64;
     /// Reads the bricks of `keys` that are not resident, without placing them (read-ahead:
     /// called while a group marches, reading the arena).
     fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>>;
@@ -75,7 +77,8 @@ pub(super) fn march<T: Scalar>(
             band_bricks(frame, &layout, rows, planes, &needed)
         })
         .collect();
-    let groups = group_bands(&per_band, res.capacity(), frame.group_bands(), &layout)?;
+    let room = (res.capacity(), res.budget(), std::mem::size_of::<T>());
+    let groups = group_bands(&per_band, room, frame.group_bands(), &layout)?;
     let keys_of = |g: &Group| -> Vec<BrickKey> {
         g.bricks
             .iter()
@@ -89,7 +92,15 @@ pub(super) fn march<T: Scalar>(
     for (g, group) in groups.iter().enumerate() {
         res.make_resident_with(&keys_of(group), std::mem::take(&mut fetched))?;
         let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group.bands).collect();
-        let next = groups.get(g + 1).map(keys_of);
+        // Read-ahead of at most a quarter of the slots, so that the bricks read ahead and the
+        // arena together stay within 1.25 × the arena (the rest of the next group is read
+        // when it is made resident).
+        let ahead = (res.capacity() / 4).max(1);
+        let next = groups.get(g + 1).map(|n| {
+            let mut keys = keys_of(n);
+            keys.truncate(ahead);
+            keys
+        });
         let ctx = Ctx::new(
             frame,
             Vox::Slotted(Slotted::new(res.arena(), res.bases(), &layout)),
@@ -124,7 +135,7 @@ struct Group {
 /// an error naming the budget where one band alone needs more.
 fn group_bands(
     per_band: &[Vec<u32>],
-    capacity: usize,
+    (capacity, budget, slot_size): (usize, u64, usize),
     max_bands: usize,
     layout: &BrickLayout,
 ) -> Result<Vec<Group>> {
@@ -135,15 +146,11 @@ fn group_bands(
     };
     for set in per_band {
         if set.len() > capacity {
-            return Err(SplatError::Setting {
-                name: "memory",
-                value: format!(
-                    "{capacity} bricks of {}³ voxels ({} bytes each)",
-                    layout.extent(),
-                    layout.slot_len()
-                ),
-                expected: "room for the bricks of one band of rows; \
-                           raise the memory budget or lower the image height",
+            return Err(SplatError::Budget {
+                budget,
+                slot_bytes: (layout.slot_len() * slot_size) as u64,
+                capacity,
+                needed: set.len(),
             });
         }
         let union = merge(&cur.bricks, set);
@@ -337,6 +344,30 @@ impl Hull {
             );
             n.dot(p) <= c
         })
+    }
+}
+
+impl<T: Scalar> Resident<T> for crate::cache::BrickCache<T> {
+    fn layout(&self) -> &BrickLayout {
+        crate::cache::BrickCache::layout(self)
+    }
+    fn capacity(&self) -> usize {
+        crate::cache::BrickCache::capacity(self)
+    }
+    fn budget(&self) -> u64 {
+        crate::cache::BrickCache::budget(self)
+    }
+    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>> {
+        crate::cache::BrickCache::fetch(self, keys)
+    }
+    fn make_resident_with(&mut self, keys: &[BrickKey], fetched: Vec<Arc<Brick<T>>>) -> Result<()> {
+        crate::cache::BrickCache::make_resident_with(self, keys, fetched)
+    }
+    fn arena(&self) -> &[T] {
+        crate::cache::BrickCache::arena(self)
+    }
+    fn bases(&self) -> &[u32] {
+        crate::cache::BrickCache::bases(self)
     }
 }
 

@@ -54,6 +54,9 @@ impl<T: Scalar> Resident<T> for Copies<T> {
     fn capacity(&self) -> usize {
         self.capacity
     }
+    fn budget(&self) -> u64 {
+        (self.capacity * self.layout.slot_len() * std::mem::size_of::<T>()) as u64
+    }
     fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>> {
         Ok(keys
             .iter()
@@ -415,10 +418,10 @@ fn a_budget_below_one_band_is_an_error_naming_memory() {
     let mut res = Copies::new(&f, 8, 2);
     let e = bricked(&mut res, &bricks, &cam, &tables, &s).unwrap_err();
     assert!(
-        matches!(e, SplatError::Setting { name: "memory", .. }),
+        matches!(e, SplatError::Budget { capacity: 2, needed, .. } if needed > 2),
         "{e}"
     );
-    assert!(e.to_string().contains("memory"), "{e}");
+    assert!(e.to_string().contains("memory budget"), "{e}");
 }
 
 /// Shading at the voxels needs the voxels' direction codes, a field of the whole volume: a

@@ -196,6 +196,34 @@ pub fn render_slabs<T: Scalar>(
     )
 }
 
+/// Renders the level that `cache` serves, seen by `camera`, with image-aligned,
+/// post-classified slabs, reading the voxels through the cache (out of core, issue 31 item 4):
+/// the bands of the image go in groups, and before each group the bricks its rays can sample
+/// are made resident (the rest of the level is never read; the next group's bricks are read
+/// while a group marches). `bricks` is the level's brick grid ([`crate::LevelScan::brick_grid`]).
+/// The image is the same bits as [`render_slabs`] of the level read whole, for any budget that
+/// holds one band's bricks and any thread count. Errors: those of [`render_slabs`]; a budget
+/// below one band's bricks ([`SplatError::Budget`]); a brick that cannot be read
+/// ([`SplatError::Core`] naming the level and brick); shading at the voxels
+/// ([`RenderSettings::shade_at`] `Voxels`: the direction codes are a field of the whole volume).
+pub fn render_slabs_bricked<T: Scalar>(
+    cache: &mut crate::cache::BrickCache<T>,
+    bricks: &BrickGrid,
+    camera: &Camera,
+    tables: &CrioTables,
+    settings: &RenderSettings,
+    progress: &mut dyn FnMut(&Progress) -> bool,
+) -> Result<Rendered> {
+    render_slabs_in(
+        &mut Access::Bricked(cache),
+        camera,
+        tables,
+        settings,
+        bricks,
+        progress,
+    )
+}
+
 /// Where a frame reads its voxels: a volume in memory, or the resident bricks of a level
 /// ([`bricked::Resident`], made resident band group by band group).
 pub(crate) enum Access<'v, T> {
