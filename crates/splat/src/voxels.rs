@@ -184,8 +184,8 @@ impl<T: Scalar> Voxels<T> for Slotted<'_, T> {
     fn cell_base(&self, c: [usize; 3]) -> usize {
         let sh = self.slots.shift;
         let mut at = self.slot(c.map(|x| x >> sh));
-        for a in 0..3 {
-            at += ((c[a] & self.mask) + HALO) * self.stride[a];
+        for (&ca, &s) in c.iter().zip(&self.stride) {
+            at += ((ca & self.mask) + HALO) * s;
         }
         at
     }
