@@ -233,6 +233,35 @@ pub fn composite_direct_send(
     Ok(Some(image))
 }
 
+/// This rank's side of [`composite_direct_send`] when it cannot take part at all (its set-up
+/// failed before it knew the tree: the volume could not be read, a setting is bad): it sends
+/// `why` to every rank in place of its images, receives every rank's message of the same round
+/// (so that no rank's send is left waiting), and returns the error every rank then returns,
+/// [`DistributedError::Rank`] naming the lowest failing rank. The other ranks, in
+/// [`composite_direct_send`], return the same error after the exchange, without the gather.
+pub fn fail_direct_send(comm: &dyn Communicator, why: String) -> DistributedError {
+    let msg = Message::Failed(why.clone()).encode();
+    for s in 0..comm.size() {
+        if let Err(e) = comm.send(s, msg.clone()) {
+            return e;
+        }
+    }
+    let mut first = None;
+    for from in 0..comm.size() {
+        match comm.recv(from).and_then(|m| Message::decode(&m)) {
+            Ok(Message::Failed(why)) => {
+                first.get_or_insert(DistributedError::Rank { rank: from, why });
+            }
+            Ok(Message::Images(_)) => {}
+            Err(e) => return e,
+        }
+    }
+    first.unwrap_or(DistributedError::Rank {
+        rank: comm.rank(),
+        why,
+    })
+}
+
 /// What one rank sends another: its subtrees' stripes, or why it has none.
 enum Message {
     Failed(String),
