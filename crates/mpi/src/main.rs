@@ -11,7 +11,7 @@
 //! its part in the one exchange, sending its error (`fail_direct_send`), so every rank exits
 //! with status 1 and an error naming the failing rank and its cause; none waits.
 //!
-//! Two benchmark modes (not tests; `docs/BENCHMARKS.md` §29):
+//! Two benchmark modes (not tests; `docs/BENCHMARKS.md` §30):
 //! - `bench --scene SCENE.json [--brick B] [--rounds R]`: a whole sort-last frame, `R` times
 //!   after one warm-up (which loads the volume), each started by a barrier; rank 0 prints the
 //!   median and the minimum in ms.
