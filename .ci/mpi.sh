@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Sort-last rendering across MPI processes (issue 32, decision 0038): Debian's Open MPI and
 # libclang (rsmpi's bindings), the crate's formatting and lints, then `mpirun -np 1/2/3/4` on
-# scene files in both projections, whose images must be the same bytes for every rank count,
-# and a missing volume, which must stop every rank with an error, not hang. crates/mpi is a
+# scene files in both projections, composite and X-ray, whose images must be the same bytes for
+# every rank count (and the X-ray within 60 dB of one process); a missing volume, and one rank's
+# truncated volume (the others' reads succeed), which must stop every rank with an error naming
+# the file, not hang (each mpirun runs under `timeout`). crates/mpi is a
 # workspace of its own (the root's `exclude`), so `cargo test --workspace` never needs MPI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -30,16 +32,36 @@ bin="$PWD/target/release/volsplat"
 mpi="$PWD/crates/mpi/target/release/volsplat-mpi"
 work="$(mktemp -d)"; trap 'rm -rf "$work"' EXIT
 run() { timeout 300 mpirun --allow-run-as-root --oversubscribe -np "$@"; }
-for view in "--azimuth 30 --elevation 15" "--azimuth -50 --elevation 20 --perspective"; do
-  # shellcheck disable=SC2086
-  "$bin" render --size 96x80 $view --save-scene "$work/s.json" -q -o "$work/whole.npy"
-  for n in 1 2 3 4; do
-    run "$n" "$mpi" render --scene "$work/s.json" --brick 32 -o "$work/out$n.npy"
+for mode in composite xray; do
+  for view in "--azimuth 30 --elevation 15" "--azimuth -50 --elevation 20 --perspective"; do
+    # shellcheck disable=SC2086
+    "$bin" render --mode "$mode" --size 96x80 $view --save-scene "$work/s.json" -q -o "$work/whole.npy"
+    for n in 1 2 3 4; do
+      run "$n" "$mpi" render --scene "$work/s.json" --brick 32 -o "$work/out$n.npy"
+    done
+    for n in 2 3 4; do
+      cmp "$work/out1.npy" "$work/out$n.npy" || { echo "FAIL: $n ranks differ from 1 ($mode $view)"; exit 1; }
+    done
+    if [ "$mode" = xray ]; then
+      # The summed line integrals against the single-process X-ray (the same request).
+      python3 - "$work/out1.npy" "$work/whole.npy" <<'PY'
+import math, struct, sys
+def npy(path):
+    b = open(path, "rb").read()
+    n = struct.unpack("<H", b[8:10])[0]
+    body = b[10 + n:]
+    return struct.unpack("<%df" % (len(body) // 4), body)
+a, w = npy(sys.argv[1]), npy(sys.argv[2])
+assert len(a) == len(w), (len(a), len(w))
+mse = sum((x - y) ** 2 for x, y in zip(a, w)) / len(w)
+peak = max(w)
+psnr = 10 * math.log10(peak * peak / mse) if mse > 0 else float("inf")
+print(f"X-ray: {psnr:.1f} dB from one process")
+assert peak > 0 and psnr >= 60, psnr
+PY
+    fi
+    echo "ok: 1–4 ranks give the same bytes ($mode $view)"
   done
-  for n in 2 3 4; do
-    cmp "$work/out1.npy" "$work/out$n.npy" || { echo "FAIL: $n ranks differ from 1 ($view)"; exit 1; }
-  done
-  echo "ok: 1–4 ranks give the same bytes ($view)"
 done
 
 step "mpi: a rank that cannot read its volume stops every rank"
@@ -56,3 +78,39 @@ fi
 grep -q "missing.nrrd" "$work/err.txt" || { cat "$work/err.txt"; echo "FAIL: the error does not name the file"; exit 1; }
 [ ! -e "$work/bad.npy" ] || { echo "FAIL: an output was written"; exit 1; }
 echo "ok: every rank stopped with an error naming the file"
+
+step "mpi: one rank whose volume read fails stops every rank"
+# MPMD: every rank gets the same scene except one, whose volume file is truncated, so that only
+# its read fails (a real read error, no test hook); the others load and render, and must learn
+# of it in the exchange instead of waiting for its images.
+"$bin" convert -o "$work/vol.nrrd" -q
+head -c 20000 "$work/vol.nrrd" > "$work/trunc.nrrd"
+"$bin" render "$work/vol.nrrd" --size 64x48 --save-scene "$work/ok.json" -q -o "$work/b.png"
+python3 - "$work/ok.json" "$work/one_bad.json" "$work/trunc.nrrd" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+s["scene"]["volume"] = {"file": {"path": sys.argv[3]}}
+json.dump(s, open(sys.argv[2], "w"))
+PY
+run 2 "$mpi" render --scene "$work/ok.json" --brick 16 -o "$work/ok.npy" \
+  || { echo "FAIL: the good volume did not render"; exit 1; }
+for n in 2 3 4; do
+  for bad in 0 $((n - 1)); do
+    spec=()
+    for ((r = 0; r < n; r++)); do
+      [ "$r" -gt 0 ] && spec+=(:)
+      scene="$work/ok.json"; [ "$r" -eq "$bad" ] && scene="$work/one_bad.json"
+      spec+=(-np 1 "$mpi" render --scene "$scene" --brick 16 -o "$work/one.npy")
+    done
+    set +e
+    timeout 120 mpirun --allow-run-as-root --oversubscribe "${spec[@]}" 2> "$work/err.txt"
+    rc=$?
+    set -e
+    [ "$rc" -ne 124 ] || { echo "FAIL: np=$n, rank $bad failing: mpirun hung (timeout)"; exit 1; }
+    [ "$rc" -ne 0 ] || { echo "FAIL: np=$n, rank $bad failing: exit 0"; exit 1; }
+    got=$(grep -c "rank $bad failed: .*trunc.nrrd" "$work/err.txt" || true)
+    [ "$got" -eq "$n" ] || { cat "$work/err.txt"; echo "FAIL: np=$n: $got of $n ranks named rank $bad and the file"; exit 1; }
+    [ ! -e "$work/one.npy" ] || { echo "FAIL: an output was written"; exit 1; }
+  done
+  echo "ok: np=$n, rank 0 or rank $((n - 1)) failing its read: every rank named it, none hung"
+done

@@ -3,114 +3,113 @@
 //! is available) across the ranks of `MPI_COMM_WORLD` (issue 32, decision 0038). The volume is
 //! cut into bricks of `B` cells (64 by default; the cut does not depend on N), rank `r` draws
 //! its run of the bricks, the ranks composite the partial images over a tree fixed by the
-//! bricks, and rank 0 writes the image as `volsplat render` writes it. The image is the same bits
-//! for any N. Every rank still loads the whole volume (reading only a rank's bricks needs the
-//! brick seam's cache, not built yet).
+//! bricks (`over` in composite, the sum in X-ray), and rank 0 writes the image as `volsplat
+//! render` writes it. The image is the same bits for any N. Every rank still loads the whole
+//! volume (reading only a rank's bricks needs the brick seam's cache, not built yet).
+//!
+//! A rank that fails before the compositing (its scene file or volume unreadable) still takes
+//! its part in the one exchange, sending its error (`fail_direct_send`), so every rank exits
+//! with status 1 and an error naming the failing rank and its cause; none waits.
+//!
+//! Two benchmark modes (not tests; `docs/BENCHMARKS.md` §30):
+//! - `bench --scene SCENE.json [--brick B] [--rounds R]`: a whole sort-last frame, `R` times
+//!   after one warm-up (which loads the volume), each started by a barrier; rank 0 prints the
+//!   median and the minimum in ms.
+//! - `bench-composite --size S [--bricks X,Y,Z] [--rounds R]`: `composite_direct_send` alone on
+//!   `S × S` images, one per brick of an `X × Y × Z` brick grid (2,2,1 by default: one brick
+//!   per rank at N = 4), premultiplied RGBA with opacity in [0, 0.9], made before the timed
+//!   region; rank 0 prints the median and the minimum in ms.
+
+mod bench;
+mod world;
 
 use anyhow::{Context, Result, bail};
-use mpi::traits::{Communicator as _, Destination, Source};
 use std::path::PathBuf;
-use volsplat::distributed::{Communicator, DistributedError, render_sort_last};
+use volsplat::distributed::{Communicator, fail_direct_send, render_sort_last};
+use world::World;
 
-/// MPI point-to-point messages on `MPI_COMM_WORLD`: buffered sends (`MPI_Bsend`, into the
-/// buffer `main` attaches), so every rank may send to every rank before it receives, as
-/// [`Communicator`] requires; a message to itself is queued in memory.
-struct World {
-    world: mpi::topology::SimpleCommunicator,
-    /// Messages sent and not yet known to be delivered, completed in order.
-    pending: std::sync::Mutex<Vec<Vec<u8>>>,
+/// What to do, from the command line.
+enum Command {
+    Render {
+        scene: PathBuf,
+        output: PathBuf,
+        brick: usize,
+    },
+    Bench {
+        scene: PathBuf,
+        brick: usize,
+        rounds: usize,
+    },
+    BenchComposite {
+        size: usize,
+        bricks: [usize; 3],
+        rounds: usize,
+    },
 }
 
-impl Communicator for World {
-    fn rank(&self) -> usize {
-        self.world.rank() as usize
-    }
+const USAGE: &str = "usage: volsplat-mpi render --scene SCENE.json -o OUT [--brick B]\n       \
+                     volsplat-mpi bench --scene SCENE.json [--brick B] [--rounds R]\n       \
+                     volsplat-mpi bench-composite --size S [--bricks X,Y,Z] [--rounds R]";
 
-    fn size(&self) -> usize {
-        self.world.size() as usize
-    }
-
-    fn send(&self, to: usize, data: Vec<u8>) -> std::result::Result<(), DistributedError> {
-        if to >= self.size() {
-            return Err(DistributedError::Protocol(
-                "a send to a rank that does not exist",
-            ));
-        }
-        // A length first, then the bytes: the receiver sizes its buffer.
-        let p = self.world.process_at_rank(to as i32);
-        let len = data.len() as u64;
-        if to == self.rank() {
-            self.pending
-                .lock()
-                .map_err(|_| DistributedError::Protocol("a poisoned queue"))?
-                .push(data);
-            return Ok(());
-        }
-        // Buffered (MPI_Bsend): the send returns once the message is copied into the buffer
-        // attached in `main`, whether or not the receiver has posted its receive.
-        p.buffered_send(&len);
-        p.buffered_send(&data[..]);
-        Ok(())
-    }
-
-    fn recv(&self, from: usize) -> std::result::Result<Vec<u8>, DistributedError> {
-        if from >= self.size() {
-            return Err(DistributedError::Protocol(
-                "a receive from a rank that does not exist",
-            ));
-        }
-        if from == self.rank() {
-            let mut q = self
-                .pending
-                .lock()
-                .map_err(|_| DistributedError::Protocol("a poisoned queue"))?;
-            if q.is_empty() {
-                return Err(DistributedError::Protocol(
-                    "a receive from itself before a send",
-                ));
-            }
-            return Ok(q.remove(0));
-        }
-        let p = self.world.process_at_rank(from as i32);
-        let (len, _) = p.receive::<u64>();
-        let mut buf = vec![0u8; len as usize];
-        p.receive_into(&mut buf[..]);
-        Ok(buf)
-    }
-}
-
-struct Args {
-    scene: PathBuf,
-    output: PathBuf,
-    brick: usize,
-}
-
-fn parse() -> Result<Args> {
+fn parse() -> Result<Command> {
     let mut it = std::env::args().skip(1);
-    if it.next().as_deref() != Some("render") {
-        bail!("usage: volsplat-mpi render --scene SCENE.json -o OUT [--brick B]");
-    }
-    let (mut scene, mut output, mut brick) = (None, None, 64usize);
+    let command = it.next().unwrap_or_default();
+    let (mut scene, mut output, mut brick, mut rounds) = (None, None, 64usize, 5usize);
+    let (mut size, mut bricks) = (None, [2, 2, 1]);
     while let Some(a) = it.next() {
         let mut value = || it.next().with_context(|| format!("{a} needs a value"));
         match a.as_str() {
             "--scene" => scene = Some(PathBuf::from(value()?)),
             "-o" | "--output" => output = Some(PathBuf::from(value()?)),
             "--brick" => brick = value()?.parse().context("--brick: a number of cells")?,
-            other => bail!("unknown argument {other:?}"),
+            "--rounds" => rounds = value()?.parse().context("--rounds: a count ≥ 1")?,
+            "--size" => size = Some(value()?.parse().context("--size: pixels per side")?),
+            "--bricks" => {
+                let v = value()?;
+                let n: Vec<usize> = v
+                    .split(',')
+                    .map(str::parse)
+                    .collect::<std::result::Result<_, _>>()
+                    .with_context(|| format!("--bricks {v}: X,Y,Z brick counts"))?;
+                bricks = n
+                    .try_into()
+                    .map_err(|_| anyhow::anyhow!("--bricks {v}: three counts, X,Y,Z"))?;
+            }
+            other => bail!("unknown argument {other:?}\n{USAGE}"),
         }
     }
-    Ok(Args {
-        scene: scene.context("--scene SCENE.json is required (volsplat render … --save-scene)")?,
-        output: output.context("-o OUT is required")?,
-        brick,
+    let scene = || {
+        scene
+            .clone()
+            .context("--scene SCENE.json is required (volsplat render … --save-scene)")
+    };
+    if rounds == 0 {
+        bail!("--rounds 0: at least one round");
+    }
+    Ok(match command.as_str() {
+        "render" => Command::Render {
+            scene: scene()?,
+            output: output.context("-o OUT is required")?,
+            brick,
+        },
+        "bench" => Command::Bench {
+            scene: scene()?,
+            brick,
+            rounds,
+        },
+        "bench-composite" => Command::BenchComposite {
+            size: size.context("--size S is required")?,
+            bricks,
+            rounds,
+        },
+        _ => bail!("{USAGE}"),
     })
 }
 
 /// The scene file's request, with its warnings printed once (rank 0).
-fn load(args: &Args, rank: i32) -> Result<volsplat::RenderRequest> {
-    let (request, warnings) = volsplat::RenderRequest::load(&args.scene)
-        .with_context(|| format!("reading {}", args.scene.display()))?;
+fn load(scene: &PathBuf, rank: i32) -> Result<volsplat::RenderRequest> {
+    let (request, warnings) = volsplat::RenderRequest::load(scene)
+        .with_context(|| format!("reading {}", scene.display()))?;
     if rank == 0 {
         for w in warnings {
             eprintln!("warning: {w}");
@@ -119,24 +118,86 @@ fn load(args: &Args, rank: i32) -> Result<volsplat::RenderRequest> {
     Ok(request)
 }
 
-fn run(world: &World, args: &Args, request: &volsplat::RenderRequest) -> Result<()> {
+fn render(
+    world: &World,
+    request: &volsplat::RenderRequest,
+    output: &std::path::Path,
+    brick: usize,
+) -> Result<()> {
     let mut renderer = volsplat::Renderer::new();
-    let image = render_sort_last(world, &mut renderer, request, args.brick)
+    let image = render_sort_last(world, &mut renderer, request, brick)
         .with_context(|| format!("rank {} of {}", world.rank(), world.size()))?;
     if let Some(image) = image {
         let options = request.output.write_options()?;
-        volsplat::write_image(&args.output, &image, None, request.mode, &options)
-            .with_context(|| format!("writing {}", args.output.display()))?;
+        volsplat::write_image(
+            output,
+            &image.image,
+            image.values.as_ref(),
+            request.mode,
+            &options,
+        )
+        .with_context(|| format!("writing {}", output.display()))?;
         eprintln!(
             "wrote {} ({}×{}, {} ranks, bricks of {} cells)",
-            args.output.display(),
-            image.width(),
-            image.height(),
+            output.display(),
+            image.image.width(),
+            image.image.height(),
             world.size(),
-            args.brick
+            brick
         );
     }
     Ok(())
+}
+
+/// The bytes of the buffered sends' buffer for `images` whole `width × height` images of 16
+/// bytes a pixel, and MPI's per-message overhead.
+fn buffer_bytes(width: usize, height: usize, images: usize) -> usize {
+    width * height * 16 * images + (1 << 20)
+}
+
+fn run(universe: &mut mpi::environment::Universe, command: Result<Command>) -> Result<()> {
+    use mpi::traits::Communicator as _;
+    let rank = universe.world().rank();
+    // Everything a rank does before the exchange; its failure is shared through it.
+    let ready = command.and_then(|c| {
+        let request = match &c {
+            Command::Render { scene, .. } | Command::Bench { scene, .. } => {
+                Some(load(scene, rank)?)
+            }
+            Command::BenchComposite { .. } => None,
+        };
+        Ok((c, request))
+    });
+    let (command, request) = match ready {
+        Ok(r) => r,
+        Err(e) => {
+            universe.set_buffer_size(1 << 20);
+            let world = World::new(universe);
+            let e = fail_direct_send(&world, format!("{e:#}"));
+            bail!("rank {rank} of {}: {e}", world.size());
+        }
+    };
+    match (command, request) {
+        (Command::Render { output, brick, .. }, Some(request)) => {
+            // A rank sends its subtrees' images (the roots of its run of the tree: a few) once,
+            // split in stripes, and its stripe once more: room for 8 whole images.
+            universe.set_buffer_size(buffer_bytes(request.width, request.height, 8));
+            render(&World::new(universe), &request, &output, brick)
+        }
+        (Command::Bench { brick, rounds, .. }, Some(request)) => {
+            universe.set_buffer_size(buffer_bytes(request.width, request.height, 8));
+            bench::frames(&World::new(universe), &request, brick, rounds)
+        }
+        (
+            Command::BenchComposite {
+                size,
+                bricks,
+                rounds,
+            },
+            _,
+        ) => bench::composite(universe, size, bricks, rounds),
+        _ => bail!("a scene command without its scene"),
+    }
 }
 
 fn main() {
@@ -144,21 +205,8 @@ fn main() {
         eprintln!("error: MPI could not be initialised");
         std::process::exit(1);
     };
-    let rank = universe.world().rank();
-    let loaded = parse().and_then(|a| load(&a, rank).map(|r| (a, r)));
-    let result = loaded.and_then(|(args, request)| {
-        // The buffer of the buffered sends: a rank sends its subtrees' images (the roots of its
-        // run of the tree: a few) once, split in stripes, and its stripe once more; 16 bytes a
-        // pixel, room for 8 whole images and MPI's per-message overhead.
-        let bytes = request.width * request.height * 16 * 8 + (1 << 20);
-        universe.set_buffer_size(bytes);
-        let world = World {
-            world: universe.world(),
-            pending: std::sync::Mutex::new(Vec::new()),
-        };
-        run(&world, &args, &request)
-    });
-    if let Err(e) = result {
+    let command = parse();
+    if let Err(e) = run(&mut universe, command) {
         eprintln!("error: {e:#}");
         // Every rank reaches here with the same error (the protocol shares a rank's failure);
         // exiting non-zero lets mpirun report it.

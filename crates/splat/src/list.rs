@@ -41,7 +41,7 @@ use crate::footprint::metric_from;
 use crate::geometry::{Order, sheet_axis};
 use crate::gradient::gradient_in;
 use crate::sheets::{
-    BandState, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
+    BandState, OwnedVoxels, Progress, RenderMode, RenderSettings, RenderStats, Rendered, SINK_LINE,
     SINK_OVER_BTF, SINK_OVER_FTB, SINK_SHEET, SheetPass, SpanCtx, deposit, div_band, drive, ms,
     refuse_image_aligned, scale_kept, validate, xray_weight,
 };
@@ -463,6 +463,8 @@ struct Frame<'a> {
     n_bands: usize,
     /// Clipping planes in lattice terms (empty: none).
     clip: LatticeClip,
+    /// A brick's voxels only ([`RenderSettings::owned_cells`]; `None`: every voxel).
+    owned: Option<OwnedVoxels>,
 }
 
 /// Renders a splat list seen by `camera` (orthographic or perspective); see the module docs.
@@ -650,6 +652,7 @@ fn render_inner(
         band_h,
         n_bands,
         clip: LatticeClip::new(&settings.clip, &list.grid, &settings.kernel, list.stride),
+        owned: OwnedVoxels::new(settings, list.grid.dims)?,
     };
     let stats = RenderStats {
         sheets: n_sheets,
@@ -819,8 +822,18 @@ impl Frame<'_> {
         let frame = *self.proj.frame();
         let needs_gradient = mode == RenderMode::Composite && self.classifier.needs_gradient;
         let stride = self.list.stride as f64;
+        // A brick's partial image: the slices and voxels of its box only.
+        let ls = self.list.stride;
+        if self.owned.is_some_and(|o| !o.owns(axis, c * ls)) {
+            return;
+        }
         self.list.for_each_in_slice(axis, c, |r| {
             if out.out_of_memory.is_some() {
+                return;
+            }
+            if let Some(o) = &self.owned
+                && !o.owns_voxel(r.ijk.map(|l| l as usize * ls))
+            {
                 return;
             }
             let lattice = DVec3::new(r.ijk[0] as f64, r.ijk[1] as f64, r.ijk[2] as f64);

@@ -181,15 +181,15 @@ pub fn composite_direct_send(
     for s in 0..n {
         let (y0, y1) = stripe_rows(s, n, height);
         let msg = match &failure {
-            Some(why) => Message::Failed(why.clone()),
-            None => Message::Images(
-                local
+            Some(why) => Message::Failed(why.clone()).encode(),
+            None => encode_images(
+                &local
                     .iter()
-                    .map(|(root, p)| (*root, p[y0 * width..y1 * width].to_vec()))
-                    .collect(),
+                    .map(|(root, p)| (*root, &p[y0 * width..y1 * width]))
+                    .collect::<Vec<_>>(),
             ),
         };
-        comm.send(s, msg.encode())?;
+        comm.send(s, msg)?;
     }
     let mut given: Vec<Option<Pixels>> = vec![None; tree.nodes.len()];
     let mut first_failure = None;
@@ -233,6 +233,56 @@ pub fn composite_direct_send(
     Ok(Some(image))
 }
 
+/// This rank's side of [`composite_direct_send`] when it cannot take part at all (its set-up
+/// failed before it knew the tree: the volume could not be read, a setting is bad): it sends
+/// `why` to every rank in place of its images, receives every rank's message of the same round
+/// (so that no rank's send is left waiting), and returns the error every rank then returns,
+/// [`DistributedError::Rank`] naming the lowest failing rank. The other ranks, in
+/// [`composite_direct_send`], return the same error after the exchange, without the gather.
+pub fn fail_direct_send(comm: &dyn Communicator, why: String) -> DistributedError {
+    let msg = Message::Failed(why.clone()).encode();
+    for s in 0..comm.size() {
+        if let Err(e) = comm.send(s, msg.clone()) {
+            return e;
+        }
+    }
+    let mut first = None;
+    for from in 0..comm.size() {
+        match comm.recv(from).and_then(|m| Message::decode(&m)) {
+            Ok(Message::Failed(why)) => {
+                first.get_or_insert(DistributedError::Rank { rank: from, why });
+            }
+            Ok(Message::Images(_)) => {}
+            Err(e) => return e,
+        }
+    }
+    first.unwrap_or(DistributedError::Rank {
+        rank: comm.rank(),
+        why,
+    })
+}
+
+/// [`Message::Images`] of borrowed pixels, encoded (as [`Message::encode`]) without copying
+/// them first.
+fn encode_images(v: &[(usize, &[[f32; 4]])]) -> Vec<u8> {
+    let bytes = 8 + v.iter().map(|(_, p)| 8 + 16 * p.len()).sum::<usize>();
+    let mut out = Vec::with_capacity(bytes);
+    out.extend_from_slice(&1u32.to_le_bytes());
+    out.extend_from_slice(&(v.len() as u32).to_le_bytes());
+    for (node, p) in v {
+        out.extend_from_slice(&(*node as u32).to_le_bytes());
+        out.extend_from_slice(&(p.len() as u32).to_le_bytes());
+        for px in p.iter() {
+            let mut b = [0u8; 16];
+            for (c, v) in px.iter().enumerate() {
+                b[4 * c..4 * c + 4].copy_from_slice(&v.to_le_bytes());
+            }
+            out.extend_from_slice(&b);
+        }
+    }
+    out
+}
+
 /// What one rank sends another: its subtrees' stripes, or why it has none.
 enum Message {
     Failed(String),
@@ -242,28 +292,22 @@ enum Message {
 impl Message {
     /// Little-endian: tag (u32: 0 failed, 1 images); failed: the UTF-8 reason; images: count
     /// (u32), then per image the node (u32), the pixel count (u32) and the f32 channels.
+    /// The buffer is sized once (a grown buffer would copy whole images and fault in their
+    /// pages again; `bench-composite` under `mpirun`).
     fn encode(&self) -> Vec<u8> {
-        let mut out = Vec::new();
         match self {
             Message::Failed(why) => {
-                out.extend(0u32.to_le_bytes());
-                out.extend(why.as_bytes());
+                let mut out = Vec::with_capacity(4 + why.len());
+                out.extend_from_slice(&0u32.to_le_bytes());
+                out.extend_from_slice(why.as_bytes());
+                out
             }
-            Message::Images(v) => {
-                out.extend(1u32.to_le_bytes());
-                out.extend((v.len() as u32).to_le_bytes());
-                for (node, p) in v {
-                    out.extend((*node as u32).to_le_bytes());
-                    out.extend((p.len() as u32).to_le_bytes());
-                    for px in p {
-                        for c in px {
-                            out.extend(c.to_le_bytes());
-                        }
-                    }
-                }
-            }
+            Message::Images(v) => encode_images(
+                &v.iter()
+                    .map(|(node, p)| (*node, &p[..]))
+                    .collect::<Vec<_>>(),
+            ),
         }
-        out
     }
 
     fn decode(bytes: &[u8]) -> Result<Message> {
@@ -286,15 +330,13 @@ impl Message {
                     let len = u32_at(&mut at)? as usize;
                     let raw = bytes.get(at..at + len * 16).ok_or(bad.clone())?;
                     at += len * 16;
-                    let p = raw
-                        .chunks_exact(16)
-                        .map(|px| {
-                            std::array::from_fn(|c| {
-                                let b = &px[4 * c..4 * c + 4];
-                                f32::from_le_bytes([b[0], b[1], b[2], b[3]])
-                            })
+                    let mut p: Pixels = Vec::with_capacity(len);
+                    p.extend(raw.chunks_exact(16).map(|px| {
+                        std::array::from_fn(|c| {
+                            let b = &px[4 * c..4 * c + 4];
+                            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
                         })
-                        .collect();
+                    }));
                     v.push((node, p));
                 }
                 Ok(Message::Images(v))

@@ -13,6 +13,8 @@
 //! rank reading only its bricks (the brick seam's `BrickCache`, `docs/design/brick-seam.md`),
 //! pre-integration across a brick face (a brick's first sample has no previous one), early
 //! termination across bricks (each brick's image runs to its own opacity) and MIP/MinIP bricks.
+//! X-ray is summed from bricks drawn by the sheets or the splat list, each drawing the voxels of
+//! its cells.
 //! The MPI communicator and the `volsplat-mpi` binary are in `crates/mpi`.
 
 mod comm;
@@ -21,8 +23,8 @@ mod render;
 mod tree;
 
 pub use comm::{Communicator, FakeCluster, FakeComm};
-pub use composite::{Combine, Pixels, composite_direct_send, stripe_rows};
-pub use render::render_sort_last;
+pub use composite::{Combine, Pixels, composite_direct_send, fail_direct_send, stripe_rows};
+pub use render::{SortLastImage, render_sort_last};
 pub use tree::{BrickTree, Eye, Node};
 
 /// What can go wrong while compositing across processes.

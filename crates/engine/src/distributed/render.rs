@@ -3,39 +3,132 @@
 //! ([`Renderer::render_brick`]) and the ranks compositing them over the fixed tree.
 
 use super::comm::Communicator;
-use super::composite::{Combine, Pixels, composite_direct_send};
+use super::composite::{Combine, Pixels, composite_direct_send, fail_direct_send};
 use super::tree::{BrickTree, Eye};
 use super::{DistributedError, Result};
+use crate::Mode;
 use crate::renderer::Renderer;
 use crate::request::RenderRequest;
-use volsplat_core::Image;
 use volsplat_core::glam::DVec3;
+use volsplat_core::{Image, ScalarImage};
+
+/// The image of a sort-last render, on rank 0: what [`Renderer::render`] returns as
+/// `Output::image` and `Output::values` for the same request (write both with
+/// [`crate::write_image`]).
+#[derive(Debug, Clone)]
+pub struct SortLastImage {
+    /// Composite: premultiplied RGBA. X-ray: the grey picture of the line integrals, scaled so
+    /// that the largest is white ([`volsplat_splat::xray_picture`]).
+    pub image: Image,
+    /// X-ray: the line integrals (data units × world units), rows top to bottom; `None` in
+    /// composite.
+    pub values: Option<ScalarImage>,
+}
 
 /// Renders `request` sort-last among the ranks of `comm`: its volume is cut into bricks of
 /// `brick` cells per side (a multiple of 8, the same on every rank: the cut does not depend on
 /// the number of ranks), rank `r` draws the partial images of its run of the tree's bricks
 /// with `renderer`, and the ranks composite them ([`composite_direct_send`]). Returns the image
-/// on rank 0 (`None` on the others): the same bits for any number of ranks, and the
-/// single-process render up to f32 reassociation where nothing is pre-integrated and no ray
-/// reaches the opacity cutoff (decision 0038). Composite through the image-aligned slabs only.
+/// on rank 0 (`None` on the others): the same bits for any number of ranks.
+///
+/// - **Composite** (`over`, front to back), through the image-aligned slabs: the
+///   single-process render up to f32 reassociation where nothing is pre-integrated and no ray
+///   reaches the opacity cutoff (decision 0038). One ray per pixel (`quality.antialias` is
+///   taken as `none`): a minified view's area averaging does not commute with compositing, so
+///   it would have to composite the rays before averaging them, which is not built.
+/// - **X-ray** (sum), through the sheets (orthographic) or the splat list (perspective): each
+///   brick draws the voxels of its cells (the last brick along an axis also the far face), so
+///   the sum is the single-process X-ray up to f32 reassociation, anti-aliasing included (a
+///   footprint is linear in its voxel).
+/// - MIP and MinIP are refused (an error naming `renderer`).
+///
 /// Every rank still loads the whole volume (reading only a rank's bricks is the brick seam's
-/// cache, not built yet). One ray per pixel (`quality.antialias` is taken as `none`): a
-/// minified view's area averaging does not commute with compositing, so it would have to
-/// composite the rays before averaging them, which is not built.
+/// cache, not built yet). A rank that cannot set up (its volume unreadable, a bad setting)
+/// still takes its part in the exchange, sending its error instead of images, so every rank
+/// returns [`DistributedError::Rank`] naming the lowest failing rank and nobody waits.
 pub fn render_sort_last(
     comm: &dyn Communicator,
     renderer: &mut Renderer,
     request: &RenderRequest,
     brick: usize,
-) -> Result<Option<Image>> {
+) -> Result<Option<SortLastImage>> {
     let mut request = request.clone();
-    request.quality.antialias = crate::request::AntialiasChoice::None;
+    if request.mode != Mode::Xray {
+        request.quality.antialias = crate::request::AntialiasChoice::None;
+    }
     let request = &request;
+    let (tree, eye, combine) = match set_up(renderer, request, brick) {
+        Ok(s) => s,
+        Err(e) => return Err(fail_direct_send(comm, e.to_string())),
+    };
+    let (w, h) = (request.width, request.height);
+    let pixels = composite_direct_send(comm, &tree, eye, combine, (w, h), &mut |b| {
+        let [nx, ny, _] = tree.dims;
+        let at = [b % nx, b / nx % ny, b / (nx * ny)];
+        let owned = [at.map(|a| a * brick), at.map(|a| (a + 1) * brick)];
+        let out = renderer
+            .render_brick(request, owned, &mut |_| true)
+            .map_err(|e| DistributedError::Brick {
+                brick: b,
+                why: e.to_string(),
+            })?;
+        let p: Pixels = match (combine, &out.values) {
+            (Combine::Sum, Some(v)) => v.values().iter().map(|&x| [x, 0.0, 0.0, 0.0]).collect(),
+            (Combine::Sum, None) => {
+                return Err(DistributedError::Brick {
+                    brick: b,
+                    why: "an X-ray without its values".into(),
+                });
+            }
+            _ => out.image.pixels().to_vec(),
+        };
+        let drawn = |px: &[f32; 4]| match combine {
+            Combine::Sum => px[0] != 0.0,
+            _ => px[3] > 0.0,
+        };
+        Ok(p.iter().any(drawn).then_some(p))
+    })?;
+    let Some(pixels) = pixels else {
+        return Ok(None);
+    };
+    let bad = || DistributedError::Protocol("an image of the wrong size");
+    Ok(Some(match combine {
+        Combine::Sum => {
+            let (image, values) =
+                volsplat_splat::xray_picture(w, h, pixels.iter().map(|p| p[0]).collect());
+            SortLastImage {
+                image,
+                values: Some(values.ok_or_else(bad)?),
+            }
+        }
+        _ => SortLastImage {
+            image: Image::from_pixels(w, h, pixels).ok_or_else(bad)?,
+            values: None,
+        },
+    }))
+}
+
+/// The tree over the request's bricks, where the eye is in the volume's index space, and how
+/// the partial images combine.
+fn set_up(
+    renderer: &mut Renderer,
+    request: &RenderRequest,
+    brick: usize,
+) -> Result<(BrickTree, Eye, Combine)> {
     if brick == 0 || !brick.is_multiple_of(8) {
         return Err(DistributedError::Setting(format!(
             "brick size {brick}: a positive multiple of 8 cells"
         )));
     }
+    let combine = match request.mode {
+        Mode::Composite => Combine::Over,
+        Mode::Xray => Combine::Sum,
+        Mode::Mip | Mode::Minip => {
+            return Err(DistributedError::Setting(
+                "renderer: sort-last MIP and MinIP are not built (composite and X-ray are)".into(),
+            ));
+        }
+    };
     let engine = |e: crate::EngineError| DistributedError::Engine(e.to_string());
     let grid = renderer
         .volume(&request.scene.volume)
@@ -52,19 +145,5 @@ pub fn render_sort_last(
     } else {
         Eye::Point(position.into())
     };
-    let (w, h) = (request.width, request.height);
-    let pixels = composite_direct_send(comm, &tree, eye, Combine::Over, (w, h), &mut |b| {
-        let [nx, ny, _] = tree.dims;
-        let at = [b % nx, b / nx % ny, b / (nx * ny)];
-        let owned = [at.map(|a| a * brick), at.map(|a| (a + 1) * brick)];
-        let out = renderer
-            .render_brick(request, owned, &mut |_| true)
-            .map_err(|e| DistributedError::Brick {
-                brick: b,
-                why: e.to_string(),
-            })?;
-        let p: Pixels = out.image.pixels().to_vec();
-        Ok(p.iter().any(|px| px[3] > 0.0).then_some(p))
-    })?;
-    Ok(pixels.and_then(|p| Image::from_pixels(w, h, p)))
+    Ok((tree, eye, combine))
 }

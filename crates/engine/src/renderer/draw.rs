@@ -249,6 +249,7 @@ impl Renderer {
         let mut settings = f.request.splat_settings();
         settings.clip = f.request.scene.clipping.world_planes(f.volume.grid())?;
         settings.xray_offset = f.xray_offset.map(|o| o as f32);
+        settings.owned_cells = f.owned_cells;
         // The sheets draw sheet-buffer visibility; `image` reaches them only where they draw
         // what the slabs do not (X-ray, or the splat list asked for by name).
         if f.request.quality.visibility == VisibilityChoice::Image {

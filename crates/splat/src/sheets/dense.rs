@@ -7,8 +7,8 @@ use super::band::{
 };
 use super::driver::{SheetPass, drive};
 use super::settings::{
-    Progress, RenderMode, RenderSettings, RenderStats, Rendered, refuse_image_aligned, validate,
-    xray_weight,
+    OwnedVoxels, Progress, RenderMode, RenderSettings, RenderStats, Rendered, refuse_image_aligned,
+    validate, xray_weight,
 };
 use crate::clip::LatticeClip;
 use crate::error::Result;
@@ -78,6 +78,7 @@ pub fn render_with_progress<T: Scalar>(
         &settings.footprint,
         settings.antialias,
     )?;
+    let owned = OwnedVoxels::new(settings, volume.grid().dims)?;
     let classifier = FrameClassifier::new(tables, &proj.frame, geom.sheet_spacing);
     let n_bands = settings.height.div_ceil(settings.band_height);
     let stats = RenderStats {
@@ -97,7 +98,7 @@ pub fn render_with_progress<T: Scalar>(
             (tables, &classifier),
             settings,
             &table,
-            n_bands,
+            (n_bands, owned),
         ),
         bands: BandContext {
             table: &table,
@@ -183,6 +184,8 @@ struct ClassifyContext<'a, T> {
     clip: LatticeClip,
     /// X-ray: the offset of [`RenderSettings::xray_offset`].
     xray_offset: Option<f32>,
+    /// A brick's voxels only ([`RenderSettings::owned_cells`]; `None`: every voxel).
+    owned: Option<OwnedVoxels>,
 }
 
 impl<'a, T: Scalar> ClassifyContext<'a, T> {
@@ -192,7 +195,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
         (tables, classifier): (&CrioTables, &'a FrameClassifier),
         settings: &RenderSettings,
         table: &FootprintTable,
-        n_bands: usize,
+        (n_bands, owned): (usize, Option<OwnedVoxels>),
     ) -> Self {
         let grid = volume.grid();
         let (dlo, dhi) = geom.depth_range;
@@ -246,6 +249,7 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
             depth_scale: if dhi > dlo { 1.0 / (dhi - dlo) } else { 0.0 },
             clip: LatticeClip::new(&settings.clip, grid, &settings.kernel, geom.stride),
             xray_offset: settings.xray_offset,
+            owned,
         }
     }
 
@@ -279,6 +283,13 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
             b.clear();
         }
         out.buckets.resize_with(self.n_bands, Vec::new);
+        out.visited = (nu * nv) as u64;
+        // A brick's partial image: the sheets, rows and voxels of its box only.
+        let owns = |axis: usize, l: usize| self.owned.is_none_or(|o| o.owns(axis, l * stride));
+        if !owns(sa, sheet) {
+            (out.splatted, out.skipped) = (0, 0);
+            return;
+        }
         let (mut splatted, mut skipped) = (0u64, 0u64);
         let data = self.vox.data();
         let data_stride = self.vox.stride();
@@ -295,6 +306,9 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                 vi
             };
             // Incremental transform (Westover §3.5.1): one full position per row, then adds.
+            if !owns(va, v) {
+                continue;
+            }
             let row = sheet_origin + jv * v as f64;
             let row_lin = sheet_lin + v * sv;
             for ui in 0..nu {
@@ -303,6 +317,9 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                 } else {
                     ui
                 };
+                if !owns(ua, u) {
+                    continue;
+                }
                 let lin = row_lin + u * su;
                 let density = data[lin].to_f32();
                 // Shade first (§5.2): cull zero opacity before anything else is computed.
@@ -357,7 +374,6 @@ impl<'a, T: Scalar> ClassifyContext<'a, T> {
                 }
             }
         }
-        out.visited = (nu * nv) as u64;
         out.splatted = splatted;
         out.skipped = skipped;
     }

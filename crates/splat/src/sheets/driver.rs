@@ -172,18 +172,7 @@ fn finish_unchecked(
             let img = Image::from_pixels(w, h, acc).unwrap_or_else(|| Image::new(w, h));
             (img, None)
         }
-        RenderMode::Xray => {
-            let values: Vec<f32> = acc.iter().map(|p| p[0]).collect();
-            let max = values.iter().fold(0.0f32, |m, &v| m.max(v));
-            let k = if max > 0.0 { 1.0 / max } else { 0.0 };
-            let pixels = values.iter().map(|&v| {
-                let g = (v * k).clamp(0.0, 1.0);
-                [g, g, g, 1.0]
-            });
-            let img =
-                Image::from_pixels(w, h, pixels.collect()).unwrap_or_else(|| Image::new(w, h));
-            (img, ScalarImage::from_values(w, h, values))
-        }
+        RenderMode::Xray => xray_picture(w, h, acc.iter().map(|p| p[0]).collect()),
         RenderMode::Mip | RenderMode::Minip => {
             let values: Vec<f32> = acc.iter().map(|p| p[0]).collect();
             let pixels = values
@@ -206,4 +195,21 @@ fn finish_unchecked(
             (img, ScalarImage::from_values(w, h, values))
         }
     }
+}
+
+/// The picture of an X-ray whose line integrals are `values` (`width × height`, rows top to
+/// bottom, data units × world units): grey, scaled so that the largest value is white (0 and
+/// below black), opaque; returned with the values themselves (`None` if their count is not
+/// `width × height`). What the sheet renderer and the splat list return in X-ray, for callers
+/// that sum partial X-rays themselves (a sort-last render, `volsplat::distributed`).
+pub fn xray_picture(width: usize, height: usize, values: Vec<f32>) -> (Image, Option<ScalarImage>) {
+    let (w, h) = (width, height);
+    let max = values.iter().fold(0.0f32, |m, &v| m.max(v));
+    let k = if max > 0.0 { 1.0 / max } else { 0.0 };
+    let pixels = values.iter().map(|&v| {
+        let g = (v * k).clamp(0.0, 1.0);
+        [g, g, g, 1.0]
+    });
+    let img = Image::from_pixels(w, h, pixels.collect()).unwrap_or_else(|| Image::new(w, h));
+    (img, ScalarImage::from_values(w, h, values))
 }

@@ -40,9 +40,10 @@ pub(crate) use band::{
     div_band, scale_kept,
 };
 pub use dense::{render, render_any, render_with_progress};
+pub use driver::xray_picture;
 pub(crate) use driver::{SheetPass, drive, finish};
+pub(crate) use settings::{OwnedVoxels, ms, refuse_image_aligned, validate};
 pub use settings::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility,
     xray_weight,
 };
-pub(crate) use settings::{ms, refuse_image_aligned, validate};

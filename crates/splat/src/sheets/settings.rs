@@ -99,12 +99,22 @@ pub struct RenderSettings {
     /// relative to air, `μ/μ_water · 1000` (a digitally reconstructed radiograph; air and
     /// padding below −1000 HU add nothing). See [`xray_weight`].
     pub xray_offset: Option<f32>,
-    /// Image-aligned slabs, composite: draw only the samples whose cell lies in the box of cells
-    /// `[lo, hi)` (index units, per axis), as one brick's partial image of a sort-last render
-    /// (issue 32, `volsplat::distributed`): every sample keeps its global position, slab factor
-    /// and classification, so the bricks' partial images, composited front to back, are the
-    /// whole ray's. `lo` must be a multiple of 8 (the empty-space blocks) and `hi` too, or past
-    /// the last cell. `None` (the default): every cell.
+    /// One brick's partial image of a sort-last render (issue 32, `volsplat::distributed`): draw
+    /// only what belongs to the box of cells `[lo, hi)` (index units of the full-resolution grid,
+    /// per axis). `None` (the default): everything.
+    ///
+    /// - Image-aligned slabs, composite: the samples whose cell (the one its trilinear
+    ///   interpolation reads) lies in the box; every sample keeps its global position, slab
+    ///   factor and classification, so the bricks' partial images, composited front to back, are
+    ///   the whole ray's. `lo` must be a multiple of 8 (the empty-space blocks) and `hi` too, or
+    ///   past the last cell.
+    /// - Sheet renderer and splat list, X-ray only: the voxels whose cell lies in the box, a
+    ///   voxel's cell being the one of which it is the lower corner, `min(v, n − 2)` along an axis
+    ///   of `n ≥ 2` voxels (the last voxel belongs to the last cell; 0 where `n = 1`). Every
+    ///   voxel is drawn by exactly one box of a partition of the cells, so the boxes' X-rays sum
+    ///   to the whole one (a line integral is linear in the voxels). Composite and MIP/MinIP are
+    ///   refused there: a sheet buffer reconstructs a sheet from all its voxels before it is
+    ///   composited or compared, which a partial sheet does not.
     pub owned_cells: Option<[[usize; 3]; 2]>,
 }
 
@@ -329,6 +339,55 @@ pub(crate) fn validate(s: &RenderSettings) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The voxels a voxel-driven renderer (the sheets, the splat list) draws for
+/// [`RenderSettings::owned_cells`]: voxel `v` along axis `a` belongs to cell
+/// `min(v, n_a − 2)`, and is drawn where that cell lies in `[lo, hi)` on every axis.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct OwnedVoxels {
+    lo: [usize; 3],
+    hi: [usize; 3],
+    /// Per axis, the cell of the last voxel: `n − 2` (0 where `n < 2`).
+    last_cell: [usize; 3],
+}
+
+impl OwnedVoxels {
+    /// The restriction of `settings` for a volume of `dims` voxels (full resolution): `None`
+    /// where every voxel is drawn. Errors (naming `owned_cells`) outside X-ray or for an empty
+    /// box.
+    pub(crate) fn new(settings: &RenderSettings, dims: [usize; 3]) -> Result<Option<Self>> {
+        let Some([lo, hi]) = settings.owned_cells else {
+            return Ok(None);
+        };
+        if settings.mode != RenderMode::Xray || (0..3).any(|a| lo[a] >= hi[a]) {
+            return Err(SplatError::Setting {
+                name: "owned_cells",
+                value: format!("{lo:?}..{hi:?} ({:?})", settings.mode),
+                expected: "X-ray and a non-empty box in the sheet renderer and the splat list \
+                           (composite is the image-aligned slabs'; a sheet buffer does not \
+                           composite partial sheets)",
+            });
+        }
+        Ok(Some(OwnedVoxels {
+            lo,
+            hi,
+            last_cell: dims.map(|n| n.saturating_sub(2)),
+        }))
+    }
+
+    /// Whether voxel index `v` (full resolution) along `axis` lies in the box.
+    #[inline(always)]
+    pub(crate) fn owns(&self, axis: usize, v: usize) -> bool {
+        let c = v.min(self.last_cell[axis]);
+        c >= self.lo[axis] && c < self.hi[axis]
+    }
+
+    /// Whether the voxel `ijk` (full resolution) lies in the box.
+    #[inline(always)]
+    pub(crate) fn owns_voxel(&self, ijk: [usize; 3]) -> bool {
+        (0..3).all(|a| self.owns(a, ijk[a]))
+    }
 }
 
 pub(crate) fn ms(t: Instant) -> f64 {
