@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Sort-last rendering across MPI processes (issue 32, decision 0038): Debian's Open MPI and
 # libclang (rsmpi's bindings), the crate's formatting and lints, then `mpirun -np 1/2/3/4` on
-# scene files in both projections, composite and X-ray, whose images must be the same bytes for
-# every rank count (and the X-ray within 60 dB of one process); a missing volume, and one rank's
-# truncated volume (the others' reads succeed), which must stop every rank with an error naming
-# the file, not hang (each mpirun runs under `timeout`). crates/mpi is a
-# workspace of its own (the root's `exclude`), so `cargo test --workspace` never needs MPI.
+# scene files in both projections, composite, X-ray, MIP and MinIP, whose images must be the same
+# bytes for every rank count (the X-ray within 60 dB of one process, MIP and MinIP the same bytes
+# as one process); a missing volume, and one rank's truncated volume (the others' reads
+# succeed), which must stop every rank with an error naming the file, not hang (each mpirun runs
+# under `timeout`). crates/mpi is a workspace of its own (the root's `exclude`), so `cargo test
+# --workspace` never needs MPI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
@@ -32,10 +33,12 @@ bin="$PWD/target/release/volsplat"
 mpi="$PWD/crates/mpi/target/release/volsplat-mpi"
 work="$(mktemp -d)"; trap 'rm -rf "$work"' EXIT
 run() { timeout 300 mpirun --allow-run-as-root --oversubscribe -np "$@"; }
-for mode in composite xray; do
+for mode in composite xray mip minip; do
   for view in "--azimuth 30 --elevation 15" "--azimuth -50 --elevation 20 --perspective"; do
+    # MIP/MinIP: one ray per pixel, as sort-last draws, so that the bytes can be compared.
+    aa=""; case "$mode" in mip|minip) aa="--antialias none";; esac
     # shellcheck disable=SC2086
-    "$bin" render --mode "$mode" --size 96x80 $view --save-scene "$work/s.json" -q -o "$work/whole.npy"
+    "$bin" render --mode "$mode" --size 96x80 $view $aa --save-scene "$work/s.json" -q -o "$work/whole.npy"
     for n in 1 2 3 4; do
       run "$n" "$mpi" render --scene "$work/s.json" --brick 32 -o "$work/out$n.npy"
     done
@@ -59,6 +62,10 @@ psnr = 10 * math.log10(peak * peak / mse) if mse > 0 else float("inf")
 print(f"X-ray: {psnr:.1f} dB from one process")
 assert peak > 0 and psnr >= 60, psnr
 PY
+    fi
+    if [ "$mode" = mip ] || [ "$mode" = minip ]; then
+      cmp "$work/out1.npy" "$work/whole.npy" || { echo "FAIL: $mode differs from one process ($view)"; exit 1; }
+      echo "ok: $mode is the single-process projection, byte for byte ($view)"
     fi
     echo "ok: 1–4 ranks give the same bytes ($mode $view)"
   done

@@ -3,7 +3,8 @@
 //! is available) across the ranks of `MPI_COMM_WORLD` (issue 32, decision 0038). The volume is
 //! cut into bricks of `B` cells (64 by default; the cut does not depend on N), rank `r` draws
 //! its run of the bricks, the ranks composite the partial images over a tree fixed by the
-//! bricks (`over` in composite, the sum in X-ray), and rank 0 writes the image as `volsplat
+//! bricks (`over` in composite, the sum in X-ray, the maximum in MIP, the minimum in MinIP), and
+//! rank 0 writes the image as `volsplat
 //! render` writes it. The image is the same bits for any N. Every rank still loads the whole
 //! volume (reading only a rank's bricks needs the brick seam's cache, not built yet).
 //!

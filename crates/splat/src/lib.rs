@@ -61,7 +61,7 @@ pub use list::{
 pub use normals::ShadeAt;
 pub use pyramid::{Pyramid, PyramidLevel, auto_level, focal_pixel_size, render_level};
 pub use sheets::{
-    Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility, render,
-    render_any, render_with_progress, xray_picture, xray_weight,
+    Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility,
+    extreme_picture, render, render_any, render_with_progress, xray_picture, xray_weight,
 };
 pub use slab::{render_slabs, render_slabs_any, render_slabs_bricked};

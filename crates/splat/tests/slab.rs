@@ -1148,7 +1148,7 @@ fn owned_cells_are_checked_and_the_whole_box_is_the_whole_picture() {
         (RenderMode::Composite, [[4, 0, 0], [16, 16, 16]]),
         (RenderMode::Composite, [[0, 0, 0], [12, 16, 16]]),
         (RenderMode::Composite, [[8, 0, 0], [8, 16, 16]]),
-        (RenderMode::Mip, [[0, 0, 0], [16, 16, 16]]),
+        (RenderMode::Mip, [[0, 0, 0], [12, 16, 16]]),
     ] {
         let mut s = settings(40, 36, mode);
         s.owned_cells = Some(cells);

@@ -12,9 +12,9 @@
 //! single-process render and the same bits for any rank count, `tests.rs`). What is not yet: a
 //! rank reading only its bricks (the brick seam's `BrickCache`, `docs/design/brick-seam.md`),
 //! pre-integration across a brick face (a brick's first sample has no previous one), early
-//! termination across bricks (each brick's image runs to its own opacity) and MIP/MinIP bricks.
-//! X-ray is summed from bricks drawn by the sheets or the splat list, each drawing the voxels of
-//! its cells.
+//! termination across bricks (each brick's image runs to its own opacity). X-ray is summed from
+//! bricks drawn by the sheets or the splat list, each drawing the voxels of its cells; MIP and
+//! MinIP take the extreme of the slabs' bricks, bit for bit the single-process projection.
 //! The MPI communicator and the `volsplat-mpi` binary are in `crates/mpi`.
 
 mod comm;

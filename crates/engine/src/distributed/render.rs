@@ -18,10 +18,11 @@ use volsplat_core::{Image, ScalarImage};
 #[derive(Debug, Clone)]
 pub struct SortLastImage {
     /// Composite: premultiplied RGBA. X-ray: the grey picture of the line integrals, scaled so
-    /// that the largest is white ([`volsplat_splat::xray_picture`]).
+    /// that the largest is white ([`volsplat_splat::xray_picture`]). MIP/MinIP: the values
+    /// classified by the request's tables ([`volsplat_splat::extreme_picture`]).
     pub image: Image,
-    /// X-ray: the line integrals (data units × world units), rows top to bottom; `None` in
-    /// composite.
+    /// X-ray: the line integrals (data units × world units); MIP/MinIP: the projected values
+    /// (data units, NaN where no sample); rows top to bottom; `None` in composite.
     pub values: Option<ScalarImage>,
 }
 
@@ -40,7 +41,10 @@ pub struct SortLastImage {
 ///   brick draws the voxels of its cells (the last brick along an axis also the far face), so
 ///   the sum is the single-process X-ray up to f32 reassociation, anti-aliasing included (a
 ///   footprint is linear in its voxel).
-/// - MIP and MinIP are refused (an error naming `renderer`).
+/// - **MIP and MinIP** (the larger or smaller value, NaN where no sample), through the
+///   image-aligned slabs: each brick draws the samples of its cells, so the extreme over the
+///   bricks is the single-process projection **bit for bit** (max and min are exact); rank 0
+///   classifies it with the request's tables ([`volsplat_splat::extreme_picture`]).
 ///
 /// Every rank still loads the whole volume (reading only a rank's bricks is the brick seam's
 /// cache, not built yet). A rank that cannot set up (its volume unreadable, a bad setting)
@@ -54,6 +58,8 @@ pub fn render_sort_last(
 ) -> Result<Option<SortLastImage>> {
     let mut request = request.clone();
     if request.mode != Mode::Xray {
+        // One ray per pixel: a minified view's supersampling averages rays, which commutes
+        // with neither `over` nor the extremes.
         request.quality.antialias = crate::request::AntialiasChoice::None;
     }
     let request = &request;
@@ -73,18 +79,19 @@ pub fn render_sort_last(
                 why: e.to_string(),
             })?;
         let p: Pixels = match (combine, &out.values) {
-            (Combine::Sum, Some(v)) => v.values().iter().map(|&x| [x, 0.0, 0.0, 0.0]).collect(),
-            (Combine::Sum, None) => {
+            (Combine::Over, _) => out.image.pixels().to_vec(),
+            (_, Some(v)) => v.values().iter().map(|&x| [x, 0.0, 0.0, 0.0]).collect(),
+            (_, None) => {
                 return Err(DistributedError::Brick {
                     brick: b,
-                    why: "an X-ray without its values".into(),
+                    why: "a projection without its values".into(),
                 });
             }
-            _ => out.image.pixels().to_vec(),
         };
         let drawn = |px: &[f32; 4]| match combine {
+            Combine::Over => px[3] > 0.0,
             Combine::Sum => px[0] != 0.0,
-            _ => px[3] > 0.0,
+            Combine::Max | Combine::Min => !px[0].is_nan(),
         };
         Ok(p.iter().any(drawn).then_some(p))
     })?;
@@ -92,20 +99,22 @@ pub fn render_sort_last(
         return Ok(None);
     };
     let bad = || DistributedError::Protocol("an image of the wrong size");
-    Ok(Some(match combine {
+    let values = || pixels.iter().map(|p| p[0]).collect();
+    let (image, values) = match combine {
+        Combine::Over => (Image::from_pixels(w, h, pixels).ok_or_else(bad)?, None),
         Combine::Sum => {
-            let (image, values) =
-                volsplat_splat::xray_picture(w, h, pixels.iter().map(|p| p[0]).collect());
-            SortLastImage {
-                image,
-                values: Some(values.ok_or_else(bad)?),
-            }
+            let (image, values) = volsplat_splat::xray_picture(w, h, values());
+            (image, Some(values.ok_or_else(bad)?))
         }
-        _ => SortLastImage {
-            image: Image::from_pixels(w, h, pixels).ok_or_else(bad)?,
-            values: None,
-        },
-    }))
+        Combine::Max | Combine::Min => {
+            let tables = renderer
+                .frame_tables(request)
+                .map_err(|e| DistributedError::Engine(e.to_string()))?;
+            let (image, values) = volsplat_splat::extreme_picture(w, h, values(), &tables);
+            (image, Some(values.ok_or_else(bad)?))
+        }
+    };
+    Ok(Some(SortLastImage { image, values }))
 }
 
 /// The tree over the request's bricks, where the eye is in the volume's index space, and how
@@ -123,11 +132,8 @@ fn set_up(
     let combine = match request.mode {
         Mode::Composite => Combine::Over,
         Mode::Xray => Combine::Sum,
-        Mode::Mip | Mode::Minip => {
-            return Err(DistributedError::Setting(
-                "renderer: sort-last MIP and MinIP are not built (composite and X-ray are)".into(),
-            ));
-        }
+        Mode::Mip => Combine::Max,
+        Mode::Minip => Combine::Min,
     };
     let engine = |e: crate::EngineError| DistributedError::Engine(e.to_string());
     let grid = renderer

@@ -426,9 +426,9 @@ fn the_engine_renders_sort_last_as_one_process_does() {
             }
         }
     }
-    // Not the slabs: refused by name on every rank.
+    // Composite not through the slabs (sheet-buffer visibility): refused by name on every rank.
     let mut req = RenderRequest::new(Scene::default(), 16, 16);
-    req.mode = crate::Mode::Mip;
+    req.quality.visibility = crate::request::VisibilityChoice::Sheet;
     let e = FakeCluster { size: 2 }
         .run(|comm| render_sort_last(comm, &mut Renderer::new(), &req, 32))
         .remove(0)
@@ -532,6 +532,59 @@ fn a_rank_that_cannot_read_its_volume_stops_every_rank() {
                         && e.contains("volsplat-rank.nrrd"),
                     "n={n} rank {r}: {e}"
                 );
+            }
+        }
+    }
+}
+
+/// MIP and MinIP sort-last (max, min): the demo head in both projections, bricks of 16 cells,
+/// 1–4 ranks. Each brick draws the slabs' samples of its cells, so the extreme over the bricks
+/// is `Renderer::render`'s projection bit for bit (one ray per pixel in both), values and
+/// picture.
+#[test]
+fn mip_and_minip_bricks_are_the_single_process_projection_bit_for_bit() {
+    use crate::{Mode, RenderRequest, Renderer, Scene};
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for mode in [Mode::Mip, Mode::Minip] {
+        for perspective in [false, true] {
+            let mut req = RenderRequest::new(Scene::default(), 48, 40);
+            req.mode = mode;
+            req.quality.antialias = crate::request::AntialiasChoice::None;
+            if perspective {
+                let cam = Renderer::new().camera(&req).unwrap();
+                req.scene.camera = crate::CameraSpec::Explicit {
+                    camera: volsplat_core::Camera {
+                        parallel_projection: false,
+                        ..cam
+                    },
+                    orbit: Default::default(),
+                };
+            }
+            let whole = Renderer::new().render(&req, &mut |_| true).unwrap();
+            let whole_values = whole.values.as_ref().unwrap().values().to_vec();
+            let seen = whole_values.iter().filter(|v| !v.is_nan()).count();
+            eprintln!(
+                "{mode:?} perspective={perspective}: {seen} of {} pixels",
+                whole_values.len()
+            );
+            assert!(seen > 300, "{seen}");
+            for ranks in 1..=4 {
+                let out = FakeCluster { size: ranks }
+                    .run(|comm| render_sort_last(comm, &mut Renderer::new(), &req, 16))
+                    .remove(0)
+                    .unwrap()
+                    .unwrap();
+                let label = format!("{mode:?} perspective={perspective} ranks={ranks}");
+                let values = out.values.as_ref().unwrap().values();
+                assert_eq!(bits(values), bits(&whole_values), "{label}");
+                let picture = |i: &volsplat_core::Image| {
+                    i.pixels()
+                        .iter()
+                        .flatten()
+                        .map(|v| v.to_bits())
+                        .collect::<Vec<_>>()
+                };
+                assert_eq!(picture(&out.image), picture(&whole.image), "{label}");
             }
         }
     }

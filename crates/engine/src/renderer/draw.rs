@@ -124,6 +124,14 @@ impl Renderer {
         Ok((Arc::clone(got.value), got.fresh))
     }
 
+    /// The tables `request` classifies with (its resolved transfer function), cached as a
+    /// frame's: what rank 0 of a sort-last MIP/MinIP classifies the extreme values by
+    /// ([`crate::distributed::render_sort_last`]).
+    pub(crate) fn frame_tables(&mut self, request: &RenderRequest) -> Result<Arc<CrioTables>> {
+        let tf = self.transfer_function(request)?;
+        Ok(self.tables(request, &tf)?.0)
+    }
+
     /// A Chapter 6 display of `kind` (Sabella's or a NIL-map display).
     pub(super) fn draw_display(
         &mut self,

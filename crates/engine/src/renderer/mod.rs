@@ -248,8 +248,8 @@ impl Renderer {
     /// ([`crate::distributed`]): only the samples whose cell lies in `owned_cells` (`[lo, hi)`,
     /// index units of the full level; [`volsplat_splat::RenderSettings::owned_cells`]) are
     /// drawn, each at its global position. The request must be drawn by the image-aligned
-    /// slabs at the full level in composite, or by the sheets or the splat list in X-ray (the
-    /// voxels whose cell lies in the box; an error naming `renderer` otherwise).
+    /// slabs at the full level in composite, MIP and MinIP, or by the sheets or the splat list
+    /// in X-ray (the voxels whose cell lies in the box; an error naming `renderer` otherwise).
     pub fn render_brick(
         &mut self,
         request: &RenderRequest,
@@ -337,16 +337,15 @@ impl Renderer {
             let slabs_at_full = matches!(&plan.draw, Draw::Slabs(p) if p.level == 0);
             let voxels = matches!(&plan.draw, Draw::Sheets | Draw::SplatList);
             let drawn = match request.mode {
-                Mode::Composite => slabs_at_full,
+                Mode::Composite | Mode::Mip | Mode::Minip => slabs_at_full,
                 Mode::Xray => voxels,
-                Mode::Mip | Mode::Minip => false,
             };
             if !drawn {
                 return Err(EngineError::request(
                     "renderer",
                     "a brick's partial image is drawn by the image-aligned slabs at the full \
-                     level in composite (visibility image or auto, quality.level full), or by \
-                     the sheets or the splat list in X-ray (renderer auto)",
+                     level in composite, MIP and MinIP (visibility image or auto, quality.level \
+                     full), or by the sheets or the splat list in X-ray (renderer auto)",
                 ));
             }
         }

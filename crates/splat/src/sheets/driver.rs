@@ -174,25 +174,7 @@ fn finish_unchecked(
         }
         RenderMode::Xray => xray_picture(w, h, acc.iter().map(|p| p[0]).collect()),
         RenderMode::Mip | RenderMode::Minip => {
-            let values: Vec<f32> = acc.iter().map(|p| p[0]).collect();
-            let pixels = values
-                .iter()
-                .map(|&v| {
-                    if v.is_nan() {
-                        return [0.0; 4];
-                    }
-                    let c = tables.emission.lookup(v);
-                    let a = tables.opacity.lookup(v)[0].clamp(0.0, 1.0);
-                    [
-                        c[0].clamp(0.0, 1.0) * a,
-                        c[1].clamp(0.0, 1.0) * a,
-                        c[2].clamp(0.0, 1.0) * a,
-                        a,
-                    ]
-                })
-                .collect();
-            let img = Image::from_pixels(w, h, pixels).unwrap_or_else(|| Image::new(w, h));
-            (img, ScalarImage::from_values(w, h, values))
+            extreme_picture(w, h, acc.iter().map(|p| p[0]).collect(), tables)
         }
     }
 }
@@ -211,5 +193,38 @@ pub fn xray_picture(width: usize, height: usize, values: Vec<f32>) -> (Image, Op
         [g, g, g, 1.0]
     });
     let img = Image::from_pixels(w, h, pixels.collect()).unwrap_or_else(|| Image::new(w, h));
+    (img, ScalarImage::from_values(w, h, values))
+}
+
+/// The picture of a MIP or MinIP whose projected values are `values` (`width × height`, rows
+/// top to bottom, data units; NaN where no sample): each value classified by `tables`
+/// (premultiplied RGBA, colour and opacity clamped to [0, 1]; transparent where NaN); returned
+/// with the values themselves (`None` if their count is not `width × height`). What every
+/// renderer returns in MIP/MinIP, for callers that take the extreme of partial projections
+/// themselves (a sort-last render, `volsplat::distributed`).
+pub fn extreme_picture(
+    width: usize,
+    height: usize,
+    values: Vec<f32>,
+    tables: &CrioTables,
+) -> (Image, Option<ScalarImage>) {
+    let (w, h) = (width, height);
+    let pixels = values
+        .iter()
+        .map(|&v| {
+            if v.is_nan() {
+                return [0.0; 4];
+            }
+            let c = tables.emission.lookup(v);
+            let a = tables.opacity.lookup(v)[0].clamp(0.0, 1.0);
+            [
+                c[0].clamp(0.0, 1.0) * a,
+                c[1].clamp(0.0, 1.0) * a,
+                c[2].clamp(0.0, 1.0) * a,
+                a,
+            ]
+        })
+        .collect();
+    let img = Image::from_pixels(w, h, pixels).unwrap_or_else(|| Image::new(w, h));
     (img, ScalarImage::from_values(w, h, values))
 }

@@ -40,8 +40,8 @@ pub(crate) use band::{
     div_band, scale_kept,
 };
 pub use dense::{render, render_any, render_with_progress};
-pub use driver::xray_picture;
 pub(crate) use driver::{SheetPass, drive, finish};
+pub use driver::{extreme_picture, xray_picture};
 pub(crate) use settings::{OwnedVoxels, ms, refuse_image_aligned, validate};
 pub use settings::{
     Preintegrate, Progress, RenderMode, RenderSettings, RenderStats, Rendered, Visibility,

@@ -103,11 +103,12 @@ pub struct RenderSettings {
     /// only what belongs to the box of cells `[lo, hi)` (index units of the full-resolution grid,
     /// per axis). `None` (the default): everything.
     ///
-    /// - Image-aligned slabs, composite: the samples whose cell (the one its trilinear
-    ///   interpolation reads) lies in the box; every sample keeps its global position, slab
-    ///   factor and classification, so the bricks' partial images, composited front to back, are
-    ///   the whole ray's. `lo` must be a multiple of 8 (the empty-space blocks) and `hi` too, or
-    ///   past the last cell.
+    /// - Image-aligned slabs, composite, MIP and MinIP: the samples whose cell (the one its
+    ///   trilinear interpolation reads) lies in the box; every sample keeps its global position,
+    ///   slab factor and classification, so the bricks' partial images, composited front to back,
+    ///   are the whole ray's, and the extreme of their MIPs (MinIPs) is the whole MIP (MinIP),
+    ///   bit for bit. `lo` must be a multiple of 8 (the empty-space blocks) and `hi` too, or past
+    ///   the last cell.
     /// - Sheet renderer and splat list, X-ray only: the voxels whose cell lies in the box, a
     ///   voxel's cell being the one of which it is the lower corner, `min(v, n − 2)` along an axis
     ///   of `n ≥ 2` voxels (the last voxel belongs to the last cell; 0 where `n = 1`). Every

@@ -745,7 +745,11 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
         let mip = self.mode == RenderMode::Mip;
         let mut c = Counters::default();
         let mut vals = vec![f32::NAN; rows * w];
-        for p in coarse_to_fine(self.n_planes) {
+        let planes = self.plane_range.0..self.plane_range.1;
+        for p in coarse_to_fine(self.n_planes)
+            .into_iter()
+            .filter(|p| planes.contains(p))
+        {
             let d = self.depth(p);
             for r in 0..rows {
                 let y = y0 + r;
@@ -783,7 +787,7 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
         let (cell, f) = self.cell_f32(walk, x);
         let bound = self.extreme_bounds[self.bricks.index(cell[0], cell[1], cell[2])];
         let cur = row[x];
-        if !cur.is_nan() && if mip { bound <= cur } else { bound >= cur } {
+        if bound.is_nan() || !cur.is_nan() && if mip { bound <= cur } else { bound >= cur } {
             return;
         }
         c.samples += 1;

@@ -321,6 +321,12 @@ pub(crate) fn render_slabs_in<T: Scalar>(
     );
     if let Some(range) = owned_planes {
         frame.plane_range = range;
+        // MIP/MinIP: a NaN bound skips the blocks outside the box (`Ctx::extreme_one`).
+        let mut mine = vec![true; frame.extreme_bounds.len()];
+        keep_owned_blocks(&mut mine, bricks, settings.owned_cells.unwrap_or_default());
+        mine.iter()
+            .zip(&mut frame.extreme_bounds)
+            .for_each(|(m, b)| *b = if *m { *b } else { f32::NAN });
     }
     stats.setup_ms = ms(t_start);
     // The march, band by band of the image.
@@ -406,11 +412,11 @@ fn check_settings(settings: &RenderSettings, dims: [usize; 3]) -> Result<()> {
         let cells = dims.map(|n| n.saturating_sub(1).max(1));
         let fits = (0..3)
             .all(|a| lo[a] % 8 == 0 && lo[a] < hi[a] && (hi[a] % 8 == 0 || hi[a] >= cells[a]));
-        if settings.mode != RenderMode::Composite || !fits {
+        if !fits {
             return Err(SplatError::Setting {
                 name: "owned_cells",
                 value: format!("{lo:?}..{hi:?} ({:?})", settings.mode),
-                expected: "composite, a box of cells whose bounds are multiples of 8 (the upper \
+                expected: "a box of cells whose bounds are multiples of 8 (the upper \
                            one may pass the last cell)",
             });
         }

@@ -115,6 +115,7 @@ pub(super) unsafe fn extreme_row_avx2<T: Scalar, V: Voxels<T>>(
             let cells = unsafe { sampler.locate(x) };
             let brick = unsafe { sampler.bricks_of(&cells) };
             let bound = unsafe { _mm256_i32gather_ps::<4>(bounds, brick) };
+            let in_row = _mm256_and_ps(in_row, _mm256_cmp_ps::<_CMP_ORD_Q>(bound, bound));
             let unset = _mm256_and_ps(_mm256_cmp_ps::<_CMP_UNORD_Q>(cur, cur), in_row);
             let open = _mm256_and_ps(
                 if mip {
