@@ -76,7 +76,8 @@ fn bits(out: &volsplat::Output) -> Vec<u32> {
 
 /// 160 × 150 × 140 u16 (6.4 MiB, 27 bricks of 64³): a budget of 16 MiB holds all of them, one
 /// of 14 MiB eighteen (so frames evict and read again: a thin slab of rows through a 3 × 3 × 3
-/// grid of bricks meets up to 17 of them). Composite (CT-Bone, lit at the samples),
+/// grid of bricks meets up to 17 of them), one of 10 MiB thirteen (fewer than some bands meet: bands
+/// march their planes in pieces). Composite (CT-Bone, lit at the samples),
 /// MIP and MinIP, from two eyes in each projection: the same bits as the level read whole.
 #[test]
 fn out_of_core_frames_equal_in_memory_ones_bit_for_bit() {
@@ -85,6 +86,7 @@ fn out_of_core_frames_equal_in_memory_ones_bit_for_bit() {
     let mut whole = Renderer::new();
     let mut paged = Renderer::new();
     let mut evicted = 0;
+    let mut pieced = 0;
     for mode in [Mode::Composite, Mode::Mip, Mode::Minip] {
         for (azimuth, perspective) in [(30.0, false), (125.0, false), (60.0, true), (200.0, true)] {
             let mut req = RenderRequest::new(scene(&path, azimuth, perspective), 96, 80);
@@ -95,7 +97,7 @@ fn out_of_core_frames_equal_in_memory_ones_bit_for_bit() {
                 "{:?}",
                 want.notes
             );
-            for budget in [16u64 << 20, 14 << 20] {
+            for budget in [16u64 << 20, 14 << 20, 10 << 20] {
                 req.memory = Some(budget);
                 let got = paged.render(&req, &mut |_| true).unwrap();
                 let note = got
@@ -103,6 +105,7 @@ fn out_of_core_frames_equal_in_memory_ones_bit_for_bit() {
                     .iter()
                     .find(|n| n.starts_with("out of core: ") && n.contains("read ("));
                 assert!(note.is_some(), "{:?}", got.notes);
+                pieced += got.notes.iter().filter(|n| n.contains("in pieces")).count();
                 // "… read (x MiB), N evicted, …"
                 evicted += note
                     .and_then(|n| n.split(", ").nth(1))
@@ -121,6 +124,10 @@ fn out_of_core_frames_equal_in_memory_ones_bit_for_bit() {
     assert!(
         evicted > 0,
         "no frame evicted a brick: the small budget tests nothing"
+    );
+    assert!(
+        pieced > 0,
+        "no band was drawn in pieces: the smallest budget tests nothing"
     );
 }
 

@@ -216,6 +216,13 @@ impl Renderer {
         })?;
         let after = with_cache!(&paged.cache, c => c.stats());
         notes.push(frame_note(&before, &after, budget));
+        if rendered.stats.pieced_groups > 0 {
+            notes.push(format!(
+                "out of core: {} groups of bands met more bricks than the budget holds and were \
+                 drawn in pieces of planes ({} steps in all)",
+                rendered.stats.pieced_groups, rendered.stats.brick_steps
+            ));
+        }
         let composite = request.mode == Mode::Composite;
         let mut stats = Stats {
             prepare_ms,

@@ -227,6 +227,12 @@ pub struct RenderStats {
     /// [`crate::slab::ring_risk`], which [`Preintegrate::Auto`] compares with
     /// [`crate::slab::RING_RISK`] (0 otherwise).
     pub ring_risk: f64,
+    /// Out-of-core slab frames (`render_slabs_bricked`): the steps whose bricks were made
+    /// resident, one per group of bands or per piece of a group's planes (0 in memory).
+    pub brick_steps: usize,
+    /// Of those, the groups whose planes were marched in more than one piece because their
+    /// bricks exceeded the budget.
+    pub pieced_groups: usize,
 }
 
 impl RenderStats {

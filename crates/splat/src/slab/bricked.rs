@@ -18,11 +18,12 @@
 //! active blocks, and the other lanes of an AVX2 group read slot 0 and are dropped); MIP and
 //! MinIP sample every block.
 
-use super::march::{Counters, Ctx, Frame};
+use super::march::{Carry, Counters, Ctx, Frame};
 use super::view::View;
 use crate::error::{Result, SplatError};
 use crate::sheets::{Progress, RenderMode, RenderSettings};
 use crate::voxels::{Slotted, Vox};
+use rayon::prelude::*;
 use std::sync::Arc;
 use volsplat_core::Scalar;
 use volsplat_core::glam::DVec3;
@@ -53,66 +54,81 @@ pub(crate) trait Resident<T>: Sync {
 }
 
 /// Marches `frame` band group by band group, each group's bricks made resident in `res`
-/// first (module docs). The result is
-/// [`Ctx::march_bands`]'s.
+/// first (module docs); a group whose bricks exceed the budget marches its planes in pieces,
+/// each piece's bricks made resident in turn. The result is [`Ctx::march_bands`]'s (MIP and
+/// MinIP marched in pieces sample in another order: the same extremes, other counters).
 pub(super) fn march<T: Scalar>(
     frame: &Frame<'_>,
     res: &mut dyn Resident<T>,
     settings: &RenderSettings,
     progress: &mut dyn FnMut(&Progress) -> bool,
-) -> Result<(Vec<Rgba>, Counters)> {
+) -> Result<(Vec<Rgba>, Counters, [usize; 2])> {
     let layout = res.layout().clone();
     let (w, h) = (settings.width, settings.height);
     let mut acc = vec![frame.acc_init(); w * h];
     let band_h = frame.band_rows(settings);
     let n_bands = h.div_ceil(band_h);
-    let needed = needed_bricks(frame, &layout);
-    let planes = match frame.mode {
-        RenderMode::Composite => frame.plane_range,
-        _ => (0, frame.n_planes),
+    let plan = Planner {
+        frame,
+        layout: &layout,
+        needed: needed_bricks(frame, &layout),
+        band_h,
+        height: h,
+        capacity: res.capacity(),
+        budget: res.budget(),
+        slot_bytes: (layout.slot_len() * std::mem::size_of::<T>()) as u64,
     };
-    let per_band: Vec<Vec<u32>> = (0..n_bands)
-        .map(|b| {
-            let rows = (b * band_h, ((b + 1) * band_h).min(h));
-            band_bricks(frame, &layout, rows, planes, &needed)
-        })
+    let groups = plan.groups(n_bands, frame.group_bands())?;
+    let keys_of = |set: &[u32]| -> Vec<BrickKey> {
+        set.iter().map(|&i| key_of(&layout, i as usize)).collect()
+    };
+    // Every (group, piece) in order, for the read-ahead.
+    let steps: Vec<(usize, usize)> = groups
+        .iter()
+        .enumerate()
+        .flat_map(|(g, group)| (0..group.pieces.len()).map(move |p| (g, p)))
         .collect();
-    let room = (res.capacity(), res.budget(), std::mem::size_of::<T>());
-    let groups = group_bands(&per_band, room, frame.group_bands(), &layout)?;
-    let keys_of = |g: &Group| -> Vec<BrickKey> {
-        g.bricks
-            .iter()
-            .map(|&i| key_of(&layout, i as usize))
-            .collect()
-    };
+    let ahead = (res.capacity() / 4).max(1);
     let mut counters = Counters::default();
     let mut chunks = acc.chunks_mut(band_h * w).enumerate();
     let mut done = 0;
     let mut fetched = Vec::new();
-    for (g, group) in groups.iter().enumerate() {
-        res.make_resident_with(&keys_of(group), std::mem::take(&mut fetched))?;
-        let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group.bands).collect();
-        // Read-ahead of at most a quarter of the slots, so that the bricks read ahead and the
-        // arena together stay within 1.25 × the arena (the rest of the next group is read
-        // when it is made resident).
-        let ahead = (res.capacity() / 4).max(1);
-        let next = groups.get(g + 1).map(|n| {
-            let mut keys = keys_of(n);
-            keys.truncate(ahead);
-            keys
-        });
-        let ctx = Ctx::new(
-            frame,
-            Vox::Slotted(Slotted::new(res.arena(), res.bases(), &layout)),
-        );
-        // Read-ahead: the next group's bricks are read while this one marches.
-        let res_ref: &dyn Resident<T> = &*res;
-        let (c, ahead) = rayon::join(
-            || ctx.run_bands(batch, band_h),
-            || next.map(|keys| res_ref.fetch(&keys)).transpose(),
-        );
-        fetched = ahead?.unwrap_or_default();
-        counters = counters.add(c);
+    let mut step = 0;
+    for group in &groups {
+        let mut batch: Vec<(usize, &mut [Rgba], Carry)> = chunks
+            .by_ref()
+            .take(group.bands)
+            .map(|(b, rows)| (b, rows, Carry::default()))
+            .collect();
+        for piece in &group.pieces {
+            res.make_resident_with(&keys_of(&piece.bricks), std::mem::take(&mut fetched))?;
+            step += 1;
+            // Read-ahead of at most a quarter of the slots, so that the bricks read ahead and
+            // the arena together stay within 1.25 × the arena (the rest of the next piece is
+            // read when it is made resident).
+            let next = steps.get(step).map(|&(g, p)| {
+                let mut keys = keys_of(&groups[g].pieces[p].bricks);
+                keys.truncate(ahead);
+                keys
+            });
+            let ctx = Ctx::new(
+                frame,
+                Vox::Slotted(Slotted::new(res.arena(), res.bases(), &layout)),
+            );
+            let res_ref: &dyn Resident<T> = &*res;
+            let planes = piece.planes;
+            let (c, read) = rayon::join(
+                || {
+                    batch
+                        .par_iter_mut()
+                        .map(|(b, rows, carry)| ctx.band_in(*b * band_h, rows, planes, carry))
+                        .reduce(Counters::default, Counters::add)
+                },
+                || next.map(|keys| res_ref.fetch(&keys)).transpose(),
+            );
+            fetched = read?.unwrap_or_default();
+            counters = counters.add(c);
+        }
         done += group.bands;
         if !progress(&Progress {
             sheets_done: done,
@@ -122,55 +138,122 @@ pub(super) fn march<T: Scalar>(
             return Err(SplatError::Cancelled);
         }
     }
-    Ok((acc, counters))
+    let pieced = groups.iter().filter(|g| g.pieces.len() > 1).count();
+    Ok((acc, counters, [steps.len(), pieced]))
 }
 
-/// A run of consecutive bands marched together, and the bricks (indices, i fastest) they need.
+/// A run of consecutive bands marched together, in pieces of planes.
 struct Group {
     bands: usize,
+    pieces: Vec<Piece>,
+}
+
+/// Planes `[first, end)` of a group, and the bricks (indices, i fastest, sorted) they need.
+struct Piece {
+    planes: (usize, usize),
     bricks: Vec<u32>,
 }
 
-/// Cuts the bands into runs of at most `max_bands` whose bricks fit `capacity` together;
-/// an error naming the budget where one band alone needs more.
-fn group_bands(
-    per_band: &[Vec<u32>],
-    (capacity, budget, slot_size): (usize, u64, usize),
-    max_bands: usize,
-    layout: &BrickLayout,
-) -> Result<Vec<Group>> {
-    let mut groups = Vec::new();
-    let mut cur = Group {
-        bands: 0,
-        bricks: Vec::new(),
-    };
-    for set in per_band {
-        if set.len() > capacity {
-            return Err(SplatError::Budget {
-                budget,
-                slot_bytes: (layout.slot_len() * slot_size) as u64,
-                capacity,
-                needed: set.len(),
+/// How a frame's bands are cut into groups and pieces that fit the cache.
+struct Planner<'p, 'a> {
+    frame: &'p Frame<'a>,
+    layout: &'p BrickLayout,
+    needed: Vec<bool>,
+    band_h: usize,
+    height: usize,
+    capacity: usize,
+    budget: u64,
+    slot_bytes: u64,
+}
+
+impl Planner<'_, '_> {
+    /// The bricks bands `[b0, b1)` need on planes `planes`.
+    fn set(&self, (b0, b1): (usize, usize), planes: (usize, usize)) -> Vec<u32> {
+        let rows = (b0 * self.band_h, (b1 * self.band_h).min(self.height));
+        band_bricks(self.frame, self.layout, rows, planes, &self.needed)
+    }
+
+    fn budget_error(&self, needed: usize) -> SplatError {
+        SplatError::Budget {
+            budget: self.budget,
+            slot_bytes: self.slot_bytes,
+            capacity: self.capacity,
+            needed,
+        }
+    }
+
+    /// Consecutive bands while their bricks over every plane fit together (at most
+    /// `max_bands`); a band whose bricks alone do not fit marches its planes in pieces, with
+    /// as many bands beside it as there are threads where their pieces still fit (else alone).
+    /// An error naming the budget where one plane of one band needs more bricks than it holds.
+    fn groups(&self, n_bands: usize, max_bands: usize) -> Result<Vec<Group>> {
+        let all = self.frame.plane_range;
+        let mut groups = Vec::new();
+        let mut b = 0;
+        while b < n_bands {
+            let mut set = self.set((b, b + 1), all);
+            if set.len() <= self.capacity {
+                let mut e = b + 1;
+                while e < n_bands && e - b < max_bands {
+                    let union = merge(&set, &self.set((e, e + 1), all));
+                    if union.len() > self.capacity {
+                        break;
+                    }
+                    set = union;
+                    e += 1;
+                }
+                groups.push(Group {
+                    bands: e - b,
+                    pieces: vec![Piece {
+                        planes: all,
+                        bricks: set,
+                    }],
+                });
+                b = e;
+                continue;
+            }
+            let k = rayon::current_num_threads().clamp(1, n_bands - b);
+            let pieces = match self.pieces((b, b + k), all) {
+                Ok(p) if k > 1 => Ok((k, p)),
+                _ => self.pieces((b, b + 1), all).map(|p| (1, p)),
+            };
+            let (k, pieces) = pieces?;
+            groups.push(Group { bands: k, pieces });
+            b += k;
+        }
+        Ok(groups)
+    }
+
+    /// The planes `[first, end)` of bands `bands` cut into the longest pieces whose bricks fit.
+    fn pieces(&self, bands: (usize, usize), (first, end): (usize, usize)) -> Result<Vec<Piece>> {
+        let mut out = Vec::new();
+        let mut p0 = first;
+        while p0 < end {
+            let one = self.set(bands, (p0, p0 + 1));
+            if one.len() > self.capacity {
+                return Err(self.budget_error(one.len()));
+            }
+            // The longest piece from p0 that fits (the set grows with the piece).
+            let (mut lo, mut hi) = (p0 + 1, end);
+            let mut best = one;
+            while lo < hi {
+                let mid = (lo + hi).div_ceil(2);
+                let s = self.set(bands, (p0, mid));
+                if s.len() <= self.capacity {
+                    lo = mid;
+                    best = s;
+                } else {
+                    hi = mid - 1;
+                }
+            }
+            out.push(Piece {
+                planes: (p0, lo),
+                bricks: best,
             });
+            p0 = lo;
         }
-        let union = merge(&cur.bricks, set);
-        if cur.bands > 0 && (union.len() > capacity || cur.bands == max_bands) {
-            groups.push(std::mem::replace(
-                &mut cur,
-                Group {
-                    bands: 1,
-                    bricks: set.clone(),
-                },
-            ));
-        } else {
-            cur.bands += 1;
-            cur.bricks = union;
-        }
+        Ok(out)
     }
-    if cur.bands > 0 {
-        groups.push(cur);
-    }
-    Ok(groups)
 }
 
 /// The sorted union of two sorted lists.

@@ -406,16 +406,31 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
 
     /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through every plane.
     pub(super) fn band(&self, y0: usize, acc: &mut [Rgba]) -> Counters {
+        self.band_in(y0, acc, self.plane_range, &mut Carry::default())
+    }
+
+    /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through the planes
+    /// `[first, end)` (within [`Frame::plane_range`]), continuing from what `acc` holds (the
+    /// accumulation, or MIP/MinIP's extreme in channel 0) and `carry`: marching a band's planes
+    /// in consecutive pieces gives the bits of marching them at once (out-of-core frames whose
+    /// band meets more bricks than the budget holds: `super::bricked`).
+    pub(super) fn band_in(
+        &self,
+        y0: usize,
+        acc: &mut [Rgba],
+        planes: (usize, usize),
+        carry: &mut Carry,
+    ) -> Counters {
         let w = self.width;
         let rows = acc.len() / w;
         match (self.post, self.shaded) {
-            _ if self.mode != RenderMode::Composite => self.band_extreme(y0, rows, acc),
-            (Some(t), _) => self.band_post(y0, rows, acc, Post::Table(t)),
+            _ if self.mode != RenderMode::Composite => self.band_extreme(y0, rows, acc, planes),
+            (Some(t), _) => self.band_post(y0, rows, acc, Post::Table(t), planes, carry),
             (None, Some(t)) => match self.voxel {
-                Some(vs) => self.band_post(y0, rows, acc, Post::Voxel(t, vs)),
-                None => self.band_post(y0, rows, acc, Post::Shaded(t)),
+                Some(vs) => self.band_post(y0, rows, acc, Post::Voxel(t, vs), planes, carry),
+                None => self.band_post(y0, rows, acc, Post::Shaded(t), planes, carry),
             },
-            (None, None) => self.band_plain(y0, rows, acc),
+            (None, None) => self.band_plain(y0, rows, acc, planes),
         }
     }
 
@@ -424,26 +439,35 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// pixels at a time where the CPU has AVX2, [`Ctx::composite_one`] otherwise and for the
     /// ends of runs; the same f32 operations in the same order, so the same bits). The band's
     /// accumulation is kept as four planes of channels while it is composited.
-    fn band_post(&self, y0: usize, rows: usize, acc: &mut [Rgba], post: Post<'_>) -> Counters {
+    fn band_post(
+        &self,
+        y0: usize,
+        rows: usize,
+        acc: &mut [Rgba],
+        post: Post<'_>,
+        planes: (usize, usize),
+        carry: &mut Carry,
+    ) -> Counters {
         let w = self.width;
         let mut c = Counters::default();
+        let channel = |ch: usize| acc.iter().map(|px| px[ch]).collect::<Vec<f32>>();
         let mut band = BandAcc {
-            r: vec![0.0; rows * w],
-            g: vec![0.0; rows * w],
-            b: vec![0.0; rows * w],
-            a: vec![0.0; rows * w],
+            r: channel(0),
+            g: channel(1),
+            b: channel(2),
+            a: channel(3),
         };
         let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
         let kf = self.path_factors(y0, rows);
         let (din, dout) = self.ray_extents(y0, rows);
         let half = (0.5 * self.delta) as f32;
         let preint = self.preint_for(post);
-        let (mut prev, mut stamp) = if preint {
-            (vec![0.0f32; rows * w], vec![u32::MAX; rows * w])
-        } else {
-            (Vec::new(), Vec::new())
-        };
-        for p in self.plane_range.0..self.plane_range.1 {
+        if preint && carry.prev.len() != rows * w {
+            carry.prev = vec![0.0f32; rows * w];
+            carry.stamp = vec![u32::MAX; rows * w];
+        }
+        let (prev, stamp) = (&mut carry.prev, &mut carry.stamp);
+        for p in planes.0..planes.1 {
             let d = self.depth(p);
             let mut any_live = false;
             for (r, live_r) in live.iter_mut().enumerate() {
@@ -740,12 +764,18 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// skipped (exact: a trilinear value lies in its brick's range). The others are sampled and
     /// compared eight at a time (`extreme_row_avx2`) or one at a time
     /// ([`Ctx::extreme_one`]); the samples are the same bits either way, so is their extreme.
-    fn band_extreme(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
+    fn band_extreme(
+        &self,
+        y0: usize,
+        rows: usize,
+        acc: &mut [Rgba],
+        (first, end): (usize, usize),
+    ) -> Counters {
         let w = self.width;
         let mip = self.mode == RenderMode::Mip;
         let mut c = Counters::default();
-        let mut vals = vec![f32::NAN; rows * w];
-        let planes = self.plane_range.0..self.plane_range.1;
+        let mut vals: Vec<f32> = acc.iter().map(|px| px[0]).collect();
+        let planes = first..end;
         for p in coarse_to_fine(self.n_planes)
             .into_iter()
             .filter(|p| planes.contains(p))
@@ -800,7 +830,13 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// Composite through the classifier (tables that depend on more than the density, shaded or
     /// not): each sample is classified, with its gradient where the lights or the tables need
     /// one, as soon as it is reconstructed.
-    fn band_plain(&self, y0: usize, rows: usize, acc: &mut [Rgba]) -> Counters {
+    fn band_plain(
+        &self,
+        y0: usize,
+        rows: usize,
+        acc: &mut [Rgba],
+        (first, end): (usize, usize),
+    ) -> Counters {
         let w = self.width;
         let mut c = Counters::default();
         let mut line = vec![f32::NAN; w];
@@ -809,7 +845,7 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
         let kf = self.path_factors(y0, rows);
         let (din, dout) = self.ray_extents(y0, rows);
         let half = (0.5 * self.delta) as f32;
-        for p in self.plane_range.0..self.plane_range.1 {
+        for p in first..end {
             let d = self.depth(p);
             let depth01 = ((d - self.dmin) * self.depth_scale).clamp(0.0, 1.0) as f32;
             let mut any_live = false;
@@ -949,6 +985,15 @@ pub(super) enum Post<'a> {
     ///
     /// [`ShadeAt::Voxels`]: crate::normals::ShadeAt::Voxels
     Voxel(&'a ShadeTable, &'a VoxelShading),
+}
+
+/// What a band's composite keeps between pieces of its planes ([`Ctx::band_in`]) beside its
+/// accumulation: pre-integration's densities and stamps of the last plane each pixel was
+/// sampled on (empty until the first piece that pre-integrates).
+#[derive(Default)]
+pub(super) struct Carry {
+    prev: Vec<f32>,
+    stamp: Vec<u32>,
 }
 
 /// The accumulation of a band of rows as four planes of channels ([`Ctx::band_post`]).

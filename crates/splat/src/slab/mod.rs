@@ -335,7 +335,12 @@ pub(crate) fn render_slabs_in<T: Scalar>(
         Access::Whole(v) => {
             Ctx::new(&frame, Vox::Linear(Linear::new(v))).march_bands(settings, progress)?
         }
-        Access::Bricked(r) => bricked::march(&frame, &mut **r, settings, progress)?,
+        Access::Bricked(r) => {
+            let (acc, c, [steps, pieced]) = bricked::march(&frame, &mut **r, settings, progress)?;
+            stats.brick_steps = steps;
+            stats.pieced_groups = pieced;
+            (acc, c)
+        }
     };
     stats.classify_ms = ms(t_render);
     // The finish: counters into stats, the accumulation into the picture.
