@@ -113,14 +113,15 @@ fn blobs() -> GaussianBlobs {
 }
 
 fn settings(w: usize, h: usize, mode: RenderMode) -> RenderSettings {
-    let mut s = RenderSettings::default();
-    s.width = w;
-    s.height = h;
-    s.mode = mode;
-    s.visibility = Visibility::ImageAligned;
-    s.antialias = Antialias::None;
-    s.band_height = 8;
-    s
+    RenderSettings {
+        width: w,
+        height: h,
+        mode,
+        visibility: Visibility::ImageAligned,
+        antialias: Antialias::None,
+        band_height: 8,
+        ..Default::default()
+    }
 }
 
 /// The frames compared, their transfer functions mapped from [0, 1] onto `[lo, hi]`:
@@ -222,7 +223,7 @@ fn compare<T: Scalar>(volume: &Volume<T>, what: &str) {
     let grid = volume.grid();
     let bricks = BrickGrid::build(volume);
     let (lo, hi) = volume.value_range();
-    for (name, mode, tables, preint) in cases_in(lo as f64, hi as f64) {
+    for (name, mode, tables, preint) in cases_in(lo, hi) {
         for (az, el) in [(61.0, 17.0), (0.0, 0.0), (135.0, -40.0), (200.0, 80.0)] {
             for parallel in [true, false] {
                 let cam = orbit_camera(grid, az, el, parallel);
