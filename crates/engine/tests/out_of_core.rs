@@ -151,3 +151,39 @@ fn what_out_of_core_frames_cannot_draw_is_refused_by_name() {
     let e = r.render(&req, &mut |_| true).unwrap_err().to_string();
     assert!(e.contains("budget"), "{e}");
 }
+
+/// Previews (`quality.level`, what the viewer draws while the user moves) of a store read out
+/// of core draw the store's own coarser level, read whole: a store written by volsplat holds the
+/// renderer's pyramid, so the picture is the in-memory pyramid preview's, bit for bit, for a
+/// level number and for `auto`; a note names the level.
+#[test]
+fn previews_of_a_store_out_of_core_are_its_coarser_levels() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = store(dir.path(), [160, 150, 140]);
+    let mut whole = Renderer::new();
+    let mut paged = Renderer::new();
+    for level in [
+        volsplat::VolumeLevel::Level(1),
+        volsplat::VolumeLevel::Level(2),
+        volsplat::VolumeLevel::Auto,
+    ] {
+        for (mode, perspective) in [(Mode::Composite, false), (Mode::Mip, true)] {
+            let mut req = RenderRequest::new(scene(&path, 40.0, perspective), 48, 40);
+            req.mode = mode;
+            req.quality.level = level;
+            let want = whole.render(&req, &mut |_| true).unwrap();
+            req.memory = Some(16 << 20);
+            let got = paged.render(&req, &mut |_| true).unwrap();
+            assert!(
+                got.notes.iter().any(|n| n.starts_with("preview: level ")),
+                "{level:?}: {:?}",
+                got.notes
+            );
+            assert!(
+                bits(&got) == bits(&want),
+                "{level:?} {mode:?}: the store's level differs from the pyramid's"
+            );
+            assert_eq!(got.camera, want.camera);
+        }
+    }
+}

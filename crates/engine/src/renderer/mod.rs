@@ -11,6 +11,7 @@ mod draw;
 mod paged;
 mod plan;
 mod stats;
+mod store_level;
 
 pub use stats::{DisplayStats, Progress, SheetAxis, Stage, Stats, UsedRenderer, renderer_name};
 

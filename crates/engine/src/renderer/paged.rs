@@ -183,9 +183,6 @@ impl Renderer {
         let Draw::Slabs(slabs) = &plan.draw else {
             return Err(refused("this renderer"));
         };
-        if slabs.level != 0 {
-            return Err(refused("a coarser renderer level (quality.level)"));
-        }
         let mut settings = request.splat_settings();
         settings.clip = request.scene.clipping.world_planes(&grid)?;
         settings.slab = slabs.thickness;
@@ -195,6 +192,34 @@ impl Renderer {
             0.0
         };
         report(progress, 0.2, Stage::Render)?;
+        if slabs.level != 0 {
+            // A preview (`quality.level`): the store's own coarser level, read whole.
+            let level = super::store_level::StoreLevelFrame {
+                source,
+                full: &grid,
+                level: slabs.level,
+                budget,
+                camera: &camera,
+                tables: &tables,
+                settings,
+                pool: &pool,
+            };
+            let (rendered, note) = self.draw_store_level(level, progress)?;
+            notes.push(note);
+            return finish(
+                Finished {
+                    rendered,
+                    plan: &plan,
+                    slabs,
+                    request,
+                    prepare_ms,
+                    load_ms,
+                    t0,
+                },
+                (camera, tf, warnings, notes),
+                progress,
+            );
+        }
         let paged = self
             .paged
             .as_mut()
@@ -223,34 +248,81 @@ impl Renderer {
                 rendered.stats.pieced_groups, rendered.stats.brick_steps
             ));
         }
-        let composite = request.mode == Mode::Composite;
-        let mut stats = Stats {
-            prepare_ms,
-            ..slab_stats(&rendered.stats, slabs, composite)
-        };
-        check_finite(
-            &rendered.image,
-            rendered.values.as_ref(),
-            request.mode,
-            plan.renderer,
-        )?;
-        stats.renderer = Some(plan.renderer);
-        stats.projection = Some(plan.projection);
-        stats.load_ms = load_ms;
-        stats.width = request.width;
-        stats.height = request.height;
-        stats.total_ms = ms(t0);
-        report(progress, 1.0, Stage::Done)?;
-        Ok(Output {
-            image: rendered.image,
-            values: rendered.values,
-            stats,
-            camera,
-            transfer_function: tf,
-            warnings,
-            notes,
-        })
+        finish(
+            Finished {
+                rendered,
+                plan: &plan,
+                slabs,
+                request,
+                prepare_ms,
+                load_ms,
+                t0,
+            },
+            (camera, tf, warnings, notes),
+            progress,
+        )
     }
+}
+
+/// A drawn out-of-core frame and what its stats are made from.
+struct Finished<'a> {
+    rendered: volsplat_splat::Rendered,
+    plan: &'a plan::Plan,
+    slabs: &'a plan::SlabPlan,
+    request: &'a RenderRequest,
+    prepare_ms: f64,
+    load_ms: f64,
+    t0: Instant,
+}
+
+/// The frame's output: the picture checked, the stats, the resolved camera and transfer
+/// function, warnings and notes.
+fn finish(
+    f: Finished<'_>,
+    (camera, tf, warnings, notes): (
+        volsplat_core::Camera,
+        volsplat_core::TransferFunction,
+        Vec<String>,
+        Vec<String>,
+    ),
+    progress: &mut (dyn FnMut(&Progress) -> bool + Send),
+) -> Result<Output> {
+    let Finished {
+        rendered,
+        plan,
+        slabs,
+        request,
+        prepare_ms,
+        load_ms,
+        t0,
+    } = f;
+    let composite = request.mode == Mode::Composite;
+    let mut stats = Stats {
+        prepare_ms,
+        ..slab_stats(&rendered.stats, slabs, composite)
+    };
+    check_finite(
+        &rendered.image,
+        rendered.values.as_ref(),
+        request.mode,
+        plan.renderer,
+    )?;
+    stats.renderer = Some(plan.renderer);
+    stats.projection = Some(plan.projection);
+    stats.load_ms = load_ms;
+    stats.width = request.width;
+    stats.height = request.height;
+    stats.total_ms = ms(t0);
+    report(progress, 1.0, Stage::Done)?;
+    Ok(Output {
+        image: rendered.image,
+        values: rendered.values,
+        stats,
+        camera,
+        transfer_function: tf,
+        warnings,
+        notes,
+    })
 }
 
 /// The error for what an out-of-core frame cannot draw.
