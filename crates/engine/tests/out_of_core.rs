@@ -22,8 +22,12 @@ fn blobs() -> GaussianBlobs {
     ])
 }
 
-/// A u16 volume of `dims` written as an OME-Zarr store with chunks of 32 in `dir`.
+/// A u16 volume of `dims` written as an OME-Zarr store with chunks of 32 in `dir`. The ranges
+/// sidecars go to a folder of the test's own (`VOLSPLAT_CACHE_DIR`), not the user's cache.
 fn store(dir: &std::path::Path, dims: [usize; 3]) -> std::path::PathBuf {
+    // SAFETY: every test of this file sets the same kind of value (a temporary folder); a race
+    // only changes which one a sidecar goes to.
+    unsafe { std::env::set_var("VOLSPLAT_CACHE_DIR", dir.join("cache")) };
     let f = phantom::sample(&blobs(), dims, 1).unwrap();
     let v = Volume::new(
         f.grid().clone(),
@@ -186,4 +190,57 @@ fn previews_of_a_store_out_of_core_are_its_coarser_levels() {
             assert_eq!(got.camera, want.camera);
         }
     }
+}
+
+/// The level's ranges are kept between opens: the second open reads them from the sidecar
+/// (a note says so) and gives the same picture; a chunk written again (a newer file) makes
+/// the next open read the level again, and so does a corrupt sidecar, never trusted.
+#[test]
+fn ranges_are_kept_between_opens_and_read_again_when_the_store_changes() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = store(dir.path(), [100, 90, 80]);
+    let mut req = RenderRequest::new(scene(&path, 30.0, false), 48, 40);
+    req.memory = Some(16 << 20);
+    let open = |req: &RenderRequest| Renderer::new().render(req, &mut |_| true).unwrap();
+    let kept = |out: &volsplat::Output| {
+        out.notes
+            .iter()
+            .any(|n| n.contains("kept from an earlier open"))
+    };
+    let first = open(&req);
+    assert!(!kept(&first), "{:?}", first.notes);
+    let second = open(&req);
+    assert!(kept(&second), "{:?}", second.notes);
+    assert!(bits(&first) == bits(&second));
+    // A chunk written again: the fingerprint changes.
+    let chunk = walk(&path.join("0"))
+        .into_iter()
+        .find(|p| !p.ends_with(".zarray") && !p.ends_with(".zattrs"))
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    std::fs::write(&chunk, std::fs::read(&chunk).unwrap()).unwrap();
+    let third = open(&req);
+    assert!(!kept(&third), "{:?}", third.notes);
+    assert!(bits(&first) == bits(&third));
+    // A corrupt sidecar is ignored.
+    for f in walk(&dir.path().join("cache")) {
+        std::fs::write(&f, b"{not json\n").unwrap();
+    }
+    let fourth = open(&req);
+    assert!(!kept(&fourth), "{:?}", fourth.notes);
+    assert!(bits(&first) == bits(&fourth));
+}
+
+fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out.sort();
+    out
 }

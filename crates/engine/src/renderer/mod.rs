@@ -10,6 +10,7 @@ mod cache;
 mod draw;
 mod paged;
 mod plan;
+mod ranges_sidecar;
 mod stats;
 mod store_level;
 

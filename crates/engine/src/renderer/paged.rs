@@ -377,10 +377,17 @@ fn open_paged(source: &VolumeSource, budget: u64, limits: &volsplat_io::Limits) 
         EngineError::request("volume", "the level's sample type cannot be rendered")
     })?;
     let arena = (budget as f64 * ARENA_SHARE) as u64;
+    let sidecar_note;
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
             let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, BRICK)?;
-            let scan = scan_level(&source.as_stored(), level)?;
+            let layout = volsplat_core::source::BrickSource::layout(&source, level)
+                .cloned()
+                .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
+            let (scan, kept) = scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
+                Ok(scan_level(&source.as_stored(), level)?)
+            })?;
+            sidecar_note = kept;
             let source = match scan.finite {
                 Some([lo, hi]) if scan.non_finite.is_some() => {
                     source.with_finite_range(level, [lo, hi])?
@@ -392,7 +399,7 @@ fn open_paged(source: &VolumeSource, budget: u64, limits: &volsplat_io::Limits) 
             let [lo, hi] = scan.value_range();
             let note = format!(
                 "out of core: level {level} ({} × {} × {}) in {} bricks of {BRICK}³ cells, \
-                 their ranges read once in {:.0} ms ({:.1} MiB); a cache of {} bricks",
+                 their ranges ready in {:.0} ms ({:.1} MiB read); a cache of {} bricks",
                 grid.dims[0],
                 grid.dims[1],
                 grid.dims[2],
@@ -431,8 +438,40 @@ fn open_paged(source: &VolumeSource, budget: u64, limits: &volsplat_io::Limits) 
         grid,
         range,
         preview,
-        notes: vec![note],
+        notes: std::iter::once(note).chain(sidecar_note).collect(),
     })
+}
+
+/// The level's ranges: kept from an earlier open of the same unchanged level
+/// ([`super::ranges_sidecar`]), else read brick by brick and kept for the next open. The note
+/// says which, or why they could not be kept.
+fn scan_or_kept(
+    layout: &volsplat_core::source::BrickLayout,
+    (store, path): (&ZarrStore, &std::path::Path),
+    (level, sel): (usize, ZarrSelection),
+    kind: ScalarType,
+    scan: impl FnOnce() -> Result<volsplat_splat::LevelScan>,
+) -> Result<(volsplat_splat::LevelScan, Option<String>)> {
+    let array = path.join(&store.levels()[level].path);
+    let fp = super::ranges_sidecar::Fingerprint::of(
+        path,
+        &array,
+        (level, sel.channel, sel.timepoint),
+        layout,
+        kind.name(),
+    );
+    if let Some(scan) = fp.as_ref().and_then(|f| f.load(layout)) {
+        return Ok((
+            scan,
+            Some("out of core: the level's ranges were kept from an earlier open".into()),
+        ));
+    }
+    let scan = scan()?;
+    let note = fp.map(|f| match f.save(&scan) {
+        Ok(p) => format!("out of core: the level's ranges are kept in {} for the next open", p.display()),
+        Err(e) => format!("out of core: the level's ranges could not be kept ({e}); the next open reads them again"),
+    });
+    Ok((scan, note))
 }
 
 /// The cache slot of out-of-core levels: one store level and budget at a time.
