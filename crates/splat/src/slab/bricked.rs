@@ -11,7 +11,8 @@
 //! ends of the three ranges, a hexahedron with planar faces (a frustum piece in perspective,
 //! a parallelepiped in orthographic views). It is widened by half a pixel, half a plane and a
 //! voxel each way (rounding of the f32 positions), and a brick is needed where its box of
-//! cells meets it (the box outside none of the six faces nor the hull's bounds). A sample's
+//! cells meets it (no separating axis: the hull's bounds, its six faces, its edges crossed with
+//! the grid axes). A sample's
 //! cell is the floor of its position, clamped to the grid, so a sample at position `q` reads
 //! the brick whose cells' box holds `q`; the halo holds the rest of its stencil. Composite
 //! needs only bricks with an active 8³ block (the march samples no other: live lanes are in
@@ -374,6 +375,10 @@ struct Hull {
     lo: DVec3,
     hi: DVec3,
     faces: Vec<(DVec3, f64)>,
+    /// The separating axes of the hull's edges against the box's (the cross products of each
+    /// edge direction with each grid axis), with the hull's extent along each: with the faces
+    /// and the bounds, the whole separating-axis test of two convex solids.
+    edges: Vec<(DVec3, f64, f64)>,
 }
 
 impl Hull {
@@ -409,16 +414,42 @@ impl Hull {
                 faces.push((n, n.dot(p0)));
             }
         }
-        Hull { lo, hi, faces }
+        // Edge directions: along x (bit 0) and y (bit 1) they are parallel (the right and up
+        // of the view); along the depth (bit 2) the four rays differ in perspective.
+        let mut dirs = vec![corner[1] - corner[0], corner[2] - corner[0]];
+        dirs.extend((0..4).map(|c| corner[c | 4] - corner[c]));
+        let mut edges = Vec::with_capacity(18);
+        for d in dirs {
+            for g in [DVec3::X, DVec3::Y, DVec3::Z] {
+                let axis = d.cross(g);
+                if !(axis.length_squared() > 1e-18 * d.length_squared()) {
+                    continue;
+                }
+                let (lo, hi) = corner
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |m, p| {
+                        let t = axis.dot(*p);
+                        (m.0.min(t), m.1.max(t))
+                    });
+                edges.push((axis, lo, hi));
+            }
+        }
+        Hull {
+            lo,
+            hi,
+            faces,
+            edges,
+        }
     }
 
-    /// Whether the box `[lo, hi]` may meet the hull: it lies beyond none of its bounds and
-    /// none of its faces (conservative: a box near an edge may pass).
+    /// Whether the box `[lo, hi]` meets the hull: no separating axis among the hull's bounds,
+    /// its faces and its edges crossed with the grid axes (the separating-axis theorem; the
+    /// hull and the box were both widened, so rounding cannot drop a brick that is met).
     fn meets_box(&self, lo: DVec3, hi: DVec3) -> bool {
         if (0..3).any(|a| hi[a] < self.lo[a] || lo[a] > self.hi[a]) {
             return false;
         }
-        self.faces.iter().all(|&(n, c)| {
+        let faces = self.faces.iter().all(|&(n, c)| {
             // The box's corner furthest against the normal.
             let p = DVec3::new(
                 if n.x < 0.0 { hi.x } else { lo.x },
@@ -426,7 +457,14 @@ impl Hull {
                 if n.z < 0.0 { hi.z } else { lo.z },
             );
             n.dot(p) <= c
-        })
+        });
+        let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
+        faces
+            && self.edges.iter().all(|&(axis, a, b)| {
+                let c = axis.dot(centre);
+                let r = axis.abs().dot(half);
+                c + r >= a && c - r <= b
+            })
     }
 }
 
