@@ -422,7 +422,9 @@ impl Hull {
         for d in dirs {
             for g in [DVec3::X, DVec3::Y, DVec3::Z] {
                 let axis = d.cross(g);
-                if !(axis.length_squared() > 1e-18 * d.length_squared()) {
+                // A degenerate axis (or a NaN one) separates nothing: skipped.
+                let big = axis.length_squared().partial_cmp(&(1e-18 * d.length_squared()));
+                if big != Some(std::cmp::Ordering::Greater) {
                     continue;
                 }
                 let (lo, hi) = corner
