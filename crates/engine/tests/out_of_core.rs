@@ -244,3 +244,26 @@ fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
     out.sort();
     out
 }
+
+/// Front ends' questions about a store read out of core are answered from its metadata and its
+/// coarsest level: the grid is level 0's, the camera resolves against it as a frame's does, and
+/// the overview (histograms) is the coarsest level.
+#[test]
+fn grid_camera_and_overview_of_a_store_out_of_core_read_no_full_level() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = store(dir.path(), [100, 90, 80]);
+    let mut req = RenderRequest::new(scene(&path, 30.0, true), 48, 40);
+    req.memory = Some(16 << 20);
+    let mut r = Renderer::new();
+    let (grid, kind) = r.volume_grid(&req).unwrap();
+    assert_eq!(grid.dims, [100, 90, 80]);
+    assert_eq!(kind, volsplat::core::ScalarType::U16);
+    let overview = r.overview(&req).unwrap();
+    let store = volsplat::io::ZarrStore::open(&path, &Default::default()).unwrap();
+    let coarsest = store.levels().last().unwrap().dims.map(|d| d as usize);
+    assert_eq!(overview.grid().dims, coarsest);
+    assert!(coarsest[0] < 100);
+    let camera = r.camera(&req).unwrap();
+    let frame = r.render(&req, &mut |_| true).unwrap();
+    assert_eq!(camera, frame.camera);
+}

@@ -381,7 +381,8 @@ fn start_session(tab: &Tab, request: RenderRequest) -> bool {
             Arc::clone(&tab.shared.clock),
         )
         .and_then(|s| {
-            let vol = renderer.volume(&s.request().scene.volume)?;
+            // The volume itself, or a store read out of core's coarsest level: the histogram.
+            let vol = renderer.overview(s.request())?;
             Ok((s, vol))
         })
     };
@@ -396,7 +397,8 @@ fn start_session(tab: &Tab, request: RenderRequest) -> bool {
     };
     let label = session.request().scene.volume.label();
     let (histogram, range) = tab.shared.histogram(&label, &vol, HISTOGRAM_BINS);
-    let g = vol.grid();
+    // The full level's geometry (`vol` may be a store's coarsest level).
+    let g = session.grid();
     let hello = Hello {
         version: env!("CARGO_PKG_VERSION").into(),
         volume: display_label(&session.request().scene.volume),

@@ -8,6 +8,7 @@
 
 mod cache;
 mod draw;
+mod overview;
 mod paged;
 mod plan;
 mod ranges_sidecar;
@@ -200,14 +201,11 @@ impl Renderer {
         Ok((concrete, Some(note)))
     }
 
-    /// The camera `request` resolves to (loads the volume for its bounds if needed).
+    /// The camera `request` resolves to (loads the volume for its bounds if needed; a store
+    /// read out of core: its metadata, [`Renderer::volume_grid`]).
     pub fn camera(&mut self, request: &RenderRequest) -> Result<Camera> {
-        let (source, _) = self.concrete_source(request)?;
-        let vol = self.volume(&source)?;
-        request
-            .scene
-            .camera
-            .resolve(vol.grid().drawn_bounds_world())
+        let (grid, _) = self.volume_grid(request)?;
+        request.scene.camera.resolve(grid.drawn_bounds_world())
     }
 
     /// The transfer function `request` resolves to for its volume and mode.

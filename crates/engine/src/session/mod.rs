@@ -156,7 +156,7 @@ impl std::fmt::Debug for Session {
 
 impl Session {
     /// A session on `request`: loads its volume through `renderer` (kept there for the frames
-    /// to come) to resolve the camera, which becomes explicit and is the one
+    /// to come; a store read out of core: its metadata only) to resolve the camera, which becomes explicit and is the one
     /// [`Event::Reset`] returns to.
     pub fn start(
         request: RenderRequest,
@@ -165,9 +165,9 @@ impl Session {
         clock: Arc<dyn Clock>,
     ) -> Result<Session> {
         request.validate()?;
-        let volume = renderer.volume(&request.scene.volume)?;
+        let (grid, _) = renderer.volume_grid(&request)?;
         let camera = renderer.camera(&request)?;
-        Session::new(request, camera, volume.grid().clone(), settings, clock)
+        Session::new(request, camera, grid, settings, clock)
     }
 
     /// A session on `request` whose camera resolves to `camera` on a volume of `grid` (what
@@ -202,6 +202,12 @@ impl Session {
             budget: Budget::new(),
             next_id: 1,
         })
+    }
+
+    /// The grid of the session's volume (world frame, mm): the full level's, also for a store
+    /// read out of core.
+    pub fn grid(&self) -> &Grid {
+        &self.grid
     }
 
     /// The full-quality request of the current scene (camera explicit): what the final frame

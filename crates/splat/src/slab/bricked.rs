@@ -423,7 +423,9 @@ impl Hull {
             for g in [DVec3::X, DVec3::Y, DVec3::Z] {
                 let axis = d.cross(g);
                 // A degenerate axis (or a NaN one) separates nothing: skipped.
-                let big = axis.length_squared().partial_cmp(&(1e-18 * d.length_squared()));
+                let big = axis
+                    .length_squared()
+                    .partial_cmp(&(1e-18 * d.length_squared()));
                 if big != Some(std::cmp::Ordering::Greater) {
                     continue;
                 }

@@ -1,0 +1,68 @@
+//! What front ends ask of a volume besides frames (its grid, a volume for histograms),
+//! answered without reading a store that is read out of core (decision 0039): its grid from
+//! the metadata, its histogram from its coarsest level.
+
+use super::Renderer;
+use crate::error::{EngineError, Result};
+use crate::request::RenderRequest;
+use crate::scene::{StoreLevel, VolumeSource};
+use std::sync::Arc;
+use volsplat_core::{AnyVolume, Grid, ScalarType};
+use volsplat_io::ZarrStore;
+
+/// The most samples of a level read whole as an overview of a store read out of core.
+const OVERVIEW_SAMPLES: u64 = 16 << 20;
+
+impl Renderer {
+    /// The grid of `request`'s volume (world frame and spacing in mm, as the readers give it)
+    /// and its sample type: for an OME-Zarr level read out of core ([`RenderRequest::memory`],
+    /// or a level larger than half the available memory), from the store's metadata, with
+    /// nothing read; otherwise the loaded volume's (loading it once).
+    pub fn volume_grid(&mut self, request: &RenderRequest) -> Result<(Grid, ScalarType)> {
+        let (source, _) = self.concrete_source(request)?;
+        if self.paged_budget(request, &source)?.is_some()
+            && let VolumeSource::File { path, level, .. } = &source
+        {
+            let store = ZarrStore::open(path, &self.limits)?;
+            let l = level.index().unwrap_or(0);
+            let kind = store.level(l)?.scalar_type.ok_or_else(|| {
+                EngineError::request("volume", "the level's sample type cannot be rendered")
+            })?;
+            return Ok((store.grid(l)?, kind));
+        }
+        let vol = self.volume(&source)?;
+        Ok((vol.grid().clone(), vol.scalar_type()))
+    }
+
+    /// A volume that stands for `request`'s in summaries (histograms, the transfer-function
+    /// editor): the volume itself, or for an OME-Zarr level read out of core the store's coarsest
+    /// level, read whole where it holds at most 16 M samples. An error naming `memory` where the
+    /// store has no level that small.
+    pub fn overview(&mut self, request: &RenderRequest) -> Result<Arc<AnyVolume>> {
+        let (source, _) = self.concrete_source(request)?;
+        if self.paged_budget(request, &source)?.is_none() {
+            return self.volume(&source);
+        }
+        let VolumeSource::File { path, .. } = &source else {
+            return self.volume(&source);
+        };
+        let store = ZarrStore::open(path, &self.limits)?;
+        let coarsest = store.levels().len() - 1;
+        let samples = store.levels()[coarsest].dims.iter().product::<u64>();
+        if samples > OVERVIEW_SAMPLES {
+            return Err(EngineError::request(
+                "memory",
+                format!(
+                    "the store is read out of core and its coarsest level holds {samples} \
+                     samples, too many to read whole for an overview (at most {OVERVIEW_SAMPLES}); \
+                     convert it with `volsplat convert … -o X.zarr` to add coarser levels"
+                ),
+            ));
+        }
+        let mut coarse = source.clone();
+        if let VolumeSource::File { level, .. } = &mut coarse {
+            *level = StoreLevel::Index(coarsest);
+        }
+        self.volume(&coarse)
+    }
+}
