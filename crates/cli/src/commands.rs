@@ -794,9 +794,19 @@ fn convert_to_zarr(a: ConvertArgs) -> Result<()> {
         }
     };
     let (label, c) = converted;
+    // The full level's ranges, kept for the first out-of-core open (decision 0039); a failure
+    // only costs that open a scan.
+    let kept = volsplat::Renderer::with_limits(reader_limits(&a.input)?).keep_store_ranges(out);
     if !a.quiet {
         for n in &c.notes {
             say!("note: {n}");
+        }
+        match kept {
+            Ok(notes) => notes
+                .iter()
+                .filter(|n| n.contains("ranges are kept") || n.contains("could not be kept"))
+                .for_each(|n| say!("note: {n}")),
+            Err(e) => say!("note: the level's ranges were not kept for out-of-core opens: {e}"),
         }
         let sizes: Vec<String> = c
             .written

@@ -66,3 +66,25 @@ impl Renderer {
         self.volume(&coarse)
     }
 }
+
+impl Renderer {
+    /// Reads the full level of the OME-Zarr store at `path` brick by brick once and keeps its
+    /// ranges in the user's cache folder (decision 0039 item 7), so that its first out-of-core
+    /// open needs no scan (`volsplat convert … -o X.zarr` calls it after writing). Returns the
+    /// notes of the scan (where the ranges were kept, or why they could not be).
+    pub fn keep_store_ranges(&mut self, path: &std::path::Path) -> Result<Vec<String>> {
+        let source = VolumeSource::File {
+            path: path.to_path_buf(),
+            raw: None,
+            frame: 0,
+            array: None,
+            series: None,
+            level: StoreLevel::Index(0),
+            channel: 0,
+            timepoint: 0,
+        };
+        // The smallest arena: only the scan is wanted.
+        let paged = super::paged::open_paged(&source, 8 << 20, &self.limits)?;
+        Ok(paged.notes)
+    }
+}

@@ -35,7 +35,7 @@ pub(super) struct Paged {
     range: (f64, f64),
     /// The coarsest level read whole (for the automatic transfer function), where it is small.
     preview: Option<Arc<AnyVolume>>,
-    notes: Vec<String>,
+    pub(super) notes: Vec<String>,
 }
 
 /// [`BrickCache`] of the level's sample type.
@@ -354,7 +354,11 @@ fn frame_note(before: &CacheStats, after: &CacheStats, budget: u64) -> String {
 }
 
 /// Opens the store of `source`, reads its level's ranges once, and makes the cache.
-fn open_paged(source: &VolumeSource, budget: u64, limits: &volsplat_io::Limits) -> Result<Paged> {
+pub(super) fn open_paged(
+    source: &VolumeSource,
+    budget: u64,
+    limits: &volsplat_io::Limits,
+) -> Result<Paged> {
     let VolumeSource::File {
         path,
         level,
