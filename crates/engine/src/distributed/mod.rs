@@ -9,9 +9,9 @@
 //! failure path, and a brick's partial image from the slabs
 //! ([`volsplat_splat::RenderSettings::owned_cells`]: the whole volume in memory, only the
 //! brick's cells drawn, every sample at its global position; composited, 156 dB from the
-//! single-process render and the same bits for any rank count, `tests.rs`). What is not yet: a
-//! rank reading only its bricks (the brick seam's `BrickCache`, `docs/design/brick-seam.md`),
-//! pre-integration across a brick face (a brick's first sample has no previous one), early
+//! single-process render and the same bits for any rank count, `tests.rs`), and ranks that read
+//! only their bricks of an OME-Zarr store (`store_tests.rs`; [`render_sort_last`]). What is not
+//! yet: a rank reading only its bricks of a NRRD file, pre-integration across a brick face (a brick's first sample has no previous one), early
 //! termination across bricks (each brick's image runs to its own opacity). X-ray is summed from
 //! bricks drawn by the sheets or the splat list, each drawing the voxels of its cells; MIP and
 //! MinIP take the extreme of the slabs' bricks, bit for bit the single-process projection.

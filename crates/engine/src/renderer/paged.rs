@@ -4,6 +4,14 @@
 //! read whole. The level's per-brick ranges are read once per store, level and selection (one
 //! pass over the bricks, in parallel, a few at a time) and give the empty-space skipping and
 //! the value range without keeping the level.
+//!
+//! A sort-last rank's **part** (issue 32, decision 0038): a brick of a store
+//! ([`Renderer::render_brick`]) reads only the cache bricks meeting the rank's sort-last bricks
+//! (their ranges scanned, `volsplat_splat::scan_level_in`; the cache
+//! `BrickCache::restricted`), in bricks of the largest power of two (≤ [`BRICK`]) dividing the
+//! sort-last brick, so no cache brick holds another rank's cells. The blocks outside the part
+//! are kept out of every frame by `RenderSettings::owned_cells` (inactive in composite, a NaN
+//! bound in MIP/MinIP), so the bricks never read are never sampled.
 
 use super::cache::{Cached, build_pool, cached, resolve_tf};
 use super::draw::{forward, sheets_done, slab_stats};
