@@ -87,27 +87,29 @@ s = json.load(open(sys.argv[1]))
 s["scene"]["volume"] = {"file": {"path": sys.argv[3]}}
 json.dump(s, open(sys.argv[2], "w"))
 PY
-    run 2 "$mpi" render --scene "$work/zn.json" --brick 16 -o "$work/nrrd.npy" 2> /dev/null
+    run 2 "$mpi" render --scene "$work/zn.json" --brick 32 -o "$work/nrrd.npy" 2> /dev/null
     for n in 1 2 3 4; do
-      run "$n" "$mpi" render --scene "$work/z.json" --brick 16 -o "$work/z$n.npy" 2> "$work/reads$n.txt"
+      run "$n" "$mpi" render --scene "$work/z.json" --brick 32 -o "$work/z$n.npy" 2> "$work/reads$n.txt"
       cmp "$work/nrrd.npy" "$work/z$n.npy" || { echo "FAIL: np=$n from the store differs from the NRRD read whole ($mode $view)"; exit 1; }
       # Every rank read its part only: the parts' bricks add up to the level's, and with
       # several ranks each read less than the level.
       python3 - "$work/reads$n.txt" "$n" <<'PY'
 import re, sys
-lines = [l for l in open(sys.argv[1]) if " read " in l]
+# mpirun may interleave the ranks' lines: match the records, not the lines.
+pat = (r"rank (\d+) of \d+: read (\d+) of (\d+) bricks of \d+. cells: scan_bytes=(\d+) "
+       r"\([^)]*\), frame_bytes=(\d+) \([^)]*\), level_bytes=(\d+)")
+recs = re.findall(pat, open(sys.argv[1]).read())
 n = int(sys.argv[2])
-assert len(lines) == n, lines
+assert sorted(int(r[0]) for r in recs) == list(range(n)), recs
 total = 0
-for l in lines:
-    m = re.search(r"read (\d+) of (\d+) bricks.*scan_bytes=(\d+).*frame_bytes=(\d+).*level_bytes=(\d+)", l)
-    mine, level, scan, frame, whole = map(int, m.groups())
+for r in recs:
+    rank, mine, level, scan, frame, whole = map(int, r)
     total += mine
-    assert frame <= scan, l
+    assert frame <= scan, r
     if n > 1:
-        assert mine < level and scan < whole, l
+        assert mine < level and scan < whole, r
 assert total == level, (total, level)
-print("np=%d: %s" % (n, "; ".join(l.split(":")[0] + ": " + l.split("cells: ")[1].split(", level")[0] for l in sorted(lines)).strip()))
+print("np=%d: %s" % (n, "; ".join("rank %s read %s/%s bricks, scan %s B, frame %s B of a %s B level" % r for r in sorted(recs))))
 PY
     done
     echo "ok: np 1-4 read their bricks of the store, the same bytes as the NRRD read whole ($mode $view)"
