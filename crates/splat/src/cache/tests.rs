@@ -508,8 +508,8 @@ fn a_scan_of_a_region_reads_only_its_bricks_and_agrees_with_the_whole_scan_there
     assert_eq!(scan.bricks, 45);
     assert_eq!(scan.bytes_read, 45 * SLOT_U16_B8);
     assert_eq!(scan.read, wanted);
-    for i in 0..wanted.len() {
-        if wanted[i] {
+    for (i, &w) in wanted.iter().enumerate() {
+        if w {
             assert_eq!(scan.ranges8_of(i), whole.ranges8_of(i), "brick {i}");
             assert_eq!(scan.ranges[i], whole.ranges[i]);
         } else {
