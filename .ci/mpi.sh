@@ -71,6 +71,51 @@ PY
   done
 done
 
+step "mpi: ranks read only their bricks of an OME-Zarr store"
+# The demo head as a store and as NRRD: from the store each rank reads only the bricks of its
+# part (it prints what it read); the bytes are the same for np 1-4 and the same as the ranks
+# reading the NRRD whole (the in-memory sort-last render of the same samples).
+"$bin" convert -o "$work/head.zarr" -q
+"$bin" convert -o "$work/head.nrrd" -q
+for mode in composite mip minip; do
+  for view in "--azimuth 30 --elevation 15" "--azimuth -50 --elevation 20 --perspective"; do
+    # shellcheck disable=SC2086
+    "$bin" render "$work/head.zarr" --mode "$mode" --size 96x80 $view --save-scene "$work/z.json" -q -o "$work/z.png"
+    python3 - "$work/z.json" "$work/zn.json" "$work/head.nrrd" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+s["scene"]["volume"] = {"file": {"path": sys.argv[3]}}
+json.dump(s, open(sys.argv[2], "w"))
+PY
+    run 2 "$mpi" render --scene "$work/zn.json" --brick 32 -o "$work/nrrd.npy" 2> /dev/null
+    for n in 1 2 3 4; do
+      run "$n" "$mpi" render --scene "$work/z.json" --brick 32 -o "$work/z$n.npy" 2> "$work/reads$n.txt"
+      cmp "$work/nrrd.npy" "$work/z$n.npy" || { echo "FAIL: np=$n from the store differs from the NRRD read whole ($mode $view)"; exit 1; }
+      # Every rank read its part only: the parts' bricks add up to the level's, and with
+      # several ranks each read less than the level.
+      python3 - "$work/reads$n.txt" "$n" <<'PY'
+import re, sys
+# mpirun may interleave the ranks' lines: match the records, not the lines.
+pat = (r"rank (\d+) of \d+: read (\d+) of (\d+) bricks of \d+. cells: scan_bytes=(\d+) "
+       r"\([^)]*\), frame_bytes=(\d+) \([^)]*\), level_bytes=(\d+)")
+recs = re.findall(pat, open(sys.argv[1]).read())
+n = int(sys.argv[2])
+assert sorted(int(r[0]) for r in recs) == list(range(n)), recs
+total = 0
+for r in recs:
+    rank, mine, level, scan, frame, whole = map(int, r)
+    total += mine
+    assert frame <= scan, r
+    if n > 1:
+        assert mine < level and scan < whole, r
+assert total == level, (total, level)
+print("np=%d: %s" % (n, "; ".join("rank %s read %s/%s bricks, scan %s B, frame %s B of a %s B level" % r for r in sorted(recs))))
+PY
+    done
+    echo "ok: np 1-4 read their bricks of the store, the same bytes as the NRRD read whole ($mode $view)"
+  done
+done
+
 step "mpi: a rank that cannot read its volume stops every rank"
 "$bin" render --phantom-size 40 --save-scene "$work/bad0.json" -q -o "$work/b.png"
 python3 - "$work/bad0.json" "$work/bad.json" "$work/missing.nrrd" <<'PY'

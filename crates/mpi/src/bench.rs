@@ -47,6 +47,14 @@ pub fn frames(
         world.world.barrier();
         if round > 0 {
             times.push(ms);
+        } else {
+            // The cold frame: the volume (or the rank's bricks) read, the tables built.
+            if world.rank() == 0 {
+                println!("bench first frame: np={} first_ms={ms:.1}", world.size());
+            }
+            if let Some(line) = crate::reads_line(world, &renderer) {
+                println!("{line}");
+            }
         }
     }
     if world.rank() == 0 {

@@ -5,8 +5,9 @@
 //! its run of the bricks, the ranks composite the partial images over a tree fixed by the
 //! bricks (`over` in composite, the sum in X-ray, the maximum in MIP, the minimum in MinIP), and
 //! rank 0 writes the image as `volsplat
-//! render` writes it. The image is the same bits for any N. Every rank still loads the whole
-//! volume (reading only a rank's bricks needs the brick seam's cache, not built yet).
+//! render` writes it. The image is the same bits for any N. From an OME-Zarr store (not in
+//! X-ray) each rank reads only the bricks of its part, and prints what it read (`rank R of N:
+//! read …`); other files are read whole by every rank.
 //!
 //! A rank that fails before the compositing (its scene file or volume unreadable) still takes
 //! its part in the one exchange, sending its error (`fail_direct_send`), so every rank exits
@@ -128,6 +129,9 @@ fn render(
     let mut renderer = volsplat::Renderer::new();
     let image = render_sort_last(world, &mut renderer, request, brick)
         .with_context(|| format!("rank {} of {}", world.rank(), world.size()))?;
+    if let Some(line) = reads_line(world, &renderer) {
+        eprintln!("{line}");
+    }
     if let Some(image) = image {
         let options = request.output.write_options()?;
         volsplat::write_image(
@@ -148,6 +152,29 @@ fn render(
         );
     }
     Ok(())
+}
+
+/// What this rank read of its part of a store, one line (`None` where it read the volume
+/// whole): `.ci/mpi.sh` and BENCHMARKS §31 read it.
+pub fn reads_line(world: &World, renderer: &volsplat::Renderer) -> Option<String> {
+    let r = renderer.rank_reads()?;
+    let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+    Some(format!(
+        "rank {} of {}: read {} of {} bricks of {}³ cells: scan_bytes={} ({:.2} MiB), \
+         frame_bytes={} ({:.2} MiB, {} bricks), level_bytes={} ({:.2} MiB)",
+        world.rank(),
+        world.size(),
+        r.region_bricks,
+        r.level_bricks,
+        r.brick,
+        r.scan_bytes,
+        mib(r.scan_bytes),
+        r.frames.bytes_read,
+        mib(r.frames.bytes_read),
+        r.frames.reads,
+        r.level_bytes,
+        mib(r.level_bytes)
+    ))
 }
 
 /// The bytes of the buffered sends' buffer for `images` whole `width × height` images of 16

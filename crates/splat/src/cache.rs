@@ -76,6 +76,11 @@ pub struct BrickCache<T: Scalar> {
     bytes_read: AtomicU64,
     hits: u64,
     evictions: u64,
+    /// Per brick index: whether it may be read ([`BrickCache::restricted`]); `None`: every
+    /// brick.
+    allowed: Option<Vec<bool>>,
+    /// Bricks that may not be read.
+    outside: usize,
 }
 
 impl<T: Scalar> std::fmt::Debug for BrickCache<T> {
@@ -133,12 +138,49 @@ impl<T: Scalar> BrickCache<T> {
     /// Errors: [`SplatError::Budget`] naming the budget and the slot size if it holds no slot;
     /// a level the source lacks ([`SplatError::Core`]); [`SplatError::OutOfMemory`].
     pub fn new(source: Arc<dyn BrickSource<T>>, level: usize, budget: u64) -> Result<Self> {
+        Self::make(source, level, budget, None)
+    }
+
+    /// A cache that reads only the bricks whose index is `allowed` (a sort-last rank's bricks,
+    /// issue 32; [`bricks_meeting`]), with at most as many slots as there are allowed bricks.
+    /// The others are never read: [`BrickCache::make_resident`] and [`BrickCache::fetch`]
+    /// leave them out (their base stays 0, slot 0's memory), so a frame must never sample
+    /// them (`RenderSettings::owned_cells` inside the allowed bricks), and
+    /// [`BrickCache::capacity`] counts them as resident. Errors as [`BrickCache::new`]; an
+    /// `allowed` of another length than the level's brick count.
+    pub fn restricted(
+        source: Arc<dyn BrickSource<T>>,
+        level: usize,
+        budget: u64,
+        allowed: Vec<bool>,
+    ) -> Result<Self> {
+        Self::make(source, level, budget, Some(allowed))
+    }
+
+    fn make(
+        source: Arc<dyn BrickSource<T>>,
+        level: usize,
+        budget: u64,
+        allowed: Option<Vec<bool>>,
+    ) -> Result<Self> {
         let layout = layout_of(&*source, level)?;
         let size = std::mem::size_of::<T>();
         let slot_len = layout.slot_len();
         let pad = padding::<T>();
         let slot_bytes = (slot_len * size) as u64;
-        let capacity = slots(budget, slot_len, size, pad, layout.brick_count());
+        let count = layout.brick_count();
+        let inside = match &allowed {
+            Some(a) if a.len() != count => {
+                return Err(SplatError::Core(CoreError::invalid(
+                    "allowed bricks",
+                    a.len(),
+                    format!("one flag for each of the level's {count} bricks"),
+                )));
+            }
+            Some(a) => a.iter().filter(|&&x| x).count().max(1),
+            None => count,
+        };
+        let capacity = slots(budget, slot_len, size, pad, inside);
         if capacity == 0 {
             return Err(SplatError::Budget {
                 budget,
@@ -147,7 +189,9 @@ impl<T: Scalar> BrickCache<T> {
                 needed: 1,
             });
         }
-        let count = layout.brick_count();
+        let outside = allowed
+            .as_ref()
+            .map_or(0, |a| a.iter().filter(|&&x| !x).count());
         Ok(BrickCache {
             arena: try_filled(
                 capacity * slot_len + pad,
@@ -169,6 +213,8 @@ impl<T: Scalar> BrickCache<T> {
             bytes_read: AtomicU64::new(0),
             hits: 0,
             evictions: 0,
+            allowed,
+            outside,
         })
     }
 
@@ -187,9 +233,11 @@ impl<T: Scalar> BrickCache<T> {
         self.level
     }
 
-    /// Slots in the arena: the most bricks resident at once.
+    /// The most bricks resident at once: the slots in the arena ([`CacheStats::capacity`]),
+    /// plus, for a [`BrickCache::restricted`] cache, the bricks it never reads (which take no
+    /// slot).
     pub fn capacity(&self) -> usize {
-        self.capacity
+        self.capacity + self.outside
     }
 
     /// The index of brick `b` (brick coordinates, each below [`BrickLayout::dims`]): `(b_k·d_j +
@@ -242,6 +290,9 @@ impl<T: Scalar> BrickCache<T> {
             .iter()
             .map(|&k| Ok((k, self.index(self.layout.check(k)?))))
             .collect::<Result<Vec<_>>>()?;
+        if let Some(allowed) = &self.allowed {
+            out.retain(|&(_, i)| allowed[i]);
+        }
         out.sort_unstable();
         out.dedup();
         Ok(out)
@@ -414,10 +465,13 @@ pub struct LevelScan {
     /// every sample is finite (always for integer types, and for a source that already
     /// replaced them).
     pub non_finite: Option<NonFiniteSamples>,
-    /// Bricks read (every brick of the level, once).
+    /// Bricks read (every brick of the level once by [`scan_level`]; those of the region by
+    /// [`scan_level_in`]).
     pub bricks: usize,
     /// Decoded bytes read (`E³ · size_of::<T>()` per brick).
     pub bytes_read: u64,
+    /// Per brick (index order): whether it was read (all by [`scan_level`]).
+    pub read: Vec<bool>,
 }
 
 impl LevelScan {
@@ -436,6 +490,24 @@ impl LevelScan {
             .fold([f32::INFINITY, f32::NEG_INFINITY], |r, q| {
                 [r[0].min(q[0]), r[1].max(q[1])]
             })
+    }
+
+    /// Gives every block of the bricks not read ([`scan_level_in`]) the range `range` (data
+    /// units): a sort-last rank's scan, where `range` is the level's (the union of the ranks'
+    /// [`LevelScan::value_range`]s), so that what folds every block's range (the slabs'
+    /// ring-risk test for automatic pre-integration) sees the level's range. Blocks outside
+    /// the rank's boxes of cells must stay inactive by other means
+    /// (`RenderSettings::owned_cells`): they now look like data.
+    pub fn fill_unread(&mut self, range: [f32; 2]) {
+        let per = self.layout.blocks_per_brick().pow(3);
+        for (i, &read) in self.read.iter().enumerate() {
+            if !read {
+                self.ranges[i] = range;
+                if let Some(blocks) = self.ranges8.get_mut(i * per..(i + 1) * per) {
+                    blocks.fill(range);
+                }
+            }
+        }
     }
 
     /// The level's skip-block grid, equal to [`crate::BrickGrid::build`] of the level read
@@ -544,13 +616,67 @@ fn summarise<T: Scalar>(layout: &BrickLayout, brick: &Brick<T>) -> Result<BrickS
 /// level with non-finite samples and no finite one (as [`volsplat_core::Volume::new`]).
 pub fn scan_level<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Result<LevelScan> {
     let layout = layout_of(source, level)?;
+    let every = vec![true; layout.brick_count()];
+    scan_bricks(source, layout, &every)
+}
+
+/// Per brick of `layout` (index order, [`BrickCache::index`]): whether its box of cells
+/// `[B·b, B·b + B)` meets one of the boxes of cells `region` (`[lo, hi)` each, index space of
+/// the level; an upper bound past the last cell reaches it).
+pub fn bricks_meeting(layout: &BrickLayout, region: &[[[usize; 3]; 2]]) -> Vec<bool> {
+    let d = layout.dims();
+    let size = layout.size();
+    (0..layout.brick_count())
+        .map(|i| {
+            let b = [i % d[0], i / d[0] % d[1], i / (d[0] * d[1])];
+            region
+                .iter()
+                .any(|[lo, hi]| (0..3).all(|a| b[a] * size < hi[a] && lo[a] < (b[a] + 1) * size))
+        })
+        .collect()
+}
+
+/// [`scan_level`] of the bricks that meet the boxes of cells `region` ([`bricks_meeting`])
+/// only: a sort-last rank's part of a level (issue 32), the rest never read. The bricks read
+/// have the ranges [`scan_level`] gives them; the others have empty ranges (`[+∞, −∞]`, no
+/// block active) until [`LevelScan::fill_unread`] gives them the level's range, and
+/// [`LevelScan::read`] says which were read. `finite` and `non_finite` are those of the bricks
+/// read (a float level's replacement values are the *level's* finite extremes, which a part
+/// does not know: a caller must refuse or exchange them where `non_finite` is `Some`).
+pub fn scan_level_in<T: Scalar>(
+    source: &dyn BrickSource<T>,
+    level: usize,
+    region: &[[[usize; 3]; 2]],
+) -> Result<LevelScan> {
+    let layout = layout_of(source, level)?;
+    let wanted = bricks_meeting(&layout, region);
+    scan_bricks(source, layout, &wanted)
+}
+
+/// Reads the bricks of `layout` that are `wanted` (per index), in parallel batches of two per
+/// thread, and folds them into a [`LevelScan`] (the others empty).
+fn scan_bricks<T: Scalar>(
+    source: &dyn BrickSource<T>,
+    layout: BrickLayout,
+    wanted: &[bool],
+) -> Result<LevelScan> {
     let d = layout.dims();
     let keys: Vec<BrickKey> = (0..layout.brick_count())
+        .filter(|&i| wanted.get(i).copied().unwrap_or(false))
         .filter_map(|i| layout.key([i % d[0], i / d[0] % d[1], i / (d[0] * d[1])]))
         .collect();
     let batch = 2 * rayon::current_num_threads().max(1);
-    let mut summaries = Vec::with_capacity(keys.len());
+    let mut summaries = Vec::with_capacity(layout.brick_count());
     let mut bytes_read = 0u64;
+    let per = layout.blocks_per_brick().pow(3);
+    let empty = || BrickSummary {
+        ranges8: vec![[f32::INFINITY, f32::NEG_INFINITY]; per].into_boxed_slice(),
+        flags: None,
+        nan: 0,
+        pos_inf: 0,
+        neg_inf: 0,
+    };
+    let index = |k: &BrickKey| index_in(d, k.b.map(|x| x as usize));
     for chunk in keys.chunks(batch) {
         let part = chunk
             .par_iter()
@@ -565,12 +691,22 @@ pub fn scan_level<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Resul
                 Ok((summarise(&layout, &brick)?, bytes))
             })
             .collect::<Result<Vec<_>>>()?;
-        for (s, b) in part {
+        for ((s, b), k) in part.into_iter().zip(chunk) {
             bytes_read += b;
+            while summaries.len() < index(k) {
+                summaries.push(empty());
+            }
             summaries.push(s);
         }
     }
-    finish_scan(layout, summaries, bytes_read)
+    let read_count = keys.len();
+    while summaries.len() < layout.brick_count() {
+        summaries.push(empty());
+    }
+    let read = (0..layout.brick_count())
+        .map(|i| wanted.get(i).copied().unwrap_or(false))
+        .collect();
+    finish_scan(layout, summaries, bytes_read, read, read_count)
 }
 
 /// Folds the bricks' summaries (in index order) into the level's scan: the finite range, then
@@ -579,6 +715,8 @@ fn finish_scan(
     layout: BrickLayout,
     summaries: Vec<BrickSummary>,
     bytes_read: u64,
+    read: Vec<bool>,
+    read_count: usize,
 ) -> Result<LevelScan> {
     let fold = |r: [f32; 2], q: &[f32; 2]| [r[0].min(q[0]), r[1].max(q[1])];
     let empty = [f32::INFINITY, f32::NEG_INFINITY];
@@ -634,8 +772,9 @@ fn finish_scan(
         ranges,
         finite,
         non_finite,
-        bricks: summaries.len(),
+        bricks: read_count,
         bytes_read,
+        read,
         layout,
     })
 }

@@ -198,6 +198,11 @@ pub fn composite_direct_send(
             Message::Failed(why) => {
                 first_failure.get_or_insert(DistributedError::Rank { rank: from, why });
             }
+            Message::Ready(_) => {
+                return Err(DistributedError::Protocol(
+                    "a set-up message in the image exchange",
+                ));
+            }
             Message::Images(images) => {
                 for (root, p) in images {
                     let slot = given.get_mut(root).ok_or(DistributedError::Protocol(
@@ -233,8 +238,10 @@ pub fn composite_direct_send(
     Ok(Some(image))
 }
 
-/// This rank's side of [`composite_direct_send`] when it cannot take part at all (its set-up
-/// failed before it knew the tree: the volume could not be read, a setting is bad): it sends
+/// This rank's side of the first round of a sort-last render (the set-up round of
+/// [`super::render_sort_last`], or [`composite_direct_send`] called alone) when it cannot take
+/// part at all (its set-up failed before it knew the tree: the scene or volume could not be
+/// read, a setting is bad): it sends
 /// `why` to every rank in place of its images, receives every rank's message of the same round
 /// (so that no rank's send is left waiting), and returns the error every rank then returns,
 /// [`DistributedError::Rank`] naming the lowest failing rank. The other ranks, in
@@ -252,7 +259,7 @@ pub fn fail_direct_send(comm: &dyn Communicator, why: String) -> DistributedErro
             Ok(Message::Failed(why)) => {
                 first.get_or_insert(DistributedError::Rank { rank: from, why });
             }
-            Ok(Message::Images(_)) => {}
+            Ok(Message::Images(_) | Message::Ready(_)) => {}
             Err(e) => return e,
         }
     }
@@ -283,14 +290,61 @@ fn encode_images(v: &[(usize, &[[f32; 4]])]) -> Vec<u8> {
     out
 }
 
-/// What one rank sends another: its subtrees' stripes, or why it has none.
+/// What one rank sends another: its subtrees' stripes, or why it has none; or, in the set-up
+/// round before them ([`exchange_ready`]), what it read of its part.
 enum Message {
     Failed(String),
     Images(Vec<(usize, Pixels)>),
+    Ready(Ready),
+}
+
+/// A rank's set-up, shared with every rank before the images ([`exchange_ready`]): the value
+/// range of its part of a volume read in bricks (`None` where it read none, or read the volume
+/// whole), and whether its part holds non-finite floats.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Ready {
+    pub(super) range: Option<[f32; 2]>,
+    pub(super) non_finite: bool,
+}
+
+/// The set-up round, before [`composite_direct_send`]: every rank sends every rank its
+/// [`Ready`], or why it could not set up, and receives theirs (the round that
+/// [`fail_direct_send`] takes part in, so a rank that fails before knowing the request stops
+/// every rank here). Returns every rank's [`Ready`] in rank order, or
+/// [`DistributedError::Rank`] naming the lowest failing rank (on every rank alike).
+pub(super) fn exchange_ready(
+    comm: &dyn Communicator,
+    mine: std::result::Result<Ready, String>,
+) -> Result<Vec<Ready>> {
+    let msg = match &mine {
+        Ok(r) => Message::Ready(*r).encode(),
+        Err(why) => Message::Failed(why.clone()).encode(),
+    };
+    for s in 0..comm.size() {
+        comm.send(s, msg.clone())?;
+    }
+    let mut all = Vec::with_capacity(comm.size());
+    let mut first = None;
+    for from in 0..comm.size() {
+        match Message::decode(&comm.recv(from)?)? {
+            Message::Failed(why) => {
+                first.get_or_insert(DistributedError::Rank { rank: from, why });
+            }
+            Message::Ready(r) => all.push(r),
+            Message::Images(_) => {
+                return Err(DistributedError::Protocol("images in the set-up round"));
+            }
+        }
+    }
+    match first {
+        Some(e) => Err(e),
+        None => Ok(all),
+    }
 }
 
 impl Message {
-    /// Little-endian: tag (u32: 0 failed, 1 images); failed: the UTF-8 reason; images: count
+    /// Little-endian: tag (u32: 0 failed, 1 images, 2 ready); failed: the UTF-8 reason; ready:
+    /// flags (u32: 1 a range, 2 non-finite samples) and the range (2 × f32); images: count
     /// (u32), then per image the node (u32), the pixel count (u32) and the f32 channels.
     /// The buffer is sized once (a grown buffer would copy whole images and fault in their
     /// pages again; `bench-composite` under `mpirun`).
@@ -307,6 +361,16 @@ impl Message {
                     .map(|(node, p)| (*node, &p[..]))
                     .collect::<Vec<_>>(),
             ),
+            Message::Ready(r) => {
+                let mut out = Vec::with_capacity(16);
+                let flags = u32::from(r.range.is_some()) | u32::from(r.non_finite) << 1;
+                let [lo, hi] = r.range.unwrap_or([0.0, 0.0]);
+                out.extend_from_slice(&2u32.to_le_bytes());
+                out.extend_from_slice(&flags.to_le_bytes());
+                out.extend_from_slice(&lo.to_le_bytes());
+                out.extend_from_slice(&hi.to_le_bytes());
+                out
+            }
         }
     }
 
@@ -340,6 +404,15 @@ impl Message {
                     v.push((node, p));
                 }
                 Ok(Message::Images(v))
+            }
+            2 => {
+                let flags = u32_at(&mut at)?;
+                let lo = f32::from_bits(u32_at(&mut at)?);
+                let hi = f32::from_bits(u32_at(&mut at)?);
+                Ok(Message::Ready(Ready {
+                    range: (flags & 1 == 1).then_some([lo, hi]),
+                    non_finite: flags & 2 == 2,
+                }))
             }
             _ => Err(DistributedError::Protocol("an unknown message tag")),
         }

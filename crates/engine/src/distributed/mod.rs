@@ -9,9 +9,9 @@
 //! failure path, and a brick's partial image from the slabs
 //! ([`volsplat_splat::RenderSettings::owned_cells`]: the whole volume in memory, only the
 //! brick's cells drawn, every sample at its global position; composited, 156 dB from the
-//! single-process render and the same bits for any rank count, `tests.rs`). What is not yet: a
-//! rank reading only its bricks (the brick seam's `BrickCache`, `docs/design/brick-seam.md`),
-//! pre-integration across a brick face (a brick's first sample has no previous one), early
+//! single-process render and the same bits for any rank count, `tests.rs`), and ranks that read
+//! only their bricks of an OME-Zarr store (`store_tests.rs`; [`render_sort_last`]). What is not
+//! yet: a rank reading only its bricks of a NRRD file, pre-integration across a brick face (a brick's first sample has no previous one), early
 //! termination across bricks (each brick's image runs to its own opacity). X-ray is summed from
 //! bricks drawn by the sheets or the splat list, each drawing the voxels of its cells; MIP and
 //! MinIP take the extreme of the slabs' bricks, bit for bit the single-process projection.
@@ -26,6 +26,37 @@ pub use comm::{Communicator, FakeCluster, FakeComm};
 pub use composite::{Combine, Pixels, composite_direct_send, fail_direct_send, stripe_rows};
 pub use render::{SortLastImage, render_sort_last};
 pub use tree::{BrickTree, Eye, Node};
+
+/// A sort-last rank's part of a volume read in bricks
+/// ([`crate::Renderer`]'s part of an OME-Zarr store): what its ranges scan found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct RankPart {
+    /// `[min, max]` of the part's samples (data units); `None` for an empty part.
+    pub(crate) range: Option<[f32; 2]>,
+    /// Whether the part holds NaN or infinite floats (refused: `renderer::paged`).
+    pub(crate) non_finite: bool,
+}
+
+/// What one rank read of its part of a store ([`crate::Renderer::rank_reads`]): issue 32's "each
+/// rank reads only its bricks, with their halo". Bytes are decoded samples of the cache's
+/// bricks (`E³` samples each, `E` = cells per brick + 3: the shared face and a halo of one
+/// voxel each side); a store's compressed bytes are fewer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RankReads {
+    /// Cells per side of the cache's bricks (the largest power of two, at most 64, that
+    /// divides the sort-last brick).
+    pub brick: usize,
+    /// The cache's bricks that meet the rank's sort-last bricks: the only ones it may read.
+    pub region_bricks: usize,
+    /// The cache's bricks of the whole level.
+    pub level_bricks: usize,
+    /// Bytes read by the ranges scan (each of the region's bricks once).
+    pub scan_bytes: u64,
+    /// The frames' reads (bricks, bytes, evictions; `capacity`: the slots).
+    pub frames: volsplat_splat::CacheStats,
+    /// Bytes of the level's samples, had it been read whole.
+    pub level_bytes: u64,
+}
 
 /// What can go wrong while compositing across processes.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -61,5 +92,7 @@ pub enum DistributedError {
 /// The result type of this module.
 pub type Result<T> = std::result::Result<T, DistributedError>;
 
+#[cfg(test)]
+mod store_tests;
 #[cfg(test)]
 mod tests;

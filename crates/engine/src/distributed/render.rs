@@ -3,7 +3,9 @@
 //! ([`Renderer::render_brick`]) and the ranks compositing them over the fixed tree.
 
 use super::comm::Communicator;
-use super::composite::{Combine, Pixels, composite_direct_send, fail_direct_send};
+use super::composite::{
+    Combine, Pixels, Ready, composite_direct_send, exchange_ready, fail_direct_send,
+};
 use super::tree::{BrickTree, Eye};
 use super::{DistributedError, Result};
 use crate::Mode;
@@ -46,10 +48,19 @@ pub struct SortLastImage {
 ///   bricks is the single-process projection **bit for bit** (max and min are exact); rank 0
 ///   classifies it with the request's tables ([`volsplat_splat::extreme_picture`]).
 ///
-/// Every rank still loads the whole volume (reading only a rank's bricks is the brick seam's
-/// cache, not built yet). A rank that cannot set up (its volume unreadable, a bad setting)
-/// still takes its part in the exchange, sending its error instead of images, so every rank
-/// returns [`DistributedError::Rank`] naming the lowest failing rank and nobody waits.
+/// **Reading.** From an OME-Zarr store (composite, MIP, MinIP) each rank reads only the bricks
+/// of its part ([`crate::Renderer::rank_reads`] counts them): the grid and camera come from the
+/// store's metadata, the ranges scan reads only the bricks meeting the rank's sort-last bricks
+/// (`volsplat_splat::scan_level_in`), and the frames read them through a cache that never reads
+/// another. The ranks share their parts' value ranges in a set-up round, so presets, the
+/// projections' automatic window and the pre-integration test see the level's range: the
+/// image is the bits of the same sort-last render from the volume in memory. Refused on every
+/// rank alike: the automatic composite transfer function (a histogram of the whole level)
+/// and float stores with NaN or ±∞. X-ray and other files: every rank reads the volume whole.
+///
+/// A rank that cannot set up (its volume unreadable, a bad setting) still takes its part in
+/// the set-up round, sending its error, so every rank returns [`DistributedError::Rank`]
+/// naming the lowest failing rank and nobody waits.
 pub fn render_sort_last(
     comm: &dyn Communicator,
     renderer: &mut Renderer,
@@ -63,10 +74,27 @@ pub fn render_sort_last(
         request.quality.antialias = crate::request::AntialiasChoice::None;
     }
     let request = &request;
-    let (tree, eye, combine) = match set_up(renderer, request, brick) {
-        Ok(s) => s,
-        Err(e) => return Err(fail_direct_send(comm, e.to_string())),
+    // Set-up: the tree, and the rank's part of a store (only its bricks scanned); then the
+    // set-up round, which shares a failure or the parts' value ranges.
+    let set = set_up(renderer, request, brick).and_then(|s| {
+        let region = rank_region(&s.0, comm.rank(), comm.size());
+        let part = renderer
+            .open_rank_part(request, &region)
+            .map_err(|e| DistributedError::Engine(e.to_string()))?;
+        Ok((s, part))
+    });
+    let mine = match &set {
+        Ok((_, part)) => Ok(Ready {
+            range: part.and_then(|p| p.range),
+            non_finite: part.is_some_and(|p| p.non_finite),
+        }),
+        Err(e) => Err(e.to_string()),
     };
+    let all = exchange_ready(comm, mine)?;
+    let ((tree, eye, combine), part) = set?;
+    if part.is_some() {
+        share_range(comm, renderer, &all)?;
+    }
     let (w, h) = (request.width, request.height);
     let pixels = composite_direct_send(comm, &tree, eye, combine, (w, h), &mut |b| {
         let [nx, ny, _] = tree.dims;
@@ -107,9 +135,11 @@ pub fn render_sort_last(
             (image, Some(values.ok_or_else(bad)?))
         }
         Combine::Max | Combine::Min => {
-            let tables = renderer
-                .frame_tables(request)
-                .map_err(|e| DistributedError::Engine(e.to_string()))?;
+            let engine = |e: crate::EngineError| DistributedError::Engine(e.to_string());
+            let tables = match renderer.rank_frame_tables(request).map_err(engine)? {
+                Some(t) => t,
+                None => renderer.frame_tables(request).map_err(engine)?,
+            };
             let (image, values) = volsplat_splat::extreme_picture(w, h, values(), &tables);
             (image, Some(values.ok_or_else(bad)?))
         }
@@ -136,12 +166,25 @@ fn set_up(
         Mode::Minip => Combine::Min,
     };
     let engine = |e: crate::EngineError| DistributedError::Engine(e.to_string());
-    let grid = renderer
-        .volume(&request.scene.volume)
-        .map_err(engine)?
-        .grid()
-        .clone();
-    let camera = renderer.camera(request).map_err(engine)?;
+    // A store read in bricks: the grid and the camera from its metadata, no voxel read.
+    let (grid, camera) = match renderer.part_grid(request).map_err(engine)? {
+        Some(grid) => {
+            let camera = request
+                .scene
+                .camera
+                .resolve(grid.drawn_bounds_world())
+                .map_err(|e| DistributedError::Engine(e.to_string()))?;
+            (grid, camera)
+        }
+        None => {
+            let grid = renderer
+                .volume(&request.scene.volume)
+                .map_err(engine)?
+                .grid()
+                .clone();
+            (grid, renderer.camera(request).map_err(engine)?)
+        }
+    };
     let cells = grid.dims.map(|d| d.saturating_sub(1).max(1));
     let tree = BrickTree::new(cells.map(|c| c.div_ceil(brick)), brick)
         .ok_or(DistributedError::Protocol("an empty brick grid"))?;
@@ -152,4 +195,45 @@ fn set_up(
         Eye::Point(position.into())
     };
     Ok((tree, eye, combine))
+}
+
+/// The boxes of cells (`[lo, hi)`, index space) of rank `rank`'s run of the tree's bricks
+/// ([`BrickTree::rank_leaves`]): the only bricks it reads of a store.
+pub(super) fn rank_region(tree: &BrickTree, rank: usize, size: usize) -> Vec<[[usize; 3]; 2]> {
+    let (a, b) = tree.rank_leaves(rank, size);
+    let [nx, ny, _] = tree.dims;
+    tree.leaves[a..b]
+        .iter()
+        .map(|&i| {
+            let at = [i % nx, i / nx % ny, i / (nx * ny)];
+            [at.map(|x| x * tree.brick), at.map(|x| (x + 1) * tree.brick)]
+        })
+        .collect()
+}
+
+/// After the set-up round, with every rank's part ([`Ready`] in `all`): every rank refuses
+/// alike where a part holds non-finite floats (their replacement is the level's finite
+/// extremes), else gives its part the level's value range, the union of the parts' (exact:
+/// min and max). A rank that fails to take it stops every rank in the image exchange
+/// ([`fail_direct_send`]).
+fn share_range(comm: &dyn Communicator, renderer: &mut Renderer, all: &[Ready]) -> Result<()> {
+    if let Some(r) = all.iter().position(|r| r.non_finite) {
+        return Err(DistributedError::Setting(format!(
+            "rank {r}'s bricks hold NaN or infinite samples: a float store with non-finite \
+             samples cannot be read per rank yet (they become the whole level's finite \
+             extremes, which no rank reads)"
+        )));
+    }
+    let range = all
+        .iter()
+        .filter_map(|r| r.range)
+        .fold([f32::INFINITY, f32::NEG_INFINITY], |a, r| {
+            [a[0].min(r[0]), a[1].max(r[1])]
+        });
+    if range[0] > range[1] {
+        return Err(fail_direct_send(comm, "no rank read a sample".into()));
+    }
+    renderer
+        .set_rank_range(range)
+        .map_err(|e| fail_direct_send(comm, e.to_string()))
 }

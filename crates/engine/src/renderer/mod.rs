@@ -250,6 +250,8 @@ impl Renderer {
     /// drawn, each at its global position. The request must be drawn by the image-aligned
     /// slabs at the full level in composite, MIP and MinIP, or by the sheets or the splat list
     /// in X-ray (the voxels whose cell lies in the box; an error naming `renderer` otherwise).
+    /// From an OME-Zarr store (not in X-ray) only the bricks of the box are read (the rank's
+    /// part opened by [`crate::distributed::render_sort_last`] where it holds the box).
     pub fn render_brick(
         &mut self,
         request: &RenderRequest,
@@ -273,15 +275,15 @@ impl Renderer {
         report(progress, 0.0, Stage::Load)?;
         let (source, level_note) = self.concrete_source(request)?;
         let source = &source;
-        if let Some(budget) = self.paged_budget(request, source)? {
-            if owned.is_some() || ladder.is_some() {
+        if let Some(budget) = self.paged_budget(request, source, owned.is_some())? {
+            if ladder.is_some() {
                 return Err(EngineError::request(
                     "memory",
-                    "a store read out of core is drawn whole by the image-aligned slabs \
-                     (not by bricks for sort-last rendering, nor by a refinement ladder)",
+                    "a store read out of core is drawn by the image-aligned slabs (not by a \
+                     refinement ladder)",
                 ));
             }
-            return self.render_paged(request, source, budget, level_note, progress);
+            return self.render_paged(request, source, budget, level_note, owned, progress);
         }
         let loaded = self.load(source)?;
         let (vol, fresh_volume) = (Arc::clone(&loaded.value.volume), loaded.fresh);

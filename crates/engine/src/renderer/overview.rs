@@ -20,7 +20,7 @@ impl Renderer {
     /// nothing read; otherwise the loaded volume's (loading it once).
     pub fn volume_grid(&mut self, request: &RenderRequest) -> Result<(Grid, ScalarType)> {
         let (source, _) = self.concrete_source(request)?;
-        if self.paged_budget(request, &source)?.is_some()
+        if self.paged_budget(request, &source, false)?.is_some()
             && let VolumeSource::File { path, level, .. } = &source
         {
             let store = ZarrStore::open(path, &self.limits)?;
@@ -40,7 +40,7 @@ impl Renderer {
     /// store has no level that small.
     pub fn overview(&mut self, request: &RenderRequest) -> Result<Arc<AnyVolume>> {
         let (source, _) = self.concrete_source(request)?;
-        if self.paged_budget(request, &source)?.is_none() {
+        if self.paged_budget(request, &source, false)?.is_none() {
             return self.volume(&source);
         }
         let VolumeSource::File { path, .. } = &source else {
@@ -84,7 +84,7 @@ impl Renderer {
             timepoint: 0,
         };
         // The smallest arena: only the scan is wanted.
-        let paged = super::paged::open_paged(&source, 8 << 20, &self.limits)?;
+        let paged = super::paged::open_paged(&source, 8 << 20, &self.limits, None)?;
         Ok(paged.notes)
     }
 }

@@ -4,6 +4,14 @@
 //! read whole. The level's per-brick ranges are read once per store, level and selection (one
 //! pass over the bricks, in parallel, a few at a time) and give the empty-space skipping and
 //! the value range without keeping the level.
+//!
+//! A sort-last rank's **part** (issue 32, decision 0038): a brick of a store
+//! ([`Renderer::render_brick`]) reads only the cache bricks meeting the rank's sort-last bricks
+//! (their ranges scanned, `volsplat_splat::scan_level_in`; the cache
+//! `BrickCache::restricted`), in bricks of the largest power of two (≤ [`BRICK`]) dividing the
+//! sort-last brick, so no cache brick holds another rank's cells. The blocks outside the part
+//! are kept out of every frame by `RenderSettings::owned_cells` (inactive in composite, a NaN
+//! bound in MIP/MinIP), so the bricks never read are never sampled.
 
 use super::cache::{Cached, build_pool, cached, resolve_tf};
 use super::draw::{forward, sheets_done, slab_stats};
@@ -17,7 +25,9 @@ use std::sync::Arc;
 use std::time::Instant;
 use volsplat_core::{AnyVolume, Grid, ScalarType};
 use volsplat_io::{ZarrSelection, ZarrSource, ZarrStore};
-use volsplat_splat::{BrickCache, BrickGrid, CacheStats, scan_level};
+use volsplat_splat::{
+    BrickCache, BrickGrid, CacheStats, LevelScan, bricks_meeting, scan_level, scan_level_in,
+};
 
 /// Cells per brick side of out-of-core frames: 64³ u16 bricks of 67³ voxels are 0.57 MiB,
 /// so a budget of 256 MiB holds about 440 of them.
@@ -36,7 +46,26 @@ pub(super) struct Paged {
     /// The coarsest level read whole (for the automatic transfer function), where it is small.
     preview: Option<Arc<AnyVolume>>,
     pub(super) notes: Vec<String>,
+    /// A sort-last rank's part ([`Region`]): its scan, to give the bricks it did not read the
+    /// level's range ([`Renderer::set_rank_range`]); `None` for a whole level.
+    part: Option<Part>,
 }
+
+/// What a sort-last rank's part of a level knows of itself.
+struct Part {
+    scan: LevelScan,
+    /// Whether `range` is the level's ([`Renderer::set_rank_range`]), not only the part's.
+    range_is_level: bool,
+    /// Cells per brick of the part's cache.
+    brick: usize,
+    /// The level's bricks and decoded bytes, had it been read whole.
+    level_bricks: usize,
+    level_bytes: u64,
+}
+
+/// The boxes of cells (`[lo, hi)`, index space of the level) whose bricks a sort-last rank
+/// reads; the cache of a store's level is keyed by it (`None`: the whole level).
+type Region = Option<Vec<[[usize; 3]; 2]>>;
 
 /// [`BrickCache`] of the level's sample type.
 enum AnyCache {
@@ -79,10 +108,15 @@ fn auto_budget() -> u64 {
 impl Renderer {
     /// The budget `source` is read under out of core, where it is: an OME-Zarr store's level
     /// with `request.memory` set, or too large for half the available memory.
+    ///
+    /// A sort-last brick (`owned`) of a store is always read in bricks (at `request.memory`,
+    /// or half the available memory), except in X-ray: the sheets and the splat list read every
+    /// voxel, so an X-ray brick reads the level whole (decision 0038).
     pub(super) fn paged_budget(
         &self,
         request: &RenderRequest,
         source: &VolumeSource,
+        owned: bool,
     ) -> Result<Option<u64>> {
         let VolumeSource::File {
             path,
@@ -96,6 +130,9 @@ impl Renderer {
         if !ZarrStore::is_store(path) {
             return Ok(None);
         }
+        if owned && request.mode != Mode::Xray {
+            return Ok(Some(request.memory.unwrap_or_else(auto_budget)));
+        }
         if let Some(b) = request.memory {
             return Ok(Some(b));
         }
@@ -107,17 +144,140 @@ impl Renderer {
         Ok((bytes > budget).then_some(budget))
     }
 
-    /// The cache of `source`'s level under `budget`, opened (and its ranges read) once.
+    /// The cache of `source`'s level under `budget`, opened (and its ranges read) once: the
+    /// whole level (`owned` `None`), or a sort-last rank's part holding the box `owned` (the
+    /// part opened by [`Renderer::open_rank_part`] where it holds the box, else the box alone).
     fn paged(
         &mut self,
         source: &VolumeSource,
         budget: u64,
+        request_memory: Option<u64>,
+        owned: Option<[[usize; 3]; 2]>,
         pool: &rayon::ThreadPool,
     ) -> Result<super::cache::Fetched<'_, Paged>> {
         let limits = self.limits.clone();
-        cached(&mut self.paged, (source.clone(), budget), || {
-            pool.install(|| open_paged(source, budget, &limits))
+        // A rank's part is kept at the budget it was opened with (an automatic budget follows
+        // the memory available, which changes from call to call).
+        let (budget, region): (u64, Region) = match (owned, &self.paged) {
+            (None, _) => (budget, None),
+            (Some(o), Some(c))
+                if c.key.0 == *source
+                    && (c.key.1 == budget || request_memory.is_none())
+                    && c.key.2.as_ref().is_some_and(|r| r.contains(&o)) =>
+            {
+                (c.key.1, c.key.2.clone())
+            }
+            (Some(o), _) => (budget, Some(vec![o])),
+        };
+        let key = (source.clone(), budget, region.clone());
+        cached(&mut self.paged, key, || {
+            pool.install(|| open_paged(source, budget, &limits, region.as_deref()))
         })
+    }
+
+    /// The grid of `request`'s volume where a sort-last rank reads it in bricks (an OME-Zarr
+    /// store's level, not in X-ray), from the store's metadata (no voxel read); `None` where
+    /// the volume is read whole.
+    pub(crate) fn part_grid(&self, request: &RenderRequest) -> Result<Option<Grid>> {
+        let (source, _) = self.concrete_source(request)?;
+        if self.paged_budget(request, &source, true)?.is_none() {
+            return Ok(None);
+        }
+        let VolumeSource::File { path, level, .. } = &source else {
+            return Ok(None);
+        };
+        let store = ZarrStore::open(path, &self.limits)?;
+        Ok(Some(store.grid(level.index().unwrap_or(0))?))
+    }
+
+    /// Opens a sort-last rank's part of `request`'s volume for reading in bricks, where it is
+    /// read so (an OME-Zarr store, not in X-ray): the bricks meeting the boxes of cells
+    /// `region` (the rank's sort-last bricks) are scanned for their ranges and no other brick
+    /// is ever read. Returns the part's value range and whether it holds non-finite floats,
+    /// or `None` where the volume is read whole. The part's range is not the level's: give
+    /// the level's with [`Renderer::set_rank_range`] before rendering where the picture
+    /// depends on it.
+    pub(crate) fn open_rank_part(
+        &mut self,
+        request: &RenderRequest,
+        region: &[[[usize; 3]; 2]],
+    ) -> Result<Option<crate::distributed::RankPart>> {
+        let (source, _) = self.concrete_source(request)?;
+        let Some(budget) = self.paged_budget(request, &source, true)? else {
+            return Ok(None);
+        };
+        let threads = request.threads;
+        let pool = Arc::clone(cached(&mut self.pool, threads, || build_pool(threads))?.value);
+        let limits = self.limits.clone();
+        let key = (source.clone(), budget, Some(region.to_vec()));
+        let got = cached(&mut self.paged, key, || {
+            pool.install(|| open_paged(&source, budget, &limits, Some(region)))
+        })?;
+        let Some(part) = &got.value.part else {
+            return Ok(None);
+        };
+        let range = part.scan.value_range();
+        Ok(Some(crate::distributed::RankPart {
+            range: (range[0] <= range[1]).then_some(range),
+            non_finite: part.scan.non_finite.is_some(),
+        }))
+    }
+
+    /// Gives the rank's part opened by [`Renderer::open_rank_part`] the level's value range
+    /// `range` (data units; the union of every rank's part's range): the value range of its
+    /// frames (presets, the projections' automatic ramp) and the range of the blocks it did
+    /// not read (the slabs' automatic pre-integration test folds every block's range), so
+    /// that its frames are those of the level read whole.
+    pub(crate) fn set_rank_range(&mut self, range: [f32; 2]) -> Result<()> {
+        let Some(paged) = self.paged.as_mut().map(|c| &mut c.value) else {
+            return Ok(());
+        };
+        let Some(part) = paged.part.as_mut() else {
+            return Ok(());
+        };
+        part.scan.fill_unread(range);
+        paged.bricks = Arc::new(part.scan.brick_grid()?);
+        paged.range = (range[0] as f64, range[1] as f64);
+        part.range_is_level = true;
+        Ok(())
+    }
+
+    /// What this renderer read of a sort-last rank's part of a store: the bricks of its
+    /// ranges scan and of its frames, against the level read whole; `None` where no part is
+    /// open (the volume was read whole).
+    pub fn rank_reads(&self) -> Option<crate::distributed::RankReads> {
+        let paged = &self.paged.as_ref()?.value;
+        let part = paged.part.as_ref()?;
+        Some(crate::distributed::RankReads {
+            brick: part.brick,
+            region_bricks: part.scan.read.iter().filter(|&&r| r).count(),
+            level_bricks: part.level_bricks,
+            scan_bytes: part.scan.bytes_read,
+            frames: with_cache!(&paged.cache, c => c.stats()),
+            level_bytes: part.level_bytes,
+        })
+    }
+
+    /// The classification tables of `request` drawn from the rank's part of a store (rank 0
+    /// classifies the composited MIP/MinIP with them), or `None` where no part is open.
+    pub(crate) fn rank_frame_tables(
+        &mut self,
+        request: &RenderRequest,
+    ) -> Result<Option<Arc<volsplat_core::CrioTables>>> {
+        let Some((range, preview)) = self
+            .paged
+            .as_ref()
+            .filter(|c| c.value.part.is_some())
+            .map(|c| (c.value.range, c.value.preview.clone()))
+        else {
+            return Ok(None);
+        };
+        let vol = match preview {
+            Some(v) => v,
+            None => placeholder()?,
+        };
+        let tf = resolve_tf(request, &vol, range, &mut self.auto_tf)?.tf;
+        Ok(Some(self.tables(request, &tf)?.0))
     }
 
     /// Renders `request` out of core from `source` (a store's level) under `budget`: the
@@ -129,12 +289,16 @@ impl Renderer {
         source: &VolumeSource,
         budget: u64,
         level_note: Option<String>,
+        owned: Option<[[usize; 3]; 2]>,
         progress: &mut (dyn FnMut(&Progress) -> bool + Send),
     ) -> Result<Output> {
         let t0 = Instant::now();
         let threads = request.threads;
         let pool = Arc::clone(cached(&mut self.pool, threads, || build_pool(threads))?.value);
-        let paged = self.paged(source, budget, &pool)?;
+        let paged = self.paged(source, budget, request.memory, owned, &pool)?;
+        if let Some(part) = &paged.value.part {
+            check_part(request, part)?;
+        }
         let fresh = paged.fresh;
         let mut notes: Vec<String> = level_note.into_iter().collect();
         if fresh {
@@ -163,10 +327,7 @@ impl Renderer {
                 ));
             }
             // Not read: only the automatic composite function reads it.
-            None => Arc::new(AnyVolume::U8(volsplat_core::Volume::from_fn(
-                Grid::with_dims([1, 1, 1])?,
-                |_, _, _| 0u8,
-            )?)),
+            None => placeholder()?,
         };
         let resolved = resolve_tf(request, &vol, range, &mut self.auto_tf)?;
         let tf = resolved.tf;
@@ -186,6 +347,7 @@ impl Renderer {
         let mut settings = request.splat_settings();
         settings.clip = request.scene.clipping.world_planes(&grid)?;
         settings.slab = slabs.thickness;
+        settings.owned_cells = owned;
         let prepare_ms = if fresh || tables_fresh {
             ms(t_prep)
         } else {
@@ -325,6 +487,54 @@ fn finish(
     })
 }
 
+/// A volume read whole to stand in where none is read (only the automatic composite transfer
+/// function reads one, and a rank's part refuses it).
+fn placeholder() -> Result<Arc<AnyVolume>> {
+    Ok(Arc::new(AnyVolume::U8(volsplat_core::Volume::from_fn(
+        Grid::with_dims([1, 1, 1])?,
+        |_, _, _| 0u8,
+    )?)))
+}
+
+/// What a sort-last rank's part of a store cannot draw as the level read whole would: a float
+/// level with NaN or ±∞ (they become the *level's* finite extremes, which a part does not
+/// know), the automatic composite transfer function (a histogram of the whole level), and a
+/// preset or automatic range before the level's range is known ([`Renderer::set_rank_range`]).
+fn check_part(request: &RenderRequest, part: &Part) -> Result<()> {
+    if let Some(nf) = &part.scan.non_finite {
+        return Err(EngineError::request(
+            "volume",
+            format!(
+                "a rank's bricks hold {} NaN and {} infinite samples: a float store with \
+                 non-finite samples cannot be read per rank yet (they become the whole level's \
+                 finite extremes, which one rank does not read)",
+                nf.nan,
+                nf.pos_inf + nf.neg_inf
+            ),
+        ));
+    }
+    let spec = &request.scene.transfer_function;
+    let auto = matches!(spec, crate::scene::TransferSpec::Auto);
+    if auto && request.mode == Mode::Composite {
+        return Err(EngineError::request(
+            "transfer_function",
+            "a sort-last rank reading only its bricks needs a transfer function or a preset in \
+                 composite (the automatic one is a histogram of the whole volume; `volsplat render \
+                 --save-scene` records the function it used)",
+        ));
+    }
+    let needs_range = !matches!(spec, crate::scene::TransferSpec::Function(_));
+    if needs_range && !part.range_is_level {
+        return Err(EngineError::request(
+            "transfer_function",
+            "a brick rendered alone from a store knows only its own value range: a preset or \
+                 the automatic projection window needs the level's (render through \
+                 distributed::render_sort_last, which shares it, or give a transfer function)",
+        ));
+    }
+    Ok(())
+}
+
 /// The error for what an out-of-core frame cannot draw.
 fn refused(what: &str) -> EngineError {
     EngineError::request(
@@ -358,6 +568,7 @@ pub(super) fn open_paged(
     source: &VolumeSource,
     budget: u64,
     limits: &volsplat_io::Limits,
+    region: Option<&[[[usize; 3]; 2]]>,
 ) -> Result<Paged> {
     let VolumeSource::File {
         path,
@@ -381,46 +592,70 @@ pub(super) fn open_paged(
         EngineError::request("volume", "the level's sample type cannot be rendered")
     })?;
     let arena = (budget as f64 * ARENA_SHARE) as u64;
-    let sidecar_note;
+    let mut sidecar_note = None;
+    let brick = region.map_or(BRICK, |r| part_brick(r, grid.dims));
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
-            let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, BRICK)?;
-            let layout = volsplat_core::source::BrickSource::layout(&source, level)
-                .cloned()
-                .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
-            let (scan, kept) = scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
-                Ok(scan_level(&source.as_stored(), level)?)
-            })?;
-            sidecar_note = kept;
-            let source = match scan.finite {
-                Some([lo, hi]) if scan.non_finite.is_some() => {
-                    source.with_finite_range(level, [lo, hi])?
+            let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, brick)?;
+            let (scan, cache) = match region {
+                None => {
+                    let layout = volsplat_core::source::BrickSource::layout(&source, level)
+                        .cloned()
+                        .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
+                    let (scan, kept) =
+                        scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
+                            Ok(scan_level(&source.as_stored(), level)?)
+                        })?;
+                    sidecar_note = kept;
+                    let source = match scan.finite {
+                        Some([lo, hi]) if scan.non_finite.is_some() => {
+                            source.with_finite_range(level, [lo, hi])?
+                        }
+                        _ => source,
+                    };
+                    let cache = BrickCache::new(Arc::new(source), level, arena)?;
+                    (scan, cache)
                 }
-                _ => source,
+                Some(r) => {
+                    // Only the part's bricks, as stored: non-finite floats are refused
+                    // (`check_part`), never replaced by the part's own extremes.
+                    let scan = scan_level_in(&source.as_stored(), level, r)?;
+                    let allowed = bricks_meeting(&scan.layout, r);
+                    let cache = BrickCache::restricted(Arc::new(source), level, arena, allowed)?;
+                    (scan, cache)
+                }
             };
             let bricks = Arc::new(scan.brick_grid()?);
-            let cache = BrickCache::new(Arc::new(source), level, arena)?;
             let [lo, hi] = scan.value_range();
             let note = format!(
-                "out of core: level {level} ({} × {} × {}) in {} bricks of {BRICK}³ cells, \
+                "out of core: level {level} ({} × {} × {}){} in {} bricks of {brick}³ cells, \
                  their ranges ready in {:.0} ms ({:.1} MiB read); a cache of {} bricks",
                 grid.dims[0],
                 grid.dims[1],
                 grid.dims[2],
+                if region.is_some() {
+                    ", a rank's part,"
+                } else {
+                    ""
+                },
                 scan.bricks,
                 ms(t0),
                 scan.bytes_read as f64 / (1u64 << 20) as f64,
-                cache.capacity()
+                cache.stats().capacity
             );
+            let level_bytes =
+                grid.dims.iter().product::<usize>() as u64 * std::mem::size_of::<$t>() as u64;
             (
                 AnyCache::$variant(cache),
                 bricks,
                 (lo as f64, hi as f64),
                 note,
+                scan,
+                level_bytes,
             )
         }};
     }
-    let (cache, bricks, range, note) = match kind {
+    let (cache, bricks, range, note, scan, level_bytes) = match kind {
         ScalarType::U8 => open!(u8, U8),
         ScalarType::I8 => open!(i8, I8),
         ScalarType::U16 => open!(u16, U16),
@@ -430,7 +665,8 @@ pub(super) fn open_paged(
     // The coarsest level, read whole where it is small: the automatic transfer function's
     // histogram.
     let coarsest = store.levels().len() - 1;
-    let small = store.levels()[coarsest].dims.iter().product::<u64>() <= PREVIEW_SAMPLES;
+    let small = region.is_none()
+        && store.levels()[coarsest].dims.iter().product::<u64>() <= PREVIEW_SAMPLES;
     let preview = if small {
         Some(Arc::new(store.read_level(coarsest, sel)?))
     } else {
@@ -443,7 +679,32 @@ pub(super) fn open_paged(
         range,
         preview,
         notes: std::iter::once(note).chain(sidecar_note).collect(),
+        part: region.map(|_| Part {
+            level_bricks: scan.layout.brick_count(),
+            range_is_level: scan.read.iter().all(|&r| r),
+            scan,
+            brick,
+            level_bytes,
+        }),
     })
+}
+
+/// Cells per brick of a rank's part: the largest power of two (at most [`BRICK`], at least 8)
+/// that divides every bound of the boxes `region` inside the level (of `dims` voxels), so that
+/// the bricks meeting a box hold no cell outside it.
+fn part_brick(region: &[[[usize; 3]; 2]], dims: [usize; 3]) -> usize {
+    let cells = dims.map(|d| d.saturating_sub(1).max(1));
+    let mut shift = BRICK.trailing_zeros();
+    for [lo, hi] in region {
+        for a in 0..3 {
+            for v in [lo[a], hi[a]] {
+                if v > 0 && v < cells[a] {
+                    shift = shift.min(v.trailing_zeros());
+                }
+            }
+        }
+    }
+    (1usize << shift).max(8)
 }
 
 /// The level's ranges: kept from an earlier open of the same unchanged level
@@ -479,4 +740,4 @@ fn scan_or_kept(
 }
 
 /// The cache slot of out-of-core levels: one store level and budget at a time.
-pub(super) type PagedSlot = Option<Cached<(VolumeSource, u64), Paged>>;
+pub(super) type PagedSlot = Option<Cached<(VolumeSource, u64, Region), Paged>>;

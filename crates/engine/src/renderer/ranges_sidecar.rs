@@ -154,6 +154,7 @@ impl Fingerprint {
                 ),
             bricks: n,
             bytes_read: 0,
+            read: vec![true; n],
         })
     }
 

@@ -485,3 +485,84 @@ fn from_ranges8_refuses_a_wrong_length() {
     assert!(e.to_string().contains("ranges8"), "{e}");
     assert!(BrickGrid::from_ranges8(&l, &[[0.0, 1.0]; 48]).is_ok());
 }
+
+#[test]
+fn a_scan_of_a_region_reads_only_its_bricks_and_agrees_with_the_whole_scan_there() {
+    // 70 × 45 × 20 voxels in bricks of 8 cells: 9 × 6 × 3 bricks. The region: cells
+    // [16, 40) × [8, 44) × [0, 19) (the last upper bound past the last cell), two boxes.
+    let inner = InMemory::new(volume::<u16>([70, 45, 20]), 8).unwrap();
+    let whole = scan_level(&inner, 0).unwrap();
+    let region = [[[16, 8, 0], [32, 44, 19]], [[32, 8, 0], [40, 44, 19]]];
+    // A brick outside the region fails to read: the scan must never ask for it.
+    let s = Failing {
+        inner,
+        bad: key([0, 0, 0]),
+        calls: AtomicUsize::new(0),
+    };
+    let wanted = bricks_meeting(&whole.layout, &region);
+    let expected: Vec<usize> = (0..wanted.len()).filter(|&i| wanted[i]).collect();
+    // b_i in 2..5, b_j in 1..6 (cells 8..44 meet bricks 1..=5), b_k in 0..3.
+    assert_eq!(expected.len(), 3 * 5 * 3);
+    let mut scan = scan_level_in(&s, 0, &region).unwrap();
+    assert_eq!(s.calls.load(Ordering::Relaxed), 45);
+    assert_eq!(scan.bricks, 45);
+    assert_eq!(scan.bytes_read, 45 * SLOT_U16_B8);
+    assert_eq!(scan.read, wanted);
+    for (i, &w) in wanted.iter().enumerate() {
+        if w {
+            assert_eq!(scan.ranges8_of(i), whole.ranges8_of(i), "brick {i}");
+            assert_eq!(scan.ranges[i], whole.ranges[i]);
+        } else {
+            assert!(scan.ranges8_of(i).iter().all(|r| r[0] > r[1]), "brick {i}");
+        }
+    }
+    let part = scan.value_range();
+    assert!(part[0] >= whole.value_range()[0] && part[1] <= whole.value_range()[1]);
+    scan.fill_unread(whole.value_range());
+    assert_eq!(scan.value_range(), whole.value_range());
+    let g = scan.brick_grid().unwrap();
+    let fold = g
+        .ranges
+        .iter()
+        .fold([f32::INFINITY, f32::NEG_INFINITY], |a, r| {
+            [a[0].min(r[0]), a[1].max(r[1])]
+        });
+    assert_eq!(fold, whole.value_range());
+    assert!(whole.read.iter().all(|&r| r));
+}
+
+#[test]
+fn a_restricted_cache_reads_only_its_bricks_and_counts_the_others_as_resident() {
+    let inner = InMemory::new(volume::<u16>([37, 20, 9]), 8).unwrap();
+    let bad = key([0, 0, 0]);
+    let s = Arc::new(Failing {
+        inner,
+        bad,
+        calls: AtomicUsize::new(0),
+    });
+    let layout = s.layout(0).unwrap().clone();
+    // Bricks 5 × 3 × 1; allowed: cells [16, 36) × [0, 19): b_i 2..5, every b_j.
+    let allowed = bricks_meeting(&layout, &[[[16, 0, 0], [36, 19, 8]]]);
+    assert_eq!(allowed.iter().filter(|&&a| a).count(), 9);
+    let wrong = BrickCache::restricted(s.clone(), 0, 1 << 30, vec![true; 3]).unwrap_err();
+    assert!(wrong.to_string().contains("allowed bricks"), "{wrong}");
+    let mut c = BrickCache::restricted(s.clone(), 0, 1 << 30, allowed.clone()).unwrap();
+    // Slots for the allowed bricks only, however large the budget.
+    assert_eq!(c.stats().capacity, 9);
+    assert_eq!(c.capacity(), 15);
+    // Every brick asked for: only the allowed ones are read (the bad one is not).
+    c.make_resident(&all_keys(&layout)).unwrap();
+    assert_eq!(s.calls.load(Ordering::Relaxed), 9);
+    let st = c.stats();
+    assert_eq!(
+        (st.reads, st.resident, st.bytes_read),
+        (9, 9, 9 * SLOT_U16_B8)
+    );
+    for k in all_keys(&layout) {
+        let i = c.index(k.b.map(|x| x as usize));
+        assert_eq!(c.is_resident(k), allowed[i], "{k:?}");
+    }
+    assert!(c.fetch(&[bad]).unwrap().is_empty());
+    assert_eq!(s.calls.load(Ordering::Relaxed), 9);
+    assert_arena_holds_bricks(&c, &*s);
+}
