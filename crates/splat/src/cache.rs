@@ -28,6 +28,17 @@ const NONE: u32 = u32::MAX;
 /// bricks, whatever the thread count, so that a failing read leaves the same state for any).
 const BATCH_BYTES: usize = 64 << 20;
 
+/// The share of the budget that one batch of reads may hold (`budget / READ_SHARE`): the
+/// bricks a batch reads (and their decoding buffers, one brick per read in flight) come on top
+/// of the arena and the read-ahead, so a batch is bounded by the budget, not only by
+/// [`BATCH_BYTES`] (BENCHMARKS §31: 64 bricks of 0.57 MiB in flight under an 8 MiB budget).
+const READ_SHARE: u64 = 16;
+
+/// Bytes one brick read holds while it is in flight, as a multiple of its slot: the region read
+/// from the source, the slot cut from it and a decoded chunk or two of the store (a store's
+/// reader decodes whole chunks; 64³ chunks are about a slot each).
+pub const READ_COST_SLOTS: u64 = 4;
+
 /// Counters of a [`BrickCache`] since it was made.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct CacheStats {
@@ -106,6 +117,14 @@ fn slots(budget: u64, slot_len: usize, size: usize, pad: usize, bricks: usize) -
         .unwrap_or(usize::MAX)
         .min(by_offsets)
         .min(bricks)
+}
+
+/// Bricks of `slot_bytes` read at once so that `in_flight` bytes hold them while they are read
+/// ([`READ_COST_SLOTS`] slots each): at least 1, at most 64 and [`BATCH_BYTES`].
+fn per_batch(in_flight: u64, slot_bytes: u64) -> usize {
+    let by_bytes = in_flight / (slot_bytes * READ_COST_SLOTS).max(1);
+    let cap = (BATCH_BYTES as u64 / slot_bytes.max(1)).clamp(1, 64);
+    by_bytes.clamp(1, cap) as usize
 }
 
 /// The layout of `level` of `source`, or an error naming the level.
@@ -287,7 +306,25 @@ impl<T: Scalar> BrickCache<T> {
             .filter(|&(_, i)| self.slot_of[i] == NONE)
             .map(|(k, _)| k)
             .collect();
-        missing.par_iter().map(|&k| self.read(k)).collect()
+        let mut out = Vec::with_capacity(missing.len());
+        for batch in missing.chunks(self.per_batch()) {
+            out.extend(
+                batch
+                    .par_iter()
+                    .map(|&k| self.read(k))
+                    .collect::<Result<Vec<_>>>()?,
+            );
+        }
+        Ok(out)
+    }
+
+    /// Bricks read at once by [`BrickCache::fetch`] and [`BrickCache::make_resident_with`]:
+    /// those whose reads hold at most `budget / READ_SHARE` bytes ([`per_batch`]), so that a
+    /// batch (read in parallel, at most that many reads in flight) stays a small share of the
+    /// budget whatever the thread count.
+    fn per_batch(&self) -> usize {
+        let slot_bytes = (self.slot_len * std::mem::size_of::<T>()) as u64;
+        per_batch(self.budget / READ_SHARE, slot_bytes)
     }
 
     /// Makes the bricks of `keys` resident (duplicates count once): reads the missing ones from
@@ -353,14 +390,20 @@ impl<T: Scalar> BrickCache<T> {
         for b in fetched {
             given.insert(b.key, b);
         }
-        let per_batch = (BATCH_BYTES / (self.slot_len * std::mem::size_of::<T>())).clamp(1, 64);
-        for batch in missing.chunks(per_batch) {
+        // Bricks given but not missing are dropped now, not at the end.
+        given.retain(|k, _| missing.binary_search_by_key(k, |&(key, _)| key).is_ok());
+        for batch in missing.chunks(self.per_batch()) {
+            // Bricks given are taken out of `given` as their batch comes, so that each is
+            // dropped once placed.
+            let mut taken: Vec<Option<Arc<Brick<T>>>> =
+                batch.iter().map(|(key, _)| given.remove(key)).collect();
             let bricks = batch
                 .par_iter()
-                .map(|&(key, _)| match given.get(&key) {
+                .zip(taken.par_iter_mut())
+                .map(|(&(key, _), got)| match got.take() {
                     Some(b) => {
-                        self.check_brick(key, b)?;
-                        Ok(b.clone())
+                        self.check_brick(key, &b)?;
+                        Ok(b)
                     }
                     None => self.read(key),
                 })
@@ -532,8 +575,15 @@ fn summarise<T: Scalar>(layout: &BrickLayout, brick: &Brick<T>) -> Result<BrickS
     })
 }
 
+/// [`scan_level_within`] with reads in flight bounded by the thread count alone (two bricks
+/// per thread at most).
+pub fn scan_level<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Result<LevelScan> {
+    scan_level_within(source, level, u64::MAX)
+}
+
 /// Reads every brick of `level` of `source` once, in parallel batches of two bricks per thread
-/// (so at most that many bricks are held at once), and returns the level's ranges
+/// and at most the bricks whose reads `in_flight` bytes hold ([`READ_COST_SLOTS`] slots each,
+/// at least one brick: give a share of a memory budget), and returns the level's ranges
 /// ([`LevelScan`]). Serve the samples as stored (e.g. `ZarrSource::as_stored` for a float
 /// store): non-finite samples are found and counted, and the ranges are those after their
 /// replacement by the level's finite extremes (NaN and −∞ the lowest, +∞ the highest;
@@ -542,13 +592,21 @@ fn summarise<T: Scalar>(layout: &BrickLayout, brick: &Brick<T>) -> Result<BrickS
 ///
 /// Errors: a level the source lacks; a failed read (the brick's [`CoreError::Brick`]); a
 /// level with non-finite samples and no finite one (as [`volsplat_core::Volume::new`]).
-pub fn scan_level<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Result<LevelScan> {
+pub fn scan_level_within<T: Scalar>(
+    source: &dyn BrickSource<T>,
+    level: usize,
+    in_flight: u64,
+) -> Result<LevelScan> {
     let layout = layout_of(source, level)?;
     let d = layout.dims();
     let keys: Vec<BrickKey> = (0..layout.brick_count())
         .filter_map(|i| layout.key([i % d[0], i / d[0] % d[1], i / (d[0] * d[1])]))
         .collect();
-    let batch = 2 * rayon::current_num_threads().max(1);
+    let slot_bytes = (layout.slot_len() * std::mem::size_of::<T>()) as u64;
+    let by_bytes = in_flight / (slot_bytes * READ_COST_SLOTS).max(1);
+    let batch = usize::try_from(by_bytes)
+        .unwrap_or(usize::MAX)
+        .clamp(1, 2 * rayon::current_num_threads().max(1));
     let mut summaries = Vec::with_capacity(keys.len());
     let mut bytes_read = 0u64;
     for chunk in keys.chunks(batch) {

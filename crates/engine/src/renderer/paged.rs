@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::time::Instant;
 use volsplat_core::{AnyVolume, Grid, ScalarType};
 use volsplat_io::{ZarrSelection, ZarrSource, ZarrStore};
-use volsplat_splat::{BrickCache, BrickGrid, CacheStats, scan_level};
+use volsplat_splat::{BrickCache, BrickGrid, CacheStats};
 
 /// Cells per brick side of out-of-core frames: 64³ u16 bricks of 67³ voxels are 0.57 MiB,
 /// so a budget of 256 MiB holds about 440 of them.
@@ -61,6 +61,13 @@ macro_rules! with_cache {
 
 /// The largest coarse level read whole for the automatic transfer function, in samples.
 const PREVIEW_SAMPLES: u64 = 16 << 20;
+
+/// The coarse level is read whole only if it takes at most `budget / PREVIEW_SHARE` bytes.
+const PREVIEW_SHARE: u64 = 16;
+
+/// The scan's reads in flight hold at most `budget / SCAN_SHARE` bytes (it runs before the
+/// cache's arena is allocated).
+const SCAN_SHARE: u64 = 4;
 
 /// Half the memory the system reports available, bytes (4 GiB where unknown).
 fn auto_budget() -> u64 {
@@ -301,7 +308,11 @@ fn open_paged(source: &VolumeSource, budget: u64, limits: &volsplat_io::Limits) 
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
             let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, BRICK)?;
-            let scan = scan_level(&source.as_stored(), level)?;
+            let scan = volsplat_splat::cache::scan_level_within(
+                &source.as_stored(),
+                level,
+                budget / SCAN_SHARE,
+            )?;
             let source = match scan.finite {
                 Some([lo, hi]) if scan.non_finite.is_some() => {
                     source.with_finite_range(level, [lo, hi])?
@@ -340,7 +351,9 @@ fn open_paged(source: &VolumeSource, budget: u64, limits: &volsplat_io::Limits) 
     // The coarsest level, read whole where it is small: the automatic transfer function's
     // histogram.
     let coarsest = store.levels().len() - 1;
-    let small = store.levels()[coarsest].dims.iter().product::<u64>() <= PREVIEW_SAMPLES;
+    let samples = store.levels()[coarsest].dims.iter().product::<u64>();
+    let small =
+        samples <= PREVIEW_SAMPLES && samples * kind.size_bytes() as u64 <= budget / PREVIEW_SHARE;
     let preview = if small {
         Some(Arc::new(store.read_level(coarsest, sel)?))
     } else {
