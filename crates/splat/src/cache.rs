@@ -28,6 +28,17 @@ const NONE: u32 = u32::MAX;
 /// bricks, whatever the thread count, so that a failing read leaves the same state for any).
 const BATCH_BYTES: usize = 64 << 20;
 
+/// The share of the budget that one batch of reads may hold (`budget / READ_SHARE`): the
+/// bricks a batch reads (and their decoding buffers, one brick per read in flight) come on top
+/// of the arena and the read-ahead, so a batch is bounded by the budget, not only by
+/// [`BATCH_BYTES`] (BENCHMARKS §31: 64 bricks of 0.57 MiB in flight under an 8 MiB budget).
+const READ_SHARE: u64 = 16;
+
+/// Bytes one brick read holds while it is in flight, as a multiple of its slot: the region read
+/// from the source, the slot cut from it and a decoded chunk or two of the store (a store's
+/// reader decodes whole chunks; 64³ chunks are about a slot each).
+pub const READ_COST_SLOTS: u64 = 4;
+
 /// Counters of a [`BrickCache`] since it was made.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct CacheStats {
@@ -111,6 +122,14 @@ fn slots(budget: u64, slot_len: usize, size: usize, pad: usize, bricks: usize) -
         .unwrap_or(usize::MAX)
         .min(by_offsets)
         .min(bricks)
+}
+
+/// Bricks of `slot_bytes` read at once so that `in_flight` bytes hold them while they are read
+/// ([`READ_COST_SLOTS`] slots each): at least 1, at most 64 and [`BATCH_BYTES`].
+fn per_batch(in_flight: u64, slot_bytes: u64) -> usize {
+    let by_bytes = in_flight / (slot_bytes * READ_COST_SLOTS).max(1);
+    let cap = (BATCH_BYTES as u64 / slot_bytes.max(1)).clamp(1, 64);
+    by_bytes.clamp(1, cap) as usize
 }
 
 /// The layout of `level` of `source`, or an error naming the level.
@@ -338,7 +357,25 @@ impl<T: Scalar> BrickCache<T> {
             .filter(|&(_, i)| self.slot_of[i] == NONE)
             .map(|(k, _)| k)
             .collect();
-        missing.par_iter().map(|&k| self.read(k)).collect()
+        let mut out = Vec::with_capacity(missing.len());
+        for batch in missing.chunks(self.per_batch()) {
+            out.extend(
+                batch
+                    .par_iter()
+                    .map(|&k| self.read(k))
+                    .collect::<Result<Vec<_>>>()?,
+            );
+        }
+        Ok(out)
+    }
+
+    /// Bricks read at once by [`BrickCache::fetch`] and [`BrickCache::make_resident_with`]:
+    /// those whose reads hold at most `budget / READ_SHARE` bytes ([`per_batch`]), so that a
+    /// batch (read in parallel, at most that many reads in flight) stays a small share of the
+    /// budget whatever the thread count.
+    fn per_batch(&self) -> usize {
+        let slot_bytes = (self.slot_len * std::mem::size_of::<T>()) as u64;
+        per_batch(self.budget / READ_SHARE, slot_bytes)
     }
 
     /// Makes the bricks of `keys` resident (duplicates count once): reads the missing ones from
@@ -404,14 +441,20 @@ impl<T: Scalar> BrickCache<T> {
         for b in fetched {
             given.insert(b.key, b);
         }
-        let per_batch = (BATCH_BYTES / (self.slot_len * std::mem::size_of::<T>())).clamp(1, 64);
-        for batch in missing.chunks(per_batch) {
+        // Bricks given but not missing are dropped now, not at the end.
+        given.retain(|k, _| missing.binary_search_by_key(k, |&(key, _)| key).is_ok());
+        for batch in missing.chunks(self.per_batch()) {
+            // Bricks given are taken out of `given` as their batch comes, so that each is
+            // dropped once placed.
+            let mut taken: Vec<Option<Arc<Brick<T>>>> =
+                batch.iter().map(|(key, _)| given.remove(key)).collect();
             let bricks = batch
                 .par_iter()
-                .map(|&(key, _)| match given.get(&key) {
+                .zip(taken.par_iter_mut())
+                .map(|(&(key, _), got)| match got.take() {
                     Some(b) => {
-                        self.check_brick(key, b)?;
-                        Ok(b.clone())
+                        self.check_brick(key, &b)?;
+                        Ok(b)
                     }
                     None => self.read(key),
                 })
@@ -604,8 +647,15 @@ fn summarise<T: Scalar>(layout: &BrickLayout, brick: &Brick<T>) -> Result<BrickS
     })
 }
 
+/// [`scan_level_within`] with reads in flight bounded by the thread count alone (two bricks
+/// per thread at most).
+pub fn scan_level<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Result<LevelScan> {
+    scan_level_within(source, level, u64::MAX)
+}
+
 /// Reads every brick of `level` of `source` once, in parallel batches of two bricks per thread
-/// (so at most that many bricks are held at once), and returns the level's ranges
+/// and at most the bricks whose reads `in_flight` bytes hold ([`READ_COST_SLOTS`] slots each,
+/// at least one brick: give a share of a memory budget), and returns the level's ranges
 /// ([`LevelScan`]). Serve the samples as stored (e.g. `ZarrSource::as_stored` for a float
 /// store): non-finite samples are found and counted, and the ranges are those after their
 /// replacement by the level's finite extremes (NaN and −∞ the lowest, +∞ the highest;
@@ -614,10 +664,14 @@ fn summarise<T: Scalar>(layout: &BrickLayout, brick: &Brick<T>) -> Result<BrickS
 ///
 /// Errors: a level the source lacks; a failed read (the brick's [`CoreError::Brick`]); a
 /// level with non-finite samples and no finite one (as [`volsplat_core::Volume::new`]).
-pub fn scan_level<T: Scalar>(source: &dyn BrickSource<T>, level: usize) -> Result<LevelScan> {
+pub fn scan_level_within<T: Scalar>(
+    source: &dyn BrickSource<T>,
+    level: usize,
+    in_flight: u64,
+) -> Result<LevelScan> {
     let layout = layout_of(source, level)?;
     let every = vec![true; layout.brick_count()];
-    scan_bricks(source, layout, &every)
+    scan_bricks(source, layout, &every, in_flight)
 }
 
 /// Per brick of `layout` (index order, [`BrickCache::index`]): whether its box of cells
@@ -650,32 +704,45 @@ pub fn scan_level_in<T: Scalar>(
 ) -> Result<LevelScan> {
     let layout = layout_of(source, level)?;
     let wanted = bricks_meeting(&layout, region);
-    scan_bricks(source, layout, &wanted)
+    scan_bricks(source, layout, &wanted, u64::MAX)
 }
 
 /// Reads the bricks of `layout` that are `wanted` (per index), in parallel batches of two per
-/// thread, and folds them into a [`LevelScan`] (the others empty).
+/// thread and at most the bricks whose reads `in_flight` bytes hold ([`READ_COST_SLOTS`] slots
+/// each, at least one), and folds them into a [`LevelScan`] (the others empty).
 fn scan_bricks<T: Scalar>(
     source: &dyn BrickSource<T>,
     layout: BrickLayout,
     wanted: &[bool],
+    in_flight: u64,
 ) -> Result<LevelScan> {
     let d = layout.dims();
     let keys: Vec<BrickKey> = (0..layout.brick_count())
         .filter(|&i| wanted.get(i).copied().unwrap_or(false))
         .filter_map(|i| layout.key([i % d[0], i / d[0] % d[1], i / (d[0] * d[1])]))
         .collect();
-    let batch = 2 * rayon::current_num_threads().max(1);
-    let mut summaries = Vec::with_capacity(layout.brick_count());
-    let mut bytes_read = 0u64;
-    let per = layout.blocks_per_brick().pow(3);
+    let slot_bytes = (layout.slot_len() * std::mem::size_of::<T>()) as u64;
+    let by_bytes = in_flight / (slot_bytes * READ_COST_SLOTS).max(1);
+    let batch = usize::try_from(by_bytes)
+        .unwrap_or(usize::MAX)
+        .clamp(1, 2 * rayon::current_num_threads().max(1));
+    // The block ranges go into the level's vector (one allocation: 8 bytes per 8³ block, 64
+    // MiB for an 8 GiB u16 level); the summaries keep only counts and flags.
+    let per3 = layout.blocks_per_brick().pow(3);
+    let mut ranges8 = try_filled(
+        layout.brick_count() * per3,
+        [f32::INFINITY, f32::NEG_INFINITY],
+        "the scan's block ranges",
+    )?;
     let empty = || BrickSummary {
-        ranges8: vec![[f32::INFINITY, f32::NEG_INFINITY]; per].into_boxed_slice(),
+        ranges8: Box::default(),
         flags: None,
         nan: 0,
         pos_inf: 0,
         neg_inf: 0,
     };
+    let mut summaries: Vec<BrickSummary> = (0..layout.brick_count()).map(|_| empty()).collect();
+    let mut bytes_read = 0u64;
     let index = |k: &BrickKey| index_in(d, k.b.map(|x| x as usize));
     for chunk in keys.chunks(batch) {
         let part = chunk
@@ -691,28 +758,27 @@ fn scan_bricks<T: Scalar>(
                 Ok((summarise(&layout, &brick)?, bytes))
             })
             .collect::<Result<Vec<_>>>()?;
-        for ((s, b), k) in part.into_iter().zip(chunk) {
+        for ((mut s, b), k) in part.into_iter().zip(chunk) {
             bytes_read += b;
-            while summaries.len() < index(k) {
-                summaries.push(empty());
-            }
-            summaries.push(s);
+            let i = index(k);
+            ranges8[i * per3..(i + 1) * per3].copy_from_slice(&s.ranges8);
+            s.ranges8 = Box::default();
+            summaries[i] = s;
         }
     }
     let read_count = keys.len();
-    while summaries.len() < layout.brick_count() {
-        summaries.push(empty());
-    }
     let read = (0..layout.brick_count())
         .map(|i| wanted.get(i).copied().unwrap_or(false))
         .collect();
-    finish_scan(layout, summaries, bytes_read, read, read_count)
+    finish_scan(layout, ranges8, summaries, bytes_read, read, read_count)
 }
 
-/// Folds the bricks' summaries (in index order) into the level's scan: the finite range, then
-/// the blocks holding non-finite samples widened by what those become.
+/// Folds the bricks' summaries (in index order) and their block ranges `ranges8` into the
+/// level's scan: the finite range, then the blocks holding non-finite samples widened by what
+/// those become (in place).
 fn finish_scan(
     layout: BrickLayout,
+    mut ranges8: Vec<[f32; 2]>,
     summaries: Vec<BrickSummary>,
     bytes_read: u64,
     read: Vec<bool>,
@@ -720,10 +786,7 @@ fn finish_scan(
 ) -> Result<LevelScan> {
     let fold = |r: [f32; 2], q: &[f32; 2]| [r[0].min(q[0]), r[1].max(q[1])];
     let empty = [f32::INFINITY, f32::NEG_INFINITY];
-    let lohi = summaries
-        .iter()
-        .flat_map(|s| s.ranges8.iter())
-        .fold(empty, fold);
+    let lohi = ranges8.iter().fold(empty, fold);
     let finite = (lohi[0] <= lohi[1]).then_some(lohi);
     let (nan, pos_inf, neg_inf) = summaries.iter().fold((0, 0, 0), |c, s| {
         (c.0 + s.nan, c.1 + s.pos_inf, c.2 + s.neg_inf)
@@ -750,13 +813,11 @@ fn finish_scan(
             highest,
         })
     };
-    let mut ranges8 = Vec::with_capacity(summaries.len() * layout.blocks_per_brick().pow(3));
+    let per3 = layout.blocks_per_brick().pow(3);
     let mut ranges = Vec::with_capacity(summaries.len());
-    for s in &summaries {
-        let start = ranges8.len();
-        ranges8.extend_from_slice(&s.ranges8);
+    for (s, brick) in summaries.iter().zip(ranges8.chunks_mut(per3)) {
         if let (Some(flags), Some(nf)) = (&s.flags, &non_finite) {
-            for (r, &(low, high)) in ranges8[start..].iter_mut().zip(flags) {
+            for (r, &(low, high)) in brick.iter_mut().zip(flags) {
                 if low {
                     *r = fold(*r, &[nf.lowest, nf.lowest]);
                 }
@@ -765,7 +826,7 @@ fn finish_scan(
                 }
             }
         }
-        ranges.push(ranges8[start..].iter().fold(empty, fold));
+        ranges.push(brick.iter().fold(empty, fold));
     }
     Ok(LevelScan {
         ranges8,

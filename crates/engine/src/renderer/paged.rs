@@ -25,9 +25,7 @@ use std::sync::Arc;
 use std::time::Instant;
 use volsplat_core::{AnyVolume, Grid, ScalarType};
 use volsplat_io::{ZarrSelection, ZarrSource, ZarrStore};
-use volsplat_splat::{
-    BrickCache, BrickGrid, CacheStats, LevelScan, bricks_meeting, scan_level, scan_level_in,
-};
+use volsplat_splat::{BrickCache, BrickGrid, CacheStats, LevelScan, bricks_meeting, scan_level_in};
 
 /// Cells per brick side of out-of-core frames: 64³ u16 bricks of 67³ voxels are 0.57 MiB,
 /// so a budget of 256 MiB holds about 440 of them.
@@ -90,6 +88,13 @@ macro_rules! with_cache {
 
 /// The largest coarse level read whole for the automatic transfer function, in samples.
 const PREVIEW_SAMPLES: u64 = 16 << 20;
+
+/// The coarse level is read whole only if it takes at most `budget / PREVIEW_SHARE` bytes.
+const PREVIEW_SHARE: u64 = 16;
+
+/// The scan's reads in flight hold at most `budget / SCAN_SHARE` bytes (it runs before the
+/// cache's arena is allocated).
+const SCAN_SHARE: u64 = 4;
 
 /// Half the memory the system reports available, bytes (4 GiB where unknown).
 fn auto_budget() -> u64 {
@@ -597,14 +602,18 @@ pub(super) fn open_paged(
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
             let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, brick)?;
-            let (scan, cache) = match region {
+            let (cache, bricks, [lo, hi], scanned, scan_bytes, part_scan) = match region {
                 None => {
                     let layout = volsplat_core::source::BrickSource::layout(&source, level)
                         .cloned()
                         .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
                     let (scan, kept) =
                         scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
-                            Ok(scan_level(&source.as_stored(), level)?)
+                            Ok(volsplat_splat::cache::scan_level_within(
+                                &source.as_stored(),
+                                level,
+                                budget / SCAN_SHARE,
+                            )?)
                         })?;
                     sidecar_note = kept;
                     let source = match scan.finite {
@@ -613,20 +622,27 @@ pub(super) fn open_paged(
                         }
                         _ => source,
                     };
+                    let bricks = Arc::new(scan.brick_grid()?);
+                    let range = scan.value_range();
+                    let (scanned, scan_bytes) = (scan.bricks, scan.bytes_read);
+                    // Dropped before the arena is allocated: the block ranges are 0.8 % of
+                    // the level.
+                    drop(scan);
                     let cache = BrickCache::new(Arc::new(source), level, arena)?;
-                    (scan, cache)
+                    (cache, bricks, range, scanned, scan_bytes, None)
                 }
                 Some(r) => {
                     // Only the part's bricks, as stored: non-finite floats are refused
                     // (`check_part`), never replaced by the part's own extremes.
                     let scan = scan_level_in(&source.as_stored(), level, r)?;
                     let allowed = bricks_meeting(&scan.layout, r);
+                    let bricks = Arc::new(scan.brick_grid()?);
+                    let range = scan.value_range();
+                    let (scanned, scan_bytes) = (scan.bricks, scan.bytes_read);
                     let cache = BrickCache::restricted(Arc::new(source), level, arena, allowed)?;
-                    (scan, cache)
+                    (cache, bricks, range, scanned, scan_bytes, Some(scan))
                 }
             };
-            let bricks = Arc::new(scan.brick_grid()?);
-            let [lo, hi] = scan.value_range();
             let note = format!(
                 "out of core: level {level} ({} × {} × {}){} in {} bricks of {brick}³ cells, \
                  their ranges ready in {:.0} ms ({:.1} MiB read); a cache of {} bricks",
@@ -638,9 +654,9 @@ pub(super) fn open_paged(
                 } else {
                     ""
                 },
-                scan.bricks,
+                scanned,
                 ms(t0),
-                scan.bytes_read as f64 / (1u64 << 20) as f64,
+                scan_bytes as f64 / (1u64 << 20) as f64,
                 cache.stats().capacity
             );
             let level_bytes =
@@ -650,12 +666,12 @@ pub(super) fn open_paged(
                 bricks,
                 (lo as f64, hi as f64),
                 note,
-                scan,
+                part_scan,
                 level_bytes,
             )
         }};
     }
-    let (cache, bricks, range, note, scan, level_bytes) = match kind {
+    let (cache, bricks, range, note, part_scan, level_bytes) = match kind {
         ScalarType::U8 => open!(u8, U8),
         ScalarType::I8 => open!(i8, I8),
         ScalarType::U16 => open!(u16, U16),
@@ -665,8 +681,10 @@ pub(super) fn open_paged(
     // The coarsest level, read whole where it is small: the automatic transfer function's
     // histogram.
     let coarsest = store.levels().len() - 1;
+    let samples = store.levels()[coarsest].dims.iter().product::<u64>();
     let small = region.is_none()
-        && store.levels()[coarsest].dims.iter().product::<u64>() <= PREVIEW_SAMPLES;
+        && samples <= PREVIEW_SAMPLES
+        && samples * kind.size_bytes() as u64 <= budget / PREVIEW_SHARE;
     let preview = if small {
         Some(Arc::new(store.read_level(coarsest, sel)?))
     } else {
@@ -679,7 +697,7 @@ pub(super) fn open_paged(
         range,
         preview,
         notes: std::iter::once(note).chain(sidecar_note).collect(),
-        part: region.map(|_| Part {
+        part: part_scan.map(|scan| Part {
             level_bricks: scan.layout.brick_count(),
             range_is_level: scan.read.iter().all(|&r| r),
             scan,

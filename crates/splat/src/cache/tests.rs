@@ -232,7 +232,8 @@ fn a_read_error_names_the_brick_and_leaves_the_cache_consistent() {
     let first = [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]].map(key);
     c.make_resident(&first).unwrap();
     let before = c.stats();
-    // One batch holds the three missing bricks: the error comes before any is placed.
+    // The bad brick is the first missing one in key order: the error comes before any is
+    // placed.
     let e = c
         .make_resident(&[key([0, 0, 0]), bad, key([4, 0, 0])])
         .unwrap_err();
@@ -476,6 +477,93 @@ fn scans_read_each_brick_once_for_any_thread_count() {
             Some(f) => assert_eq!(&scan, f, "{threads} threads"),
         }
     }
+}
+
+/// A source that counts the reads in flight at once (each read lasts a few milliseconds, so
+/// that parallel reads overlap) and keeps the most.
+struct InFlight {
+    inner: InMemory<u16>,
+    now: AtomicUsize,
+    most: AtomicUsize,
+}
+
+impl InFlight {
+    fn new(dims: [usize; 3]) -> Self {
+        InFlight {
+            inner: InMemory::new(volume::<u16>(dims), 8).unwrap(),
+            now: AtomicUsize::new(0),
+            most: AtomicUsize::new(0),
+        }
+    }
+}
+
+impl BrickSource<u16> for InFlight {
+    fn levels(&self) -> &[Grid] {
+        self.inner.levels()
+    }
+    fn layout(&self, level: usize) -> Option<&BrickLayout> {
+        self.inner.layout(level)
+    }
+    fn brick_range(&self, key: BrickKey) -> Option<[f32; 2]> {
+        self.inner.brick_range(key)
+    }
+    fn brick(&self, key: BrickKey) -> volsplat_core::Result<Arc<Brick<u16>>> {
+        let n = self.now.fetch_add(1, Ordering::SeqCst) + 1;
+        self.most.fetch_max(n, Ordering::SeqCst);
+        std::thread::sleep(std::time::Duration::from_millis(3));
+        self.now.fetch_sub(1, Ordering::SeqCst);
+        self.inner.brick(key)
+    }
+}
+
+/// Reads in flight are bounded by the budget, whatever the thread count: under a budget whose
+/// sixteenth holds less than one brick's read, the cache reads one brick at a time (it read
+/// up to 64 at once, one per thread, before), and with a large budget reads do run in
+/// parallel. The scan reads at most the bricks its `in_flight` bytes hold.
+#[test]
+fn reads_in_flight_are_bounded_by_the_budget() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(4)
+        .build()
+        .unwrap();
+    let dims = [70, 45, 20]; // 9 × 6 × 3 bricks of 8.
+    let read_all = |budget: u64, ahead: bool| {
+        let s = Arc::new(InFlight::new(dims));
+        let keys = all_keys(s.layout(0).unwrap());
+        let mut c = BrickCache::new(s.clone(), 0, budget).unwrap();
+        let n = c.capacity().min(keys.len());
+        pool.install(|| {
+            if ahead {
+                let fetched = c.fetch(&keys[..n]).unwrap();
+                c.make_resident_with(&keys[..n], fetched).unwrap();
+            } else {
+                c.make_resident(&keys[..n]).unwrap();
+            }
+        });
+        assert_eq!(c.stats().resident, n);
+        assert_arena_holds_bricks(&c, &*s);
+        s.most.load(Ordering::SeqCst)
+    };
+    // 20 slots: a sixteenth of the budget is under one read (4 slots).
+    for ahead in [false, true] {
+        assert_eq!(read_all(20 * SLOT_U16_B8 + 2, ahead), 1, "ahead {ahead}");
+        // 64 × 4 slots per sixteenth: all four threads read at once.
+        assert!(read_all(1 << 30, ahead) > 1, "ahead {ahead}");
+    }
+    let scan_most = |in_flight: u64| {
+        let s = InFlight::new(dims);
+        let scan = pool
+            .install(|| scan_level_within(&s, 0, in_flight))
+            .unwrap();
+        assert_eq!(scan, pool.install(|| scan_level(&s, 0)).unwrap());
+        s.most.store(0, Ordering::SeqCst);
+        pool.install(|| scan_level_within(&s, 0, in_flight))
+            .unwrap();
+        s.most.load(Ordering::SeqCst)
+    };
+    assert_eq!(scan_most(0), 1);
+    assert!(scan_most(2 * READ_COST_SLOTS * SLOT_U16_B8) <= 2);
+    assert!(scan_most(u64::MAX) > 1);
 }
 
 #[test]
