@@ -155,12 +155,16 @@ for n in 2 3 4; do
       spec+=(-np 1 "$mpi" render --scene "$scene" --brick 16 -o "$work/one.npy")
     done
     set +e
-    timeout 120 mpirun --allow-run-as-root --oversubscribe "${spec[@]}" 2> "$work/err.txt"
+    # --tag-output: each rank's lines whole and tagged [job,rank] (untagged, the ranks' lines
+    # on the shared stderr can interleave mid-line).
+    timeout 120 mpirun --allow-run-as-root --oversubscribe --tag-output "${spec[@]}" \
+      2> "$work/err.txt"
     rc=$?
     set -e
     [ "$rc" -ne 124 ] || { echo "FAIL: np=$n, rank $bad failing: mpirun hung (timeout)"; exit 1; }
     [ "$rc" -ne 0 ] || { echo "FAIL: np=$n, rank $bad failing: exit 0"; exit 1; }
-    got=$(grep -c "rank $bad failed: .*trunc.nrrd" "$work/err.txt" || true)
+    got=$(grep "rank $bad failed: .*trunc.nrrd" "$work/err.txt" \
+      | sed -n 's/^\[[0-9]*,\([0-9]*\)\].*/\1/p' | sort -u | wc -l)
     [ "$got" -eq "$n" ] || { cat "$work/err.txt"; echo "FAIL: np=$n: $got of $n ranks named rank $bad and the file"; exit 1; }
     [ ! -e "$work/one.npy" ] || { echo "FAIL: an output was written"; exit 1; }
   done

@@ -235,7 +235,11 @@ fn main() {
     };
     let command = parse();
     if let Err(e) = run(&mut universe, command) {
-        eprintln!("error: {e:#}");
+        // One write of the whole line: the ranks share mpirun's stderr, where the pieces of
+        // a formatted print (each its own write on unbuffered stderr) interleave with other
+        // ranks' pieces.
+        let line = format!("error: {e:#}\n");
+        let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), line.as_bytes());
         // Every rank reaches here with the same error (the protocol shares a rank's failure);
         // exiting non-zero lets mpirun report it.
         drop(universe);
