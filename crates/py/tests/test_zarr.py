@@ -88,3 +88,26 @@ def test_zarr_options_are_refused_for_other_files(tmp_path):
             volsplat.load(p, **kw)
     with pytest.raises(volsplat.InvalidInputError, match="do not apply to headerless raw"):
         volsplat.load(p, raw={"dims": (2, 1, 1), "dtype": "uint8"}, level=1)
+
+
+def test_memory_reads_a_store_out_of_core_with_the_same_picture(tmp_path):
+    """``memory=`` (``--memory``): the store is read in bricks through a cache of that size;
+    the picture is the same bytes as the store read whole. Bad sizes are refused by name."""
+    z, y, x = np.mgrid[0:40, 0:36, 0:44].astype(np.float32)
+    blob = 3000 * np.exp(-(((x - 22) / 12) ** 2 + ((y - 18) / 10) ** 2 + ((z - 20) / 11) ** 2))
+    store = tmp_path / "b.zarr"
+    write_store(store, [(blob.astype(np.uint16), [1.0, 1.0, 1.0])], unit="millimeter")
+    for mode in ("composite", "mip"):
+        whole = volsplat.render(str(store), size=32, mode=mode, azimuth=30, elevation=20)
+        paged = volsplat.render(
+            str(store), size=32, mode=mode, azimuth=30, elevation=20, memory="2MiB"
+        )
+        assert any("out of core" in n for n in paged.notes), paged.notes
+        assert not any("out of core" in n for n in whole.notes)
+        np.testing.assert_array_equal(paged.rgba, whole.rgba)
+    scene = volsplat.Scene(str(store), memory="512MiB")
+    assert scene.memory == 512 << 20
+    assert scene.replace(memory=4096).memory == 4096
+    for bad in ("0", "2 PiB", "1.5G", True, -1, [1]):
+        with pytest.raises(volsplat.InvalidInputError, match="memory"):
+            volsplat.Scene(str(store), memory=bad)

@@ -15,7 +15,7 @@ from ._util import dumps, floats, fspath, number, size_pair, warn_all
 Volume = _core.Volume
 
 #: Options of a render request, by where they live in the scene file.
-_TOP = ("width", "height", "mode", "renderer", "threads", "k_contour", "display")
+_TOP = ("width", "height", "mode", "renderer", "threads", "memory", "k_contour", "display")
 _QUALITY = (
     "kernel",
     "antialias",
@@ -143,6 +143,10 @@ class Scene:
       raw values, negative parts included) or a number ``o`` (``max(v + o, 0)``, data units).
     - ``display={...}``: options of the Chapter 6 displays (``renderer="sabella"|"nil"``).
     - ``threads``: worker threads (default: all cores; the image does not depend on it).
+    - ``memory`` (``--memory``): OME-Zarr stores are read in bricks through a cache of at most
+      this many bytes (an integer, or a string such as ``"512MiB"`` or ``"2GiB"``), out of core;
+      the image does not depend on it. Default: whole, unless the level is larger than half the
+      available memory.
 
     Scenes are immutable; :meth:`replace` returns a changed copy.
     """
@@ -218,6 +222,8 @@ class Scene:
                     if isinstance(v, bool) or not isinstance(v, int):
                         raise InvalidInputError(f"{k}: expected an integer, got {v!r}")
                     req[k] = int(v)
+                elif k == "memory":
+                    req[k] = _size_bytes(v)
                 else:
                     req[k] = v
         quality = dict(req.get("quality", {}))
@@ -387,6 +393,11 @@ class Scene:
     @property
     def threads(self) -> Optional[int]:
         return self._req.get("threads")
+
+    @property
+    def memory(self) -> Optional[int]:
+        """The out-of-core budget for OME-Zarr stores, bytes (``None``: whole where it fits)."""
+        return self._req.get("memory")
 
     @property
     def quality(self) -> Dict[str, Any]:
@@ -727,3 +738,29 @@ def render(
         volume = Volume(volume, **vkw)
     scene = volume.replace(**options) if isinstance(volume, Scene) else Scene(volume, **options)
     return Renderer(scene, max_voxels=max_voxels).render(progress=progress)
+
+
+_SIZE_UNITS = {"": 0, "b": 0, "k": 10, "kb": 10, "kib": 10, "m": 20, "mb": 20, "mib": 20,
+               "g": 30, "gb": 30, "gib": 30, "t": 40, "tb": 40, "tib": 40}
+
+
+def _size_bytes(v: Any) -> int:
+    """``memory=``: bytes as an integer, or a whole number with KiB, MiB, GiB or TiB (K, M, G,
+    T, KB, … : powers of 1024, as ``--memory`` reads them)."""
+    if isinstance(v, bool):
+        raise InvalidInputError(f"memory: expected a size in bytes, got {v!r}")
+    if isinstance(v, int):
+        n = v
+    elif isinstance(v, str):
+        t = v.strip()
+        digits = len(t) - len(t.lstrip("0123456789"))
+        num, unit = t[:digits], t[digits:].strip().lower()
+        if not num or unit not in _SIZE_UNITS:
+            raise InvalidInputError(
+                f"memory: {v!r} is not a size (a whole number, then KiB, MiB, GiB or TiB)")
+        n = int(num) << _SIZE_UNITS[unit]
+    else:
+        raise InvalidInputError(f"memory: expected a size in bytes, got {v!r}")
+    if not 0 < n < 1 << 64:
+        raise InvalidInputError(f"memory: {v!r} must be above 0 bytes and below 16 EiB")
+    return n
