@@ -48,3 +48,19 @@ pub fn with_file(name: &str, data: &[u8], f: impl FnOnce(&Path)) {
     f(&p);
     let _ = std::fs::remove_file(&p);
 }
+
+/// Writes the files of a store (`(relative path, bytes)`, folders created) into a fresh folder
+/// `name` of the fuzz folder, calls `f` with the folder's path, then removes it.
+pub fn with_files(name: &str, files: &[(&str, &[u8])], f: impl FnOnce(&Path)) {
+    let root = dir().join(name);
+    let _ = std::fs::remove_dir_all(&root);
+    for (rel, bytes) in files {
+        let p = root.join(rel);
+        if let Some(parent) = p.parent() {
+            std::fs::create_dir_all(parent).expect("create the store's folders");
+        }
+        std::fs::write(&p, bytes).expect("write the fuzz input");
+    }
+    f(&root);
+    let _ = std::fs::remove_dir_all(&root);
+}
