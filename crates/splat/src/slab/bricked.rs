@@ -18,6 +18,23 @@
 //! needs only bricks with an active 8³ block (the march samples no other: live lanes are in
 //! active blocks, and the other lanes of an AVX2 group read slot 0 and are dropped); MIP and
 //! MinIP sample every block.
+//!
+//! **Pieces, and the least budget.** Consecutive bands go together while their bricks over
+//! every plane fit the cache. A band that does not fit marches in pieces ([`Planner::pieces`]):
+//! the longest runs of planes whose bricks fit, and where even one plane of its rows does not
+//! fit (a plane along the long axis of a volume wider than the image's bricks: one row of
+//! bricks across the image, two high and two deep), its rows and columns are cut in two, again
+//! and again, each half going on through the remaining planes. Columns are independent, and
+//! each pixel meets its planes in order with its band's [`Carry`], so the bits are those of one
+//! pass. The smallest piece, one pixel on one plane, spans along each index axis `a` at most
+//! `L_a`: a pixel along the row and the column and a slab along the depth (after
+//! supersampling, at that plane). Brick `b`'s cells widened by a voxel are
+//! `[bB − 1, (b + 1)B + 1]`, so an interval of length `L` meets at most `2 + ⌊(L + 2)/B⌋` of
+//! them: **two per axis, eight bricks in all, when every `L_a < B − 2`**. With the engine's
+//! 64³ bricks that is every view whose (supersampled) pixel and slab span under 62 voxels, so
+//! a budget of 8 slots draws every such frame (for u16, 8 × 601,526 bytes in an arena of 80 %
+//! of the budget: 6 MiB). A smaller budget is refused with [`SplatError::Budget`] naming the
+//! bricks one sample needs.
 
 use super::march::{Carry, Counters, Ctx, Frame, Part};
 use super::view::View;
@@ -148,12 +165,14 @@ pub(super) fn march<T: Scalar>(
         }
     }
     let pieced = groups.iter().filter(|g| g.pieces.len() > 1).count();
+    // Groups with a band cut into columns or rows (not merely into bands).
+    let on_edge = |y: usize| y.is_multiple_of(band_h) || y == h;
     let split = groups
         .iter()
         .filter(|g| {
             g.pieces
                 .iter()
-                .any(|p| p.rows != g.rows || p.part.cols != (0, w))
+                .any(|p| p.part.cols != (0, w) || !on_edge(p.rows.0) || !on_edge(p.rows.1))
         })
         .count();
     Ok((acc, counters, [steps.len(), pieced, split]))
