@@ -154,6 +154,17 @@ pub(super) fn march<T: Scalar>(
             );
             fetched = read?.unwrap_or_default();
             counters = counters.add(c);
+            // A group in pieces can take long (each piece reads its bricks): between its
+            // pieces, the callback may cancel (the count of bands done is unchanged).
+            if group.pieces.len() > 1
+                && !progress(&Progress {
+                    sheets_done: done,
+                    sheets_total: n_bands,
+                    accumulation: &[],
+                })
+            {
+                return Err(SplatError::Cancelled);
+            }
         }
         done += group.bands;
         if !progress(&Progress {

@@ -528,6 +528,38 @@ fn a_plane_of_a_band_above_the_budget_marches_in_columns_with_the_same_bits() {
     }
 }
 
+/// A frame whose bands march in many pieces can be cancelled between two pieces, not only
+/// after the whole group: the callback's `false` after the first piece stops the frame with
+/// `Cancelled` after one step.
+#[test]
+fn a_frame_in_pieces_can_be_cancelled_between_pieces() {
+    let f = phantom::sample(&blobs(), [64, 24, 40], 1).unwrap();
+    let bricks = BrickGrid::build(&f);
+    let (_, mode, tables, _) = cases().remove(0);
+    let cam = orbit_camera(f.grid(), 0.0, 0.0, true);
+    let s = settings(96, 40, mode);
+    let mut res = Copies::new(&f, 8, MIN_SLOTS);
+    let mut calls = 0;
+    let e = render_slabs_in(
+        &mut Access::Bricked(&mut res),
+        &cam,
+        &tables,
+        &s,
+        &bricks,
+        &mut |_| {
+            calls += 1;
+            false
+        },
+    )
+    .unwrap_err();
+    assert!(matches!(e, SplatError::Cancelled), "{e}");
+    assert_eq!(
+        (calls, res.calls),
+        (1, 1),
+        "(callbacks, steps made resident)"
+    );
+}
+
 /// [`MIN_SLOTS`] is enough from any eye (the bound of `Planner::pieces`), in both
 /// projections, for a frame that samples every brick on its rays (MIP) and for one that
 /// pre-integrates (a carry between pieces): the in-memory bits.
