@@ -233,6 +233,10 @@ pub struct RenderStats {
     /// Of those, the groups whose planes were marched in more than one piece because their
     /// bricks exceeded the budget.
     pub pieced_groups: usize,
+    /// Of the pieced groups, those also marched in pieces of columns or rows, because one
+    /// plane of their bands met more bricks than the budget holds (the same pixels; the
+    /// counters differ, as each piece narrows its rows' live windows apart).
+    pub split_groups: usize,
 }
 
 impl RenderStats {

@@ -18,8 +18,25 @@
 //! needs only bricks with an active 8³ block (the march samples no other: live lanes are in
 //! active blocks, and the other lanes of an AVX2 group read slot 0 and are dropped); MIP and
 //! MinIP sample every block.
+//!
+//! **Pieces, and the least budget.** Consecutive bands go together while their bricks over
+//! every plane fit the cache. A band that does not fit marches in pieces ([`Planner::pieces`]):
+//! the longest runs of planes whose bricks fit, and where even one plane of its rows does not
+//! fit (a plane along the long axis of a volume wider than the image's bricks: one row of
+//! bricks across the image, two high and two deep), its rows and columns are cut in two, again
+//! and again, each half going on through the remaining planes. Columns are independent, and
+//! each pixel meets its planes in order with its band's [`Carry`], so the bits are those of one
+//! pass. The smallest piece, one pixel on one plane, spans along each index axis `a` at most
+//! `L_a`: a pixel along the row and the column and a slab along the depth (after
+//! supersampling, at that plane). Brick `b`'s cells widened by a voxel are
+//! `[bB − 1, (b + 1)B + 1]`, so an interval of length `L` meets at most `2 + ⌊(L + 2)/B⌋` of
+//! them: **two per axis, eight bricks in all, when every `L_a < B − 2`**. With the engine's
+//! 64³ bricks that is every view whose (supersampled) pixel and slab span under 62 voxels, so
+//! a budget of 8 slots draws every such frame (for u16, 8 × 601,526 bytes in an arena of 80 %
+//! of the budget: 6 MiB). A smaller budget is refused with [`SplatError::Budget`] naming the
+//! bricks one sample needs.
 
-use super::march::{Carry, Counters, Ctx, Frame};
+use super::march::{Carry, Counters, Ctx, Frame, Part};
 use super::view::View;
 use crate::error::{Result, SplatError};
 use crate::sheets::{Progress, RenderMode, RenderSettings};
@@ -55,15 +72,17 @@ pub(crate) trait Resident<T>: Sync {
 }
 
 /// Marches `frame` band group by band group, each group's bricks made resident in `res`
-/// first (module docs); a group whose bricks exceed the budget marches its planes in pieces,
-/// each piece's bricks made resident in turn. The result is [`Ctx::march_bands`]'s (MIP and
-/// MinIP marched in pieces sample in another order: the same extremes, other counters).
+/// first (module docs); a group whose bricks exceed the budget marches in pieces, each
+/// piece's bricks made resident in turn ([`Planner::pieces`]). The result is
+/// [`Ctx::march_bands`]'s image (MIP and MinIP marched in pieces sample in another order, and
+/// pieces of columns narrow the rows' live windows: the same pixels, other counters), and the
+/// steps, the groups in pieces and the groups of those cut into columns or rows.
 pub(super) fn march<T: Scalar>(
     frame: &Frame<'_>,
     res: &mut dyn Resident<T>,
     settings: &RenderSettings,
     progress: &mut dyn FnMut(&Progress) -> bool,
-) -> Result<(Vec<Rgba>, Counters, [usize; 2])> {
+) -> Result<(Vec<Rgba>, Counters, [usize; 3])> {
     let layout = res.layout().clone();
     let (w, h) = (settings.width, settings.height);
     let mut acc = vec![frame.acc_init(); w * h];
@@ -91,15 +110,20 @@ pub(super) fn march<T: Scalar>(
         .collect();
     let ahead = (res.capacity() / 4).max(1);
     let mut counters = Counters::default();
-    let mut chunks = acc.chunks_mut(band_h * w).enumerate();
+    let mut rest: &mut [Rgba] = &mut acc;
     let mut done = 0;
     let mut fetched = Vec::new();
     let mut step = 0;
     for group in &groups {
-        let mut batch: Vec<(usize, &mut [Rgba], Carry)> = chunks
-            .by_ref()
-            .take(group.bands)
-            .map(|(b, rows)| (b, rows, Carry::default()))
+        let (y0, y1) = group.rows;
+        let (mine, tail) = std::mem::take(&mut rest).split_at_mut((y1 - y0) * w);
+        rest = tail;
+        // The group's units: its bands, or its rows where it marches in pieces (a piece may
+        // hold some of its rows only), each with what its pieces carry to the next.
+        let mut units: Vec<(usize, &mut [Rgba], Carry)> = mine
+            .chunks_mut(group.unit * w)
+            .enumerate()
+            .map(|(i, px)| (y0 + i * group.unit, px, Carry::default()))
             .collect();
         for piece in &group.pieces {
             res.make_resident_with(&keys_of(&piece.bricks), std::mem::take(&mut fetched))?;
@@ -117,18 +141,30 @@ pub(super) fn march<T: Scalar>(
                 Vox::Slotted(Slotted::new(res.arena(), res.bases(), &layout)),
             );
             let res_ref: &dyn Resident<T> = &*res;
-            let planes = piece.planes;
+            let (r0, r1) = piece.rows;
             let (c, read) = rayon::join(
                 || {
-                    batch
+                    units
                         .par_iter_mut()
-                        .map(|(b, rows, carry)| ctx.band_in(*b * band_h, rows, planes, carry))
+                        .filter(|(y, px, _)| *y >= r0 && *y + px.len() / w <= r1)
+                        .map(|(y, px, carry)| ctx.band_in(*y, px, piece.part, carry))
                         .reduce(Counters::default, Counters::add)
                 },
                 || next.map(|keys| res_ref.fetch(&keys)).transpose(),
             );
             fetched = read?.unwrap_or_default();
             counters = counters.add(c);
+            // A group in pieces can take long (each piece reads its bricks): between its
+            // pieces, the callback may cancel (the count of bands done is unchanged).
+            if group.pieces.len() > 1
+                && !progress(&Progress {
+                    sheets_done: done,
+                    sheets_total: n_bands,
+                    accumulation: &[],
+                })
+            {
+                return Err(SplatError::Cancelled);
+            }
         }
         done += group.bands;
         if !progress(&Progress {
@@ -140,18 +176,33 @@ pub(super) fn march<T: Scalar>(
         }
     }
     let pieced = groups.iter().filter(|g| g.pieces.len() > 1).count();
-    Ok((acc, counters, [steps.len(), pieced]))
+    // Groups with a band cut into columns or rows (not merely into bands).
+    let on_edge = |y: usize| y.is_multiple_of(band_h) || y == h;
+    let split = groups
+        .iter()
+        .filter(|g| {
+            g.pieces
+                .iter()
+                .any(|p| p.part.cols != (0, w) || !on_edge(p.rows.0) || !on_edge(p.rows.1))
+        })
+        .count();
+    Ok((acc, counters, [steps.len(), pieced, split]))
 }
 
-/// A run of consecutive bands marched together, in pieces of planes.
+/// A run of consecutive bands (image rows `rows`, `[first, end)`) marched together, in
+/// pieces; `unit` rows at a time (a band, or one row where it marches in pieces).
 struct Group {
     bands: usize,
+    rows: (usize, usize),
+    unit: usize,
     pieces: Vec<Piece>,
 }
 
-/// Planes `[first, end)` of a group, and the bricks (indices, i fastest, sorted) they need.
+/// The rows `[first, end)` of a group, the part of them marched ([`Part`]: columns and
+/// planes), and the bricks (indices, i fastest, sorted) it needs.
 struct Piece {
-    planes: (usize, usize),
+    rows: (usize, usize),
+    part: Part,
     bricks: Vec<u32>,
 }
 
@@ -168,10 +219,22 @@ struct Planner<'p, 'a> {
 }
 
 impl Planner<'_, '_> {
-    /// The bricks bands `[b0, b1)` need on planes `planes`.
-    fn set(&self, (b0, b1): (usize, usize), planes: (usize, usize)) -> Vec<u32> {
-        let rows = (b0 * self.band_h, (b1 * self.band_h).min(self.height));
-        band_bricks(self.frame, self.layout, rows, planes, &self.needed)
+    /// The image rows of bands `[b0, b1)`.
+    fn rows(&self, (b0, b1): (usize, usize)) -> (usize, usize) {
+        (b0 * self.band_h, (b1 * self.band_h).min(self.height))
+    }
+
+    /// The bricks that the rows `rows` need on the part `part` of the image and planes.
+    fn set(&self, rows: (usize, usize), part: Part) -> Vec<u32> {
+        band_bricks(self.frame, self.layout, rows, part, &self.needed)
+    }
+
+    /// Every column of the image through the planes `planes`.
+    fn whole(&self, planes: (usize, usize)) -> Part {
+        Part {
+            cols: (0, self.frame.width),
+            planes,
+        }
     }
 
     fn budget_error(&self, needed: usize) -> SplatError {
@@ -184,29 +247,34 @@ impl Planner<'_, '_> {
     }
 
     /// Consecutive bands while their bricks over every plane fit together (at most
-    /// `max_bands`); a band whose bricks alone do not fit marches its planes in pieces, with
-    /// as many bands beside it as there are threads where their pieces still fit (else alone).
-    /// An error naming the budget where one plane of one band needs more bricks than it holds.
+    /// `max_bands`); a band whose bricks alone do not fit marches in pieces
+    /// ([`Planner::pieces`]), with as many bands beside it as there are threads (fewer where
+    /// that is all the image has left). An error naming the budget where one sample of one
+    /// plane needs more bricks than it holds.
     fn groups(&self, n_bands: usize, max_bands: usize) -> Result<Vec<Group>> {
-        let all = self.frame.plane_range;
+        let all = self.whole(self.frame.plane_range);
         let mut groups = Vec::new();
         let mut b = 0;
         while b < n_bands {
-            let mut set = self.set((b, b + 1), all);
+            let mut set = self.set(self.rows((b, b + 1)), all);
             if set.len() <= self.capacity {
                 let mut e = b + 1;
                 while e < n_bands && e - b < max_bands {
-                    let union = merge(&set, &self.set((e, e + 1), all));
+                    let union = merge(&set, &self.set(self.rows((e, e + 1)), all));
                     if union.len() > self.capacity {
                         break;
                     }
                     set = union;
                     e += 1;
                 }
+                let rows = self.rows((b, e));
                 groups.push(Group {
                     bands: e - b,
+                    rows,
+                    unit: self.band_h,
                     pieces: vec![Piece {
-                        planes: all,
+                        rows,
+                        part: all,
                         bricks: set,
                     }],
                 });
@@ -214,32 +282,50 @@ impl Planner<'_, '_> {
                 continue;
             }
             let k = rayon::current_num_threads().clamp(1, n_bands - b);
-            let pieces = match self.pieces((b, b + k), all) {
-                Ok(p) if k > 1 => Ok((k, p)),
-                _ => self.pieces((b, b + 1), all).map(|p| (1, p)),
-            };
-            let (k, pieces) = pieces?;
-            groups.push(Group { bands: k, pieces });
+            let rows = self.rows((b, b + k));
+            let mut pieces = Vec::new();
+            self.pieces(rows, all, &mut pieces)?;
+            groups.push(Group {
+                bands: k,
+                rows,
+                unit: 1,
+                pieces,
+            });
             b += k;
         }
         Ok(groups)
     }
 
-    /// The planes `[first, end)` of bands `bands` cut into the longest pieces whose bricks fit.
-    fn pieces(&self, bands: (usize, usize), (first, end): (usize, usize)) -> Result<Vec<Piece>> {
-        let mut out = Vec::new();
-        let mut p0 = first;
+    /// The rows `rows` of the image on `part` cut into pieces whose bricks fit, pushed onto
+    /// `out` in an order that keeps each pixel's planes in order: the longest pieces of planes
+    /// whose bricks fit (a binary search per piece); where even one plane does not fit, the
+    /// rows and columns are cut in two ([`Planner::halves`]) and each half goes on from that
+    /// plane in turn. A piece of one row, one column and one plane meets at most 8 bricks
+    /// where a pixel and a slab span under `B − 2` voxels along each index axis (module docs),
+    /// so any budget of 8 slots completes such a frame; an error naming the budget where even
+    /// such a piece does not fit.
+    fn pieces(&self, rows: (usize, usize), part: Part, out: &mut Vec<Piece>) -> Result<()> {
+        let (mut p0, end) = part.planes;
+        let cols = part.cols;
+        let at = |planes| Part { cols, planes };
         while p0 < end {
-            let one = self.set(bands, (p0, p0 + 1));
+            let one = self.set(rows, at((p0, p0 + 1)));
             if one.len() > self.capacity {
-                return Err(self.budget_error(one.len()));
+                let Some(halves) = self.halves(rows, cols) else {
+                    return Err(self.budget_error(one.len()));
+                };
+                for (rows, cols) in halves {
+                    let planes = (p0, end);
+                    self.pieces(rows, Part { cols, planes }, out)?;
+                }
+                return Ok(());
             }
             // The longest piece from p0 that fits (the set grows with the piece).
             let (mut lo, mut hi) = (p0 + 1, end);
             let mut best = one;
             while lo < hi {
                 let mid = (lo + hi).div_ceil(2);
-                let s = self.set(bands, (p0, mid));
+                let s = self.set(rows, at((p0, mid)));
                 if s.len() <= self.capacity {
                     lo = mid;
                     best = s;
@@ -248,12 +334,36 @@ impl Planner<'_, '_> {
                 }
             }
             out.push(Piece {
-                planes: (p0, lo),
+                rows,
+                part: at((p0, lo)),
                 bricks: best,
             });
             p0 = lo;
         }
-        Ok(out)
+        Ok(())
+    }
+
+    /// Rows `rows` and columns `cols` cut in two: the bands apart first (at a band's edge),
+    /// then the columns, then the rows of one band; `None` for one pixel.
+    #[allow(clippy::type_complexity)]
+    fn halves(
+        &self,
+        (y0, y1): (usize, usize),
+        (x0, x1): (usize, usize),
+    ) -> Option<[((usize, usize), (usize, usize)); 2]> {
+        let (ys, xs) = ((y0, y1), (x0, x1));
+        if y1 - y0 > self.band_h {
+            let mid = y0 + (y1 - y0).div_ceil(self.band_h) / 2 * self.band_h;
+            Some([((y0, mid), xs), ((mid, y1), xs)])
+        } else if x1 - x0 > 1 {
+            let mid = x0 + (x1 - x0) / 2;
+            Some([(ys, (x0, mid)), (ys, (mid, x1))])
+        } else if y1 - y0 > 1 {
+            let mid = y0 + (y1 - y0) / 2;
+            Some([((y0, mid), xs), ((mid, y1), xs)])
+        } else {
+            None
+        }
     }
 }
 
@@ -317,21 +427,22 @@ fn needed_bricks(frame: &Frame<'_>, layout: &BrickLayout) -> Vec<bool> {
     needed
 }
 
-/// The bricks (indices, sorted) whose cells the rows `[y0, y1)` can sample on the planes
-/// `[first, end)` (module docs), among those `needed`.
+/// The bricks (indices, sorted) whose cells the pixels `part.cols` of the rows `[y0, y1)` can
+/// sample on the planes `part.planes` (module docs), among those `needed`.
 fn band_bricks(
     frame: &Frame<'_>,
     layout: &BrickLayout,
     (y0, y1): (usize, usize),
-    (first, end): (usize, usize),
+    part: Part,
     needed: &[bool],
 ) -> Vec<u32> {
-    if first >= end || y0 >= y1 {
+    let ((x0, x1), (first, end)) = (part.cols, part.planes);
+    if first >= end || y0 >= y1 || x0 >= x1 {
         return Vec::new();
     }
     let hull = Hull::new(
         &frame.view,
-        (-0.5, frame.width as f64 - 0.5),
+        (x0 as f64 - 0.5, x1 as f64 - 0.5),
         (y0 as f64 - 0.5, y1 as f64 - 0.5),
         (
             frame.depth(first) - 0.5 * frame.delta,

@@ -177,7 +177,8 @@ fn cases() -> Vec<(&'static str, RenderMode, CrioTables, Preintegrate)> {
 }
 
 /// Pixels, values, and the counters where they are comparable (MIP and MinIP marched in
-/// pieces of planes sample in another order: `None`).
+/// pieces of planes sample in another order, and pieces of columns narrow the rows' live
+/// windows: `None`).
 type Bits = (Vec<u32>, Option<Vec<u32>>, Option<[u64; 3]>);
 
 fn bits(r: &Rendered) -> Bits {
@@ -191,11 +192,8 @@ fn bits(r: &Rendered) -> Bits {
         r.values
             .as_ref()
             .map(|v| v.values().iter().map(|x| x.to_bits()).collect()),
-        (r.values.is_none() || r.stats.pieced_groups == 0).then_some([
-            r.stats.voxels,
-            r.stats.splats,
-            r.stats.splats_terminated,
-        ]),
+        (r.stats.split_groups == 0 && (r.values.is_none() || r.stats.pieced_groups == 0))
+            .then_some([r.stats.voxels, r.stats.splats, r.stats.splats_terminated]),
     )
 }
 
@@ -289,13 +287,41 @@ fn same(a: &Bits, b: &Bits, what: &str) {
 }
 
 /// The fewest slots a frame renders with: found by lowering the capacity until the render
-/// refuses (one plane of one band's bricks, since bands march in pieces).
+/// refuses (one sample of one plane's bricks, since bands march in pieces of planes, columns
+/// and rows; at most [`MIN_SLOTS`] here).
 fn band_need<T: Scalar>(
     volume: &Volume<T>,
     size: usize,
     cam: &Camera,
     tables: &CrioTables,
     s: &RenderSettings,
+) -> usize {
+    least(volume, size, cam, tables, s, |r| r.is_ok())
+}
+
+/// The fewest slots a frame renders with without cutting a band into columns or rows (one
+/// plane of one band's bricks).
+fn plane_need<T: Scalar>(
+    volume: &Volume<T>,
+    size: usize,
+    cam: &Camera,
+    tables: &CrioTables,
+    s: &RenderSettings,
+) -> usize {
+    least(volume, size, cam, tables, s, |r| {
+        r.as_ref().is_ok_and(|r| r.stats.split_groups == 0)
+    })
+}
+
+/// The least capacity (a binary search) whose bricked render passes `ok` (which must hold
+/// from some capacity on, and for every brick).
+fn least<T: Scalar>(
+    volume: &Volume<T>,
+    size: usize,
+    cam: &Camera,
+    tables: &CrioTables,
+    s: &RenderSettings,
+    ok: impl Fn(&Result<Rendered>) -> bool,
 ) -> usize {
     let bricks = BrickGrid::build(volume);
     let n = Copies::new(volume, size, 1).layout.brick_count();
@@ -304,9 +330,10 @@ fn band_need<T: Scalar>(
         let mid = (lo + hi) / 2;
         let mut r = Copies::new(volume, size, mid.max(1));
         r.capacity = mid;
-        match bricked(&mut r, &bricks, cam, tables, s) {
-            Ok(_) => hi = mid,
-            Err(_) => lo = mid,
+        if ok(&bricked(&mut r, &bricks, cam, tables, s)) {
+            hi = mid;
+        } else {
+            lo = mid;
         }
     }
     hi
@@ -416,9 +443,10 @@ fn a_wrong_voxel_in_one_slot_changes_the_picture() {
     }
 }
 
-/// Room for fewer bricks than one band needs: the band marches its planes in pieces, each
-/// piece's bricks made resident in turn; the same picture (composite: the same counters too;
-/// MIP and MinIP sample the pieces in another order, so only their extremes are compared).
+/// Room for fewer bricks than one band needs, but for one plane of it: the band marches its
+/// planes in pieces, each piece's bricks made resident in turn; the same picture (composite:
+/// the same counters too; MIP and MinIP sample the pieces in another order, so only their
+/// extremes are compared).
 #[test]
 fn bands_larger_than_the_budget_march_in_pieces_with_the_same_bits() {
     let f = phantom::sample(&blobs(), [45, 41, 38], 1).unwrap();
@@ -430,10 +458,11 @@ fn bands_larger_than_the_budget_march_in_pieces_with_the_same_bits() {
             let mut s = settings(60, 44, mode);
             s.preintegrate = preint;
             let want = render_slabs(&f, &cam, &tables, &s, Some(&bricks), &mut |_| true).unwrap();
-            let need = band_need(&f, 8, &cam, &tables, &s);
+            let need = plane_need(&f, 8, &cam, &tables, &s);
             for capacity in [need, need + 3] {
                 let mut res = Copies::new(&f, 8, capacity);
                 let got = bricked(&mut res, &bricks, &cam, &tables, &s).unwrap();
+                assert_eq!(got.stats.split_groups, 0, "{name}: a band was cut");
                 pieced += got.stats.pieced_groups;
                 same(
                     &bits(&got),
@@ -446,22 +475,148 @@ fn bands_larger_than_the_budget_march_in_pieces_with_the_same_bits() {
     assert!(pieced > 10, "only {pieced} groups were marched in pieces");
 }
 
-/// Room for fewer bricks than one plane of one band needs is an error naming the memory
-/// budget, not a wrong picture or a panic.
+/// The bricks one sample of one plane can need where a pixel and a slab span under `B − 2`
+/// voxels along each index axis (`Planner::pieces`): two per axis.
+const MIN_SLOTS: usize = 8;
+
+/// The view of the 8 GiB benchmark that was refused (BENCHMARKS §32, issue 31 item 4): along
+/// z, across a volume long in x, one plane of one 8-row band meets a row of bricks across the
+/// image, two or three high and two deep (here 8 × 3 × 2), more than the budget holds. It
+/// failed with `SplatError::Budget` before bands were cut into columns; now the band's
+/// columns (and rows, if need be) march apart, each column's planes in order with their
+/// carry: the in-memory bits in every mode, both projections, AVX2 on and off, 1 and 3
+/// threads, at room for 12 bricks and at the stated minimum, [`MIN_SLOTS`].
 #[test]
-fn a_budget_below_one_plane_is_an_error_naming_memory() {
+fn a_plane_of_a_band_above_the_budget_marches_in_columns_with_the_same_bits() {
+    let f = phantom::sample(&blobs(), [64, 24, 40], 1).unwrap();
+    let bricks = BrickGrid::build(&f);
+    let pool = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    let pools = [pool(1), pool(3)];
+    for (name, mode, tables, preint) in cases() {
+        for parallel in [true, false] {
+            let cam = orbit_camera(f.grid(), 0.0, 0.0, parallel);
+            for simd in [true, false] {
+                let mut s = settings(96, 40, mode);
+                s.simd = simd;
+                s.preintegrate = preint;
+                let want =
+                    render_slabs(&f, &cam, &tables, &s, Some(&bricks), &mut |_| true).unwrap();
+                let plane = plane_need(&f, 8, &cam, &tables, &s);
+                assert!(plane > 12, "{name}: one plane of a band needs only {plane}");
+                for capacity in [12, MIN_SLOTS] {
+                    for pool in &pools {
+                        let got = pool.install(|| {
+                            let mut res = Copies::new(&f, 8, capacity);
+                            bricked(&mut res, &bricks, &cam, &tables, &s).unwrap()
+                        });
+                        let what = format!(
+                            "{name} parallel {parallel} simd {simd} capacity {capacity} \
+                             threads {}",
+                            pool.current_num_threads()
+                        );
+                        assert!(got.stats.split_groups > 0, "{what}: no band was cut");
+                        same(&bits(&got), &bits(&want), &what);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A frame whose bands march in many pieces can be cancelled between two pieces, not only
+/// after the whole group: the callback's `false` after the first piece stops the frame with
+/// `Cancelled` after one step.
+#[test]
+fn a_frame_in_pieces_can_be_cancelled_between_pieces() {
+    let f = phantom::sample(&blobs(), [64, 24, 40], 1).unwrap();
+    let bricks = BrickGrid::build(&f);
+    let (_, mode, tables, _) = cases().remove(0);
+    let cam = orbit_camera(f.grid(), 0.0, 0.0, true);
+    let s = settings(96, 40, mode);
+    let mut res = Copies::new(&f, 8, MIN_SLOTS);
+    let mut calls = 0;
+    let e = render_slabs_in(
+        &mut Access::Bricked(&mut res),
+        &cam,
+        &tables,
+        &s,
+        &bricks,
+        &mut |_| {
+            calls += 1;
+            false
+        },
+    )
+    .unwrap_err();
+    assert!(matches!(e, SplatError::Cancelled), "{e}");
+    assert_eq!(
+        (calls, res.calls),
+        (1, 1),
+        "(callbacks, steps made resident)"
+    );
+}
+
+/// [`MIN_SLOTS`] is enough from any eye (the bound of `Planner::pieces`), in both
+/// projections, for a frame that samples every brick on its rays (MIP) and for one that
+/// pre-integrates (a carry between pieces): the in-memory bits.
+#[test]
+fn the_stated_minimum_budget_renders_every_view() {
+    let f = phantom::sample(&blobs(), [37, 29, 23], 1).unwrap();
+    let bricks = BrickGrid::build(&f);
+    let mut all = cases();
+    let picked = [all.remove(5), all.remove(1)]; // MIP, unshaded pre-integrated.
+    for (name, mode, tables, preint) in picked {
+        for (az, el) in [(61.0, 17.0), (135.0, -40.0), (200.0, 80.0), (10.0, 45.0)] {
+            for parallel in [true, false] {
+                let cam = orbit_camera(f.grid(), az, el, parallel);
+                let mut s = settings(70, 52, mode);
+                s.preintegrate = preint;
+                let want =
+                    render_slabs(&f, &cam, &tables, &s, Some(&bricks), &mut |_| true).unwrap();
+                for size in [8, 16] {
+                    let mut res = Copies::new(&f, size, MIN_SLOTS);
+                    let got = bricked(&mut res, &bricks, &cam, &tables, &s).unwrap();
+                    same(
+                        &bits(&got),
+                        &bits(&want),
+                        &format!("{name} az {az} el {el} parallel {parallel} B {size}"),
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Room for fewer bricks than one sample of one plane needs is an error naming the memory
+/// budget and the bricks needed (at most [`MIN_SLOTS`]), not a wrong picture or a panic.
+#[test]
+fn a_budget_below_one_samples_bricks_is_an_error_naming_memory() {
     let f = phantom::sample(&blobs(), [40, 40, 40], 1).unwrap();
     let bricks = BrickGrid::build(&f);
     let cam = orbit_camera(f.grid(), 20.0, 10.0, true);
     let (_, mode, tables, _) = cases().remove(5); // MIP reads every brick on its rays.
     let s = settings(64, 64, mode);
-    let mut res = Copies::new(&f, 8, 1);
-    let e = bricked(&mut res, &bricks, &cam, &tables, &s).unwrap_err();
-    assert!(
-        matches!(e, SplatError::Budget { capacity: 1, needed, .. } if needed > 1),
-        "{e}"
-    );
-    assert!(e.to_string().contains("memory budget"), "{e}");
+    for capacity in [1, MIN_SLOTS - 1] {
+        let mut res = Copies::new(&f, 8, capacity);
+        let e = bricked(&mut res, &bricks, &cam, &tables, &s).unwrap_err();
+        let SplatError::Budget { needed, .. } = e else {
+            panic!("capacity {capacity}: {e}");
+        };
+        assert!(
+            needed > capacity && needed <= MIN_SLOTS,
+            "capacity {capacity}: {needed} needed"
+        );
+        let text = e.to_string();
+        assert!(text.contains("memory budget"), "{e}");
+        assert!(
+            text.contains(&format!("but {needed} bricks are needed")),
+            "{e}"
+        );
+    }
 }
 
 /// Shading at the voxels needs the voxels' direction codes, a field of the whole volume: a

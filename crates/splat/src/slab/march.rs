@@ -406,32 +406,49 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
 
     /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through every plane.
     pub(super) fn band(&self, y0: usize, acc: &mut [Rgba]) -> Counters {
-        self.band_in(y0, acc, self.plane_range, &mut Carry::default())
+        let part = Part {
+            cols: (0, self.width),
+            planes: self.plane_range,
+        };
+        self.band_in(y0, acc, part, &mut Carry::default())
     }
 
-    /// Renders the band of image rows `[y0, y0 + rows.len()/width)` through the planes
-    /// `[first, end)` (within [`Frame::plane_range`]), continuing from what `acc` holds (the
-    /// accumulation, or MIP/MinIP's extreme in channel 0) and `carry`: marching a band's planes
-    /// in consecutive pieces gives the bits of marching them at once (out-of-core frames whose
-    /// band meets more bricks than the budget holds: `super::bricked`).
+    /// Renders the pixels `part.cols` (`[first, end)`) of the band of image rows
+    /// `[y0, y0 + rows.len()/width)` through the planes `part.planes` (within
+    /// [`Frame::plane_range`]), continuing from what `acc` holds (the accumulation, or
+    /// MIP/MinIP's extreme in channel 0) and `carry`: marching a band's planes in consecutive
+    /// pieces gives the bits of marching them at once, and so does marching its columns apart
+    /// or its rows as bands of their own (each pixel's arithmetic is its own). Out-of-core
+    /// frames whose band meets more bricks than the budget holds: `super::bricked`. The
+    /// counters of column pieces differ (a row's live window is narrowed per piece).
     pub(super) fn band_in(
         &self,
         y0: usize,
         acc: &mut [Rgba],
-        planes: (usize, usize),
+        part: Part,
         carry: &mut Carry,
     ) -> Counters {
         let w = self.width;
         let rows = acc.len() / w;
         match (self.post, self.shaded) {
-            _ if self.mode != RenderMode::Composite => self.band_extreme(y0, rows, acc, planes),
-            (Some(t), _) => self.band_post(y0, rows, acc, Post::Table(t), planes, carry),
+            _ if self.mode != RenderMode::Composite => self.band_extreme(y0, rows, acc, part),
+            (Some(t), _) => self.band_post(y0, rows, acc, Post::Table(t), part, carry),
             (None, Some(t)) => match self.voxel {
-                Some(vs) => self.band_post(y0, rows, acc, Post::Voxel(t, vs), planes, carry),
-                None => self.band_post(y0, rows, acc, Post::Shaded(t), planes, carry),
+                Some(vs) => self.band_post(y0, rows, acc, Post::Voxel(t, vs), part, carry),
+                None => self.band_post(y0, rows, acc, Post::Shaded(t), part, carry),
             },
-            (None, None) => self.band_plain(y0, rows, acc, planes),
+            (None, None) => self.band_plain(y0, rows, acc, part, carry),
         }
+    }
+
+    /// The path factors and ray extents of the rows `[y0, y0 + rows)`, computed by the first
+    /// piece of a band and kept in its `carry` for the next.
+    fn paths<'c>(&self, y0: usize, rows: usize, paths: &'c mut Option<Paths>) -> &'c Paths {
+        paths.get_or_insert_with(|| {
+            let kf = self.path_factors(y0, rows);
+            let (din, dout) = self.ray_extents(y0, rows);
+            Paths { kf, din, dout }
+        })
     }
 
     /// Unshaded composite through the post-classification table: each run of pixels in active
@@ -445,7 +462,7 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
         rows: usize,
         acc: &mut [Rgba],
         post: Post<'_>,
-        planes: (usize, usize),
+        Part { cols, planes }: Part,
         carry: &mut Carry,
     ) -> Counters {
         let w = self.width;
@@ -457,16 +474,15 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
             b: channel(2),
             a: channel(3),
         };
-        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
-        let kf = self.path_factors(y0, rows);
-        let (din, dout) = self.ray_extents(y0, rows);
+        let mut live: Vec<(i64, i64)> = vec![(cols.0 as i64, cols.1 as i64 - 1); rows];
+        let Carry { prev, stamp, paths } = carry;
+        let Paths { kf, din, dout } = self.paths(y0, rows, paths);
         let half = (0.5 * self.delta) as f32;
         let preint = self.preint_for(post);
-        if preint && carry.prev.len() != rows * w {
-            carry.prev = vec![0.0f32; rows * w];
-            carry.stamp = vec![u32::MAX; rows * w];
+        if preint && prev.len() != rows * w {
+            *prev = vec![0.0f32; rows * w];
+            *stamp = vec![u32::MAX; rows * w];
         }
-        let (prev, stamp) = (&mut carry.prev, &mut carry.stamp);
         for p in planes.0..planes.1 {
             let d = self.depth(p);
             let mut any_live = false;
@@ -769,7 +785,10 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
         y0: usize,
         rows: usize,
         acc: &mut [Rgba],
-        (first, end): (usize, usize),
+        Part {
+            cols,
+            planes: (first, end),
+        }: Part,
     ) -> Counters {
         let w = self.width;
         let mip = self.mode == RenderMode::Mip;
@@ -785,7 +804,10 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
                 let y = y0 + r;
                 let walk = self.walk(y, d);
                 let span = self.clip_span(y, d, walk.span);
-                let (lo, hi) = (span.0.max(walk.span.0), span.1.min(walk.span.1));
+                let (lo, hi) = (
+                    span.0.max(walk.span.0).max(cols.0 as i64),
+                    span.1.min(walk.span.1).min(cols.1 as i64 - 1),
+                );
                 if lo > hi {
                     continue;
                 }
@@ -835,15 +857,19 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
         y0: usize,
         rows: usize,
         acc: &mut [Rgba],
-        (first, end): (usize, usize),
+        Part {
+            cols,
+            planes: (first, end),
+        }: Part,
+        carry: &mut Carry,
     ) -> Counters {
         let w = self.width;
         let mut c = Counters::default();
         let mut line = vec![f32::NAN; w];
-        // Live window of each row (composite): pixels outside it are opaque.
-        let mut live: Vec<(i64, i64)> = vec![(0, w as i64 - 1); rows];
-        let kf = self.path_factors(y0, rows);
-        let (din, dout) = self.ray_extents(y0, rows);
+        // Live window of each row (composite): pixels outside it are opaque (or in another
+        // piece's columns).
+        let mut live: Vec<(i64, i64)> = vec![(cols.0 as i64, cols.1 as i64 - 1); rows];
+        let Paths { kf, din, dout } = self.paths(y0, rows, &mut carry.paths);
         let half = (0.5 * self.delta) as f32;
         for p in first..end {
             let d = self.depth(p);
@@ -987,13 +1013,31 @@ pub(super) enum Post<'a> {
     Voxel(&'a ShadeTable, &'a VoxelShading),
 }
 
+/// Which part of a band [`Ctx::band_in`] marches: the pixels `cols` (`[first, end)`) of each
+/// of its rows through the planes `planes` (`[first, end)`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Part {
+    pub(super) cols: (usize, usize),
+    pub(super) planes: (usize, usize),
+}
+
 /// What a band's composite keeps between pieces of its planes ([`Ctx::band_in`]) beside its
 /// accumulation: pre-integration's densities and stamps of the last plane each pixel was
-/// sampled on (empty until the first piece that pre-integrates).
+/// sampled on (empty until the first piece that pre-integrates), and the band's path factors
+/// and ray extents (computed by its first piece).
 #[derive(Default)]
 pub(super) struct Carry {
     prev: Vec<f32>,
     stamp: Vec<u32>,
+    paths: Option<Paths>,
+}
+
+/// Per pixel of a band (row-major): the path factor and the depths where the ray enters and
+/// leaves the volume ([`Ctx::path_factors`], [`Ctx::ray_extents`]).
+struct Paths {
+    kf: Vec<f32>,
+    din: Vec<f32>,
+    dout: Vec<f32>,
 }
 
 /// The accumulation of a band of rows as four planes of channels ([`Ctx::band_post`]).

@@ -336,9 +336,11 @@ pub(crate) fn render_slabs_in<T: Scalar>(
             Ctx::new(&frame, Vox::Linear(Linear::new(v))).march_bands(settings, progress)?
         }
         Access::Bricked(r) => {
-            let (acc, c, [steps, pieced]) = bricked::march(&frame, &mut **r, settings, progress)?;
+            let (acc, c, [steps, pieced, split]) =
+                bricked::march(&frame, &mut **r, settings, progress)?;
             stats.brick_steps = steps;
             stats.pieced_groups = pieced;
+            stats.split_groups = split;
             (acc, c)
         }
     };
