@@ -135,6 +135,46 @@ fn out_of_core_frames_equal_in_memory_ones_bit_for_bit() {
     );
 }
 
+/// A volume wider than the budget's bricks, seen along its short axis: one plane of one band
+/// of rows crosses a row of 6 bricks, up to two high and two deep (24), and 8 MiB holds 8 to
+/// 11 bricks (decision 0039's least budget is 8), so bands are cut into columns and rows as
+/// well as planes (a note says so). The picture is still the level read whole, bit for bit, in
+/// composite and MIP, both projections.
+#[test]
+fn a_plane_of_a_band_above_the_budget_is_drawn_in_columns_with_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = store(dir.path(), [384, 128, 128]);
+    let mut whole = Renderer::new();
+    let mut paged = Renderer::new();
+    let mut split = 0;
+    for mode in [Mode::Composite, Mode::Mip] {
+        for perspective in [false, true] {
+            let mut scene = scene(&path, 0.0, perspective);
+            if let CameraSpec::Orbit(o) = &mut scene.camera {
+                o.elevation = Some(0.0);
+            }
+            let mut req = RenderRequest::new(scene, 96, 64);
+            req.mode = mode;
+            let want = whole.render(&req, &mut |_| true).unwrap();
+            req.memory = Some(8 << 20);
+            let got = paged.render(&req, &mut |_| true).unwrap();
+            split += got
+                .notes
+                .iter()
+                .filter(|n| n.contains("pieces of columns or rows"))
+                .count();
+            assert!(
+                bits(&got) == bits(&want),
+                "{mode:?} perspective {perspective}: the out-of-core picture differs"
+            );
+        }
+    }
+    assert!(
+        split > 0,
+        "no band was cut into columns: the budget tests nothing"
+    );
+}
+
 /// What the slabs cannot draw from bricks is an error naming it: X-ray (the sheets read every
 /// voxel), a budget below one band's bricks (naming the budget), shading at the voxels.
 #[test]

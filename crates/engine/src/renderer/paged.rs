@@ -415,6 +415,14 @@ impl Renderer {
                 rendered.stats.pieced_groups, rendered.stats.brick_steps
             ));
         }
+        if rendered.stats.split_groups > 0 {
+            notes.push(format!(
+                "out of core: in {} of those groups one plane of a band met more bricks than the \
+                 budget holds, so the band was drawn in pieces of columns or rows too (a larger \
+                 --memory reads fewer bricks again)",
+                rendered.stats.split_groups
+            ));
+        }
         finish(
             Finished {
                 rendered,
