@@ -28,16 +28,21 @@ pub use render::{SortLastImage, render_sort_last};
 pub use tree::{BrickTree, Eye, Node};
 
 /// A sort-last rank's part of a volume read in bricks
-/// ([`crate::Renderer`]'s part of an OME-Zarr store): what its ranges scan found.
+/// ([`crate::Renderer`]'s part of an OME-Zarr store or a NRRD raw file): what its ranges scan
+/// found.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct RankPart {
     /// `[min, max]` of the part's samples (data units); `None` for an empty part.
     pub(crate) range: Option<[f32; 2]>,
-    /// Whether the part holds NaN or infinite floats (refused: `renderer::paged`).
+    /// `[lowest, highest]` finite sample of the part (data units); `None` where none is.
+    pub(crate) finite: Option<[f32; 2]>,
+    /// Whether the part holds NaN or infinite floats (replaced by the level's finite extremes
+    /// once the ranks have shared their finite ranges: `Renderer::set_rank_range`).
     pub(crate) non_finite: bool,
 }
 
-/// What one rank read of its part of a store ([`crate::Renderer::rank_reads`]): issue 32's "each
+/// What one rank read of its part of a store or NRRD file ([`crate::Renderer::rank_reads`]):
+/// issue 32's "each
 /// rank reads only its bricks, with their halo". Bytes are decoded samples of the cache's
 /// bricks (`E³` samples each, `E` = cells per brick + 3: the shared face and a halo of one
 /// voxel each side); a store's compressed bytes are fewer.
@@ -56,6 +61,9 @@ pub struct RankReads {
     pub frames: volsplat_splat::CacheStats,
     /// Bytes of the level's samples, had it been read whole.
     pub level_bytes: u64,
+    /// A NRRD file's part: the bytes its bricks read from the file (the halo boxes' rows, as
+    /// stored), scan and frames together; `None` for a store (whose chunks are compressed).
+    pub file_bytes: Option<u64>,
 }
 
 /// What can go wrong while compositing across processes.
