@@ -48,15 +48,18 @@ pub struct SortLastImage {
 ///   bricks is the single-process projection **bit for bit** (max and min are exact); rank 0
 ///   classifies it with the request's tables ([`volsplat_splat::extreme_picture`]).
 ///
-/// **Reading.** From an OME-Zarr store (composite, MIP, MinIP) each rank reads only the bricks
-/// of its part ([`crate::Renderer::rank_reads`] counts them): the grid and camera come from the
-/// store's metadata, the ranges scan reads only the bricks meeting the rank's sort-last bricks
+/// **Reading.** From an OME-Zarr store or a NRRD file with a raw payload (composite, MIP,
+/// MinIP) each rank reads only the bricks of its part ([`crate::Renderer::rank_reads`] counts
+/// them): the grid and camera come from the store's metadata or the file's header, the ranges
+/// scan reads only the bricks meeting the rank's sort-last bricks
 /// (`volsplat_splat::scan_level_in`), and the frames read them through a cache that never reads
 /// another. The ranks share their parts' value ranges in a set-up round, so presets, the
 /// projections' automatic window and the pre-integration test see the level's range: the
-/// image is the bits of the same sort-last render from the volume in memory. Refused on every
-/// rank alike: the automatic composite transfer function (a histogram of the whole level)
-/// and float stores with NaN or ±∞. X-ray and other files: every rank reads the volume whole.
+/// image is the bits of the same sort-last render from the volume in memory. They share their
+/// parts' finite ranges too: a part holding NaN or ±∞ floats replaces them by the union's
+/// extremes (decision 0030), as the level read whole does. Refused on every rank alike: the
+/// automatic composite transfer function (a histogram of the whole level). X-ray, gzip or text
+/// NRRD payloads and other files: every rank reads the volume whole.
 ///
 /// A rank that cannot set up (its volume unreadable, a bad setting) still takes its part in
 /// the set-up round, sending its error, so every rank returns [`DistributedError::Rank`]

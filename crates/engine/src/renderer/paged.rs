@@ -61,8 +61,9 @@ struct Part {
     /// The level's bricks and decoded bytes, had it been read whole.
     level_bricks: usize,
     level_bytes: u64,
-    /// A NRRD file's count of the bytes its bricks read from it.
-    file_bytes: Option<Arc<std::sync::atomic::AtomicU64>>,
+    /// A NRRD file's count of the bytes its bricks read from it, and its value once the
+    /// ranges scan was done.
+    file_bytes: Option<(Arc<std::sync::atomic::AtomicU64>, u64)>,
     /// Bytes scanned and read from the file by an earlier open of the part (before the level's
     /// finite range was known, [`Renderer::set_rank_range`]).
     earlier: (u64, u64),
@@ -293,7 +294,7 @@ impl Renderer {
             let file = p
                 .file_bytes
                 .as_ref()
-                .map_or(0, |c| c.load(Ordering::Relaxed));
+                .map_or(0, |c| c.0.load(Ordering::Relaxed));
             (p.earlier.0 + p.scan.bytes_read, p.earlier.1 + file)
         });
         drop(old.value);
@@ -328,10 +329,11 @@ impl Renderer {
             scan_bytes: part.earlier.0 + part.scan.bytes_read,
             frames: with_cache!(&paged.cache, c => c.stats()),
             level_bytes: part.level_bytes,
-            file_bytes: part
+            scan_file_bytes: part.file_bytes.as_ref().map(|c| part.earlier.1 + c.1),
+            frame_file_bytes: part
                 .file_bytes
                 .as_ref()
-                .map(|c| part.earlier.1 + c.load(Ordering::Relaxed)),
+                .map(|c| c.0.load(Ordering::Relaxed) - c.1),
         })
     }
 
@@ -574,17 +576,17 @@ fn placeholder() -> Result<Arc<AnyVolume>> {
 }
 
 /// What a sort-last rank's part of a store cannot draw as the level read whole would: a float
-/// level with NaN or ±∞ (they become the *level's* finite extremes, which a part does not
-/// know), the automatic composite transfer function (a histogram of the whole level), and a
+/// level with NaN or ±∞ before the level's finite range is known (they become the *level's*
+/// finite extremes, which [`Renderer::set_rank_range`] gives), the automatic composite transfer function (a histogram of the whole level), and a
 /// preset or automatic range before the level's range is known ([`Renderer::set_rank_range`]).
 fn check_part(request: &RenderRequest, part: &Part) -> Result<()> {
     if let Some(nf) = &part.scan.non_finite {
         return Err(EngineError::request(
             "volume",
             format!(
-                "a rank's bricks hold {} NaN and {} infinite samples: a float store with \
-                 non-finite samples cannot be read per rank yet (they become the whole level's \
-                 finite extremes, which one rank does not read)",
+                "a rank's bricks hold {} NaN and {} infinite samples, which become the whole \
+                 level's finite extremes (decision 0030): a brick rendered alone does not know \
+                 them (render through distributed::render_sort_last, which shares them)",
                 nf.nan,
                 nf.pos_inf + nf.neg_inf
             ),

@@ -170,6 +170,10 @@ pub(super) fn open_part(
             // finite range is shared: `check_part`), or replaced by the level's extremes.
             let scanned = if finite.is_some() { &render } else { &stored };
             let scan = scan_level_in(&**scanned, level, region)?;
+            let counter = counter.map(|c| {
+                let scanned = c.load(std::sync::atomic::Ordering::Relaxed);
+                (c, scanned)
+            });
             let allowed = bricks_meeting(&scan.layout, region);
             let bricks = Arc::new(scan.brick_grid()?);
             let range = scan.value_range();
