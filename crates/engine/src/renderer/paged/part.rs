@@ -25,7 +25,7 @@ pub(super) enum PartStore {
         level: usize,
     },
     /// A NRRD file with a raw payload (its one level).
-    Nrrd(NrrdHeader),
+    Nrrd(Box<NrrdHeader>),
 }
 
 impl PartStore {
@@ -71,7 +71,7 @@ impl PartStore {
             return Ok(None);
         }
         let header = NrrdHeader::open(path, limits)?;
-        Ok(header.is_raw().then_some(PartStore::Nrrd(header)))
+        Ok(header.is_raw().then(|| PartStore::Nrrd(Box::new(header))))
     }
 
     /// The level's geometry.

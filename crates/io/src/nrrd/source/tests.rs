@@ -95,7 +95,7 @@ fn write(
         layout.line_skip,
         layout.byte_skip
     );
-    let path = if layout.detached {
+    if layout.detached {
         let raw = dir.join(format!("{name}.raw"));
         std::fs::write(&raw, &data).unwrap();
         header.push_str(&format!("data file: {name}.raw\n"));
@@ -109,8 +109,7 @@ fn write(
         f.write_all(header.as_bytes()).unwrap();
         f.write_all(&data).unwrap();
         p
-    };
-    path
+    }
 }
 
 fn keys(l: &BrickLayout) -> Vec<BrickKey> {
