@@ -144,8 +144,8 @@ impl Renderer {
         };
         if owned && request.mode != Mode::Xray {
             // A store, or a NRRD file with a raw payload (its header read, no sample).
-            return Ok(part::PartStore::open(source, &self.limits)?
-                .map(|_| request.memory.unwrap_or_else(auto_budget)));
+            return Ok(part::PartStore::readable(source, &self.limits)?
+                .then(|| request.memory.unwrap_or_else(auto_budget)));
         }
         if !ZarrStore::is_store(path) {
             return Ok(None);

@@ -74,6 +74,19 @@ impl PartStore {
         Ok(header.is_raw().then(|| PartStore::Nrrd(Box::new(header))))
     }
 
+    /// Whether [`PartStore::open`] opens `source`: an OME-Zarr store (its metadata not read
+    /// here), or a NRRD file whose header says its payload is raw.
+    pub(super) fn readable(source: &VolumeSource, limits: &volsplat_io::Limits) -> Result<bool> {
+        if let VolumeSource::File {
+            path, raw: None, ..
+        } = source
+            && ZarrStore::is_store(path)
+        {
+            return Ok(true);
+        }
+        Ok(Self::open(source, limits)?.is_some())
+    }
+
     /// The level's geometry.
     pub(super) fn grid(&self) -> Result<Grid> {
         match self {
