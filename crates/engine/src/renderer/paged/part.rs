@@ -232,7 +232,11 @@ pub(super) fn open_part(
         grid,
         range: (lo as f64, hi as f64),
         preview: None,
-        notes: vec![note],
+        // The NRRD reader's own notes (how the world frame was taken), as a whole read gives.
+        notes: match &store {
+            PartStore::Nrrd(h) => h.notes().iter().cloned().chain([note]).collect(),
+            PartStore::Zarr { .. } => vec![note],
+        },
         part: Some(Part {
             level_bricks: scan.layout.brick_count(),
             range_is_level: scan.read.iter().all(|&r| r),
