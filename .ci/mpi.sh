@@ -3,7 +3,8 @@
 # libclang (rsmpi's bindings), the crate's formatting and lints, then `mpirun -np 1/2/3/4` on
 # scene files in both projections, composite, X-ray, MIP and MinIP, whose images must be the same
 # bytes for every rank count (the X-ray within 60 dB of one process, MIP and MinIP the same bytes
-# as one process); a missing volume, and one rank's truncated volume (the others' reads
+# as one process); ranks reading only their bricks of an OME-Zarr store and of a raw NRRD file
+# (the bytes of the gzip NRRD read whole, each rank's reads checked); a missing volume, and one rank's truncated volume (the others' reads
 # succeed), which must stop every rank with an error naming the file, not hang (each mpirun runs
 # under `timeout`). crates/mpi is a workspace of its own (the root's `exclude`), so `cargo test
 # --workspace` never needs MPI.
@@ -76,48 +77,74 @@ PY
   done
 done
 
-step "mpi: ranks read only their bricks of an OME-Zarr store"
-# The demo head as a store and as NRRD: from the store each rank reads only the bricks of its
-# part (it prints what it read); the bytes are the same for np 1-4 and the same as the ranks
-# reading the NRRD whole (the in-memory sort-last render of the same samples).
+step "mpi: ranks read only their bricks of an OME-Zarr store and of a NRRD raw file"
+# The demo head as a store, as a raw NRRD and as a gzip NRRD: from the store and the raw NRRD
+# each rank reads only the bricks of its part (it prints what it read: from the NRRD also the
+# bytes read from the file); the gzip NRRD has no random access and is read whole by every rank
+# (the in-memory sort-last render of the same samples). The bytes are the same for np 1-4 and
+# the same as the ranks reading the gzip NRRD whole.
 "$bin" convert -o "$work/head.zarr" -q
 "$bin" convert -o "$work/head.nrrd" -q
-for mode in composite mip minip; do
-  for view in "--azimuth 30 --elevation 15" "--azimuth -50 --elevation 20 --perspective"; do
-    # shellcheck disable=SC2086
-    "$bin" render "$work/head.zarr" --mode "$mode" --size 96x80 $view --save-scene "$work/z.json" -q -o "$work/z.png"
-    python3 - "$work/z.json" "$work/zn.json" "$work/head.nrrd" <<'PY'
-import json, sys
-s = json.load(open(sys.argv[1]))
-s["scene"]["volume"] = {"file": {"path": sys.argv[3]}}
-json.dump(s, open(sys.argv[2], "w"))
-PY
-    run 2 "$mpi" render --scene "$work/zn.json" --brick 32 -o "$work/nrrd.npy" 2> /dev/null
-    for n in 1 2 3 4; do
-      run "$n" "$mpi" render --scene "$work/z.json" --brick 32 -o "$work/z$n.npy" 2> "$work/reads$n.txt"
-      cmp "$work/nrrd.npy" "$work/z$n.npy" || { echo "FAIL: np=$n from the store differs from the NRRD read whole ($mode $view)"; exit 1; }
-      # Every rank read its part only: the parts' bricks add up to the level's, and with
-      # several ranks each read less than the level.
-      python3 - "$work/reads$n.txt" "$n" <<'PY'
+"$bin" convert -o "$work/headgz.nrrd" --gzip -q
+cat > "$work/reads.py" <<'PY'
 import re, sys
 # mpirun may interleave the ranks' lines: match the records, not the lines.
 pat = (r"rank (\d+) of \d+: read (\d+) of (\d+) bricks of \d+. cells: scan_bytes=(\d+) "
-       r"\([^)]*\), frame_bytes=(\d+) \([^)]*\), level_bytes=(\d+)")
-recs = re.findall(pat, open(sys.argv[1]).read())
-n = int(sys.argv[2])
+       r"\([^)]*\), frame_bytes=(\d+) \([^)]*\), level_bytes=(\d+) \([^)]*\)"
+       r"(?:, scan_file_bytes=(\d+) \([^)]*\), frame_file_bytes=(\d+))?")
+text = open(sys.argv[1]).read()
+recs = re.findall(pat, text)
+n, nrrd = int(sys.argv[2]), sys.argv[3] == "nrrd"
+if n == 0:
+    assert not recs, "a rank read in bricks a file it must read whole: %s" % (recs,)
+    sys.exit(0)
 assert sorted(int(r[0]) for r in recs) == list(range(n)), recs
 total = 0
 for r in recs:
-    rank, mine, level, scan, frame, whole = map(int, r)
+    rank, mine, level, scan, frame, whole = map(int, r[:6])
     total += mine
     assert frame <= scan, r
     if n > 1:
         assert mine < level and scan < whole, r
+    # From the NRRD file: the bytes read from the file, the scan's less than the file's
+    # samples with several ranks (no rank reads the whole file), the frame's no more.
+    assert (r[6] != "") == nrrd, r
+    if nrrd:
+        scan_file, frame_file = int(r[6]), int(r[7])
+        assert frame_file <= scan_file, r
+        if n > 1:
+            assert scan_file < whole, r
 assert total == level, (total, level)
-print("np=%d: %s" % (n, "; ".join("rank %s read %s/%s bricks, scan %s B, frame %s B of a %s B level" % r for r in sorted(recs))))
+print("np=%d %s: %s" % (n, sys.argv[3], "; ".join(
+    "rank %s read %s/%s bricks, scan %s B, frame %s B of a %s B level%s" % (
+        r[0], r[1], r[2], r[3], r[4], r[5],
+        ", %s B and %s B of the file" % (r[6], r[7]) if r[6] else "")
+    for r in sorted(recs))))
 PY
+for mode in composite mip minip; do
+  for view in "--azimuth 30 --elevation 15" "--azimuth -50 --elevation 20 --perspective"; do
+    # shellcheck disable=SC2086
+    "$bin" render "$work/head.zarr" --mode "$mode" --size 96x80 $view --save-scene "$work/z.json" -q -o "$work/z.png"
+    python3 - "$work/z.json" "$work" <<'PY'
+import json, sys
+for name, out in [("head.nrrd", "zn.json"), ("headgz.nrrd", "zg.json")]:
+    s = json.load(open(sys.argv[1]))
+    s["scene"]["volume"] = {"file": {"path": sys.argv[2] + "/" + name}}
+    json.dump(s, open(sys.argv[2] + "/" + out, "w"))
+PY
+    run 2 "$mpi" render --scene "$work/zg.json" --brick 32 -o "$work/whole.npy" 2> "$work/gz.txt"
+    python3 "$work/reads.py" "$work/gz.txt" 0 gzip
+    for n in 1 2 3 4; do
+      run "$n" "$mpi" render --scene "$work/z.json" --brick 32 -o "$work/z$n.npy" 2> "$work/reads$n.txt"
+      run "$n" "$mpi" render --scene "$work/zn.json" --brick 32 -o "$work/n$n.npy" 2> "$work/nreads$n.txt"
+      cmp "$work/whole.npy" "$work/z$n.npy" || { echo "FAIL: np=$n from the store differs from the NRRD read whole ($mode $view)"; exit 1; }
+      cmp "$work/whole.npy" "$work/n$n.npy" || { echo "FAIL: np=$n from the raw NRRD differs from the NRRD read whole ($mode $view)"; exit 1; }
+      # Every rank read its part only: the parts' bricks add up to the level's, and with
+      # several ranks each read less than the level (from the NRRD: less than the file).
+      python3 "$work/reads.py" "$work/reads$n.txt" "$n" store
+      python3 "$work/reads.py" "$work/nreads$n.txt" "$n" nrrd
     done
-    echo "ok: np 1-4 read their bricks of the store, the same bytes as the NRRD read whole ($mode $view)"
+    echo "ok: np 1-4 read their bricks of the store and of the raw NRRD, the same bytes as the gzip NRRD read whole ($mode $view)"
   done
 done
 

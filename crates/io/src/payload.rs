@@ -293,6 +293,17 @@ fn raw_offset(spec: &PayloadSpec<'_>, data: &OpenPayload, needed: u64) -> Result
     Ok(offset)
 }
 
+/// Where the samples of an uncompressed payload of `grid` start in `spec.data_path` (after
+/// `start`, the line skip and the byte skip, or the file's last bytes for `byte skip: -1`),
+/// and how many bytes they take, checked against the file's size as a whole read checks them
+/// (a brick source, `nrrd::NrrdSource`, reads its boxes from there).
+pub(crate) fn raw_payload_offset(spec: &PayloadSpec<'_>, grid: &Grid) -> Result<(u64, u64)> {
+    debug_assert_eq!(spec.encoding, Encoding::Raw);
+    let needed = needed_bytes(spec, grid)?;
+    let data = open_at_payload(spec)?;
+    Ok((raw_offset(spec, &data, needed)?, needed))
+}
+
 /// An uncompressed payload read one z slice at a time (`convert -o X.zarr` streams large
 /// raw and NRRD files through it: memory bounded by a slice, not the volume). The sizes are
 /// checked against the file before the first slice is read, as for a whole read.

@@ -5,9 +5,10 @@
 //! its run of the bricks, the ranks composite the partial images over a tree fixed by the
 //! bricks (`over` in composite, the sum in X-ray, the maximum in MIP, the minimum in MinIP), and
 //! rank 0 writes the image as `volsplat
-//! render` writes it. The image is the same bits for any N. From an OME-Zarr store (not in
-//! X-ray) each rank reads only the bricks of its part, and prints what it read (`rank R of N:
-//! read …`); other files are read whole by every rank.
+//! render` writes it. The image is the same bits for any N. From an OME-Zarr store or a NRRD
+//! file with a raw payload (not in X-ray) each rank reads only the bricks of its part, and
+//! prints what it read (`rank R of N: read …`; from a NRRD file also the bytes read from the
+//! file); other files are read whole by every rank.
 //!
 //! A rank that fails before the compositing (its scene file or volume unreadable) still takes
 //! its part in the one exchange, sending its error (`fail_direct_send`), so every rank exits
@@ -130,7 +131,9 @@ fn render(
     let image = render_sort_last(world, &mut renderer, request, brick)
         .with_context(|| format!("rank {} of {}", world.rank(), world.size()))?;
     if let Some(line) = reads_line(world, &renderer) {
-        eprintln!("{line}");
+        // One write of the whole line (the ranks share mpirun's stderr; see `main`).
+        let line = format!("{line}\n");
+        let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), line.as_bytes());
     }
     if let Some(image) = image {
         let options = request.output.write_options()?;
@@ -159,9 +162,18 @@ fn render(
 pub fn reads_line(world: &World, renderer: &volsplat::Renderer) -> Option<String> {
     let r = renderer.rank_reads()?;
     let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+    // A NRRD file's part: the bytes read from the file itself.
+    let file = match (r.scan_file_bytes, r.frame_file_bytes) {
+        (Some(scan), Some(frame)) => format!(
+            ", scan_file_bytes={scan} ({:.2} MiB), frame_file_bytes={frame} ({:.2} MiB)",
+            mib(scan),
+            mib(frame)
+        ),
+        _ => String::new(),
+    };
     Some(format!(
         "rank {} of {}: read {} of {} bricks of {}³ cells: scan_bytes={} ({:.2} MiB), \
-         frame_bytes={} ({:.2} MiB, {} bricks), level_bytes={} ({:.2} MiB)",
+         frame_bytes={} ({:.2} MiB, {} bricks), level_bytes={} ({:.2} MiB){file}",
         world.rank(),
         world.size(),
         r.region_bricks,

@@ -300,10 +300,12 @@ enum Message {
 
 /// A rank's set-up, shared with every rank before the images ([`exchange_ready`]): the value
 /// range of its part of a volume read in bricks (`None` where it read none, or read the volume
-/// whole), and whether its part holds non-finite floats.
+/// whole), its finite range (`None` where it holds no finite sample), and whether its part
+/// holds non-finite floats (replaced by the union of the parts' finite ranges, decision 0030).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Ready {
     pub(super) range: Option<[f32; 2]>,
+    pub(super) finite: Option<[f32; 2]>,
     pub(super) non_finite: bool,
 }
 
@@ -344,7 +346,8 @@ pub(super) fn exchange_ready(
 
 impl Message {
     /// Little-endian: tag (u32: 0 failed, 1 images, 2 ready); failed: the UTF-8 reason; ready:
-    /// flags (u32: 1 a range, 2 non-finite samples) and the range (2 × f32); images: count
+    /// flags (u32: 1 a range, 2 non-finite samples, 4 a finite range), the range and the
+    /// finite range (2 × f32 each, zeros where absent); images: count
     /// (u32), then per image the node (u32), the pixel count (u32) and the f32 channels.
     /// The buffer is sized once (a grown buffer would copy whole images and fault in their
     /// pages again; `bench-composite` under `mpirun`).
@@ -362,13 +365,20 @@ impl Message {
                     .collect::<Vec<_>>(),
             ),
             Message::Ready(r) => {
-                let mut out = Vec::with_capacity(16);
-                let flags = u32::from(r.range.is_some()) | u32::from(r.non_finite) << 1;
-                let [lo, hi] = r.range.unwrap_or([0.0, 0.0]);
+                let mut out = Vec::with_capacity(24);
+                let flags = u32::from(r.range.is_some())
+                    | u32::from(r.non_finite) << 1
+                    | u32::from(r.finite.is_some()) << 2;
                 out.extend_from_slice(&2u32.to_le_bytes());
                 out.extend_from_slice(&flags.to_le_bytes());
-                out.extend_from_slice(&lo.to_le_bytes());
-                out.extend_from_slice(&hi.to_le_bytes());
+                for v in r
+                    .range
+                    .unwrap_or([0.0; 2])
+                    .iter()
+                    .chain(&r.finite.unwrap_or([0.0; 2]))
+                {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
                 out
             }
         }
@@ -407,10 +417,13 @@ impl Message {
             }
             2 => {
                 let flags = u32_at(&mut at)?;
-                let lo = f32::from_bits(u32_at(&mut at)?);
-                let hi = f32::from_bits(u32_at(&mut at)?);
+                let mut v = [0.0f32; 4];
+                for x in &mut v {
+                    *x = f32::from_bits(u32_at(&mut at)?);
+                }
                 Ok(Message::Ready(Ready {
-                    range: (flags & 1 == 1).then_some([lo, hi]),
+                    range: (flags & 1 == 1).then_some([v[0], v[1]]),
+                    finite: (flags & 4 == 4).then_some([v[2], v[3]]),
                     non_finite: flags & 2 == 2,
                 }))
             }

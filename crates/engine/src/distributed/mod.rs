@@ -10,8 +10,10 @@
 //! ([`volsplat_splat::RenderSettings::owned_cells`]: the whole volume in memory, only the
 //! brick's cells drawn, every sample at its global position; composited, 156 dB from the
 //! single-process render and the same bits for any rank count, `tests.rs`), and ranks that read
-//! only their bricks of an OME-Zarr store (`store_tests.rs`; [`render_sort_last`]). What is not
-//! yet: a rank reading only its bricks of a NRRD file, pre-integration across a brick face (a brick's first sample has no previous one), early
+//! only their bricks of an OME-Zarr store or a NRRD file with a raw payload, float levels with
+//! NaN or ±∞ included (`store_tests.rs`; [`render_sort_last`]). What is not yet: X-ray ranks
+//! reading only their bricks, pre-integration across a brick face (a brick's first sample has
+//! no previous one), early
 //! termination across bricks (each brick's image runs to its own opacity). X-ray is summed from
 //! bricks drawn by the sheets or the splat list, each drawing the voxels of its cells; MIP and
 //! MinIP take the extreme of the slabs' bricks, bit for bit the single-process projection.
@@ -28,16 +30,21 @@ pub use render::{SortLastImage, render_sort_last};
 pub use tree::{BrickTree, Eye, Node};
 
 /// A sort-last rank's part of a volume read in bricks
-/// ([`crate::Renderer`]'s part of an OME-Zarr store): what its ranges scan found.
+/// ([`crate::Renderer`]'s part of an OME-Zarr store or a NRRD raw file): what its ranges scan
+/// found.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct RankPart {
     /// `[min, max]` of the part's samples (data units); `None` for an empty part.
     pub(crate) range: Option<[f32; 2]>,
-    /// Whether the part holds NaN or infinite floats (refused: `renderer::paged`).
+    /// `[lowest, highest]` finite sample of the part (data units); `None` where none is.
+    pub(crate) finite: Option<[f32; 2]>,
+    /// Whether the part holds NaN or infinite floats (replaced by the level's finite extremes
+    /// once the ranks have shared their finite ranges: `Renderer::set_rank_range`).
     pub(crate) non_finite: bool,
 }
 
-/// What one rank read of its part of a store ([`crate::Renderer::rank_reads`]): issue 32's "each
+/// What one rank read of its part of a store or NRRD file ([`crate::Renderer::rank_reads`]):
+/// issue 32's "each
 /// rank reads only its bricks, with their halo". Bytes are decoded samples of the cache's
 /// bricks (`E³` samples each, `E` = cells per brick + 3: the shared face and a halo of one
 /// voxel each side); a store's compressed bytes are fewer.
@@ -56,6 +63,14 @@ pub struct RankReads {
     pub frames: volsplat_splat::CacheStats,
     /// Bytes of the level's samples, had it been read whole.
     pub level_bytes: u64,
+    /// A NRRD file's part: the bytes its ranges scan read from the file (the halo boxes of
+    /// the region's bricks, as stored: once, or twice where the part held NaN or ±∞ and was
+    /// scanned again with the level's finite range); `None` for a store (whose chunks are
+    /// compressed).
+    pub scan_file_bytes: Option<u64>,
+    /// A NRRD file's part: the bytes its frames read from the file (the halo boxes of the
+    /// bricks they read); `None` for a store.
+    pub frame_file_bytes: Option<u64>,
 }
 
 /// What can go wrong while compositing across processes.

@@ -48,15 +48,18 @@ pub struct SortLastImage {
 ///   bricks is the single-process projection **bit for bit** (max and min are exact); rank 0
 ///   classifies it with the request's tables ([`volsplat_splat::extreme_picture`]).
 ///
-/// **Reading.** From an OME-Zarr store (composite, MIP, MinIP) each rank reads only the bricks
-/// of its part ([`crate::Renderer::rank_reads`] counts them): the grid and camera come from the
-/// store's metadata, the ranges scan reads only the bricks meeting the rank's sort-last bricks
+/// **Reading.** From an OME-Zarr store or a NRRD file with a raw payload (composite, MIP,
+/// MinIP) each rank reads only the bricks of its part ([`crate::Renderer::rank_reads`] counts
+/// them): the grid and camera come from the store's metadata or the file's header, the ranges
+/// scan reads only the bricks meeting the rank's sort-last bricks
 /// (`volsplat_splat::scan_level_in`), and the frames read them through a cache that never reads
 /// another. The ranks share their parts' value ranges in a set-up round, so presets, the
 /// projections' automatic window and the pre-integration test see the level's range: the
-/// image is the bits of the same sort-last render from the volume in memory. Refused on every
-/// rank alike: the automatic composite transfer function (a histogram of the whole level)
-/// and float stores with NaN or ±∞. X-ray and other files: every rank reads the volume whole.
+/// image is the bits of the same sort-last render from the volume in memory. They share their
+/// parts' finite ranges too: a part holding NaN or ±∞ floats replaces them by the union's
+/// extremes (decision 0030), as the level read whole does. Refused on every rank alike: the
+/// automatic composite transfer function (a histogram of the whole level). X-ray, gzip or text
+/// NRRD payloads and other files: every rank reads the volume whole.
 ///
 /// A rank that cannot set up (its volume unreadable, a bad setting) still takes its part in
 /// the set-up round, sending its error, so every rank returns [`DistributedError::Rank`]
@@ -86,6 +89,7 @@ pub fn render_sort_last(
     let mine = match &set {
         Ok((_, part)) => Ok(Ready {
             range: part.and_then(|p| p.range),
+            finite: part.and_then(|p| p.finite),
             non_finite: part.is_some_and(|p| p.non_finite),
         }),
         Err(e) => Err(e.to_string()),
@@ -93,7 +97,7 @@ pub fn render_sort_last(
     let all = exchange_ready(comm, mine)?;
     let ((tree, eye, combine), part) = set?;
     if part.is_some() {
-        share_range(comm, renderer, &all)?;
+        share_range(comm, renderer, request, &all)?;
     }
     let (w, h) = (request.width, request.height);
     let pixels = composite_direct_send(comm, &tree, eye, combine, (w, h), &mut |b| {
@@ -211,29 +215,29 @@ pub(super) fn rank_region(tree: &BrickTree, rank: usize, size: usize) -> Vec<[[u
         .collect()
 }
 
-/// After the set-up round, with every rank's part ([`Ready`] in `all`): every rank refuses
-/// alike where a part holds non-finite floats (their replacement is the level's finite
-/// extremes), else gives its part the level's value range, the union of the parts' (exact:
-/// min and max). A rank that fails to take it stops every rank in the image exchange
-/// ([`fail_direct_send`]).
-fn share_range(comm: &dyn Communicator, renderer: &mut Renderer, all: &[Ready]) -> Result<()> {
-    if let Some(r) = all.iter().position(|r| r.non_finite) {
-        return Err(DistributedError::Setting(format!(
-            "rank {r}'s bricks hold NaN or infinite samples: a float store with non-finite \
-             samples cannot be read per rank yet (they become the whole level's finite \
-             extremes, which no rank reads)"
-        )));
-    }
-    let range = all
-        .iter()
-        .filter_map(|r| r.range)
-        .fold([f32::INFINITY, f32::NEG_INFINITY], |a, r| {
+/// After the set-up round, with every rank's part ([`Ready`] in `all`): gives its part the
+/// level's value range and finite range, the unions of the parts' (exact: min and max; the
+/// parts' owned voxels cover the level). A part holding NaN or ±∞ floats replaces them by the
+/// level's finite extremes (decision 0030), as the level read whole does. A rank that fails to
+/// take them stops every rank in the image exchange ([`fail_direct_send`]).
+fn share_range(
+    comm: &dyn Communicator,
+    renderer: &mut Renderer,
+    request: &RenderRequest,
+    all: &[Ready],
+) -> Result<()> {
+    let union = |ranges: &mut dyn Iterator<Item = [f32; 2]>| {
+        let r = ranges.fold([f32::INFINITY, f32::NEG_INFINITY], |a, r| {
             [a[0].min(r[0]), a[1].max(r[1])]
         });
-    if range[0] > range[1] {
+        (r[0] <= r[1]).then_some(r)
+    };
+    let range = union(&mut all.iter().filter_map(|r| r.range));
+    let finite = union(&mut all.iter().filter_map(|r| r.finite));
+    let Some(range) = range else {
         return Err(fail_direct_send(comm, "no rank read a sample".into()));
-    }
+    };
     renderer
-        .set_rank_range(range)
+        .set_rank_range(request, range, finite)
         .map_err(|e| fail_direct_send(comm, e.to_string()))
 }

@@ -1,6 +1,6 @@
-//! Sort-last ranks that read only their bricks of an OME-Zarr store (issue 32 item 2): the
-//! same bits as the ranks drawing the same samples from the volume in memory, for 1–4 ranks,
-//! and each rank's reads counted.
+//! Sort-last ranks that read only their bricks of an OME-Zarr store or a NRRD file with a raw
+//! payload (issue 32 item 2): the same bits as the ranks drawing the same samples from the
+//! volume in memory, for 1–4 ranks, and each rank's reads counted.
 
 use super::*;
 use crate::scene::{TransferSpec, VolumeSource};
@@ -42,29 +42,64 @@ fn bits(out: &SortLastImage) -> (Vec<u32>, Option<Vec<u32>>) {
     (img, values)
 }
 
-/// Composite with a preset, MIP and MinIP with the automatic window (both need the level's
-/// value range, which the ranks share), pre-integration left automatic (its test folds every
-/// block's range), both projections, bricks of 16 cells: the store read per rank gives the
-/// bits of the same sort-last render from memory for 1–4 ranks, and every rank reads exactly
-/// the cache bricks of its sort-last bricks (bricks of 16 cells: the same boxes), each once in
-/// its frame, their union the level once.
-#[test]
-fn ranks_read_only_their_bricks_of_a_store_and_draw_the_in_memory_bits() {
-    let dir = tempfile::tempdir().unwrap();
-    let (path, whole) = store(dir.path());
+/// The demo head written as a NRRD file with a raw payload in `dir`, and the file read whole.
+fn nrrd(dir: &Path) -> (PathBuf, Arc<AnyVolume>) {
+    let head = Renderer::new().volume(&Scene::default().volume).unwrap();
+    let path = dir.join("head.nrrd");
+    volsplat_io::write_nrrd(&path, &head, false).unwrap();
+    let whole = volsplat_io::read_nrrd(&path).unwrap();
+    (path, Arc::new(whole))
+}
+
+/// The bytes of the halo boxes of the bricks of 16 cells whose cells meet `region`, as stored
+/// (`size` bytes a sample): what a scan of a NRRD part reads from the file.
+fn halo_bytes(dims: [usize; 3], region: &[[[usize; 3]; 2]], size: usize) -> u64 {
+    let layout = volsplat_core::source::BrickLayout::new(
+        volsplat_core::Grid::with_dims(dims).unwrap(),
+        0,
+        16,
+    )
+    .unwrap();
+    let meets = volsplat_splat::bricks_meeting(&layout, region);
+    let d = layout.dims();
+    let mut total = 0;
+    for (i, _) in meets.iter().enumerate().filter(|(_, m)| **m) {
+        let key = layout
+            .key([i % d[0], i / d[0] % d[1], i / (d[0] * d[1])])
+            .unwrap();
+        let h = layout.halo_voxels(key).unwrap();
+        total += (h.iter().map(|r| r.len()).product::<usize>() * size) as u64;
+    }
+    total
+}
+
+/// For each mode (composite with `tf`, MIP and MinIP with the automatic window: both need the
+/// level's value range, which the ranks share) and projection, the file at `path` rendered
+/// sort-last by 1–4 ranks reading their parts gives the bits of the same sort-last render of
+/// `whole` in memory, and every rank reads exactly the cache bricks of its sort-last bricks
+/// (bricks of 16 cells: the same boxes), each once in its scan and at most once in its frame,
+/// their union the level once; from a NRRD file, the bytes read from the file are those bricks'
+/// halo boxes (scanned once, or twice where the part held NaN or ±∞: `rescans`), fewer than the
+/// file's with several ranks.
+fn assert_ranks_draw_the_in_memory_bits(
+    path: &Path,
+    whole: &Arc<AnyVolume>,
+    tf: TransferSpec,
+    rescans: bool,
+) {
     let dims = whole.grid().dims;
     let cells = dims.map(|d| d - 1);
     let sort_bricks = cells.map(|c| c.div_ceil(16)).iter().product::<usize>();
-    let level_bytes =
-        dims.iter().product::<usize>() as u64 * whole.scalar_type().size_bytes() as u64;
+    let size = whole.scalar_type().size_bytes();
+    let level_bytes = dims.iter().product::<usize>() as u64 * size as u64;
+    let is_nrrd = path.extension().is_some_and(|e| e == "nrrd");
     for mode in [Mode::Composite, Mode::Mip, Mode::Minip] {
         for perspective in [false, true] {
             let mut mem = RenderRequest::new(Scene::default(), 40, 32);
             mem.mode = mode;
-            mem.scene.volume = VolumeSource::Memory(Arc::clone(&whole));
+            mem.scene.volume = VolumeSource::Memory(Arc::clone(whole));
             if mode == Mode::Composite {
-                mem.scene.transfer_function =
-                    TransferSpec::Preset(volsplat_core::presets::Preset::CtSkin);
+                mem.scene.transfer_function = tf.clone();
             }
             if perspective {
                 let cam = Renderer::new().camera(&mem).unwrap();
@@ -92,34 +127,61 @@ fn ranks_read_only_their_bricks_of_a_store_and_draw_the_in_memory_bits() {
             };
             assert!(drawn > 200, "{mode:?}: {drawn} pixels drawn");
             let mut req = mem.clone();
-            req.scene.volume = file(&path);
+            req.scene.volume = file(path);
             for ranks in 1..=4 {
-                let label = format!("{mode:?} perspective={perspective} ranks={ranks}");
+                let label = format!(
+                    "{} {mode:?} perspective={perspective} ranks={ranks}",
+                    path.display()
+                );
+                let tree = BrickTree::new(cells.map(|c| c.div_ceil(16)), 16).unwrap();
                 let out = FakeCluster { size: ranks }.run(|comm| {
                     let mut r = Renderer::new();
                     let image = render_sort_last(comm, &mut r, &req, 16);
-                    let leaves = {
-                        let t = BrickTree::new(cells.map(|c| c.div_ceil(16)), 16).unwrap();
-                        let (a, b) = t.rank_leaves(comm.rank(), comm.size());
-                        b - a
-                    };
-                    (image, r.rank_reads(), leaves)
+                    let (a, b) = tree.rank_leaves(comm.rank(), comm.size());
+                    let region = super::render::rank_region(&tree, comm.rank(), comm.size());
+                    (image, r.rank_reads(), b - a, region)
                 });
                 let mut union = 0;
-                for (rank, (image, reads, leaves)) in out.iter().enumerate() {
+                for (rank, (image, reads, leaves, region)) in out.iter().enumerate() {
                     let reads = reads.unwrap_or_else(|| panic!("{label}: rank {rank} read whole"));
                     assert_eq!(reads.brick, 16, "{label}");
                     assert_eq!(reads.level_bricks, sort_bricks, "{label}");
                     assert_eq!(reads.level_bytes, level_bytes);
-                    // Exactly the rank's bricks: scanned once each, read at most once by the
-                    // frame (the cache holds them all).
+                    // Exactly the rank's bricks: scanned once each (twice where rescanned),
+                    // read at most once by the frame (the cache holds them all).
                     assert_eq!(reads.region_bricks, *leaves, "{label} rank {rank}");
-                    let slot = 19u64.pow(3) * whole.scalar_type().size_bytes() as u64;
-                    assert_eq!(reads.scan_bytes, slot * *leaves as u64, "{label}");
+                    let slot = 19u64.pow(3) * size as u64;
+                    let scans = reads.scan_bytes / (slot * *leaves as u64).max(1);
+                    assert_eq!(
+                        reads.scan_bytes % (slot * *leaves as u64).max(1),
+                        0,
+                        "{label}"
+                    );
+                    assert!(scans == 1 || (rescans && scans == 2), "{label}: {reads:?}");
                     assert!(reads.frames.reads as usize <= *leaves, "{label}: {reads:?}");
                     assert_eq!(reads.frames.evictions, 0);
                     if ranks > 1 {
-                        assert!(reads.scan_bytes < level_bytes, "{label}: {reads:?}");
+                        assert!(reads.region_bricks < sort_bricks, "{label}: {reads:?}");
+                        // Decoded slots (19³ samples for 17³ owned) of a level as large as
+                        // the head's: fewer bytes than the level (not so for the small float
+                        // volume).
+                        if !rescans {
+                            assert!(reads.scan_bytes < level_bytes, "{label}: {reads:?}");
+                        }
+                    }
+                    // From a NRRD file: only the halo boxes of its bricks, as stored.
+                    assert_eq!(reads.scan_file_bytes.is_some(), is_nrrd, "{label}");
+                    assert_eq!(reads.frame_file_bytes.is_some(), is_nrrd, "{label}");
+                    if let (Some(scan), Some(frame)) =
+                        (reads.scan_file_bytes, reads.frame_file_bytes)
+                    {
+                        let boxes = halo_bytes(dims, region, size);
+                        assert_eq!(scan, boxes * scans, "{label} rank {rank}");
+                        assert!(frame <= boxes, "{label} rank {rank}: {frame} of {boxes}");
+                        assert!(frame > 0, "{label} rank {rank}: the frame read its bricks");
+                        if ranks > 1 {
+                            assert!(boxes < level_bytes, "{label}: {boxes} of {level_bytes}");
+                        }
                     }
                     union += reads.region_bricks;
                     if rank == 0 {
@@ -136,6 +198,84 @@ fn ranks_read_only_their_bricks_of_a_store_and_draw_the_in_memory_bits() {
             }
         }
     }
+}
+
+/// Ranks reading their bricks of an OME-Zarr store (chunks of 16) draw the bits of the
+/// in-memory sort-last render ([`assert_ranks_draw_the_in_memory_bits`]).
+#[test]
+fn ranks_read_only_their_bricks_of_a_store_and_draw_the_in_memory_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, whole) = store(dir.path());
+    let tf = TransferSpec::Preset(volsplat_core::presets::Preset::CtSkin);
+    assert_ranks_draw_the_in_memory_bits(&path, &whole, tf, false);
+}
+
+/// Ranks reading their bricks of a NRRD file with a raw payload (issue 32 item 2: no rank
+/// reads the whole file) draw the bits of the in-memory sort-last render of the file read
+/// whole, and read from the file only the halo boxes of their bricks.
+#[test]
+fn ranks_read_only_their_bricks_of_a_nrrd_file_and_draw_the_in_memory_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, whole) = nrrd(dir.path());
+    let tf = TransferSpec::Preset(volsplat_core::presets::Preset::CtSkin);
+    assert_ranks_draw_the_in_memory_bits(&path, &whole, tf, false);
+}
+
+/// A float NRRD file holding NaN, +∞ and −∞ scattered over every rank's part, its lowest and
+/// highest finite samples in different parts: the ranks share their parts' finite ranges in
+/// the set-up round and replace the non-finite samples by the union's extremes (decision
+/// 0030), drawing the bits of the in-memory sort-last render of the file read whole (where
+/// `Volume::new` replaced them) for 1–4 ranks, a preset that follows the level's range in
+/// composite. Before, every rank refused the file.
+#[test]
+fn a_float_file_with_nan_and_infinities_renders_per_rank_as_in_memory() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [41usize, 37, 34];
+    let c = [20.0, 18.0, 16.5];
+    let mut bytes = Vec::new();
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = [i as f32, j as f32, k as f32];
+                let r2: f32 = (0..3).map(|a| (p[a] - c[a]).powi(2)).sum();
+                let mut v = 100.0 - r2 * 0.25 + (i as f32) * 0.5;
+                match (i * 7 + j * 11 + k * 13) % 101 {
+                    0 => v = f32::NAN,
+                    1 => v = f32::INFINITY,
+                    2 => v = f32::NEG_INFINITY,
+                    _ => {}
+                }
+                // The extremes: the lowest finite sample near one corner, the highest near
+                // the opposite one.
+                if [i, j, k] == [1, 1, 1] {
+                    v = -500.0;
+                }
+                if [i, j, k] == [39, 35, 32] {
+                    v = 700.0;
+                }
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    let path = dir.path().join("nan.nrrd");
+    let mut file = format!(
+        "NRRD0004\ntype: float\ndimension: 3\nspace: left-posterior-superior\n\
+         sizes: {} {} {}\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\
+         endian: little\n\n",
+        dims[0], dims[1], dims[2]
+    )
+    .into_bytes();
+    file.extend(bytes);
+    std::fs::write(&path, file).unwrap();
+    let whole = volsplat_io::read_nrrd(&path).unwrap();
+    let nf = *whole.non_finite().unwrap();
+    assert_eq!((nf.lowest, nf.highest), (-500.0, 700.0));
+    assert!(
+        nf.nan > 100 && nf.pos_inf > 100 && nf.neg_inf > 100,
+        "{nf:?}"
+    );
+    let tf = TransferSpec::Preset(volsplat_core::presets::Preset::Ramp);
+    assert_ranks_draw_the_in_memory_bits(&path, &Arc::new(whole), tf, true);
 }
 
 /// What a rank reading its bricks cannot draw as the whole volume would is refused on every

@@ -250,7 +250,8 @@ impl Renderer {
     /// drawn, each at its global position. The request must be drawn by the image-aligned
     /// slabs at the full level in composite, MIP and MinIP, or by the sheets or the splat list
     /// in X-ray (the voxels whose cell lies in the box; an error naming `renderer` otherwise).
-    /// From an OME-Zarr store (not in X-ray) only the bricks of the box are read (the rank's
+    /// From an OME-Zarr store or a NRRD file with a raw payload (not in X-ray) only the bricks
+    /// of the box are read (the rank's
     /// part opened by [`crate::distributed::render_sort_last`] where it holds the box).
     pub fn render_brick(
         &mut self,

@@ -5,8 +5,9 @@
 //! pass over the bricks, in parallel, a few at a time) and give the empty-space skipping and
 //! the value range without keeping the level.
 //!
-//! A sort-last rank's **part** (issue 32, decision 0038): a brick of a store
-//! ([`Renderer::render_brick`]) reads only the cache bricks meeting the rank's sort-last bricks
+//! A sort-last rank's **part** (issue 32, decision 0038; [`part`]): a brick of a store or of a
+//! NRRD file with a raw payload ([`Renderer::render_brick`]) reads only the cache bricks
+//! meeting the rank's sort-last bricks
 //! (their ranges scanned, `volsplat_splat::scan_level_in`; the cache
 //! `BrickCache::restricted`), in bricks of the largest power of two (≤ [`BRICK`]) dividing the
 //! sort-last brick, so no cache brick holds another rank's cells. The blocks outside the part
@@ -22,10 +23,11 @@ use crate::request::{Mode, RenderRequest};
 use crate::scene::VolumeSource;
 use crate::{Progress, Stage, Stats};
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 use volsplat_core::{AnyVolume, Grid, ScalarType};
 use volsplat_io::{ZarrSelection, ZarrSource, ZarrStore};
-use volsplat_splat::{BrickCache, BrickGrid, CacheStats, LevelScan, bricks_meeting, scan_level_in};
+use volsplat_splat::{BrickCache, BrickGrid, CacheStats, LevelScan};
 
 /// Cells per brick side of out-of-core frames: 64³ u16 bricks of 67³ voxels are 0.57 MiB,
 /// so a budget of 256 MiB holds about 440 of them.
@@ -59,6 +61,12 @@ struct Part {
     /// The level's bricks and decoded bytes, had it been read whole.
     level_bricks: usize,
     level_bytes: u64,
+    /// A NRRD file's count of the bytes its bricks read from it, and its value once the
+    /// ranges scan was done.
+    file_bytes: Option<(Arc<std::sync::atomic::AtomicU64>, u64)>,
+    /// Bytes scanned and read from the file by an earlier open of the part (before the level's
+    /// finite range was known, [`Renderer::set_rank_range`]).
+    earlier: (u64, u64),
 }
 
 /// The boxes of cells (`[lo, hi)`, index space of the level) whose bricks a sort-last rank
@@ -85,6 +93,8 @@ macro_rules! with_cache {
         }
     };
 }
+
+mod part;
 
 /// The largest coarse level read whole for the automatic transfer function, in samples.
 const PREVIEW_SAMPLES: u64 = 16 << 20;
@@ -114,8 +124,8 @@ impl Renderer {
     /// The budget `source` is read under out of core, where it is: an OME-Zarr store's level
     /// with `request.memory` set, or too large for half the available memory.
     ///
-    /// A sort-last brick (`owned`) of a store is always read in bricks (at `request.memory`,
-    /// or half the available memory), except in X-ray: the sheets and the splat list read every
+    /// A sort-last brick (`owned`) of a store or of a NRRD file with a raw payload is always
+    /// read in bricks (at `request.memory`, or half the available memory), except in X-ray: the sheets and the splat list read every
     /// voxel, so an X-ray brick reads the level whole (decision 0038).
     pub(super) fn paged_budget(
         &self,
@@ -132,11 +142,13 @@ impl Renderer {
         else {
             return Ok(None);
         };
+        if owned && request.mode != Mode::Xray {
+            // A store, or a NRRD file with a raw payload (its header read, no sample).
+            return Ok(part::PartStore::readable(source, &self.limits)?
+                .then(|| request.memory.unwrap_or_else(auto_budget)));
+        }
         if !ZarrStore::is_store(path) {
             return Ok(None);
-        }
-        if owned && request.mode != Mode::Xray {
-            return Ok(Some(request.memory.unwrap_or_else(auto_budget)));
         }
         if let Some(b) = request.memory {
             return Ok(Some(b));
@@ -181,25 +193,23 @@ impl Renderer {
     }
 
     /// The grid of `request`'s volume where a sort-last rank reads it in bricks (an OME-Zarr
-    /// store's level, not in X-ray), from the store's metadata (no voxel read); `None` where
-    /// the volume is read whole.
+    /// store's level or a NRRD file with a raw payload, not in X-ray), from the store's
+    /// metadata or the file's header (no voxel read); `None` where the volume is read whole.
     pub(crate) fn part_grid(&self, request: &RenderRequest) -> Result<Option<Grid>> {
         let (source, _) = self.concrete_source(request)?;
         if self.paged_budget(request, &source, true)?.is_none() {
             return Ok(None);
         }
-        let VolumeSource::File { path, level, .. } = &source else {
-            return Ok(None);
-        };
-        let store = ZarrStore::open(path, &self.limits)?;
-        Ok(Some(store.grid(level.index().unwrap_or(0))?))
+        part::PartStore::open(&source, &self.limits)?
+            .map(|s| s.grid())
+            .transpose()
     }
 
     /// Opens a sort-last rank's part of `request`'s volume for reading in bricks, where it is
-    /// read so (an OME-Zarr store, not in X-ray): the bricks meeting the boxes of cells
-    /// `region` (the rank's sort-last bricks) are scanned for their ranges and no other brick
-    /// is ever read. Returns the part's value range and whether it holds non-finite floats,
-    /// or `None` where the volume is read whole. The part's range is not the level's: give
+    /// read so (an OME-Zarr store or a NRRD file with a raw payload, not in X-ray): the bricks
+    /// meeting the boxes of cells `region` (the rank's sort-last bricks) are scanned for their
+    /// ranges and no other brick is ever read. Returns the part's value range, its finite
+    /// range and whether it holds non-finite floats, or `None` where the volume is read whole. The part's range is not the level's: give
     /// the level's with [`Renderer::set_rank_range`] before rendering where the picture
     /// depends on it.
     pub(crate) fn open_rank_part(
@@ -224,6 +234,7 @@ impl Renderer {
         let range = part.scan.value_range();
         Ok(Some(crate::distributed::RankPart {
             range: (range[0] <= range[1]).then_some(range),
+            finite: part.scan.finite,
             non_finite: part.scan.non_finite.is_some(),
         }))
     }
@@ -233,7 +244,26 @@ impl Renderer {
     /// frames (presets, the projections' automatic ramp) and the range of the blocks it did
     /// not read (the slabs' automatic pre-integration test folds every block's range), so
     /// that its frames are those of the level read whole.
-    pub(crate) fn set_rank_range(&mut self, range: [f32; 2]) -> Result<()> {
+    ///
+    /// A part holding NaN or ±∞ floats is opened again with the level's finite range `finite`
+    /// (the union of every part's finite range: decision 0030 replaces NaN and −∞ by the
+    /// level's lowest finite sample, +∞ by its highest), its bricks scanned again as replaced,
+    /// so that its bricks and block ranges are those of the level read whole; an error where
+    /// `finite` is `None`.
+    pub(crate) fn set_rank_range(
+        &mut self,
+        request: &RenderRequest,
+        range: [f32; 2],
+        finite: Option<[f32; 2]>,
+    ) -> Result<()> {
+        let nf = self
+            .paged
+            .as_ref()
+            .and_then(|c| c.value.part.as_ref())
+            .is_some_and(|p| p.scan.non_finite.is_some());
+        if nf {
+            self.reopen_part(request, finite)?;
+        }
         let Some(paged) = self.paged.as_mut().map(|c| &mut c.value) else {
             return Ok(());
         };
@@ -247,9 +277,48 @@ impl Renderer {
         Ok(())
     }
 
-    /// What this renderer read of a sort-last rank's part of a store: the bricks of its
-    /// ranges scan and of its frames, against the level read whole; `None` where no part is
-    /// open (the volume was read whole).
+    /// The rank's part opened again with the level's finite range `finite` (its non-finite
+    /// floats replaced), under the same key; the old cache dropped first.
+    fn reopen_part(&mut self, request: &RenderRequest, finite: Option<[f32; 2]>) -> Result<()> {
+        let Some(finite) = finite else {
+            return Err(EngineError::request(
+                "volume",
+                "the rank's bricks hold NaN or infinite samples and no rank read a finite one",
+            ));
+        };
+        let Some(old) = self.paged.take() else {
+            return Ok(());
+        };
+        let (source, budget, region) = old.key;
+        let earlier = old.value.part.as_ref().map_or((0, 0), |p| {
+            let file = p
+                .file_bytes
+                .as_ref()
+                .map_or(0, |c| c.0.load(Ordering::Relaxed));
+            (p.earlier.0 + p.scan.bytes_read, p.earlier.1 + file)
+        });
+        drop(old.value);
+        let Some(boxes) = region.as_deref() else {
+            return Ok(());
+        };
+        let threads = request.threads;
+        let pool = Arc::clone(cached(&mut self.pool, threads, || build_pool(threads))?.value);
+        let limits = self.limits.clone();
+        let mut value =
+            pool.install(|| part::open_part(&source, budget, &limits, boxes, Some(finite)))?;
+        if let Some(p) = value.part.as_mut() {
+            p.earlier = earlier;
+        }
+        self.paged = Some(Cached {
+            key: (source, budget, region),
+            value,
+        });
+        Ok(())
+    }
+
+    /// What this renderer read of a sort-last rank's part of a store or NRRD file: the bricks
+    /// of its ranges scan and of its frames, against the level read whole; `None` where no
+    /// part is open (the volume was read whole).
     pub fn rank_reads(&self) -> Option<crate::distributed::RankReads> {
         let paged = &self.paged.as_ref()?.value;
         let part = paged.part.as_ref()?;
@@ -257,9 +326,14 @@ impl Renderer {
             brick: part.brick,
             region_bricks: part.scan.read.iter().filter(|&&r| r).count(),
             level_bricks: part.level_bricks,
-            scan_bytes: part.scan.bytes_read,
+            scan_bytes: part.earlier.0 + part.scan.bytes_read,
             frames: with_cache!(&paged.cache, c => c.stats()),
             level_bytes: part.level_bytes,
+            scan_file_bytes: part.file_bytes.as_ref().map(|c| part.earlier.1 + c.1),
+            frame_file_bytes: part
+                .file_bytes
+                .as_ref()
+                .map(|c| c.0.load(Ordering::Relaxed) - c.1),
         })
     }
 
@@ -510,17 +584,17 @@ fn placeholder() -> Result<Arc<AnyVolume>> {
 }
 
 /// What a sort-last rank's part of a store cannot draw as the level read whole would: a float
-/// level with NaN or ±∞ (they become the *level's* finite extremes, which a part does not
-/// know), the automatic composite transfer function (a histogram of the whole level), and a
+/// level with NaN or ±∞ before the level's finite range is known (they become the *level's*
+/// finite extremes, which [`Renderer::set_rank_range`] gives), the automatic composite transfer function (a histogram of the whole level), and a
 /// preset or automatic range before the level's range is known ([`Renderer::set_rank_range`]).
 fn check_part(request: &RenderRequest, part: &Part) -> Result<()> {
     if let Some(nf) = &part.scan.non_finite {
         return Err(EngineError::request(
             "volume",
             format!(
-                "a rank's bricks hold {} NaN and {} infinite samples: a float store with \
-                 non-finite samples cannot be read per rank yet (they become the whole level's \
-                 finite extremes, which one rank does not read)",
+                "a rank's bricks hold {} NaN and {} infinite samples, which become the whole \
+                 level's finite extremes (decision 0030): a brick rendered alone does not know \
+                 them (render through distributed::render_sort_last, which shares them)",
                 nf.nan,
                 nf.pos_inf + nf.neg_inf
             ),
@@ -576,13 +650,17 @@ fn frame_note(before: &CacheStats, after: &CacheStats, budget: u64) -> String {
     )
 }
 
-/// Opens the store of `source`, reads its level's ranges once, and makes the cache.
+/// Opens the store of `source`, reads its level's ranges once, and makes the cache; a
+/// sort-last rank's part (`region`: its boxes of cells) is opened by [`part::open_part`].
 pub(super) fn open_paged(
     source: &VolumeSource,
     budget: u64,
     limits: &volsplat_io::Limits,
     region: Option<&[[[usize; 3]; 2]]>,
 ) -> Result<Paged> {
+    if let Some(r) = region {
+        return part::open_part(source, budget, limits, r, None);
+    }
     let VolumeSource::File {
         path,
         level,
@@ -605,81 +683,54 @@ pub(super) fn open_paged(
         EngineError::request("volume", "the level's sample type cannot be rendered")
     })?;
     let arena = (budget as f64 * ARENA_SHARE) as u64;
-    let mut sidecar_note = None;
-    let brick = region.map_or(BRICK, |r| part_brick(r, grid.dims));
+    let sidecar_note;
+    let brick = BRICK;
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
             let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, brick)?;
-            let (cache, bricks, [lo, hi], scanned, scan_bytes, part_scan) = match region {
-                None => {
-                    let layout = volsplat_core::source::BrickSource::layout(&source, level)
-                        .cloned()
-                        .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
-                    let (scan, kept) =
-                        scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
-                            Ok(volsplat_splat::cache::scan_level_within(
-                                &source.as_stored(),
-                                level,
-                                budget / SCAN_SHARE,
-                            )?)
-                        })?;
-                    sidecar_note = kept;
-                    let source = match scan.finite {
-                        Some([lo, hi]) if scan.non_finite.is_some() => {
-                            source.with_finite_range(level, [lo, hi])?
-                        }
-                        _ => source,
-                    };
-                    let bricks = Arc::new(scan.brick_grid()?);
-                    let range = scan.value_range();
-                    let (scanned, scan_bytes) = (scan.bricks, scan.bytes_read);
-                    // Dropped before the arena is allocated: the block ranges are 0.8 % of
-                    // the level.
-                    drop(scan);
-                    let cache = BrickCache::new(Arc::new(source), level, arena)?;
-                    (cache, bricks, range, scanned, scan_bytes, None)
+            let layout = volsplat_core::source::BrickSource::layout(&source, level)
+                .cloned()
+                .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
+            let (scan, kept) = scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
+                Ok(volsplat_splat::cache::scan_level_within(
+                    &source.as_stored(),
+                    level,
+                    budget / SCAN_SHARE,
+                )?)
+            })?;
+            sidecar_note = kept;
+            let source = match scan.finite {
+                Some([lo, hi]) if scan.non_finite.is_some() => {
+                    source.with_finite_range(level, [lo, hi])?
                 }
-                Some(r) => {
-                    // Only the part's bricks, as stored: non-finite floats are refused
-                    // (`check_part`), never replaced by the part's own extremes.
-                    let scan = scan_level_in(&source.as_stored(), level, r)?;
-                    let allowed = bricks_meeting(&scan.layout, r);
-                    let bricks = Arc::new(scan.brick_grid()?);
-                    let range = scan.value_range();
-                    let (scanned, scan_bytes) = (scan.bricks, scan.bytes_read);
-                    let cache = BrickCache::restricted(Arc::new(source), level, arena, allowed)?;
-                    (cache, bricks, range, scanned, scan_bytes, Some(scan))
-                }
+                _ => source,
             };
+            let bricks = Arc::new(scan.brick_grid()?);
+            let [lo, hi] = scan.value_range();
+            let (scanned, scan_bytes) = (scan.bricks, scan.bytes_read);
+            // Dropped before the arena is allocated: the block ranges are 0.8 % of the level.
+            drop(scan);
+            let cache = BrickCache::new(Arc::new(source), level, arena)?;
             let note = format!(
-                "out of core: level {level} ({} × {} × {}){} in {} bricks of {brick}³ cells, \
+                "out of core: level {level} ({} × {} × {}) in {} bricks of {brick}³ cells, \
                  their ranges ready in {:.0} ms ({:.1} MiB read); a cache of {} bricks",
                 grid.dims[0],
                 grid.dims[1],
                 grid.dims[2],
-                if region.is_some() {
-                    ", a rank's part,"
-                } else {
-                    ""
-                },
                 scanned,
                 ms(t0),
                 scan_bytes as f64 / (1u64 << 20) as f64,
                 cache.stats().capacity
             );
-            let level_bytes =
-                grid.dims.iter().product::<usize>() as u64 * std::mem::size_of::<$t>() as u64;
             (
                 AnyCache::$variant(cache),
                 bricks,
                 (lo as f64, hi as f64),
                 note,
-                part_scan,
-                level_bytes,
             )
         }};
     }
-    let (cache, bricks, range, note, part_scan, level_bytes) = match kind {
+    let (cache, bricks, range, note) = match kind {
         ScalarType::U8 => open!(u8, U8),
         ScalarType::I8 => open!(i8, I8),
         ScalarType::U16 => open!(u16, U16),
@@ -690,9 +741,8 @@ pub(super) fn open_paged(
     // histogram.
     let coarsest = store.levels().len() - 1;
     let samples = store.levels()[coarsest].dims.iter().product::<u64>();
-    let small = region.is_none()
-        && samples <= PREVIEW_SAMPLES
-        && samples * kind.size_bytes() as u64 <= budget / PREVIEW_SHARE;
+    let small =
+        samples <= PREVIEW_SAMPLES && samples * kind.size_bytes() as u64 <= budget / PREVIEW_SHARE;
     let preview = if small {
         Some(Arc::new(store.read_level(coarsest, sel)?))
     } else {
@@ -705,13 +755,7 @@ pub(super) fn open_paged(
         range,
         preview,
         notes: std::iter::once(note).chain(sidecar_note).collect(),
-        part: part_scan.map(|scan| Part {
-            level_bricks: scan.layout.brick_count(),
-            range_is_level: scan.read.iter().all(|&r| r),
-            scan,
-            brick,
-            level_bytes,
-        }),
+        part: None,
     })
 }
 

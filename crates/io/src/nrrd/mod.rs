@@ -52,6 +52,9 @@ use std::path::{Path, PathBuf};
 use volsplat_core::glam::{DMat3, DVec3};
 use volsplat_core::{AnyVolume, CoreError, Grid};
 
+mod source;
+pub use source::{NrrdHeader, NrrdSource};
+
 /// The `type` spellings accepted, for error messages.
 const SUPPORTED_TYPES: &str = "uint8 (uchar, unsigned char), int8 (signed char), \
      uint16 (ushort, unsigned short), int16 (short), float; converted to float: \
