@@ -38,13 +38,10 @@ pub(super) const BRICK: usize = 64;
 /// 0039, amendment 1).
 const ARENA_SHARE: f64 = 0.72;
 
-/// The frames' chunk faces cache holds at most `budget / CHUNK_CACHE_SHARE` bytes
+/// The chunk faces cache of the scan and the frames (one cache: the first frame finds the
+/// faces the scan left) holds at most `budget / CHUNK_CACHE_SHARE` bytes
 /// ([`ZarrSource::with_chunk_cache`]).
 const CHUNK_CACHE_SHARE: u64 = 8;
-
-/// The scan's chunk faces cache holds at most `budget / SCAN_CHUNK_CACHE_SHARE` bytes (the
-/// scan runs before the arena is allocated, and its faces are dropped with it).
-const SCAN_CHUNK_CACHE_SHARE: u64 = 2;
 
 /// The arena's bytes under `budget`: [`ARENA_SHARE`] of it less the skip-block grid `bricks`
 /// (8 bytes per 8³ block: 0.78 % of a u16 level), which lives as long as the cache.
@@ -628,9 +625,7 @@ pub(super) fn open_paged(
                     let (scan, kept) =
                         scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
                             Ok(volsplat_splat::cache::scan_level_within(
-                                &source
-                                    .as_stored()
-                                    .with_chunk_cache(budget / SCAN_CHUNK_CACHE_SHARE),
+                                &source.as_stored(),
                                 level,
                                 budget / SCAN_SHARE,
                             )?)
