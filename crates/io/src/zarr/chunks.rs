@@ -84,47 +84,46 @@ pub(super) fn face_boxes(chunk: Box3) -> [Box3; 6] {
     })
 }
 
-/// The faces of one decoded chunk: each face box with its samples.
+/// The faces of one decoded chunk: each face box with where its samples start, the samples of
+/// all six in one allocation (fewer small buffers kept between the reads' large ones).
 #[derive(Debug)]
 pub(super) struct Faces<T> {
-    parts: Vec<(Box3, Vec<T>)>,
+    boxes: [(Box3, usize); 6],
+    samples: Vec<T>,
 }
 
 impl<T: Copy> Faces<T> {
     /// The faces of chunk `chunk` cut from its decoded samples `data` (x fastest).
     pub(super) fn of(chunk: Box3, data: &[T]) -> Self {
-        let parts = face_boxes(chunk)
-            .into_iter()
-            .map(|b| {
-                let (f, w) = (chunk.dims(), b.hi[0] - b.lo[0]);
-                let mut v = Vec::with_capacity(b.len());
-                for k in b.lo[2]..b.hi[2] {
-                    for j in b.lo[1]..b.hi[1] {
-                        let s = (b.lo[0] - chunk.lo[0])
-                            + f[0] * ((j - chunk.lo[1]) + f[1] * (k - chunk.lo[2]));
-                        v.extend_from_slice(&data[s..s + w]);
-                    }
+        let faces = face_boxes(chunk);
+        let mut samples = Vec::with_capacity(faces.iter().map(Box3::len).sum());
+        let f = chunk.dims();
+        let boxes = faces.map(|b| {
+            let start = samples.len();
+            let w = b.hi[0] - b.lo[0];
+            for k in b.lo[2]..b.hi[2] {
+                for j in b.lo[1]..b.hi[1] {
+                    let s = (b.lo[0] - chunk.lo[0])
+                        + f[0] * ((j - chunk.lo[1]) + f[1] * (k - chunk.lo[2]));
+                    samples.extend_from_slice(&data[s..s + w]);
                 }
-                (b, v)
-            })
-            .collect();
-        Faces { parts }
+            }
+            (b, start)
+        });
+        Faces { boxes, samples }
     }
 
     /// The face holding `piece`, with its box, if one does.
     pub(super) fn find(&self, piece: &Box3) -> Option<(Box3, &[T])> {
-        self.parts
+        self.boxes
             .iter()
             .find(|(b, _)| b.contains(piece))
-            .map(|(b, v)| (*b, v.as_slice()))
+            .map(|&(b, start)| (b, &self.samples[start..start + b.len()]))
     }
 
     /// Bytes held.
     pub(super) fn bytes(&self) -> u64 {
-        self.parts
-            .iter()
-            .map(|(_, v)| (v.len() * std::mem::size_of::<T>()) as u64)
-            .sum()
+        (self.samples.len() * std::mem::size_of::<T>()) as u64
     }
 }
 
