@@ -39,6 +39,43 @@ const READ_SHARE: u64 = 16;
 /// reader decodes whole chunks; 64³ chunks are about a slot each).
 pub const READ_COST_SLOTS: u64 = 4;
 
+/// Gives the whole free pages of the allocator's heaps back to the system (glibc's
+/// `malloc_trim(0)`; nothing elsewhere). Brick reads allocate and free buffers of a slot or a
+/// chunk (0.5–0.6 MiB for 64³ u16) on every thread, while the chunk faces cache keeps small
+/// buffers that land between them; glibc serves such buffers from its per-thread heaps (its
+/// mmap threshold rises to the size of the buffers freed) and the freed space between kept
+/// buffers stays resident: +400 MiB over the budget's accounting on the 8 GiB benchmark at
+/// 1 GiB (BENCHMARKS §33). Called every [`TRIM_EVERY`] bricks read ([`bricks_were_read`]):
+/// it costs a walk of the free lists, and the pages given back are faulted in again.
+fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            fn malloc_trim(pad: usize) -> std::ffi::c_int;
+        }
+        // SAFETY: `malloc_trim` takes no pointer and only returns free pages of glibc's heaps
+        // to the system (madvise), under the allocator's own locks; the Rust global allocator
+        // is glibc's malloc here (no `#[global_allocator]` in the library).
+        unsafe {
+            malloc_trim(0);
+        }
+    }
+}
+
+/// Bricks read (by every cache and scan of the process) between two
+/// [`release_freed_memory`] calls.
+const TRIM_EVERY: usize = 64;
+
+/// Counts `n` bricks read (and freed) and gives the freed memory back each time the count
+/// passes a multiple of [`TRIM_EVERY`].
+fn bricks_were_read(n: usize) {
+    static READ: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let before = READ.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+    if before / TRIM_EVERY != before.wrapping_add(n) / TRIM_EVERY {
+        release_freed_memory();
+    }
+}
+
 /// Counters of a [`BrickCache`] since it was made.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct CacheStats {
@@ -366,6 +403,7 @@ impl<T: Scalar> BrickCache<T> {
                     .collect::<Result<Vec<_>>>()?,
             );
         }
+        bricks_were_read(out.len());
         Ok(out)
     }
 
@@ -467,6 +505,7 @@ impl<T: Scalar> BrickCache<T> {
                 self.place(slot, i, &brick.data, now);
             }
         }
+        bricks_were_read(missing.len());
         Ok(())
     }
 
@@ -758,6 +797,7 @@ fn scan_bricks<T: Scalar>(
                 Ok((summarise(&layout, &brick)?, bytes))
             })
             .collect::<Result<Vec<_>>>()?;
+        bricks_were_read(chunk.len());
         for ((mut s, b), k) in part.into_iter().zip(chunk) {
             bytes_read += b;
             let i = index(k);

@@ -33,9 +33,24 @@ use volsplat_splat::{BrickCache, BrickGrid, CacheStats, LevelScan};
 /// so a budget of 256 MiB holds about 440 of them.
 pub(super) const BRICK: usize = 64;
 
-/// The share of the budget given to the cache's arena; the bricks read ahead (at most a quarter
-/// of the slots, `volsplat_splat::slab`'s read-ahead) take the rest.
-const ARENA_SHARE: f64 = 0.8;
+/// The share of the budget given to the cache's arena, less the skip-block grid
+/// ([`arena_bytes`]); the bricks read ahead (at most a quarter of the slots,
+/// `volsplat_splat::slab`'s read-ahead: 0.18), the reads in flight (1/16) and the chunk faces
+/// cache ([`CHUNK_CACHE_SHARE`]: 1/8): 1.09 of the budget in all, the grid included (decision
+/// 0039, amendment 1).
+const ARENA_SHARE: f64 = 0.72;
+
+/// The chunk faces cache of the scan and the frames (one cache: the first frame finds the
+/// faces the scan left) holds at most `budget / CHUNK_CACHE_SHARE` bytes
+/// ([`ZarrSource::with_chunk_cache`]).
+const CHUNK_CACHE_SHARE: u64 = 8;
+
+/// The arena's bytes under `budget`: [`ARENA_SHARE`] of it less the skip-block grid `bricks`
+/// (8 bytes per 8³ block: 0.78 % of a u16 level), which lives as long as the cache.
+fn arena_bytes(budget: u64, bricks: &BrickGrid) -> u64 {
+    let grid = (bricks.ranges.len() * std::mem::size_of::<[f32; 2]>()) as u64;
+    ((budget as f64 * ARENA_SHARE) as u64).saturating_sub(grid)
+}
 
 /// The cache of one level of one store, at one budget.
 pub(super) struct Paged {
@@ -682,12 +697,12 @@ pub(super) fn open_paged(
     let kind = store.level(level)?.scalar_type.ok_or_else(|| {
         EngineError::request("volume", "the level's sample type cannot be rendered")
     })?;
-    let arena = (budget as f64 * ARENA_SHARE) as u64;
     let sidecar_note;
     let brick = BRICK;
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
-            let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, brick)?;
+            let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, brick)?
+                .with_chunk_cache(budget / CHUNK_CACHE_SHARE);
             let layout = volsplat_core::source::BrickSource::layout(&source, level)
                 .cloned()
                 .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
@@ -710,7 +725,7 @@ pub(super) fn open_paged(
             let (scanned, scan_bytes) = (scan.bricks, scan.bytes_read);
             // Dropped before the arena is allocated: the block ranges are 0.8 % of the level.
             drop(scan);
-            let cache = BrickCache::new(Arc::new(source), level, arena)?;
+            let cache = BrickCache::new(Arc::new(source), level, arena_bytes(budget, &bricks))?;
             let note = format!(
                 "out of core: level {level} ({} × {} × {}) in {} bricks of {brick}³ cells, \
                  their ranges ready in {:.0} ms ({:.1} MiB read); a cache of {} bricks",

@@ -35,6 +35,7 @@
 //! [`ReadOptions::channel`]: crate::ReadOptions::channel
 //! [`ReadOptions::timepoint`]: crate::ReadOptions::timepoint
 
+mod chunks;
 mod convert;
 mod meta;
 mod source;

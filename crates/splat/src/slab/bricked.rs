@@ -32,8 +32,8 @@
 //! `[bB − 1, (b + 1)B + 1]`, so an interval of length `L` meets at most `2 + ⌊(L + 2)/B⌋` of
 //! them: **two per axis, eight bricks in all, when every `L_a < B − 2`**. With the engine's
 //! 64³ bricks that is every view whose (supersampled) pixel and slab span under 62 voxels, so
-//! a budget of 8 slots draws every such frame (for u16, 8 × 601,526 bytes in an arena of 80 %
-//! of the budget: 6 MiB). A smaller budget is refused with [`SplatError::Budget`] naming the
+//! a budget of 8 slots draws every such frame (for u16, 8 × 601,526 bytes in the engine's
+//! arena of 72 % of the budget less the skip-block grid: about 7 MiB). A smaller budget is refused with [`SplatError::Budget`] naming the
 //! bricks one sample needs.
 
 use super::march::{Carry, Counters, Ctx, Frame, Part};

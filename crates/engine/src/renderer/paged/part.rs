@@ -3,7 +3,7 @@
 //! ([`volsplat_io::nrrd::NrrdSource`]), opened as a brick source; only the bricks meeting the
 //! rank's sort-last bricks are scanned for their ranges and ever read.
 
-use super::{ARENA_SHARE, AnyCache, Paged, Part, part_brick};
+use super::{AnyCache, CHUNK_CACHE_SHARE, Paged, Part, arena_bytes, part_brick};
 use crate::error::{EngineError, Result};
 use crate::scene::{StoreLevel, VolumeSource};
 use std::path::Path;
@@ -131,10 +131,12 @@ type Sources<T> = (
 );
 
 macro_rules! sources {
-    ($t:ty, $store:expr, $brick:expr, $finite:expr) => {{
+    ($t:ty, $store:expr, $brick:expr, $finite:expr, $budget:expr) => {{
         let sources: Sources<$t> = match $store {
             PartStore::Zarr { store, sel, level } => {
-                let s = ZarrSource::<$t>::new(Arc::clone(store), *sel, $brick)?;
+                // One chunk faces cache for the scan and the frames (its clones share it).
+                let s = ZarrSource::<$t>::new(Arc::clone(store), *sel, $brick)?
+                    .with_chunk_cache($budget / CHUNK_CACHE_SHARE);
                 let s = match $finite {
                     Some(f) => s.with_finite_range(*level, f)?,
                     None => s,
@@ -174,11 +176,10 @@ pub(super) fn open_part(
         )
     })?;
     let (grid, kind, level) = (store.grid()?, store.kind()?, store.level());
-    let arena = (budget as f64 * ARENA_SHARE) as u64;
     let brick = part_brick(region, grid.dims);
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
-            let (render, stored, counter) = sources!($t, &store, brick, finite);
+            let (render, stored, counter) = sources!($t, &store, brick, finite, budget);
             // As stored (non-finite floats found, counted, and refused until the level's
             // finite range is shared: `check_part`), or replaced by the level's extremes.
             let scanned = if finite.is_some() { &render } else { &stored };
@@ -190,7 +191,8 @@ pub(super) fn open_part(
             let allowed = bricks_meeting(&scan.layout, region);
             let bricks = Arc::new(scan.brick_grid()?);
             let range = scan.value_range();
-            let cache = BrickCache::restricted(render, level, arena, allowed)?;
+            let cache =
+                BrickCache::restricted(render, level, arena_bytes(budget, &bricks), allowed)?;
             let level_bytes =
                 grid.dims.iter().product::<usize>() as u64 * std::mem::size_of::<$t>() as u64;
             (
