@@ -301,8 +301,27 @@ pub(crate) fn load_scene(path: Option<&Path>) -> Result<Option<RenderRequest>> {
     Ok(Some(req))
 }
 
+/// [`check_render_args`], then the request of `a` ([`render_request_noted`]) and its notes,
+/// unprinted: `volsplat_cli::render_flags`.
+pub(crate) fn render_request_checked(a: &RenderArgs) -> Result<(RenderRequest, Vec<String>)> {
+    check_render_args(a)?;
+    render_request_noted(a)
+}
+
 /// The `given` ids of `a` plus the `--scene` request, translated into the engine's request.
 fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
+    let (req, notes) = render_request_noted(a)?;
+    if !a.quiet {
+        for n in notes {
+            say!("note: {n}");
+        }
+    }
+    Ok(req)
+}
+
+/// The `given` ids of `a` plus the `--scene` request, translated into the engine's request,
+/// and what the translation noted; validated before any volume is loaded.
+fn render_request_noted(a: &RenderArgs) -> Result<(RenderRequest, Vec<String>)> {
     let base = load_scene(a.scene.as_deref())?;
     let (req, notes) = build_request_noted(
         &a.input,
@@ -315,14 +334,9 @@ fn render_request(a: &RenderArgs) -> Result<RenderRequest> {
         &a.given.iter().cloned().collect(),
         base,
     )?;
-    if !a.quiet {
-        for n in notes {
-            say!("note: {n}");
-        }
-    }
     // Before the volume is loaded, which can take seconds.
     req.validate().map_err(explain)?;
-    Ok(req)
+    Ok((req, notes))
 }
 
 /// An engine error of a render worded for the command line, with `rendering LABEL` in front

@@ -1,6 +1,7 @@
-//! `mpirun -np N volsplat-mpi render --scene SCENE.json -o OUT [--brick B]`: sort-last rendering
-//! of a scene file (as `volsplat render … --save-scene SCENE.json` writes it, so every render flag
-//! is available) across the ranks of `MPI_COMM_WORLD` (issue 32, decision 0038). The volume is
+//! `mpirun -np N volsplat-mpi render FILE [render flags] -o OUT [--brick B]`: sort-last rendering
+//! of what `volsplat render FILE [render flags] -o OUT` draws (its flags read by its own parser,
+//! `volsplat_cli::render_flags`, so every render flag and `--scene SCENE.json` work alike)
+//! across the ranks of `MPI_COMM_WORLD` (issue 32, decision 0038). The volume is
 //! cut into bricks of `B` cells (64 by default; the cut does not depend on N), rank `r` draws
 //! its run of the bricks, the ranks composite the partial images over a tree fixed by the
 //! bricks (`over` in composite, the sum in X-ray, the maximum in MIP, the minimum in MinIP), and
@@ -33,11 +34,8 @@ use world::World;
 
 /// What to do, from the command line.
 enum Command {
-    Render {
-        scene: PathBuf,
-        output: PathBuf,
-        brick: usize,
-    },
+    /// `volsplat render`'s arguments (without `--brick`), read on every rank.
+    Render { argv: Vec<String>, brick: usize },
     Bench {
         scene: PathBuf,
         brick: usize,
@@ -50,20 +48,35 @@ enum Command {
     },
 }
 
-const USAGE: &str = "usage: volsplat-mpi render --scene SCENE.json -o OUT [--brick B]\n       \
+const USAGE: &str = "usage: volsplat-mpi render [FILE] [volsplat render's flags] -o OUT [--brick B]\n       \
                      volsplat-mpi bench --scene SCENE.json [--brick B] [--rounds R]\n       \
                      volsplat-mpi bench-composite --size S [--bricks X,Y,Z] [--rounds R]";
 
 fn parse() -> Result<Command> {
     let mut it = std::env::args().skip(1);
     let command = it.next().unwrap_or_default();
-    let (mut scene, mut output, mut brick, mut rounds) = (None, None, 64usize, 5usize);
+    if command == "render" {
+        // `volsplat render`'s arguments, but `--brick B` (or `--brick=B`): read in `run`.
+        let (mut argv, mut brick) = (Vec::new(), 64usize);
+        while let Some(a) = it.next() {
+            let value = match a.strip_prefix("--brick=") {
+                Some(v) => Some(v.to_string()),
+                None if a == "--brick" => Some(it.next().context("--brick needs a value")?),
+                None => None,
+            };
+            match value {
+                Some(v) => brick = v.parse().context("--brick: a number of cells")?,
+                None => argv.push(a),
+            }
+        }
+        return Ok(Command::Render { argv, brick });
+    }
+    let (mut scene, mut brick, mut rounds) = (None, 64usize, 5usize);
     let (mut size, mut bricks) = (None, [2, 2, 1]);
     while let Some(a) = it.next() {
         let mut value = || it.next().with_context(|| format!("{a} needs a value"));
         match a.as_str() {
             "--scene" => scene = Some(PathBuf::from(value()?)),
-            "-o" | "--output" => output = Some(PathBuf::from(value()?)),
             "--brick" => brick = value()?.parse().context("--brick: a number of cells")?,
             "--rounds" => rounds = value()?.parse().context("--rounds: a count ≥ 1")?,
             "--size" => size = Some(value()?.parse().context("--size: pixels per side")?),
@@ -90,11 +103,6 @@ fn parse() -> Result<Command> {
         bail!("--rounds 0: at least one round");
     }
     Ok(match command.as_str() {
-        "render" => Command::Render {
-            scene: scene()?,
-            output: output.context("-o OUT is required")?,
-            brick,
-        },
         "bench" => Command::Bench {
             scene: scene()?,
             brick,
@@ -201,9 +209,16 @@ fn run(universe: &mut mpi::environment::Universe, command: Result<Command>) -> R
     // Everything a rank does before the exchange; its failure is shared through it.
     let ready = command.and_then(|c| {
         let request = match &c {
-            Command::Render { scene, .. } | Command::Bench { scene, .. } => {
-                Some(load(scene, rank)?)
+            Command::Render { argv, .. } => {
+                let flags = volsplat_cli::render_flags(argv)?;
+                if rank == 0 && !flags.quiet {
+                    for n in &flags.notes {
+                        eprintln!("note: {n}");
+                    }
+                }
+                Some((flags.request, Some(flags.output)))
             }
+            Command::Bench { scene, .. } => Some((load(scene, rank)?, None)),
             Command::BenchComposite { .. } => None,
         };
         Ok((c, request))
@@ -218,13 +233,13 @@ fn run(universe: &mut mpi::environment::Universe, command: Result<Command>) -> R
         }
     };
     match (command, request) {
-        (Command::Render { output, brick, .. }, Some(request)) => {
+        (Command::Render { brick, .. }, Some((request, Some(output)))) => {
             // A rank sends its subtrees' images (the roots of its run of the tree: a few) once,
             // split in stripes, and its stripe once more: room for 8 whole images.
             universe.set_buffer_size(buffer_bytes(request.width, request.height, 8));
             render(&World::new(universe), &request, &output, brick)
         }
-        (Command::Bench { brick, rounds, .. }, Some(request)) => {
+        (Command::Bench { brick, rounds, .. }, Some((request, _))) => {
             universe.set_buffer_size(buffer_bytes(request.width, request.height, 8));
             bench::frames(&World::new(universe), &request, brick, rounds)
         }
