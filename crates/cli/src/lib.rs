@@ -122,6 +122,76 @@ pub fn render_flags(argv: &[String]) -> anyhow::Result<RenderFlags> {
     })
 }
 
+/// `volsplat movie`'s flags translated as `volsplat movie` translates them ([`movie_flags`]):
+/// the frames' requests, and how they are written.
+pub struct MovieFlags {
+    setup: movie::Setup,
+    /// The output (`-o`: a folder or `%04d` pattern of PNG frames, `.gif`, `.png`/`.apng`, or a
+    /// video through ffmpeg), as `volsplat movie`'s.
+    pub output: std::path::PathBuf,
+    /// The frames' size in pixels (width, height).
+    pub size: (usize, usize),
+    /// Frames per second and code values of the output.
+    pub settings: volsplat::io::MovieSettings,
+    /// MIP/MinIP's window over the values (`--window`, data units), applied before writing.
+    pub window: Option<(f32, f32)>,
+    /// What the translation noted, not printed here.
+    pub notes: Vec<String>,
+    /// `--quiet` was given.
+    pub quiet: bool,
+}
+
+impl MovieFlags {
+    /// How many frames.
+    pub fn len(&self) -> usize {
+        self.setup.len()
+    }
+
+    /// Whether there is no frame (never, for flags `volsplat movie` accepts).
+    pub fn is_empty(&self) -> bool {
+        self.setup.len() == 0
+    }
+
+    /// The request of frame `n` (`0 ≤ n < len`): an explicit camera, and the flight's transfer
+    /// function and clipping where it has them, as `volsplat movie` draws it.
+    pub fn frame_request(&self, n: usize) -> volsplat::RenderRequest {
+        self.setup.frame_request(n)
+    }
+}
+
+/// Parses `argv` (the arguments after `volsplat movie`) with `volsplat movie`'s own parser and
+/// checks, and plans its frames (turntable or keyframed flight) as `volsplat movie` does, for
+/// sort-last ranks that draw each frame (`volsplat-mpi movie`): the volume's grid comes from
+/// the store's metadata or the raw NRRD's header where a rank reads its part in bricks
+/// ([`volsplat::Renderer::part_grid`]), so planning reads no voxel there; elsewhere `renderer`
+/// reads the volume. Errors as [`render_flags`], and a keyframe file that cannot be read.
+pub fn movie_flags(
+    argv: &[String],
+    renderer: &mut volsplat::Renderer,
+) -> anyhow::Result<MovieFlags> {
+    let full = ["volsplat".to_string(), "movie".to_string()]
+        .into_iter()
+        .chain(argv.iter().cloned());
+    let matches = args::Cli::command()
+        .try_get_matches_from(full)
+        .map_err(|e| anyhow::anyhow!("{}", e.render()))?;
+    let mut cli = args::Cli::from_arg_matches(&matches).map_err(|e| anyhow::anyhow!("{e}"))?;
+    fill_given(&mut cli, &matches);
+    let args::Command::Movie(a) = cli.command else {
+        anyhow::bail!("not a movie command");
+    };
+    let setup = movie::movie_setup(&a, renderer, true)?;
+    Ok(MovieFlags {
+        output: a.output.clone(),
+        size: setup.size,
+        settings: setup.settings.clone(),
+        window: setup.window,
+        notes: setup.notes.clone(),
+        quiet: a.quiet,
+        setup,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::render_flags;

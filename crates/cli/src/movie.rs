@@ -149,8 +149,16 @@ fn plan_frames(
     renderer: &mut Renderer,
     keyframes: Option<&KeyframeFile>,
     axis: Option<TurnAxis>,
+    grid: Option<&volsplat::core::Grid>,
 ) -> Result<Frames> {
-    let camera = renderer.camera(req).map_err(explain)?;
+    let camera = match grid {
+        Some(g) => req
+            .scene
+            .camera
+            .resolve(g.drawn_bounds_world())
+            .map_err(explain)?,
+        None => renderer.camera(req).map_err(explain)?,
+    };
     Ok(match keyframes {
         Some(k) => {
             let tf = renderer.transfer_function(req).map_err(explain)?;
@@ -162,7 +170,10 @@ fn plan_frames(
             let axis = match axis {
                 Some(axis) => axis,
                 None => {
-                    let bounds = renderer.volume(&req.scene.volume)?.grid().bounds_world();
+                    let bounds = match grid {
+                        Some(g) => g.bounds_world(),
+                        None => renderer.volume(&req.scene.volume)?.grid().bounds_world(),
+                    };
                     TurnAxis::World(scene_up(&req.scene.camera, bounds).map_err(explain)?)
                 }
             };
@@ -226,9 +237,53 @@ fn check_movie_args(a: &MovieArgs) -> Result<(usize, usize)> {
     Ok(size)
 }
 
-pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
-    let t0 = Instant::now();
-    let (w, h) = check_movie_args(&a)?;
+/// What a movie draws: the request (its camera, transfer function and clipping set per frame
+/// by [`Setup::frame_request`]), the frames, and how they are written.
+pub(crate) struct Setup {
+    req: volsplat::RenderRequest,
+    frames: Frames,
+    pub(crate) settings: MovieSettings,
+    /// MIP/MinIP's window over the values (`--window`), applied before writing.
+    pub(crate) window: Option<(f32, f32)>,
+    pub(crate) size: (usize, usize),
+    pub(crate) notes: Vec<String>,
+}
+
+impl Setup {
+    /// How many frames.
+    pub(crate) fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// The request of frame `n` (an explicit camera; the flight's transfer function and
+    /// clipping where it has them).
+    pub(crate) fn frame_request(&self, n: usize) -> volsplat::RenderRequest {
+        let mut req = self.req.clone();
+        let frame = self.frames.frame(n);
+        if let Some(c) = frame.clipping {
+            req.scene.clipping = c;
+        }
+        req.scene.camera = CameraSpec::Explicit {
+            camera: frame.camera,
+            orbit: volsplat::core::Orbit::default(),
+        };
+        if let Some(tf) = frame.transfer_function {
+            req.scene.transfer_function = TransferSpec::Function(tf);
+        }
+        req
+    }
+}
+
+/// The request, frames and writing settings of `movie`'s arguments `a`, checked whole before
+/// the first frame. `sort_last`: the frames are drawn by sort-last ranks (`volsplat-mpi
+/// movie`), so the grid comes from the store's metadata or the file's header where a rank reads
+/// its part in bricks ([`Renderer::part_grid`]), not from the volume read whole.
+pub(crate) fn movie_setup(
+    a: &MovieArgs,
+    renderer: &mut Renderer,
+    sort_last: bool,
+) -> Result<Setup> {
+    let size = check_movie_args(a)?;
     let axis = turn_axis(&a.axis)?;
     let keyframes = a
         .keyframes
@@ -236,7 +291,7 @@ pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
         .map(|p| KeyframeFile::load(p).map_err(explain))
         .transpose()?;
     let base = load_scene(a.scene.as_deref())?;
-    let (mut req, notes) = build_request_noted(
+    let (req, notes) = build_request_noted(
         &a.input,
         &a.view,
         &a.options,
@@ -247,15 +302,13 @@ pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
         &a.given.iter().cloned().collect(),
         base,
     )?;
-    if !a.quiet {
-        for n in notes {
-            say!("note: {n}");
-        }
-    }
     req.validate().map_err(explain)?;
-    let mut renderer = Renderer::with_limits(crate::request::reader_limits(&a.input)?);
-    let label = req.scene.volume.label();
-    let frames = plan_frames(&a, &req, &mut renderer, keyframes.as_ref(), axis)?;
+    let grid = if sort_last {
+        renderer.part_grid(&req).map_err(explain)?
+    } else {
+        None
+    };
+    let frames = plan_frames(a, &req, renderer, keyframes.as_ref(), axis, grid.as_ref())?;
     let fps = keyframes.as_ref().and_then(|k| k.fps).unwrap_or(a.fps);
     // The request's output options: the flags, or a `--scene` file's where none is given.
     let output = req.output.write_options().map_err(explain)?;
@@ -264,7 +317,29 @@ pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
         png: output.png,
         ..MovieSettings::default()
     };
-    let window = output.window;
+    Ok(Setup {
+        req,
+        frames,
+        settings,
+        window: output.window,
+        size,
+        notes,
+    })
+}
+
+pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let mut renderer = Renderer::with_limits(crate::request::reader_limits(&a.input)?);
+    let setup = movie_setup(&a, &mut renderer, false)?;
+    if !a.quiet {
+        for n in &setup.notes {
+            say!("note: {n}");
+        }
+    }
+    let (w, h) = setup.size;
+    let label = setup.req.scene.volume.label();
+    let (settings, window) = (setup.settings.clone(), setup.window);
+    let frames = &setup;
     let stop = Stop::install()?;
     // The writer's errors name the output.
     let mut writer = MovieWriter::create(&a.output, w, h, frames.len(), &settings)?;
@@ -285,17 +360,7 @@ pub(crate) fn movie_cmd(a: MovieArgs) -> Result<()> {
     let mut first_ms = 0.0;
     for n in 0..count {
         stop.check(&stopped(n))?;
-        let frame = frames.frame(n);
-        if let Some(c) = frame.clipping {
-            req.scene.clipping = c;
-        }
-        req.scene.camera = CameraSpec::Explicit {
-            camera: frame.camera,
-            orbit: volsplat::core::Orbit::default(),
-        };
-        if let Some(tf) = frame.transfer_function {
-            req.scene.transfer_function = TransferSpec::Function(tf);
-        }
+        let req = frames.frame_request(n);
         let out = match renderer.render(&req, &mut |_| stop.signal().is_none()) {
             Ok(out) => out,
             Err(e) => {

@@ -25,6 +25,7 @@
 //!   region; rank 0 prints the median and the minimum in ms.
 
 mod bench;
+mod movie;
 mod world;
 
 use anyhow::{Context, Result, bail};
@@ -36,6 +37,8 @@ use world::World;
 enum Command {
     /// `volsplat render`'s arguments (without `--brick`), read on every rank.
     Render { argv: Vec<String>, brick: usize },
+    /// `volsplat movie`'s arguments (without `--brick`), read on every rank.
+    Movie { argv: Vec<String>, brick: usize },
     Bench {
         scene: PathBuf,
         brick: usize,
@@ -49,13 +52,14 @@ enum Command {
 }
 
 const USAGE: &str = "usage: volsplat-mpi render [FILE] [volsplat render's flags] -o OUT [--brick B]\n       \
+                     volsplat-mpi movie [FILE] [volsplat movie's flags] -o OUT [--brick B]\n       \
                      volsplat-mpi bench --scene SCENE.json [--brick B] [--rounds R]\n       \
                      volsplat-mpi bench-composite --size S [--bricks X,Y,Z] [--rounds R]";
 
 fn parse() -> Result<Command> {
     let mut it = std::env::args().skip(1);
     let command = it.next().unwrap_or_default();
-    if command == "render" {
+    if command == "render" || command == "movie" {
         // `volsplat render`'s arguments, but `--brick B` (or `--brick=B`): read in `run`.
         let (mut argv, mut brick) = (Vec::new(), 64usize);
         while let Some(a) = it.next() {
@@ -69,7 +73,11 @@ fn parse() -> Result<Command> {
                 None => argv.push(a),
             }
         }
-        return Ok(Command::Render { argv, brick });
+        return Ok(if command == "render" {
+            Command::Render { argv, brick }
+        } else {
+            Command::Movie { argv, brick }
+        });
     }
     let (mut scene, mut brick, mut rounds) = (None, 64usize, 5usize);
     let (mut size, mut bricks) = (None, [2, 2, 1]);
@@ -199,12 +207,15 @@ pub fn reads_line(world: &World, renderer: &volsplat::Renderer) -> Option<String
 
 /// The bytes of the buffered sends' buffer for `images` whole `width × height` images of 16
 /// bytes a pixel, and MPI's per-message overhead.
-fn buffer_bytes(width: usize, height: usize, images: usize) -> usize {
+pub fn buffer_bytes(width: usize, height: usize, images: usize) -> usize {
     width * height * 16 * images + (1 << 20)
 }
 
 fn run(universe: &mut mpi::environment::Universe, command: Result<Command>) -> Result<()> {
     use mpi::traits::Communicator as _;
+    if let Ok(Command::Movie { argv, brick }) = &command {
+        return movie::run(universe, argv, *brick);
+    }
     let rank = universe.world().rank();
     // Everything a rank does before the exchange; its failure is shared through it.
     let ready = command.and_then(|c| {
@@ -219,7 +230,7 @@ fn run(universe: &mut mpi::environment::Universe, command: Result<Command>) -> R
                 Some((flags.request, Some(flags.output)))
             }
             Command::Bench { scene, .. } => Some((load(scene, rank)?, None)),
-            Command::BenchComposite { .. } => None,
+            Command::BenchComposite { .. } | Command::Movie { .. } => None,
         };
         Ok((c, request))
     });

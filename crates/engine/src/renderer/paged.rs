@@ -210,7 +210,7 @@ impl Renderer {
     /// The grid of `request`'s volume where a sort-last rank reads it in bricks (an OME-Zarr
     /// store's level or a NRRD file with a raw payload, not in X-ray), from the store's
     /// metadata or the file's header (no voxel read); `None` where the volume is read whole.
-    pub(crate) fn part_grid(&self, request: &RenderRequest) -> Result<Option<Grid>> {
+    pub fn part_grid(&self, request: &RenderRequest) -> Result<Option<Grid>> {
         let (source, _) = self.concrete_source(request)?;
         if self.paged_budget(request, &source, true)?.is_none() {
             return Ok(None);
