@@ -284,6 +284,9 @@ impl Renderer {
                      refinement ladder)",
                 ));
             }
+            if let (Mode::Xray, Some(o)) = (request.mode, owned) {
+                return self.render_xray_part(request, source, budget, o, progress);
+            }
             return self.render_paged(request, source, budget, level_note, owned, progress);
         }
         let loaded = self.load(source)?;

@@ -142,7 +142,7 @@ impl Renderer {
         else {
             return Ok(None);
         };
-        if owned && request.mode != Mode::Xray {
+        if owned {
             // A store, or a NRRD file with a raw payload (its header read, no sample).
             return Ok(part::PartStore::readable(source, &self.limits)?
                 .then(|| request.memory.unwrap_or_else(auto_budget)));
