@@ -416,9 +416,9 @@ impl Renderer {
         if let Some(crop) = &mut brick.scene.clipping.crop
             && crop.units == crate::scene::CropUnits::Voxels
         {
-            for a in 0..3 {
-                crop.min[a] -= lo[a] as f64;
-                crop.max[a] -= lo[a] as f64;
+            for (a, &l) in lo.iter().enumerate() {
+                crop.min[a] -= l as f64;
+                crop.max[a] -= l as f64;
             }
         }
         let mut out = self.render_inner(&brick, progress, None, None)?;
