@@ -63,7 +63,7 @@ pub struct SortLastImage {
 /// or the splat list as any volume in memory, with the camera resolved from the level's grid
 /// and the X-ray offset from the level's range: each brick's partial image depends only on
 /// the brick, so the image is the same bits for any number of ranks, and the single-process
-/// X-ray up to f32 reassociation and the f64 rounding of a voxel's position (124–133 dB in
+/// X-ray up to f32 reassociation and the f64 rounding of a voxel's position (124–138 dB in
 /// `store_tests`). Refused on every rank alike: the automatic composite transfer function (a
 /// histogram of the whole level). Gzip or text NRRD payloads and other files: every rank
 /// reads the volume whole.
