@@ -1,7 +1,9 @@
 //! A sort-last rank's part of a file read in bricks (issue 32 item 2, decision 0038): an
 //! OME-Zarr store's level ([`ZarrSource`]) or a NRRD file with a raw payload
 //! ([`volsplat_io::nrrd::NrrdSource`]), opened as a brick source; only the bricks meeting the
-//! rank's sort-last bricks are scanned for their ranges and ever read.
+//! rank's sort-last bricks are scanned for their ranges and ever read. In X-ray each
+//! sort-last brick's voxels are copied out of them into a volume of their own and drawn by the
+//! sheets or the splat list ([`Renderer::render_xray_part`]).
 
 use super::{ARENA_SHARE, AnyCache, Paged, Part, part_brick};
 use crate::error::{EngineError, Result};
