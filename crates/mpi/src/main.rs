@@ -7,7 +7,7 @@
 //! bricks (`over` in composite, the sum in X-ray, the maximum in MIP, the minimum in MinIP), and
 //! rank 0 writes the image as `volsplat
 //! render` writes it. The image is the same bits for any N. From an OME-Zarr store or a NRRD
-//! file with a raw payload (not in X-ray) each rank reads only the bricks of its part, and
+//! file with a raw payload (X-ray included) each rank reads only the bricks of its part, and
 //! prints what it read (`rank R of N: read …`; from a NRRD file also the bytes read from the
 //! file); other files are read whole by every rank.
 //!

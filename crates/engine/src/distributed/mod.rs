@@ -11,11 +11,12 @@
 //! brick's cells drawn, every sample at its global position; composited, 156 dB from the
 //! single-process render and the same bits for any rank count, `tests.rs`), and ranks that read
 //! only their bricks of an OME-Zarr store or a NRRD file with a raw payload, float levels with
-//! NaN or ±∞ included (`store_tests.rs`; [`render_sort_last`]). What is not yet: X-ray ranks
-//! reading only their bricks, pre-integration across a brick face (a brick's first sample has
-//! no previous one), early
+//! NaN or ±∞ included, in every mode (`store_tests.rs`; [`render_sort_last`]). What is not
+//! yet: pre-integration across a brick face (a brick's first sample has no previous one),
+//! early
 //! termination across bricks (each brick's image runs to its own opacity). X-ray is summed from
-//! bricks drawn by the sheets or the splat list, each drawing the voxels of its cells; MIP and
+//! bricks drawn by the sheets or the splat list, each drawing the voxels of its cells (read
+//! per rank: those voxels alone, drawn as a sub-volume of the level); MIP and
 //! MinIP take the extreme of the slabs' bricks, bit for bit the single-process projection.
 //! The MPI communicator and the `volsplat-mpi` binary are in `crates/mpi`.
 

@@ -250,9 +250,10 @@ impl Renderer {
     /// drawn, each at its global position. The request must be drawn by the image-aligned
     /// slabs at the full level in composite, MIP and MinIP, or by the sheets or the splat list
     /// in X-ray (the voxels whose cell lies in the box; an error naming `renderer` otherwise).
-    /// From an OME-Zarr store or a NRRD file with a raw payload (not in X-ray) only the bricks
-    /// of the box are read (the rank's
-    /// part opened by [`crate::distributed::render_sort_last`] where it holds the box).
+    /// From an OME-Zarr store or a NRRD file with a raw payload only the bricks of the box are
+    /// read (the rank's part opened by [`crate::distributed::render_sort_last`] where it holds
+    /// the box); in X-ray the voxels the box draws are then drawn as a volume of their own, on
+    /// the level's grid shifted to the box, with the camera and the X-ray offset of the level.
     pub fn render_brick(
         &mut self,
         request: &RenderRequest,
@@ -283,6 +284,9 @@ impl Renderer {
                     "a store read out of core is drawn by the image-aligned slabs (not by a \
                      refinement ladder)",
                 ));
+            }
+            if let (Mode::Xray, Some(o)) = (request.mode, owned) {
+                return self.render_xray_part(request, source, budget, o, progress);
             }
             return self.render_paged(request, source, budget, level_note, owned, progress);
         }

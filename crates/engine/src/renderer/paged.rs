@@ -140,8 +140,8 @@ impl Renderer {
     /// with `request.memory` set, or too large for half the available memory.
     ///
     /// A sort-last brick (`owned`) of a store or of a NRRD file with a raw payload is always
-    /// read in bricks (at `request.memory`, or half the available memory), except in X-ray: the sheets and the splat list read every
-    /// voxel, so an X-ray brick reads the level whole (decision 0038).
+    /// read in bricks (at `request.memory`, or half the available memory); in X-ray its voxels
+    /// are then drawn as a sub-volume (`Renderer::render_xray_part`, decision 0038).
     pub(super) fn paged_budget(
         &self,
         request: &RenderRequest,
@@ -157,7 +157,7 @@ impl Renderer {
         else {
             return Ok(None);
         };
-        if owned && request.mode != Mode::Xray {
+        if owned {
             // A store, or a NRRD file with a raw payload (its header read, no sample).
             return Ok(part::PartStore::readable(source, &self.limits)?
                 .then(|| request.memory.unwrap_or_else(auto_budget)));
@@ -208,7 +208,7 @@ impl Renderer {
     }
 
     /// The grid of `request`'s volume where a sort-last rank reads it in bricks (an OME-Zarr
-    /// store's level or a NRRD file with a raw payload, not in X-ray), from the store's
+    /// store's level or a NRRD file with a raw payload), from the store's
     /// metadata or the file's header (no voxel read); `None` where the volume is read whole.
     pub fn part_grid(&self, request: &RenderRequest) -> Result<Option<Grid>> {
         let (source, _) = self.concrete_source(request)?;
@@ -221,7 +221,7 @@ impl Renderer {
     }
 
     /// Opens a sort-last rank's part of `request`'s volume for reading in bricks, where it is
-    /// read so (an OME-Zarr store or a NRRD file with a raw payload, not in X-ray): the bricks
+    /// read so (an OME-Zarr store or a NRRD file with a raw payload): the bricks
     /// meeting the boxes of cells `region` (the rank's sort-last bricks) are scanned for their
     /// ranges and no other brick is ever read. Returns the part's value range, its finite
     /// range and whether it holds non-finite floats, or `None` where the volume is read whole. The part's range is not the level's: give

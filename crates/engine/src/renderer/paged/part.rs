@@ -1,10 +1,14 @@
 //! A sort-last rank's part of a file read in bricks (issue 32 item 2, decision 0038): an
 //! OME-Zarr store's level ([`ZarrSource`]) or a NRRD file with a raw payload
 //! ([`volsplat_io::nrrd::NrrdSource`]), opened as a brick source; only the bricks meeting the
-//! rank's sort-last bricks are scanned for their ranges and ever read.
+//! rank's sort-last bricks are scanned for their ranges and ever read. In X-ray each
+//! sort-last brick's voxels are copied out of them into a volume of their own and drawn by the
+//! sheets or the splat list ([`Renderer::render_xray_part`]).
 
 use super::{AnyCache, CHUNK_CACHE_SHARE, Paged, Part, arena_bytes, part_brick};
 use crate::error::{EngineError, Result};
+use crate::renderer::Renderer;
+use crate::request::RenderRequest;
 use crate::scene::{StoreLevel, VolumeSource};
 use std::path::Path;
 use std::sync::Arc;
@@ -249,4 +253,180 @@ pub(super) fn open_part(
             earlier: (0, 0),
         }),
     })
+}
+
+/// The box of voxels an X-ray brick of cells `owned` draws (`[lo, lo + dims)`, index space of
+/// a level of `n` voxels): the voxels whose cell (`min(v, n − 2)`, the cell of which a voxel is
+/// the lower corner; [`volsplat_splat::RenderSettings::owned_cells`]) lies in the box, i.e.
+/// `[lo, hi)`, and the far face `n − 1` too where the box holds the last cell. Errors (naming
+/// `owned_cells`) for a box that draws no voxel.
+pub(super) fn xray_box(owned: [[usize; 3]; 2], n: [usize; 3]) -> Result<([usize; 3], [usize; 3])> {
+    let [lo, hi] = owned;
+    let end: [usize; 3] = std::array::from_fn(|a| {
+        if hi[a] >= n[a].saturating_sub(1) {
+            n[a]
+        } else {
+            hi[a]
+        }
+    });
+    if (0..3).any(|a| lo[a] >= end[a]) {
+        return Err(EngineError::request(
+            "owned_cells",
+            format!("{lo:?}..{hi:?} holds no voxel of a level of {n:?}"),
+        ));
+    }
+    Ok((lo, std::array::from_fn(|a| end[a] - lo[a])))
+}
+
+/// The voxels `[lo, lo + dims)` of `cache`'s level as a volume of their own: the cache bricks
+/// holding them made resident (read where they are not: only bricks of the rank's part, which
+/// a restricted cache never leaves), their samples copied row by row, on the level's grid
+/// shifted to the box (the same spacing and direction, the origin at voxel `lo`, in f64).
+fn sub_volume<T: volsplat_core::Scalar>(
+    cache: &mut BrickCache<T>,
+    lo: [usize; 3],
+    dims: [usize; 3],
+) -> Result<volsplat_core::Volume<T>> {
+    let layout = cache.layout().clone();
+    let grid = layout.grid().clone();
+    let last: [usize; 3] = std::array::from_fn(|a| lo[a] + dims[a] - 1);
+    // The cache bricks whose owned voxels hold the box: those of its first to last voxel.
+    let (Some(first), Some(end)) = (layout.brick_of_voxel(lo), layout.brick_of_voxel(last)) else {
+        return Err(EngineError::request(
+            "owned_cells",
+            "the brick lies outside the level",
+        ));
+    };
+    let mut keys = Vec::new();
+    for k in first.b[2]..=end.b[2] {
+        for j in first.b[1]..=end.b[1] {
+            for i in first.b[0]..=end.b[0] {
+                keys.extend(layout.key([i as usize, j as usize, k as usize]));
+            }
+        }
+    }
+    cache.make_resident(&keys)?;
+    let count = dims.iter().product::<usize>();
+    let mut data: Vec<T> = Vec::new();
+    data.try_reserve_exact(count).map_err(|_| {
+        EngineError::request(
+            "owned_cells",
+            format!("cannot allocate a brick of {dims:?} voxels"),
+        )
+    })?;
+    let (arena, bases) = (cache.arena(), cache.bases());
+    for k in lo[2]..=last[2] {
+        for j in lo[1]..=last[1] {
+            let mut i = lo[0];
+            while i <= last[0] {
+                let key = layout.brick_of_voxel([i, j, k]).ok_or_else(|| {
+                    EngineError::request("owned_cells", "a voxel outside the level")
+                })?;
+                // The run of this row inside the brick's owned voxels.
+                let run_end = layout.owned_voxels(key)?[0].end.min(last[0] + 1);
+                let at = layout.slot_index(key, [i, j, k]).ok_or_else(|| {
+                    EngineError::request("owned_cells", "a voxel outside its brick's slot")
+                })?;
+                let base = bases[cache.index(key.b.map(|x| x as usize))] as usize + at;
+                data.extend_from_slice(&arena[base..base + (run_end - i)]);
+                i = run_end;
+            }
+        }
+    }
+    let origin = grid.world_from_index(volsplat_core::glam::DVec3::new(
+        lo[0] as f64,
+        lo[1] as f64,
+        lo[2] as f64,
+    ));
+    let sub = Grid::new(dims, grid.spacing, origin.to_array(), grid.direction)?;
+    Ok(volsplat_core::Volume::new(sub, data)?)
+}
+
+impl Renderer {
+    /// An X-ray brick's partial image (`owned`: its cells) from a sort-last rank's part of a
+    /// store or a NRRD file with a raw payload (decision 0038): the voxels the brick draws
+    /// ([`xray_box`]) read from the part's bricks, and the X-ray of that sub-volume drawn by
+    /// the sheets or the splat list as any volume in memory, with the camera resolved from
+    /// the level's grid (an explicit camera: an orbit or the reset view frame the whole
+    /// level, not the brick), the offset of `xray_density` resolved from the level's range
+    /// (shared by the ranks: [`Renderer::set_rank_range`]), and a crop box in voxels moved
+    /// to the brick's indices. Every other choice of the sheets and the splat list depends on
+    /// the grid's spacing and direction and on the camera, never on the volume's size or
+    /// origin (sheet axis and spacing, footprints, anti-aliasing, kernel, the plan's row 7),
+    /// so each voxel is drawn as in the whole volume, up to the f64 rounding of its position
+    /// (`origin + D·S·(lo + i)` against `(origin + D·S·lo) + D·S·i`).
+    pub(in crate::renderer) fn render_xray_part(
+        &mut self,
+        request: &RenderRequest,
+        source: &VolumeSource,
+        budget: u64,
+        owned: [[usize; 3]; 2],
+        progress: &mut (dyn FnMut(&crate::Progress) -> bool + Send),
+    ) -> Result<crate::renderer::Output> {
+        let threads = request.threads;
+        let pool = Arc::clone(
+            crate::renderer::cache::cached(&mut self.pool, threads, || {
+                crate::renderer::cache::build_pool(threads)
+            })?
+            .value,
+        );
+        let fetched = self.paged(source, budget, request.memory, Some(owned), &pool)?;
+        let part_notes = if fetched.fresh {
+            fetched.value.notes.clone()
+        } else {
+            Vec::new()
+        };
+        let paged = self
+            .paged
+            .as_mut()
+            .map(|c| &mut c.value)
+            .ok_or_else(|| EngineError::request("volume", "the part's cache was dropped"))?;
+        if let Some(part) = &paged.part {
+            super::check_part(request, part)?;
+            if request.scene.xray_density.is_auto() && !part.range_is_level {
+                return Err(EngineError::request(
+                    "xray_density",
+                    "a brick rendered alone from a store knows only its own value range: the \
+                     automatic X-ray offset needs the level's (render through \
+                     distributed::render_sort_last, which shares it, or give an offset)",
+                ));
+            }
+        }
+        let grid = paged.grid.clone();
+        let camera = request.scene.camera.resolve(grid.drawn_bounds_world())?;
+        let (offset, _) = request.scene.xray_density.resolve(paged.range);
+        let (lo, dims) = xray_box(owned, grid.dims)?;
+        let cache = &mut paged.cache;
+        let sub = pool.install(|| -> Result<volsplat_core::AnyVolume> {
+            use volsplat_core::AnyVolume as V;
+            Ok(match cache {
+                AnyCache::U8(c) => V::U8(sub_volume(c, lo, dims)?),
+                AnyCache::I8(c) => V::I8(sub_volume(c, lo, dims)?),
+                AnyCache::U16(c) => V::U16(sub_volume(c, lo, dims)?),
+                AnyCache::I16(c) => V::I16(sub_volume(c, lo, dims)?),
+                AnyCache::F32(c) => V::F32(sub_volume(c, lo, dims)?),
+            })
+        })?;
+        let mut brick = request.clone();
+        brick.scene.volume = VolumeSource::Memory(Arc::new(sub));
+        brick.scene.camera = crate::CameraSpec::Explicit {
+            camera,
+            orbit: Default::default(),
+        };
+        brick.scene.xray_density = match offset {
+            Some(o) => crate::xray::XrayDensity::Offset(o),
+            None => crate::xray::XrayDensity::Raw,
+        };
+        if let Some(crop) = &mut brick.scene.clipping.crop
+            && crop.units == crate::scene::CropUnits::Voxels
+        {
+            for (a, &l) in lo.iter().enumerate() {
+                crop.min[a] -= l as f64;
+                crop.max[a] -= l as f64;
+            }
+        }
+        let mut out = self.render_inner(&brick, progress, None, None)?;
+        out.notes.splice(0..0, part_notes);
+        Ok(out)
+    }
 }
