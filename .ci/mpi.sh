@@ -162,6 +162,32 @@ PY
   done
 done
 
+step "mpi: volsplat render's and volsplat movie's own arguments"
+# `volsplat-mpi render FILE [render flags] -o OUT` (issue 32's form): the bytes of the same
+# flags saved as a scene and given as --scene, for 1 and 3 ranks.
+"$bin" convert --phantom head --phantom-size 48,40,36 -q -o "$work/f.nrrd"
+flags=(--mode composite --preset CT-Bone --azimuth -40 --elevation 25 --size 80x64)
+"$bin" render "$work/f.nrrd" "${flags[@]}" --antialias none --save-scene "$work/f.json" -q -o "$work/f_whole.png"
+run 1 "$mpi" render "$work/f.nrrd" "${flags[@]}" -o "$work/f1.png" --brick 16 2>/dev/null
+run 3 "$mpi" render "$work/f.nrrd" "${flags[@]}" -o "$work/f3.png" --brick=16 2>/dev/null
+run 2 "$mpi" render --scene "$work/f.json" -o "$work/fs.png" --brick 16 2>/dev/null
+cmp "$work/f1.png" "$work/f3.png" && cmp "$work/f1.png" "$work/fs.png" \
+  || { echo "FAIL: render flags and --scene differ, or 1 and 3 ranks"; exit 1; }
+if run 2 "$mpi" render "$work/f.nrrd" --bogus -o "$work/x.png" 2> "$work/err.txt"; then
+  echo "FAIL: an unknown flag rendered"; exit 1
+fi
+grep -q -- "--bogus" "$work/err.txt" || { cat "$work/err.txt"; echo "FAIL: the error does not name the flag"; exit 1; }
+echo "ok: render's own flags, --scene and 1/3 ranks give the same bytes; a bad flag is named"
+# `volsplat-mpi movie`: a 3-frame turntable, the same frame bytes for 1 and 3 ranks.
+for n in 1 3; do
+  run "$n" "$mpi" movie "$work/f.nrrd" --preset CT-Bone --frames 3 --degrees 90 --size 64x48 -q -o "$work/mv$n/" --brick 16 2>/dev/null
+done
+[ "$(ls "$work/mv1" | wc -l)" = 3 ] || { ls "$work/mv1"; echo "FAIL: not 3 frames"; exit 1; }
+for f in "$work"/mv1/*.png; do
+  cmp "$f" "$work/mv3/$(basename "$f")" || { echo "FAIL: movie frame $f differs between 1 and 3 ranks"; exit 1; }
+done
+echo "ok: movie frames are the same bytes for 1 and 3 ranks"
+
 step "mpi: a rank that cannot read its volume stops every rank"
 "$bin" render --phantom-size 40 --save-scene "$work/bad0.json" -q -o "$work/b.png"
 python3 - "$work/bad0.json" "$work/bad.json" "$work/missing.nrrd" <<'PY'
