@@ -627,6 +627,12 @@ pub(crate) struct InfoArgs {
     /// text.
     #[arg(long)]
     pub json: bool,
+    /// OME-Zarr stores: summarise the level from its metadata and a ranges scan that holds at
+    /// most SIZE of bricks at once (bytes, or with KiB, MiB, GiB), as `render --memory` reads
+    /// it, instead of reading it whole. Default: whole, unless the level is larger than half
+    /// the available memory. The scan's ranges are kept for the next open.
+    #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+    pub memory: Option<u64>,
 }
 
 #[derive(Debug, Args)]

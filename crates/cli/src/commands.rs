@@ -568,6 +568,56 @@ fn preview_path(output: &Path, subsample: usize) -> PathBuf {
     output.with_file_name(format!("{stem}.preview-s{subsample}.{ext}"))
 }
 
+/// The summary of an OME-Zarr level read out of core (`--memory`, or a level larger than half
+/// the available memory), from its metadata and a bounded ranges scan, never read whole;
+/// `None` for any other input (read whole by [`load_info`]).
+fn info_out_of_core(a: &InfoArgs) -> Result<Option<volsplat::io::VolumeInfo>> {
+    let source = volume_source(&a.input)?;
+    let VolumeSource::File {
+        path, raw: None, ..
+    } = &source
+    else {
+        return Ok(None);
+    };
+    if a.input.raw_dims.is_some() || !volsplat::io::ZarrStore::is_store(path) {
+        return Ok(None);
+    }
+    let limits = reader_limits(&a.input)?;
+    let mut request = RenderRequest::new(
+        volsplat::Scene {
+            volume: source.clone(),
+            ..volsplat::Scene::default()
+        },
+        1,
+        1,
+    );
+    request.memory = a.memory;
+    let mut renderer = Renderer::with_limits(limits.clone());
+    let Some((grid, kind, range, note)) = renderer
+        .out_of_core_summary(&request)
+        .map_err(|e| render_error(e, &source.label()))?
+    else {
+        return Ok(None);
+    };
+    let store = volsplat::io::ZarrStore::open(path, &limits)?;
+    let notes = std::iter::once(
+        "out of core: summarised from the store's metadata and its ranges, the level not read \
+         whole"
+            .to_string(),
+    )
+    .chain(note)
+    .collect();
+    Ok(Some(volsplat::io::VolumeInfo::from_grid(
+        path,
+        &store.format(),
+        &grid,
+        kind,
+        range,
+        (store.timepoints() as usize, a.input.timepoint as usize),
+        notes,
+    )))
+}
+
 /// The volume of the input flags as read, with what the reader reported.
 fn load_info(a: &InputArgs) -> Result<(String, volsplat::io::LoadedVolume)> {
     let limits = reader_limits(a)?;
@@ -610,13 +660,18 @@ fn load_info(a: &InputArgs) -> Result<(String, volsplat::io::LoadedVolume)> {
 }
 
 fn info_cmd(a: InfoArgs) -> Result<()> {
-    let (label, loaded) = load_info(&a.input)?;
-    let info = volsplat::io::VolumeInfo::new(Path::new(&label), &loaded);
+    let info = match info_out_of_core(&a)? {
+        Some(info) => info,
+        None => {
+            let (label, loaded) = load_info(&a.input)?;
+            volsplat::io::VolumeInfo::new(Path::new(&label), &loaded)
+        }
+    };
     if a.json {
         return emit(&info.to_json_pretty());
     }
     let d = info.direction;
-    emit(&format!("source:    {label}"))?;
+    emit(&format!("source:    {}", info.path))?;
     emit(&format!("format:    {}", info.format))?;
     emit(&format!("type:      {}", info.scalar_type))?;
     emit(&format!(

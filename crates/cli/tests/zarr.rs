@@ -236,3 +236,65 @@ fn zarr_level_auto_follows_the_pixel_size() {
     ]);
     assert!(!o.status.success(), "level auto on an NRRD file");
 }
+
+/// `info --memory SIZE` of a store summarises the level from its metadata and a bounded ranges
+/// scan (what `volsplat info` does by itself for a level larger than half the available
+/// memory, which it must never read whole): the same dims, geometry, type, range and levels
+/// as the level read whole, a note saying so, and the ranges kept for the next open (in the
+/// test's own cache folder).
+#[test]
+fn info_of_a_store_out_of_core_reads_no_level_whole_and_agrees_with_the_whole_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let nrrd = dir.path().join("h.nrrd");
+    let o = volsplat(&["phantom", "head", "--grid", "70,60,50", "-o", s(&nrrd)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let zarr = dir.path().join("h.zarr");
+    let o = volsplat(&["convert", s(&nrrd), "-o", s(&zarr), "--chunk", "32"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let cache = dir.path().join("cache");
+    let info = |extra: &[&str]| -> serde_json::Value {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_volsplat"))
+            .args(["info", s(&zarr), "--json"])
+            .args(extra)
+            .env("VOLSPLAT_CACHE_DIR", &cache)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_str(&stdout(&o)).unwrap()
+    };
+    let whole = info(&[]);
+    let paged = info(&["--memory", "4MiB"]);
+    for k in [
+        "dims",
+        "voxels",
+        "scalar_type",
+        "spacing",
+        "origin",
+        "direction",
+        "bounds",
+        "value_range",
+        "frames",
+        "levels",
+        "format",
+    ] {
+        assert_eq!(whole[k], paged[k], "{k}");
+    }
+    let notes = paged["notes"].to_string();
+    assert!(notes.contains("not read whole"), "{notes}");
+    assert!(notes.contains("kept in"), "{notes}");
+    assert!(!whole["notes"].to_string().contains("out of core"));
+    // The next open finds the ranges kept.
+    let again = info(&["--memory", "4MiB"]);
+    assert!(
+        again["notes"]
+            .to_string()
+            .contains("kept from an earlier open"),
+        "{}",
+        again["notes"]
+    );
+    assert_eq!(again["value_range"], whole["value_range"]);
+    // A bad size is refused by name.
+    let o = volsplat(&["info", s(&zarr), "--memory", "lots"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--memory"), "{}", stderr(&o));
+}

@@ -117,8 +117,36 @@ impl VolumeInfo {
     /// again from its metadata).
     pub fn new(path: &Path, loaded: &LoadedVolume) -> Self {
         let v = &loaded.volume;
-        let g = v.grid();
         let (lo, hi) = v.value_range();
+        let mut info = VolumeInfo::from_grid(
+            path,
+            &loaded.format,
+            v.grid(),
+            v.scalar_type(),
+            [lo, hi],
+            (loaded.frames, loaded.frame),
+            loaded.notes.clone(),
+        );
+        info.arrays = loaded.arrays.clone();
+        info.series_uid = loaded.series_uid.clone();
+        info.series = loaded.series.clone();
+        info
+    }
+
+    /// Summarises a volume known by its grid (world frame, mm), sample type and value range
+    /// `[lo, hi]` (data units) without its samples: an OME-Zarr level larger than memory,
+    /// whose range comes from a bounded ranges scan (`volsplat info`). `frames`: how many
+    /// frames (time points) and which one; no arrays or series; the store's levels as
+    /// [`VolumeInfo::new`] gives them.
+    pub fn from_grid(
+        path: &Path,
+        format: &str,
+        g: &volsplat_core::Grid,
+        scalar_type: volsplat_core::ScalarType,
+        [lo, hi]: [f64; 2],
+        (frames, frame): (usize, usize),
+        notes: Vec<String>,
+    ) -> Self {
         let (blo, bhi) = g.bounds_world();
         let d = g.direction;
         let direction = [
@@ -129,21 +157,21 @@ impl VolumeInfo {
         VolumeInfo {
             schema: VOLUME_INFO_SCHEMA,
             path: path.display().to_string(),
-            format: loaded.format.clone(),
+            format: format.to_string(),
             dims: g.dims,
             voxels: g.dims.iter().map(|&n| n as u64).product(),
-            scalar_type: v.scalar_type().name().to_string(),
+            scalar_type: scalar_type.name().to_string(),
             spacing: g.spacing,
             origin: g.origin,
             direction,
             bounds: [blo.to_array(), bhi.to_array()],
             value_range: [lo, hi],
-            frames: loaded.frames,
-            frame: loaded.frame,
-            arrays: loaded.arrays.clone(),
-            series_uid: loaded.series_uid.clone(),
-            series: loaded.series.clone(),
-            notes: loaded.notes.clone(),
+            frames,
+            frame,
+            arrays: Vec::new(),
+            series_uid: None,
+            series: Vec::new(),
+            notes,
             levels: zarr_levels(path),
         }
     }

@@ -14,6 +14,26 @@ use volsplat_io::ZarrStore;
 const OVERVIEW_SAMPLES: u64 = 16 << 20;
 
 impl Renderer {
+    /// For an OME-Zarr level that `request` would read out of core ([`RenderRequest::memory`],
+    /// or a level larger than half the available memory): its grid (world frame, mm), sample
+    /// type and value range `[lo, hi]` (data units; a float level's finite samples), from the
+    /// store's metadata and its ranges kept in the user's cache folder, or else a ranges scan
+    /// within the budget (kept for the next open), and a note saying which: nothing is read
+    /// whole. `None` where the volume is read whole (ask [`Renderer::volume`]). For summaries
+    /// such as `volsplat info` of a store larger than memory.
+    pub fn out_of_core_summary(
+        &mut self,
+        request: &RenderRequest,
+    ) -> Result<Option<(Grid, ScalarType, [f64; 2], Option<String>)>> {
+        let (source, _) = self.concrete_source(request)?;
+        let Some(budget) = self.paged_budget(request, &source, false)? else {
+            return Ok(None);
+        };
+        let (grid, kind) = self.volume_grid(request)?;
+        let (range, note) = super::paged::store_level_range(&source, budget, &self.limits)?;
+        Ok(Some((grid, kind, range, note)))
+    }
+
     /// The grid of `request`'s volume (world frame and spacing in mm, as the readers give it)
     /// and its sample type: for an OME-Zarr level read out of core ([`RenderRequest::memory`],
     /// or a level larger than half the available memory), from the store's metadata, with

@@ -824,5 +824,60 @@ fn scan_or_kept(
     Ok((scan, note))
 }
 
+/// The value range `[lo, hi]` (data units; the finite samples of a float level) of the store
+/// level of `source`, from its ranges kept in the user's cache folder or else a ranges scan
+/// that holds at most `budget / SCAN_SHARE` bytes of bricks at once (and keeps them for the
+/// next open), without a cache or the level read whole; what it did, as a note.
+pub(super) fn store_level_range(
+    source: &VolumeSource,
+    budget: u64,
+    limits: &volsplat_io::Limits,
+) -> Result<([f64; 2], Option<String>)> {
+    let VolumeSource::File {
+        path,
+        level,
+        channel,
+        timepoint,
+        ..
+    } = source
+    else {
+        return Err(EngineError::request("volume", "not an OME-Zarr store"));
+    };
+    let store = Arc::new(ZarrStore::open(path, limits)?);
+    let level = level.index().unwrap_or(0);
+    let sel = ZarrSelection {
+        channel: *channel,
+        timepoint: *timepoint,
+    };
+    let kind = store.level(level)?.scalar_type.ok_or_else(|| {
+        EngineError::request("volume", "the level's sample type cannot be rendered")
+    })?;
+    macro_rules! range {
+        ($t:ty) => {{
+            let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, BRICK)?
+                .with_chunk_cache(budget / CHUNK_CACHE_SHARE);
+            let layout = volsplat_core::source::BrickSource::layout(&source, level)
+                .cloned()
+                .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
+            let (scan, note) = scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
+                Ok(volsplat_splat::cache::scan_level_within(
+                    &source.as_stored(),
+                    level,
+                    budget / SCAN_SHARE,
+                )?)
+            })?;
+            let [lo, hi] = scan.value_range();
+            ([f64::from(lo), f64::from(hi)], note)
+        }};
+    }
+    Ok(match kind {
+        ScalarType::U8 => range!(u8),
+        ScalarType::I8 => range!(i8),
+        ScalarType::U16 => range!(u16),
+        ScalarType::I16 => range!(i16),
+        ScalarType::F32 => range!(f32),
+    })
+}
+
 /// The cache slot of out-of-core levels: one store level and budget at a time.
 pub(super) type PagedSlot = Option<Cached<(VolumeSource, u64, Region), Paged>>;
