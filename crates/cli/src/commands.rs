@@ -593,7 +593,12 @@ fn info_out_of_core(a: &InfoArgs) -> Result<Option<volsplat::io::VolumeInfo>> {
     );
     request.memory = a.memory;
     let mut renderer = Renderer::with_limits(limits.clone());
-    let Some((grid, kind, range, note)) = renderer
+    let Some(volsplat::OutOfCoreSummary {
+        grid,
+        scalar_type: kind,
+        value_range: range,
+        note,
+    }) = renderer
         .out_of_core_summary(&request)
         .map_err(|e| render_error(e, &source.label()))?
     else {
@@ -613,7 +618,10 @@ fn info_out_of_core(a: &InfoArgs) -> Result<Option<volsplat::io::VolumeInfo>> {
         &grid,
         kind,
         range,
-        (store.timepoints() as usize, a.input.timepoint as usize),
+        (
+            usize::try_from(store.timepoints()).unwrap_or(usize::MAX),
+            a.input.timepoint,
+        ),
         notes,
     )))
 }

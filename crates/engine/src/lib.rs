@@ -43,8 +43,8 @@ pub mod xray;
 pub use error::{EngineError, Result};
 pub use output::OutputOptions;
 pub use renderer::{
-    DisplayStats, Output, Preview, Progress, Renderer, SheetAxis, Stage, Stats, UsedRenderer,
-    render_once, renderer_name,
+    DisplayStats, OutOfCoreSummary, Output, Preview, Progress, Renderer, SheetAxis, Stage, Stats,
+    UsedRenderer, render_once, renderer_name,
 };
 pub use request::{
     AntialiasChoice, AttenuationChoice, ControlChoice, DEFAULT_OPACITY_CUTOFF, DensityChoice,

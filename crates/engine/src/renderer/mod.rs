@@ -15,6 +15,7 @@ mod ranges_sidecar;
 mod stats;
 mod store_level;
 
+pub use overview::OutOfCoreSummary;
 pub use stats::{DisplayStats, Progress, SheetAxis, Stage, Stats, UsedRenderer, renderer_name};
 
 use crate::error::{EngineError, Result};

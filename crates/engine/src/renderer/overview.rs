@@ -13,6 +13,19 @@ use volsplat_io::ZarrStore;
 /// The most samples of a level read whole as an overview of a store read out of core.
 const OVERVIEW_SAMPLES: u64 = 16 << 20;
 
+/// What [`Renderer::out_of_core_summary`] knows of a store's level without reading it whole.
+#[derive(Debug, Clone)]
+pub struct OutOfCoreSummary {
+    /// The level's grid (world frame and spacing in mm).
+    pub grid: Grid,
+    /// Its sample type.
+    pub scalar_type: ScalarType,
+    /// `[lo, hi]` of its samples (data units; a float level's finite samples).
+    pub value_range: [f64; 2],
+    /// Where the range came from (kept ranges, or a scan and where it was kept).
+    pub note: Option<String>,
+}
+
 impl Renderer {
     /// For an OME-Zarr level that `request` would read out of core ([`RenderRequest::memory`],
     /// or a level larger than half the available memory): its grid (world frame, mm), sample
@@ -24,14 +37,19 @@ impl Renderer {
     pub fn out_of_core_summary(
         &mut self,
         request: &RenderRequest,
-    ) -> Result<Option<(Grid, ScalarType, [f64; 2], Option<String>)>> {
+    ) -> Result<Option<OutOfCoreSummary>> {
         let (source, _) = self.concrete_source(request)?;
         let Some(budget) = self.paged_budget(request, &source, false)? else {
             return Ok(None);
         };
-        let (grid, kind) = self.volume_grid(request)?;
-        let (range, note) = super::paged::store_level_range(&source, budget, &self.limits)?;
-        Ok(Some((grid, kind, range, note)))
+        let (grid, scalar_type) = self.volume_grid(request)?;
+        let (value_range, note) = super::paged::store_level_range(&source, budget, &self.limits)?;
+        Ok(Some(OutOfCoreSummary {
+            grid,
+            scalar_type,
+            value_range,
+            note,
+        }))
     }
 
     /// The grid of `request`'s volume (world frame and spacing in mm, as the readers give it)
