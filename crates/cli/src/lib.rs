@@ -81,6 +81,21 @@ pub fn main_entry() -> std::process::ExitCode {
     }
 }
 
+/// `volsplat COMMAND argv…` parsed as the binary parses it (usage errors as clap words them),
+/// with the flags given on the command line recorded.
+fn parse_command(command: &str, argv: &[String]) -> anyhow::Result<args::Cli> {
+    let full = ["volsplat", command]
+        .into_iter()
+        .map(String::from)
+        .chain(argv.iter().cloned());
+    let matches = args::Cli::command()
+        .try_get_matches_from(full)
+        .map_err(|e| anyhow::anyhow!("{}", e.render()))?;
+    let mut cli = args::Cli::from_arg_matches(&matches).map_err(|e| anyhow::anyhow!("{e}"))?;
+    fill_given(&mut cli, &matches);
+    Ok(cli)
+}
+
 /// `volsplat render`'s flags translated as `volsplat render` translates them ([`render_flags`]).
 #[derive(Debug)]
 pub struct RenderFlags {
@@ -102,15 +117,7 @@ pub struct RenderFlags {
 /// an output path or option `volsplat render` refuses, a scene file that cannot be read, a
 /// request the engine refuses.
 pub fn render_flags(argv: &[String]) -> anyhow::Result<RenderFlags> {
-    let full = ["volsplat".to_string(), "render".to_string()]
-        .into_iter()
-        .chain(argv.iter().cloned());
-    let matches = args::Cli::command()
-        .try_get_matches_from(full)
-        .map_err(|e| anyhow::anyhow!("{}", e.render()))?;
-    let mut cli = args::Cli::from_arg_matches(&matches).map_err(|e| anyhow::anyhow!("{e}"))?;
-    fill_given(&mut cli, &matches);
-    let args::Command::Render(a) = cli.command else {
+    let args::Command::Render(a) = parse_command("render", argv)?.command else {
         anyhow::bail!("not a render command");
     };
     let (request, notes) = commands::render_request_checked(&a)?;
@@ -169,15 +176,7 @@ pub fn movie_flags(
     argv: &[String],
     renderer: &mut volsplat::Renderer,
 ) -> anyhow::Result<MovieFlags> {
-    let full = ["volsplat".to_string(), "movie".to_string()]
-        .into_iter()
-        .chain(argv.iter().cloned());
-    let matches = args::Cli::command()
-        .try_get_matches_from(full)
-        .map_err(|e| anyhow::anyhow!("{}", e.render()))?;
-    let mut cli = args::Cli::from_arg_matches(&matches).map_err(|e| anyhow::anyhow!("{e}"))?;
-    fill_given(&mut cli, &matches);
-    let args::Command::Movie(a) = cli.command else {
+    let args::Command::Movie(a) = parse_command("movie", argv)?.command else {
         anyhow::bail!("not a movie command");
     };
     let setup = movie::movie_setup(&a, renderer, true)?;

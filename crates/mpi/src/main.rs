@@ -211,6 +211,17 @@ pub fn buffer_bytes(width: usize, height: usize, images: usize) -> usize {
     width * height * 16 * images + (1 << 20)
 }
 
+/// A rank that could not set up (`e`) takes its part in the first exchange with its error, so
+/// that every rank stops naming it; this rank's error.
+pub fn fail_set_up(universe: &mut mpi::environment::Universe, e: anyhow::Error) -> anyhow::Error {
+    use mpi::traits::Communicator as _;
+    let rank = universe.world().rank();
+    universe.set_buffer_size(1 << 20);
+    let world = World::new(universe);
+    let shared = fail_direct_send(&world, format!("{e:#}"));
+    anyhow::anyhow!("rank {rank} of {}: {shared}", world.size())
+}
+
 fn run(universe: &mut mpi::environment::Universe, command: Result<Command>) -> Result<()> {
     use mpi::traits::Communicator as _;
     if let Ok(Command::Movie { argv, brick }) = &command {
@@ -236,12 +247,7 @@ fn run(universe: &mut mpi::environment::Universe, command: Result<Command>) -> R
     });
     let (command, request) = match ready {
         Ok(r) => r,
-        Err(e) => {
-            universe.set_buffer_size(1 << 20);
-            let world = World::new(universe);
-            let e = fail_direct_send(&world, format!("{e:#}"));
-            bail!("rank {rank} of {}: {e}", world.size());
-        }
+        Err(e) => return Err(fail_set_up(universe, e)),
     };
     match (command, request) {
         (Command::Render { brick, .. }, Some((request, Some(output)))) => {

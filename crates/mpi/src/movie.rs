@@ -10,7 +10,7 @@
 //! (after the last frame only rank 0 fails); the writer leaves nothing half-written.
 
 use crate::world::World;
-use crate::{buffer_bytes, reads_line};
+use crate::{buffer_bytes, fail_set_up, reads_line};
 use anyhow::{Context, Result, bail};
 use volsplat::distributed::{Communicator, fail_direct_send, render_sort_last};
 use volsplat::io::MovieWriter;
@@ -43,12 +43,7 @@ pub fn run(universe: &mut mpi::environment::Universe, argv: &[String], brick: us
     });
     let (flags, mut writer) = match ready {
         Ok(r) => r,
-        Err(e) => {
-            universe.set_buffer_size(1 << 20);
-            let world = World::new(universe);
-            let e = fail_direct_send(&world, format!("{e:#}"));
-            bail!("rank {rank} of {}: {e}", world.size());
-        }
+        Err(e) => return Err(fail_set_up(universe, e)),
     };
     let (w, h) = flags.size;
     universe.set_buffer_size(buffer_bytes(w, h, 8));

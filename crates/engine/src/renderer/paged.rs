@@ -665,6 +665,29 @@ fn frame_note(before: &CacheStats, after: &CacheStats, budget: u64) -> String {
     )
 }
 
+/// The level's brick source of samples `$t` (bricks of `$brick` cells, with the chunk faces
+/// cache of `$budget / CHUNK_CACHE_SHARE`, shared by the scan and the frames) and its ranges:
+/// kept from an earlier open, or scanned within `$budget / SCAN_SHARE` and kept
+/// ([`scan_or_kept`], whose note comes along). A macro, as `ZarrSource` needs zarrs' element
+/// trait, which the engine does not name.
+macro_rules! source_and_scan {
+    ($t:ty, ($store:expr, $path:expr), ($level:expr, $sel:expr), $kind:expr, $brick:expr, $budget:expr) => {{
+        let source = ZarrSource::<$t>::new(Arc::clone($store), $sel, $brick)?
+            .with_chunk_cache($budget / CHUNK_CACHE_SHARE);
+        let layout = volsplat_core::source::BrickSource::layout(&source, $level)
+            .cloned()
+            .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
+        let (scan, note) = scan_or_kept(&layout, ($store, $path), ($level, $sel), $kind, || {
+            Ok(volsplat_splat::cache::scan_level_within(
+                &source.as_stored(),
+                $level,
+                $budget / SCAN_SHARE,
+            )?)
+        })?;
+        (source, scan, note)
+    }};
+}
+
 /// Opens the store of `source`, reads its level's ranges once, and makes the cache; a
 /// sort-last rank's part (`region`: its boxes of cells) is opened by [`part::open_part`].
 pub(super) fn open_paged(
@@ -676,43 +699,15 @@ pub(super) fn open_paged(
     if let Some(r) = region {
         return part::open_part(source, budget, limits, r, None);
     }
-    let VolumeSource::File {
-        path,
-        level,
-        channel,
-        timepoint,
-        ..
-    } = source
-    else {
-        return Err(EngineError::request("volume", "not an OME-Zarr store"));
-    };
     let t0 = Instant::now();
-    let store = Arc::new(ZarrStore::open(path, limits)?);
-    let level = level.index().unwrap_or(0);
-    let sel = ZarrSelection {
-        channel: *channel,
-        timepoint: *timepoint,
-    };
+    let (path, store, level, sel, kind) = open_store_level(source, limits)?;
     let grid = store.grid(level)?;
-    let kind = store.level(level)?.scalar_type.ok_or_else(|| {
-        EngineError::request("volume", "the level's sample type cannot be rendered")
-    })?;
     let sidecar_note;
     let brick = BRICK;
     macro_rules! open {
         ($t:ty, $variant:ident) => {{
-            let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, brick)?
-                .with_chunk_cache(budget / CHUNK_CACHE_SHARE);
-            let layout = volsplat_core::source::BrickSource::layout(&source, level)
-                .cloned()
-                .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
-            let (scan, kept) = scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
-                Ok(volsplat_splat::cache::scan_level_within(
-                    &source.as_stored(),
-                    level,
-                    budget / SCAN_SHARE,
-                )?)
-            })?;
+            let (source, scan, kept) =
+                source_and_scan!($t, (&store, path), (level, sel), kind, brick, budget);
             sidecar_note = kept;
             let source = match scan.finite {
                 Some([lo, hi]) if scan.non_finite.is_some() => {
@@ -824,15 +819,18 @@ fn scan_or_kept(
     Ok((scan, note))
 }
 
-/// The value range `[lo, hi]` (data units; the finite samples of a float level) of the store
-/// level of `source`, from its ranges kept in the user's cache folder or else a ranges scan
-/// that holds at most `budget / SCAN_SHARE` bytes of bricks at once (and keeps them for the
-/// next open), without a cache or the level read whole; what it did, as a note.
-pub(super) fn store_level_range(
-    source: &VolumeSource,
-    budget: u64,
+/// The OME-Zarr store of `source` opened (metadata only): its path, the store, the level, the
+/// channel and time point, and the level's sample type.
+fn open_store_level<'s>(
+    source: &'s VolumeSource,
     limits: &volsplat_io::Limits,
-) -> Result<([f64; 2], Option<String>)> {
+) -> Result<(
+    &'s std::path::Path,
+    Arc<ZarrStore>,
+    usize,
+    ZarrSelection,
+    ScalarType,
+)> {
     let VolumeSource::File {
         path,
         level,
@@ -852,20 +850,23 @@ pub(super) fn store_level_range(
     let kind = store.level(level)?.scalar_type.ok_or_else(|| {
         EngineError::request("volume", "the level's sample type cannot be rendered")
     })?;
+    Ok((path, store, level, sel, kind))
+}
+
+/// The value range `[lo, hi]` (data units; the finite samples of a float level) of the store
+/// level of `source`, from its ranges kept in the user's cache folder or else a ranges scan
+/// that holds at most `budget / SCAN_SHARE` bytes of bricks at once (and keeps them for the
+/// next open), without a cache or the level read whole; what it did, as a note.
+pub(super) fn store_level_range(
+    source: &VolumeSource,
+    budget: u64,
+    limits: &volsplat_io::Limits,
+) -> Result<([f64; 2], Option<String>)> {
+    let (path, store, level, sel, kind) = open_store_level(source, limits)?;
     macro_rules! range {
         ($t:ty) => {{
-            let source = ZarrSource::<$t>::new(Arc::clone(&store), sel, BRICK)?
-                .with_chunk_cache(budget / CHUNK_CACHE_SHARE);
-            let layout = volsplat_core::source::BrickSource::layout(&source, level)
-                .cloned()
-                .ok_or_else(|| EngineError::request("volume.level", "no such level"))?;
-            let (scan, note) = scan_or_kept(&layout, (&store, path), (level, sel), kind, || {
-                Ok(volsplat_splat::cache::scan_level_within(
-                    &source.as_stored(),
-                    level,
-                    budget / SCAN_SHARE,
-                )?)
-            })?;
+            let (_, scan, note) =
+                source_and_scan!($t, (&store, path), (level, sel), kind, BRICK, budget);
             let [lo, hi] = scan.value_range();
             ([f64::from(lo), f64::from(hi)], note)
         }};
