@@ -130,14 +130,7 @@ fn assert_ranks_draw_the_in_memory_bits(
                     "{} {mode:?} perspective={perspective} ranks={ranks}",
                     path.display()
                 );
-                let tree = BrickTree::new(cells.map(|c| c.div_ceil(16)), 16).unwrap();
-                let out = FakeCluster { size: ranks }.run(|comm| {
-                    let mut r = Renderer::new();
-                    let image = render_sort_last(comm, &mut r, &req, 16);
-                    let (a, b) = tree.rank_leaves(comm.rank(), comm.size());
-                    let region = super::render::rank_region(&tree, comm.rank(), comm.size());
-                    (image, r.rank_reads(), b - a, region)
-                });
+                let out = run_ranks(&req, cells, ranks);
                 let mut union = 0;
                 for (rank, (image, reads, leaves, region)) in out.iter().enumerate() {
                     let reads = assert_rank_reads(
@@ -163,6 +156,27 @@ fn assert_ranks_draw_the_in_memory_bits(
             }
         }
     }
+}
+
+/// What each of `ranks` in-process ranks returns for the sort-last render of `req` (bricks of
+/// 16 cells over a level of `cells`): its image, what it read, how many of the tree's leaves it
+/// drew, and its region.
+type RankOut = (
+    Result<Option<SortLastImage>>,
+    Option<RankReads>,
+    usize,
+    Vec<[[usize; 3]; 2]>,
+);
+
+fn run_ranks(req: &RenderRequest, cells: [usize; 3], ranks: usize) -> Vec<RankOut> {
+    let tree = BrickTree::new(cells.map(|c| c.div_ceil(16)), 16).unwrap();
+    FakeCluster { size: ranks }.run(|comm| {
+        let mut r = Renderer::new();
+        let image = render_sort_last(comm, &mut r, req, 16);
+        let (a, b) = tree.rank_leaves(comm.rank(), comm.size());
+        let region = super::render::rank_region(&tree, comm.rank(), comm.size());
+        (image, r.rank_reads(), b - a, region)
+    })
 }
 
 /// One rank's reads of its part of the file at `path` (bricks of 16 cells, the sort-last
@@ -377,14 +391,7 @@ fn assert_xray_ranks_read_their_bricks(
                 "{} X-ray perspective={perspective} ranks={ranks}",
                 path.display()
             );
-            let tree = BrickTree::new(cells.map(|c| c.div_ceil(16)), 16).unwrap();
-            let out = FakeCluster { size: ranks }.run(|comm| {
-                let mut r = Renderer::new();
-                let image = render_sort_last(comm, &mut r, &req, 16);
-                let (a, b) = tree.rank_leaves(comm.rank(), comm.size());
-                let region = super::render::rank_region(&tree, comm.rank(), comm.size());
-                (image, r.rank_reads(), b - a, region)
-            });
+            let out = run_ranks(&req, cells, ranks);
             let mut union = 0;
             for (rank, (image, reads, leaves, region)) in out.iter().enumerate() {
                 let reads = assert_rank_reads(
