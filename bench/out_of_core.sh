@@ -56,7 +56,8 @@ convert)
   rm -f "$raw"
   du -sb "$store" "$store/0" ;;
 measure)
-  # (Not `volsplat info`: it reads level 0 whole to report its range, 4.8 GB RSS here.)
+  # (`volsplat info` without --memory would read level 0 whole to report its range when the
+  # level fits half the available memory; with --memory it reads only metadata and ranges.)
   levels=$(find "$store" -mindepth 1 -maxdepth 1 -type d -name '[0-9]*' | wc -l)
   echo "levels: $levels; level 0: $(du -sb "$store/0" | cut -f1) bytes stored"
   # The level's ranges go to a folder of the benchmark's own, empty at first: the first run
