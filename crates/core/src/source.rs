@@ -443,11 +443,22 @@ fn copy_slot<T: Scalar>(
             .min(n[a] - 1)
             - lo[a]
     };
+    // Along x, the slot positions whose global index needs no clamping, `[x_lo, x_hi)`, read a
+    // contiguous run of the region's row: copied at once (the same samples as `at` per voxel,
+    // which the ends still use).
+    let gx = b[0] * layout.size();
+    let x_lo = HALO.saturating_sub(gx).min(e);
+    let x_hi = (n[0] + HALO).saturating_sub(gx).clamp(x_lo, e);
     for lz in 0..e {
         let k = at(2, lz);
         for ly in 0..e {
             let row = (k * dims[1] + at(1, ly)) * dims[0];
-            out.extend((0..e).map(|lx| region[row + at(0, lx)]));
+            out.extend((0..x_lo).map(|lx| region[row + at(0, lx)]));
+            if x_lo < x_hi {
+                let start = row + at(0, x_lo);
+                out.extend_from_slice(&region[start..start + (x_hi - x_lo)]);
+            }
+            out.extend((x_hi..e).map(|lx| region[row + at(0, lx)]));
         }
     }
     Some(out.into_boxed_slice())
@@ -532,6 +543,62 @@ mod tests {
             }
         }
         out
+    }
+
+    /// `Brick::from_region`'s slot, whose unclamped x runs are copied at once, holds at every
+    /// slot position the level's sample at the clamped global index, for edge and interior
+    /// bricks of odd sizes and axes of 1–2 voxels, cut from the halo box or from a larger box.
+    #[test]
+    fn a_slot_holds_the_clamped_samples_of_its_region() {
+        for size in [8, 16] {
+            for dims in [
+                [1, 2, 9],
+                [37, 20, 9],
+                [2, 1, 30],
+                [29, 17, 1],
+                [40, 33, 18],
+            ] {
+                let l = layout(dims, size);
+                let f = |i: usize, j: usize, k: usize| (i + 101 * j + 10_007 * k) as f32;
+                let e = l.extent();
+                for key in keys(&l) {
+                    let halo = l.halo_voxels(key).unwrap();
+                    // The halo box, and the whole level as a larger region.
+                    for (lo, hi) in [
+                        (halo.clone().map(|r| r.start), halo.clone().map(|r| r.end)),
+                        ([0; 3], dims),
+                    ] {
+                        let rd: [usize; 3] = std::array::from_fn(|a| hi[a] - lo[a]);
+                        let mut region = Vec::new();
+                        for k in 0..rd[2] {
+                            for j in 0..rd[1] {
+                                for i in 0..rd[0] {
+                                    region.push(f(lo[0] + i, lo[1] + j, lo[2] + k));
+                                }
+                            }
+                        }
+                        let brick = Brick::from_region(&l, key, &region, lo, rd).unwrap();
+                        let g = |a: usize, p: usize| {
+                            (key.b[a] as usize * size + p)
+                                .saturating_sub(HALO)
+                                .min(dims[a] - 1)
+                        };
+                        for lz in 0..e {
+                            for ly in 0..e {
+                                for lx in 0..e {
+                                    let want = f(g(0, lx), g(1, ly), g(2, lz));
+                                    let got = brick.data[lx + e * (ly + e * lz)];
+                                    assert_eq!(
+                                        got, want,
+                                        "{dims:?} B {size} {key:?} ({lx},{ly},{lz})"
+                                    );
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]
