@@ -448,7 +448,7 @@ impl Renderer {
             0.0
         };
         report(progress, 0.2, Stage::Render)?;
-        if slabs.level != 0 {
+        let rendered = if slabs.level != 0 {
             // A preview (`quality.level`): the store's own coarser level, read whole.
             let level = super::store_level::StoreLevelFrame {
                 source,
@@ -462,20 +462,45 @@ impl Renderer {
             };
             let (rendered, note) = self.draw_store_level(level, progress)?;
             notes.push(note);
-            return finish(
-                Finished {
-                    rendered,
-                    plan: &plan,
-                    slabs,
-                    request,
-                    prepare_ms,
-                    load_ms,
-                    t0,
-                },
-                (camera, tf, warnings, notes),
+            rendered
+        } else {
+            self.draw_paged(
+                budget,
+                (&camera, &tables, &settings),
+                &pool,
+                &mut notes,
                 progress,
-            );
-        }
+            )?
+        };
+        finish(
+            Finished {
+                rendered,
+                plan: &plan,
+                slabs,
+                request,
+                prepare_ms,
+                load_ms,
+                t0,
+            },
+            (camera, tf, warnings, notes),
+            progress,
+        )
+    }
+
+    /// Draws a frame of the store's level through the brick cache, noting what it read and
+    /// whether bands were drawn in pieces.
+    fn draw_paged(
+        &mut self,
+        budget: u64,
+        (camera, tables, settings): (
+            &volsplat_core::Camera,
+            &volsplat_core::CrioTables,
+            &volsplat_splat::RenderSettings,
+        ),
+        pool: &rayon::ThreadPool,
+        notes: &mut Vec<String>,
+        progress: &mut (dyn FnMut(&Progress) -> bool + Send),
+    ) -> Result<volsplat_splat::Rendered> {
         let paged = self
             .paged
             .as_mut()
@@ -488,9 +513,9 @@ impl Renderer {
                 with_cache!(&mut paged.cache, c => volsplat_splat::render_slabs_bricked(
                     c,
                     &bricks,
-                    &camera,
-                    &tables,
-                    &settings,
+                    camera,
+                    tables,
+                    settings,
                     &mut |p| fwd(sheets_done(p)),
                 ))
             })
@@ -512,19 +537,7 @@ impl Renderer {
                 rendered.stats.split_groups
             ));
         }
-        finish(
-            Finished {
-                rendered,
-                plan: &plan,
-                slabs,
-                request,
-                prepare_ms,
-                load_ms,
-                t0,
-            },
-            (camera, tf, warnings, notes),
-            progress,
-        )
+        Ok(rendered)
     }
 }
 
