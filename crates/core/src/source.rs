@@ -248,6 +248,20 @@ impl BrickLayout {
         }
         Some(at)
     }
+
+    /// The slot positions per axis whose voxel `B·b − H + l` lies inside the level: the halo
+    /// box ([`BrickLayout::halo_voxels`]) in slot positions, `[1, …)` at a low face (brick 0)
+    /// and `[…, n + H − B·b)` at a high face; the other positions of an edge brick's slot repeat
+    /// the nearest of these ([`pad_slot`]).
+    pub fn slot_interior(&self, key: BrickKey) -> Result<[Range<usize>; 3]> {
+        let halo = self.halo_voxels(key)?;
+        let b = self.check(key)?;
+        Ok(std::array::from_fn(|a| {
+            // halo.start ≥ B·b − H, so this is the slot position of the first voxel.
+            let base = b[a] * self.size;
+            halo[a].start + HALO - base..halo[a].end + HALO - base
+        }))
+    }
 }
 
 /// A resident brick: the voxels `[B·b − H, B·b + B + H]` of its level at slot index
@@ -288,34 +302,29 @@ impl<T: Scalar> Brick<T> {
         region_lo: [usize; 3],
         region_dims: [usize; 3],
     ) -> Result<Brick<T>> {
-        let b = layout.check(key)?;
-        let halo = layout.halo_voxels(key)?;
-        let n = layout.grid().dims;
-        let fits = (0..3).all(|a| {
-            region_lo[a] <= halo[a].start
-                && region_lo[a]
-                    .checked_add(region_dims[a])
-                    .is_some_and(|end| halo[a].end <= end && end <= n[a])
-        });
-        if !fits {
+        let b = check_region(layout, key, region, region_lo, region_dims)?;
+        let mut data = Vec::new();
+        data.try_reserve_exact(layout.slot_len())
+            .map_err(|_| key.error("cannot allocate the brick's slot"))?;
+        data.resize(layout.slot_len(), T::from_f64(0.0));
+        copy_slot(layout, b, region, region_lo, region_dims, &mut data);
+        Brick::from_slot(layout, key, data.into_boxed_slice())
+    }
+
+    /// Brick `key` of `layout` from its full slot `data` (`E³` samples, i fastest, as
+    /// [`Brick::data`]), its ranges read from the slot ([`Brick::ranges8`], [`Brick::range`]).
+    ///
+    /// Errors ([`CoreError::Brick`]): `key` not a brick of `layout`; `data` not `E³` long; the
+    /// ranges cannot be allocated.
+    pub fn from_slot(layout: &BrickLayout, key: BrickKey, data: Box<[T]>) -> Result<Brick<T>> {
+        layout.check(key)?;
+        if data.len() != layout.slot_len() {
             return Err(key.error(format!(
-                "the region of {region_dims:?} voxels at {region_lo:?} does not hold the brick's \
-                 voxels [{}, {}) × [{}, {}) × [{}, {}) inside the level's {n:?}",
-                halo[0].start, halo[0].end, halo[1].start, halo[1].end, halo[2].start, halo[2].end
+                "the slot holds {} samples, not E³ = {}",
+                data.len(),
+                layout.slot_len()
             )));
         }
-        let want = region_dims
-            .iter()
-            .try_fold(1usize, |p, &d| p.checked_mul(d));
-        if want != Some(region.len()) {
-            return Err(key.error(format!(
-                "the region holds {} samples where {region_dims:?} needs {}",
-                region.len(),
-                want.map_or_else(|| "more than usize".into(), |w| w.to_string())
-            )));
-        }
-        let data = copy_slot(layout, b, region, region_lo, region_dims)
-            .ok_or_else(|| key.error("cannot allocate the brick's slot"))?;
         let ranges8 = block_ranges(layout, key, &data)?;
         let range = ranges8
             .iter()
@@ -349,6 +358,31 @@ pub trait BrickSource<T: Scalar>: Send + Sync {
     /// The brick, read and decoded. Errors ([`CoreError::Brick`]) name the level, the brick and
     /// the cause.
     fn brick(&self, key: BrickKey) -> Result<Arc<Brick<T>>>;
+
+    /// Reads brick `key`'s `E³` samples into `slot` (i fastest, as [`Brick::data`]: the voxel
+    /// `B·b − H + l` clamped to the level at slot position `l`), without its ranges: what a
+    /// cache of slots needs, with no slot allocated per read. The default reads
+    /// [`BrickSource::brick`] and copies its slot; sources that read a box of voxels override it
+    /// to write the box straight into `slot` ([`fill_slot`], [`pad_slot`]).
+    ///
+    /// Errors as [`BrickSource::brick`], and ([`CoreError::Brick`]) a `slot` that is not `E³`
+    /// long or a served brick that is not `key` with a full slot. On error `slot`'s contents
+    /// are unspecified.
+    fn read_slot(&self, key: BrickKey, slot: &mut [T]) -> Result<()> {
+        let brick = self.brick(key)?;
+        if brick.key != key || brick.data.len() != slot.len() {
+            return Err(key.error(format!(
+                "the brick source served brick {:?} of level {} with {} samples, where {} were \
+                 expected",
+                brick.key.b,
+                brick.key.level,
+                brick.data.len(),
+                slot.len()
+            )));
+        }
+        slot.copy_from_slice(&brick.data);
+        Ok(())
+    }
 
     /// Zero-copy fast path: the whole level as one in-memory volume, where there is one.
     fn whole(&self, level: usize) -> Result<Option<Arc<Volume<T>>>> {
@@ -416,52 +450,156 @@ impl<T: Scalar> BrickSource<T> for InMemory<T> {
         Brick::from_region(&self.layout, key, self.volume.data(), [0; 3], n).map(Arc::new)
     }
 
+    fn read_slot(&self, key: BrickKey, slot: &mut [T]) -> Result<()> {
+        let n = self.volume.grid().dims;
+        fill_slot(&self.layout, key, self.volume.data(), [0; 3], n, slot)
+    }
+
     fn whole(&self, level: usize) -> Result<Option<Arc<Volume<T>>>> {
         Ok((level == 0).then(|| self.volume.clone()))
     }
 }
 
-/// The `E³` slot of brick `b`: voxel `B·b − H + l` (clamped to the level) at slot position `l`,
-/// read from `region` (the voxels `[lo, lo + dims)`, x fastest, holding the halo box: checked
-/// by [`Brick::from_region`]). `None` if the slot cannot be allocated.
+/// Fills `slot` (brick `key`'s `E³` samples, i fastest, as [`Brick::data`]) from `region`: the
+/// box of voxels `[region_lo, region_lo + region_dims)` of the level (index space, x fastest),
+/// which must hold the brick's halo box ([`BrickLayout::halo_voxels`]). Slot position `l` gets
+/// voxel `B·b − H + l` clamped to the level, as [`Brick::from_region`]; nothing is allocated.
+///
+/// Errors ([`CoreError::Brick`]): as [`Brick::from_region`], and a `slot` that is not `E³`
+/// long.
+pub fn fill_slot<T: Scalar>(
+    layout: &BrickLayout,
+    key: BrickKey,
+    region: &[T],
+    region_lo: [usize; 3],
+    region_dims: [usize; 3],
+    slot: &mut [T],
+) -> Result<()> {
+    let b = check_region(layout, key, region, region_lo, region_dims)?;
+    if slot.len() != layout.slot_len() {
+        return Err(key.error(format!(
+            "the slot holds {} samples, not E³ = {}",
+            slot.len(),
+            layout.slot_len()
+        )));
+    }
+    copy_slot(layout, b, region, region_lo, region_dims, slot);
+    Ok(())
+}
+
+/// Checks that `region` (the voxels `[lo, lo + dims)`) holds brick `key`'s halo box inside the
+/// level and has `dims`' product of samples; the brick's coordinates.
+fn check_region<T>(
+    layout: &BrickLayout,
+    key: BrickKey,
+    region: &[T],
+    region_lo: [usize; 3],
+    region_dims: [usize; 3],
+) -> Result<[usize; 3]> {
+    let b = layout.check(key)?;
+    let halo = layout.halo_voxels(key)?;
+    let n = layout.grid().dims;
+    let fits = (0..3).all(|a| {
+        region_lo[a] <= halo[a].start
+            && region_lo[a]
+                .checked_add(region_dims[a])
+                .is_some_and(|end| halo[a].end <= end && end <= n[a])
+    });
+    if !fits {
+        return Err(key.error(format!(
+            "the region of {region_dims:?} voxels at {region_lo:?} does not hold the brick's \
+             voxels [{}, {}) × [{}, {}) × [{}, {}) inside the level's {n:?}",
+            halo[0].start, halo[0].end, halo[1].start, halo[1].end, halo[2].start, halo[2].end
+        )));
+    }
+    let want = region_dims
+        .iter()
+        .try_fold(1usize, |p, &d| p.checked_mul(d));
+    if want != Some(region.len()) {
+        return Err(key.error(format!(
+            "the region holds {} samples where {region_dims:?} needs {}",
+            region.len(),
+            want.map_or_else(|| "more than usize".into(), |w| w.to_string())
+        )));
+    }
+    Ok(b)
+}
+
+/// Fills the slot positions of brick `key` whose voxel lies outside the level (edge bricks:
+/// the positions before [`BrickLayout::slot_interior`]'s start or from its end, per axis) with
+/// the nearest position inside, so that a slot whose interior holds the halo box
+/// ([`BrickLayout::halo_voxels`]) holds voxel `B·b − H + l` clamped to the level at every
+/// position `l`, as [`Brick::from_region`]. The clamp is separable, so x is padded within the
+/// interior rows, then whole rows along y within the interior planes, then whole planes along
+/// z. Errors if `key` is not a brick of `layout` or `slot` is not `E³` long.
+pub fn pad_slot<T: Copy>(layout: &BrickLayout, key: BrickKey, slot: &mut [T]) -> Result<()> {
+    let inner = layout.slot_interior(key)?;
+    let e = layout.extent();
+    if slot.len() != layout.slot_len() {
+        return Err(key.error(format!(
+            "the slot holds {} samples, not E³ = {}",
+            slot.len(),
+            layout.slot_len()
+        )));
+    }
+    let [x, y, z] = inner;
+    for k in z.clone() {
+        for j in y.clone() {
+            let row = &mut slot[(k * e + j) * e..(k * e + j + 1) * e];
+            let (first, last) = (row[x.start], row[x.end - 1]);
+            row[..x.start].fill(first);
+            row[x.end..].fill(last);
+        }
+        let plane = k * e * e;
+        for j in (0..y.start).chain(y.end..e) {
+            let from = plane + if j < y.start { y.start } else { y.end - 1 } * e;
+            slot.copy_within(from..from + e, plane + j * e);
+        }
+    }
+    for k in (0..z.start).chain(z.end..e) {
+        let from = if k < z.start { z.start } else { z.end - 1 } * e * e;
+        slot.copy_within(from..from + e * e, k * e * e);
+    }
+    Ok(())
+}
+
+/// Fills `out` (the `E³` slot of brick `b`) with voxel `B·b − H + l` (clamped to the level) at
+/// slot position `l`, read from `region` (the voxels `[lo, lo + dims)`, x fastest, holding the
+/// halo box: checked by [`check_region`]): the halo box's rows copied into the slot's interior
+/// ([`BrickLayout::slot_interior`]), then the rest padded ([`pad_slot`]).
 fn copy_slot<T: Scalar>(
     layout: &BrickLayout,
     b: [usize; 3],
     region: &[T],
     lo: [usize; 3],
     dims: [usize; 3],
-) -> Option<Box<[T]>> {
+    out: &mut [T],
+) {
     let e = layout.extent();
     let n = layout.grid().dims;
-    let mut out = Vec::new();
-    out.try_reserve_exact(layout.slot_len()).ok()?;
-    // Region index of slot position l along axis a: the global index clamped to the level,
-    // less the region's origin.
-    let at = |a: usize, l: usize| {
-        (b[a] * layout.size() + l)
-            .saturating_sub(HALO)
-            .min(n[a] - 1)
-            - lo[a]
-    };
-    // Along x, the slot positions whose global index needs no clamping, `[x_lo, x_hi)`, read a
-    // contiguous run of the region's row: copied at once (the same samples as `at` per voxel,
-    // which the ends still use).
-    let gx = b[0] * layout.size();
-    let x_lo = HALO.saturating_sub(gx).min(e);
-    let x_hi = (n[0] + HALO).saturating_sub(gx).clamp(x_lo, e);
-    for lz in 0..e {
-        let k = at(2, lz);
-        for ly in 0..e {
-            let row = (k * dims[1] + at(1, ly)) * dims[0];
-            out.extend((0..x_lo).map(|lx| region[row + at(0, lx)]));
-            if x_lo < x_hi {
-                let start = row + at(0, x_lo);
-                out.extend_from_slice(&region[start..start + (x_hi - x_lo)]);
-            }
-            out.extend((x_hi..e).map(|lx| region[row + at(0, lx)]));
+    // The slot's interior: slot positions whose voxel `B·b − H + l` lies inside the level.
+    let inner: [Range<usize>; 3] = std::array::from_fn(|a| {
+        let g0 = b[a] * layout.size();
+        let start = HALO.saturating_sub(g0);
+        start..(n[a] + HALO).saturating_sub(g0).min(e)
+    });
+    let w = inner[0].len();
+    for lz in inner[2].clone() {
+        let k = b[2] * layout.size() + lz - HALO - lo[2];
+        for ly in inner[1].clone() {
+            let j = b[1] * layout.size() + ly - HALO - lo[1];
+            let s = (k * dims[1] + j) * dims[0] + (b[0] * layout.size() + inner[0].start - HALO)
+                - lo[0];
+            let d = (lz * e + ly) * e + inner[0].start;
+            out[d..d + w].copy_from_slice(&region[s..s + w]);
         }
     }
-    Some(out.into_boxed_slice())
+    let key = BrickKey {
+        level: layout.level,
+        b: b.map(|x| x as u32),
+    };
+    // Cannot fail: `b` was checked and `out` is E³ long.
+    let _ = pad_slot(layout, key, out);
 }
 
 impl BrickLayout {
@@ -578,6 +716,10 @@ mod tests {
                             }
                         }
                         let brick = Brick::from_region(&l, key, &region, lo, rd).unwrap();
+                        // The same slot written into a poisoned one, with nothing allocated.
+                        let mut slot = vec![-7.5f32; l.slot_len()];
+                        fill_slot(&l, key, &region, lo, rd, &mut slot).unwrap();
+                        assert_eq!(*slot, *brick.data, "fill_slot {dims:?} B {size} {key:?}");
                         let g = |a: usize, p: usize| {
                             (key.b[a] as usize * size + p)
                                 .saturating_sub(HALO)
@@ -596,6 +738,53 @@ mod tests {
                             }
                         }
                     }
+                }
+            }
+        }
+    }
+
+    /// `pad_slot` completes a slot whose interior (`slot_interior`: the halo box) alone was
+    /// written; `InMemory::read_slot` gives `brick()`'s slot; short slots are errors.
+    #[test]
+    fn a_slot_read_into_place_equals_the_brick() {
+        for size in [8, 16] {
+            for dims in [[1, 2, 9], [37, 20, 9], [29, 17, 1], [17, 17, 17]] {
+                let l = layout(dims, size);
+                let data: Vec<f32> = (0..dims.iter().product::<usize>())
+                    .map(|i| (i * 7 % 1013) as f32)
+                    .collect();
+                let vol = Volume::new(Grid::with_dims(dims).unwrap(), data).unwrap();
+                let mem = InMemory::new(Arc::new(vol), size).unwrap();
+                let e = l.extent();
+                for key in keys(&l) {
+                    let want = mem.brick(key).unwrap();
+                    let mut slot = vec![f32::NAN; l.slot_len()];
+                    mem.read_slot(key, &mut slot).unwrap();
+                    assert_eq!(*slot, *want.data, "{dims:?} B {size} {key:?}");
+                    // Only the interior written, then padded.
+                    let inner = l.slot_interior(key).unwrap();
+                    let halo = l.halo_voxels(key).unwrap();
+                    for a in 0..3 {
+                        assert_eq!(inner[a].len(), halo[a].len());
+                    }
+                    let mut only = vec![f32::NAN; l.slot_len()];
+                    for z in inner[2].clone() {
+                        for y in inner[1].clone() {
+                            for x in inner[0].clone() {
+                                let at = x + e * (y + e * z);
+                                only[at] = want.data[at];
+                            }
+                        }
+                    }
+                    pad_slot(&l, key, &mut only).unwrap();
+                    assert_eq!(
+                        only.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                        want.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                        "padded {dims:?} B {size} {key:?}"
+                    );
+                    let mut short = vec![0.0f32; l.slot_len() - 1];
+                    assert!(mem.read_slot(key, &mut short).is_err());
+                    assert!(pad_slot(&l, key, &mut short).is_err());
                 }
             }
         }

@@ -12,8 +12,8 @@
 //! lowest slot first), so the arena, the bases and the stats do not depend on the thread count.
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 use volsplat_core::source::{Brick, BrickKey, BrickLayout, BrickSource, HALO};
@@ -129,6 +129,20 @@ pub struct BrickCache<T: Scalar> {
     allowed: Option<Vec<bool>>,
     /// Bricks that may not be read.
     outside: usize,
+    /// Slot buffers of bricks read ahead ([`BrickCache::fetch`]) and placed since, kept for
+    /// the next read-ahead instead of allocated per read: at most as many as were read ahead
+    /// at once (the read-ahead's share of the budget).
+    spare: Mutex<Vec<Box<[T]>>>,
+}
+
+/// A brick read ahead by [`BrickCache::fetch`], not yet placed: its key and its `E³` slot
+/// samples (i fastest, as [`Brick::data`]). Give it to [`BrickCache::make_resident_with`].
+#[derive(Debug)]
+pub struct Fetched<T> {
+    /// Which brick.
+    pub key: BrickKey,
+    /// Its slot's samples.
+    pub data: Box<[T]>,
 }
 
 impl<T: Scalar> std::fmt::Debug for BrickCache<T> {
@@ -271,6 +285,7 @@ impl<T: Scalar> BrickCache<T> {
             evictions: 0,
             allowed,
             outside,
+            spare: Mutex::new(Vec::new()),
         })
     }
 
@@ -354,40 +369,36 @@ impl<T: Scalar> BrickCache<T> {
         Ok(out)
     }
 
-    /// Reads brick `key` from the source, checks it and counts it.
-    fn read(&self, key: BrickKey) -> Result<Arc<Brick<T>>> {
-        let brick = self.source.brick(key)?;
-        self.check_brick(key, &brick)?;
-        self.reads.fetch_add(1, Ordering::Relaxed);
-        self.bytes_read.fetch_add(
-            (brick.data.len() * std::mem::size_of::<T>()) as u64,
-            Ordering::Relaxed,
-        );
-        Ok(brick)
+    /// Reads brick `key` from the source into `slot` ([`BrickSource::read_slot`]) and counts
+    /// it.
+    fn read_into(&self, key: BrickKey, slot: &mut [T]) -> Result<()> {
+        read_counted(&*self.source, &self.reads, &self.bytes_read, key, slot)
     }
 
-    /// A brick the source served for `key` must be that brick, with a full slot.
-    fn check_brick(&self, key: BrickKey, brick: &Brick<T>) -> Result<()> {
-        if brick.key != key || brick.data.len() != self.slot_len {
-            return Err(key
-                .error(format!(
-                    "the brick source served brick {:?} of level {} with {} samples, where {} \
-                     (E³) were expected",
-                    brick.key.b,
-                    brick.key.level,
-                    brick.data.len(),
-                    self.slot_len
-                ))
-                .into());
+    /// A slot buffer for a brick read ahead: a spare one, or a new one (fallibly).
+    fn take_spare(&self, key: BrickKey) -> Result<Box<[T]>> {
+        if let Some(b) = lock(&self.spare).pop() {
+            return Ok(b);
         }
-        Ok(())
+        let mut v = Vec::new();
+        v.try_reserve_exact(self.slot_len)
+            .map_err(|_| key.error("cannot allocate a slot for a brick read ahead"))?;
+        v.resize(self.slot_len, T::from_f64(0.0));
+        Ok(v.into_boxed_slice())
+    }
+
+    /// Keeps the slot buffer of a placed or dropped brick read ahead for the next read-ahead.
+    fn give_spare(&self, data: Box<[T]>) {
+        if data.len() == self.slot_len {
+            lock(&self.spare).push(data);
+        }
     }
 
     /// Reads the bricks of `keys` that are not resident (in parallel; duplicates read once),
     /// without placing them, in key order: for read-ahead on another thread while a frame reads
-    /// the arena. Pass them to [`BrickCache::make_resident_with`]. Errors as
-    /// [`BrickCache::make_resident`]'s reads.
-    pub fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>> {
+    /// the arena. Pass them to [`BrickCache::make_resident_with`], which keeps their buffers
+    /// for the next call. Errors as [`BrickCache::make_resident`]'s reads.
+    pub fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Fetched<T>>> {
         let missing: Vec<BrickKey> = self
             .plan(keys)?
             .into_iter()
@@ -396,11 +407,24 @@ impl<T: Scalar> BrickCache<T> {
             .collect();
         let mut out = Vec::with_capacity(missing.len());
         for batch in missing.chunks(self.per_batch()) {
+            let mut bufs = batch
+                .iter()
+                .map(|&k| self.take_spare(k))
+                .collect::<Result<Vec<_>>>()?;
+            let read = batch
+                .par_iter()
+                .zip(bufs.par_iter_mut())
+                .map(|(&k, data)| self.read_into(k, data))
+                .collect::<Result<Vec<()>>>();
+            if let Err(e) = read {
+                bufs.into_iter().for_each(|b| self.give_spare(b));
+                return Err(e);
+            }
             out.extend(
                 batch
-                    .par_iter()
-                    .map(|&k| self.read(k))
-                    .collect::<Result<Vec<_>>>()?,
+                    .iter()
+                    .zip(bufs)
+                    .map(|(&key, data)| Fetched { key, data }),
             );
         }
         bricks_were_read(out.len());
@@ -425,22 +449,28 @@ impl<T: Scalar> BrickCache<T> {
     /// [`BrickCache::capacity`] (nothing read); a key outside the level or a failed read
     /// ([`SplatError::Core`] with [`CoreError::Brick`] naming level and brick). After a read
     /// error the cache is consistent: every brick marked resident holds its data (the bricks
-    /// of batches read before the failure may have been placed).
+    /// of batches read before the failure may have been placed; the failing batch's slots were
+    /// emptied for its reads and stay free).
     pub fn make_resident(&mut self, keys: &[BrickKey]) -> Result<()> {
         self.make_resident_with(keys, Vec::new())
     }
 
     /// As [`BrickCache::make_resident`], taking the bricks in `fetched` (from
     /// [`BrickCache::fetch`]) instead of reading them; bricks of `fetched` not asked for, or
-    /// already resident, are dropped. A fetched brick that is not the brick of its key at this
-    /// level with a full slot is an error.
+    /// already resident, are dropped (their buffers kept for the next read-ahead). A fetched
+    /// brick that is not the brick of its key at this level with a full slot is an error.
+    ///
+    /// Each batch's slots are chosen and their bricks evicted first; the missing bricks are
+    /// then read straight into their slots in the arena (in parallel: disjoint slots), so no
+    /// slot is allocated per read. After a failed batch its slots are free.
     pub fn make_resident_with(
         &mut self,
         keys: &[BrickKey],
-        fetched: Vec<Arc<Brick<T>>>,
+        fetched: Vec<Fetched<T>>,
     ) -> Result<()> {
         let wanted = self.plan(keys)?;
         if wanted.len() > self.capacity {
+            fetched.into_iter().for_each(|f| self.give_spare(f.data));
             return Err(SplatError::Budget {
                 budget: self.budget,
                 slot_bytes: (self.slot_len * std::mem::size_of::<T>()) as u64,
@@ -475,55 +505,126 @@ impl<T: Scalar> BrickCache<T> {
             .collect();
         victims.sort_unstable();
         let mut victims = victims.into_iter().map(|(_, s)| s);
-        let mut given: BTreeMap<BrickKey, Arc<Brick<T>>> = BTreeMap::new();
-        for b in fetched {
-            given.insert(b.key, b);
+        let mut given: BTreeMap<BrickKey, Fetched<T>> = BTreeMap::new();
+        for f in fetched {
+            if missing
+                .binary_search_by_key(&f.key, |&(key, _)| key)
+                .is_ok()
+            {
+                if let Some(old) = given.insert(f.key, f) {
+                    self.give_spare(old.data);
+                }
+            } else {
+                // Bricks given but not missing are dropped now, not at the end.
+                self.give_spare(f.data);
+            }
         }
-        // Bricks given but not missing are dropped now, not at the end.
-        given.retain(|k, _| missing.binary_search_by_key(k, |&(key, _)| key).is_ok());
         for batch in missing.chunks(self.per_batch()) {
-            // Bricks given are taken out of `given` as their batch comes, so that each is
-            // dropped once placed.
-            let mut taken: Vec<Option<Arc<Brick<T>>>> =
-                batch.iter().map(|(key, _)| given.remove(key)).collect();
-            let bricks = batch
-                .par_iter()
-                .zip(taken.par_iter_mut())
-                .map(|(&(key, _), got)| match got.take() {
-                    Some(b) => {
-                        self.check_brick(key, &b)?;
-                        Ok(b)
-                    }
-                    None => self.read(key),
-                })
-                .collect::<Result<Vec<_>>>()?;
-            for (&(key, i), brick) in batch.iter().zip(bricks) {
+            let mut slots = Vec::with_capacity(batch.len());
+            for &(key, _) in batch {
                 let Some(slot) = victims.next() else {
                     // Unreachable: wanted ≤ capacity leaves a victim for every missing brick.
                     return Err(key.error("no free slot in the brick cache").into());
                 };
-                self.place(slot, i, &brick.data, now);
+                self.evict(slot);
+                slots.push(slot);
+            }
+            let taken: Vec<Option<Fetched<T>>> =
+                batch.iter().map(|(key, _)| given.remove(key)).collect();
+            // Each of the batch's (distinct) slots as its own mutable slice of the arena.
+            let mut place: Vec<Option<&mut [T]>> = (0..batch.len()).map(|_| None).collect();
+            let at: BTreeMap<usize, usize> =
+                slots.iter().enumerate().map(|(p, &s)| (s, p)).collect();
+            for (s, chunk) in self.arena.chunks_mut(self.slot_len).enumerate() {
+                if let Some(&p) = at.get(&s) {
+                    place[p] = Some(chunk);
+                }
+            }
+            let (source, reads, bytes) = (&*self.source, &self.reads, &self.bytes_read);
+            let slot_len = self.slot_len;
+            let done =
+                batch
+                    .par_iter()
+                    .zip(place.into_par_iter())
+                    .zip(taken.into_par_iter())
+                    .map(|((&(key, _), dst), got)| {
+                        let Some(dst) = dst else {
+                            return (Err(key.error("no slot in the arena").into()), None);
+                        };
+                        match got {
+                        Some(f) if f.key == key && f.data.len() == slot_len => {
+                            dst.copy_from_slice(&f.data);
+                            (Ok(()), Some(f.data))
+                        }
+                        Some(f) => (Err(SplatError::Core(key.error(format!(
+                            "the brick source served brick {:?} of level {} with {} samples, \
+                             where {slot_len} (E³) were expected",
+                            f.key.b,
+                            f.key.level,
+                            f.data.len()
+                        )))), Some(f.data)),
+                        None => (read_counted(source, reads, bytes, key, dst), None),
+                    }
+                    })
+                    .collect::<Vec<_>>();
+            let mut failed = None;
+            for (r, spare) in done {
+                if let Some(d) = spare {
+                    self.give_spare(d);
+                }
+                if let (Err(e), None) = (r, &failed) {
+                    failed = Some(e);
+                }
+            }
+            if let Some(e) = failed {
+                // The batch's slots were emptied above and stay free.
+                return Err(e);
+            }
+            for (&(_, i), &slot) in batch.iter().zip(&slots) {
+                self.owner[slot] = i as u32;
+                self.slot_of[i] = slot as u32;
+                self.bases[i] = (slot * self.slot_len) as u32;
+                self.stamp[slot] = now;
             }
         }
         bricks_were_read(missing.len());
         Ok(())
     }
 
-    /// Puts `data` (brick index `i`) in `slot`, evicting its brick.
-    fn place(&mut self, slot: usize, i: usize, data: &[T], now: u64) {
+    /// Empties `slot`, evicting its brick (its base becomes 0).
+    fn evict(&mut self, slot: usize) {
         let old = self.owner[slot];
         if old != NONE {
             self.slot_of[old as usize] = NONE;
             self.bases[old as usize] = 0;
             self.evictions += 1;
+            self.owner[slot] = NONE;
         }
-        let base = slot * self.slot_len;
-        self.arena[base..base + self.slot_len].copy_from_slice(data);
-        self.owner[slot] = i as u32;
-        self.slot_of[i] = slot as u32;
-        self.bases[i] = base as u32;
-        self.stamp[slot] = now;
     }
+}
+
+/// Locks `m`, whatever a panicking holder left (the guarded data stays consistent: a list
+/// of buffers).
+fn lock<X>(m: &Mutex<X>) -> std::sync::MutexGuard<'_, X> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Reads brick `key` from `source` into `slot` and counts it in `reads` and `bytes`
+/// (`E³ · size_of::<T>()`).
+fn read_counted<T: Scalar>(
+    source: &dyn BrickSource<T>,
+    reads: &AtomicU64,
+    bytes: &AtomicU64,
+    key: BrickKey,
+    slot: &mut [T],
+) -> Result<()> {
+    source.read_slot(key, slot)?;
+    reads.fetch_add(1, Ordering::Relaxed);
+    bytes.fetch_add(
+        std::mem::size_of_val(slot) as u64,
+        Ordering::Relaxed,
+    );
+    Ok(())
 }
 
 /// What [`scan_level`] learnt of a level: per-brick and per-8³-block ranges (after the

@@ -49,7 +49,9 @@ mod voxels;
 
 pub use aa::Antialias;
 pub use bricks::BrickGrid;
-pub use cache::{BrickCache, CacheStats, LevelScan, bricks_meeting, scan_level, scan_level_in};
+pub use cache::{
+    BrickCache, CacheStats, Fetched, LevelScan, bricks_meeting, scan_level, scan_level_in,
+};
 pub use clip::ClipPlane;
 pub use dispatch::render_by_visibility;
 pub use error::{Result, SplatError};

@@ -344,6 +344,21 @@ impl<T: Scalar> BrickSource<T> for NrrdSource<T> {
     }
 
     fn brick(&self, key: BrickKey) -> volsplat_core::Result<Arc<Brick<T>>> {
+        let (region, lo, dims) = self.halo_box(key)?;
+        Brick::from_region(&self.layout, key, &region, lo, dims).map(Arc::new)
+    }
+
+    /// [`BrickSource::brick`]'s slot written into `slot` (the halo box read, then copied in).
+    fn read_slot(&self, key: BrickKey, slot: &mut [T]) -> volsplat_core::Result<()> {
+        let (region, lo, dims) = self.halo_box(key)?;
+        volsplat_core::source::fill_slot(&self.layout, key, &region, lo, dims, slot)
+    }
+}
+
+impl<T: Scalar> NrrdSource<T> {
+    /// Brick `key`'s halo box ([`BrickLayout::halo_voxels`]) read from the file, non-finite
+    /// floats replaced, with its first voxel and size.
+    fn halo_box(&self, key: BrickKey) -> volsplat_core::Result<(Vec<T>, [usize; 3], [usize; 3])> {
         let halo = self.layout.halo_voxels(key)?;
         let lo = halo.clone().map(|r| r.start);
         let dims = halo.map(|r| r.len());
@@ -352,7 +367,7 @@ impl<T: Scalar> BrickSource<T> for NrrdSource<T> {
             .map_err(|e| key.error(e.to_string()))?;
         self.replace_non_finite(&mut region)
             .map_err(|cause| key.error(format!("{}: {cause}", self.file.path.display())))?;
-        Brick::from_region(&self.layout, key, &region, lo, dims).map(Arc::new)
+        Ok((region, lo, dims))
     }
 }
 

@@ -47,6 +47,14 @@ impl Box3 {
         self.dims().iter().product()
     }
 
+    /// The box moved by `by` voxels along every axis.
+    pub(super) fn shifted(self, by: usize) -> Box3 {
+        Box3 {
+            lo: self.lo.map(|x| x + by),
+            hi: self.hi.map(|x| x + by),
+        }
+    }
+
     /// Whether `other` lies inside this box.
     pub(super) fn contains(&self, other: &Box3) -> bool {
         (0..3).all(|a| self.lo[a] <= other.lo[a] && other.hi[a] <= self.hi[a])
@@ -119,6 +127,11 @@ impl<T: Copy> Faces<T> {
             .iter()
             .find(|(b, _)| b.contains(piece))
             .map(|&(b, start)| (b, &self.samples[start..start + b.len()]))
+    }
+
+    /// The box of the face holding `piece`, if one does.
+    pub(super) fn find_box(&self, piece: &Box3) -> Option<Box3> {
+        self.find(piece).map(|(b, _)| b)
     }
 
     /// Bytes held.

@@ -8,16 +8,18 @@ use crate::error::{IoError, Result};
 use std::marker::PhantomData;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use volsplat_core::source::{Brick, BrickKey, BrickLayout, BrickSource};
+use volsplat_core::source::{Brick, BrickKey, BrickLayout, BrickSource, HALO, pad_slot};
 use volsplat_core::{Grid, Scalar, ScalarType};
 use zarrs::array::ElementOwned;
 
 /// A [`BrickSource`] over every level of an OME-Zarr store (one channel and time point, bricks
-/// of `B` cells per side, halo 1): [`BrickSource::brick`] reads the brick's halo box
-/// ([`BrickLayout::halo_voxels`], clamped to the level) with one
-/// [`ZarrStore::read_region`] and cuts the slot with [`Brick::from_region`], so a brick holds
-/// the same samples as the brick of the level read whole ([`ZarrStore::read_level`]) and served
-/// by [`volsplat_core::InMemory`]. Chunks absent from the store read as the fill value.
+/// of `B` cells per side, halo 1): [`BrickSource::read_slot`] reads the brick's halo box
+/// ([`BrickLayout::halo_voxels`], clamped to the level) chunk piece by chunk piece straight
+/// into the slot and pads the slot's edge positions ([`volsplat_core::source::pad_slot`]), so
+/// a brick holds the same samples as the brick of the level read whole
+/// ([`ZarrStore::read_level`]) and served by [`volsplat_core::InMemory`];
+/// [`BrickSource::brick`] is that slot with its ranges. Chunks absent from the store read as
+/// the fill value.
 /// [`BrickSource::whole`] is `None`: nothing is read whole.
 ///
 /// **Chunk faces** ([`ZarrSource::with_chunk_cache`]): a brick's halo box overlaps up to 26
@@ -210,18 +212,30 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
         e.iter().all(|&x| x > 0).then_some(e)
     }
 
-    /// The region `[lo, lo + dims)` of `level` (x fastest), read one chunk at a time: the box
-    /// is cut at the level's chunk edges and each piece read on its own
-    /// ([`ZarrStore::read_region`] of a piece inside one chunk decodes that chunk alone), so a
-    /// brick's read holds one decoded chunk at a time instead of every chunk its halo box
-    /// overlaps (up to 27 for bricks as large as the chunks) decoded in parallel; bricks are
-    /// read in parallel by the cache instead (BENCHMARKS §31). With a chunk cache
-    /// ([`ZarrSource::with_chunk_cache`]) a piece inside a chunk's faces is copied from them
-    /// (the chunk decoded once for its faces), and a chunk decoded whole leaves its faces.
-    fn read_by_chunks(&self, level: usize, lo: [usize; 3], dims: [usize; 3]) -> Result<Vec<T>> {
-        let hi: [usize; 3] = std::array::from_fn(|a| lo[a] + dims[a]);
+    /// Writes the box `whole` of `level` (index space) into `dst`, the samples of the box
+    /// `into` (x fastest), both boxes and every piece shifted by `shift` voxels per axis (so
+    /// that a slot's box, which starts `H` voxels before the level at a low face, has no
+    /// negative corner), reading one chunk at a time: the box is cut at the level's chunk
+    /// edges and each piece read on its own ([`ZarrStore::read_region`] of a piece inside one
+    /// chunk decodes that chunk alone), so a brick's read holds one decoded chunk at a time
+    /// instead of every chunk its halo box overlaps (up to 27 for bricks as large as the
+    /// chunks) decoded in parallel; bricks are read in parallel by the cache instead
+    /// (BENCHMARKS §31). With a chunk cache ([`ZarrSource::with_chunk_cache`]) a piece inside a
+    /// chunk's faces is copied from them (the chunk decoded once for its faces), and a chunk
+    /// decoded whole leaves its faces.
+    fn read_by_chunks(
+        &self,
+        level: usize,
+        whole: Box3,
+        dst: &mut [T],
+        into: Box3,
+        shift: usize,
+    ) -> Result<()> {
+        let (lo, hi) = (whole.lo, whole.hi);
         let Some(edge) = self.chunk_edges(level) else {
-            return self.read(level, lo, hi);
+            let v = self.read(level, lo, hi)?;
+            copy_box(&v, whole.shifted(shift), dst, into, whole.shifted(shift));
+            return Ok(());
         };
         // The cuts along each axis: lo, the chunk edges inside, hi.
         let cuts: [Vec<usize>; 3] = std::array::from_fn(|a| {
@@ -239,11 +253,6 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             let bytes = edge.iter().product::<usize>() * std::mem::size_of::<T>();
             (bytes as u64).saturating_mul(8) <= c.capacity()
         });
-        if cache.is_none() && cuts.iter().all(|c| c.len() == 2) {
-            return self.read(level, lo, hi);
-        }
-        let whole = Box3 { lo, hi };
-        let mut region = vec![T::from_f64(0.0); dims.iter().product()];
         for z in cuts[2].windows(2) {
             for y in cuts[1].windows(2) {
                 for x in cuts[0].windows(2) {
@@ -251,17 +260,21 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
                         lo: [x[0], y[0], z[0]],
                         hi: [x[1], y[1], z[1]],
                     };
-                    match cache {
-                        Some(c) => self.read_cached(c, level, edge, piece, &mut region, whole)?,
-                        None => {
-                            let p = self.read(level, piece.lo, piece.hi)?;
-                            copy_box(&p, piece, &mut region, whole, piece);
-                        }
-                    }
+                    let (from, v) = match cache {
+                        Some(c) => self.read_cached(c, level, edge, piece)?,
+                        None => (piece, Held::Own(self.read(level, piece.lo, piece.hi)?)),
+                    };
+                    copy_box(
+                        v.samples(),
+                        from.shifted(shift),
+                        dst,
+                        into,
+                        piece.shifted(shift),
+                    );
                 }
             }
         }
-        Ok(region)
+        Ok(())
     }
 
     /// Reads `[lo, hi)` of `level` from the store (one decode per chunk it meets; counted).
@@ -275,19 +288,17 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
         )
     }
 
-    /// Copies `piece` (inside one chunk of `level`, whose chunks have `edge` samples per side)
-    /// into `region` (the samples of box `whole`) through the chunk faces cache `cache`: from
-    /// the chunk's faces where they hold the piece (the chunk decoded for them if they are not
-    /// held), else from the chunk decoded whole, whose faces are then kept.
+    /// The samples holding `piece` (inside one chunk of `level`, whose chunks have `edge`
+    /// samples per side), with their box, through the chunk faces cache `cache`: the chunk's
+    /// face that holds the piece where one does (the chunk decoded for its faces if they are
+    /// not held), else the chunk decoded whole, whose faces are then kept.
     fn read_cached(
         &self,
         cache: &FaceCache<T>,
         level: usize,
         edge: [usize; 3],
         piece: Box3,
-        region: &mut [T],
-        whole: Box3,
-    ) -> Result<()> {
+    ) -> Result<(Box3, Held<T>)> {
         let n = self.grids[level].dims;
         let c: [usize; 3] = std::array::from_fn(|a| piece.lo[a] / edge[a]);
         let chunk = Box3 {
@@ -314,32 +325,44 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             .any(|f| f.contains(&piece));
         if thin {
             let faces = cache.faces((level, c), decode)?;
-            if let Some((b, v)) = faces.find(&piece) {
-                copy_box(v, b, region, whole, piece);
-                return Ok(());
+            if let Some(b) = faces.find_box(&piece) {
+                return Ok((b, Held::Faces(faces, piece)));
             }
         }
         let (_, v) = decode()?;
         cache.offer((level, c), chunk, &v);
-        copy_box(&v, chunk, region, whole, piece);
-        Ok(())
+        Ok((chunk, Held::Own(v)))
     }
 
-    /// Replaces `region`'s non-finite samples (float levels) by level `level`'s finite range, or
-    /// errors (the cause, for the brick's error) if there are some and no range was given.
+    /// Replaces the non-finite samples of brick `key`'s slot (float levels) by level
+    /// `level`'s finite range, or errors (the cause, for the brick's error) if there are some
+    /// and no range was given (counted over the slot's interior, each voxel once).
     fn replace_non_finite(
         &self,
         level: usize,
-        region: &mut [T],
+        layout: &BrickLayout,
+        key: BrickKey,
+        slot: &mut [T],
     ) -> std::result::Result<(), String> {
         if T::TYPE != ScalarType::F32 || self.as_stored {
             return Ok(());
         }
-        if region.iter().all(|v| v.to_f32().is_finite()) {
+        if slot.iter().all(|v| v.to_f32().is_finite()) {
             return Ok(());
         }
         let Some([lo, hi]) = self.finite[level] else {
-            let bad = region.iter().filter(|v| !v.to_f32().is_finite()).count();
+            let e = layout.extent();
+            let inner = layout.slot_interior(key).map_err(|e| e.to_string())?;
+            let mut bad = 0;
+            for z in inner[2].clone() {
+                for y in inner[1].clone() {
+                    let row = (z * e + y) * e;
+                    bad += slot[row + inner[0].start..row + inner[0].end]
+                        .iter()
+                        .filter(|v| !v.to_f32().is_finite())
+                        .count();
+                }
+            }
             return Err(format!(
                 "{bad} samples of the brick's box are NaN or infinite, which become the level's \
                  finite extremes (decision 0030); scan the level's ranges first (a brick-by-brick \
@@ -348,7 +371,7 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             ));
         };
         let (lo, hi) = (T::from_f64(f64::from(lo)), T::from_f64(f64::from(hi)));
-        for v in region.iter_mut() {
+        for v in slot.iter_mut() {
             let x = v.to_f32();
             if x.is_nan() || x == f32::NEG_INFINITY {
                 *v = lo;
@@ -360,6 +383,21 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
     }
 }
 
+/// Samples a piece is copied from: a chunk decoded for it, or the faces of a chunk (kept
+/// alive by the `Arc` while they are copied; the piece names the face).
+enum Held<T> {
+    Own(Vec<T>),
+    Faces(Arc<super::chunks::Faces<T>>, Box3),
+}
+
+impl<T: Copy> Held<T> {
+    fn samples(&self) -> &[T] {
+        match self {
+            Held::Own(v) => v,
+            Held::Faces(f, piece) => f.find(piece).map_or(&[], |(_, v)| v),
+        }
+    }
+}
 impl<T: Scalar + ElementOwned> BrickSource<T> for ZarrSource<T> {
     fn levels(&self) -> &[Grid] {
         &self.grids
@@ -375,23 +413,58 @@ impl<T: Scalar + ElementOwned> BrickSource<T> for ZarrSource<T> {
     }
 
     fn brick(&self, key: BrickKey) -> volsplat_core::Result<Arc<Brick<T>>> {
+        let layout = self.layout_or_error(key)?;
+        let mut slot = Vec::new();
+        slot.try_reserve_exact(layout.slot_len())
+            .map_err(|_| key.error("cannot allocate the brick's slot"))?;
+        slot.resize(layout.slot_len(), T::from_f64(0.0));
+        self.read_slot(key, &mut slot)?;
+        Brick::from_slot(layout, key, slot.into_boxed_slice()).map(Arc::new)
+    }
+
+    /// The brick's halo box read chunk piece by chunk piece straight into the slot's interior
+    /// ([`BrickLayout::slot_interior`]), the edge positions padded ([`pad_slot`]), non-finite
+    /// floats replaced: [`BrickSource::brick`]'s slot, with no region allocated.
+    fn read_slot(&self, key: BrickKey, slot: &mut [T]) -> volsplat_core::Result<()> {
         let level = usize::from(key.level);
-        let layout = self.layouts.get(level).ok_or_else(|| {
+        let layout = self.layout_or_error(key)?;
+        if slot.len() != layout.slot_len() {
+            return Err(key.error(format!(
+                "the slot holds {} samples, not E³ = {}",
+                slot.len(),
+                layout.slot_len()
+            )));
+        }
+        let halo = layout.halo_voxels(key)?;
+        let whole = Box3 {
+            lo: halo.clone().map(|r| r.start),
+            hi: halo.map(|r| r.end),
+        };
+        // The slot's box, shifted by H: voxel B·b − H + l sits at B·b + l.
+        let b = layout.check(key)?;
+        let e = layout.extent();
+        let into = Box3 {
+            lo: b.map(|x| x * layout.size()),
+            hi: b.map(|x| x * layout.size() + e),
+        };
+        self.read_by_chunks(level, whole, slot, into, HALO)
+            .map_err(|e| key.error(e.to_string()))?;
+        pad_slot(layout, key, slot)?;
+        self.replace_non_finite(level, layout, key, slot)
+            .map_err(|cause| key.error(format!("{}: {cause}", self.store.path().display())))
+    }
+}
+
+impl<T: Scalar + ElementOwned> ZarrSource<T> {
+    /// Level `key.level`'s layout, or the brick's error naming the store's level count.
+    fn layout_or_error(&self, key: BrickKey) -> volsplat_core::Result<&BrickLayout> {
+        self.layouts.get(usize::from(key.level)).ok_or_else(|| {
             key.error(format!(
                 "the store {} holds {} levels",
                 self.store.path().display(),
                 self.layouts.len()
             ))
-        })?;
-        let halo = layout.halo_voxels(key)?;
-        let lo = halo.clone().map(|r| r.start);
-        let dims = halo.map(|r| r.len());
-        let mut region = self
-            .read_by_chunks(level, lo, dims)
-            .map_err(|e| key.error(e.to_string()))?;
-        self.replace_non_finite(level, &mut region)
-            .map_err(|cause| key.error(format!("{}: {cause}", self.store.path().display())))?;
-        Brick::from_region(layout, key, &region, lo, dims).map(Arc::new)
+        })
     }
 }
 

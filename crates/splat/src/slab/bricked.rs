@@ -42,11 +42,10 @@ use crate::error::{Result, SplatError};
 use crate::sheets::{Progress, RenderMode, RenderSettings};
 use crate::voxels::{Slotted, Vox};
 use rayon::prelude::*;
-use std::sync::Arc;
 use volsplat_core::Scalar;
 use volsplat_core::glam::DVec3;
 use volsplat_core::image::Rgba;
-use volsplat_core::source::{Brick, BrickKey, BrickLayout};
+use volsplat_core::source::{BrickKey, BrickLayout};
 
 /// The bricks of one level that a frame may read, made resident on demand: the brick cache
 /// (`crate::cache::BrickCache`), or every brick at once in tests.
@@ -59,10 +58,14 @@ pub(crate) trait Resident<T>: Sync {
     fn budget(&self) -> u64;
     /// Reads the bricks of `keys` that are not resident, without placing them (read-ahead:
     /// called while a group marches, reading the arena).
-    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>>;
+    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<crate::cache::Fetched<T>>>;
     /// Makes every brick of `keys` (at most [`Resident::capacity`]) resident, placing the
     /// `fetched` ones and reading the rest.
-    fn make_resident_with(&mut self, keys: &[BrickKey], fetched: Vec<Arc<Brick<T>>>) -> Result<()>;
+    fn make_resident_with(
+        &mut self,
+        keys: &[BrickKey],
+        fetched: Vec<crate::cache::Fetched<T>>,
+    ) -> Result<()>;
     /// The slots, `E³` voxels each, padded so that a 4-byte read at the last voxel stays
     /// inside.
     fn arena(&self) -> &[T];
@@ -593,10 +596,14 @@ impl<T: Scalar> Resident<T> for crate::cache::BrickCache<T> {
     fn budget(&self) -> u64 {
         crate::cache::BrickCache::budget(self)
     }
-    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>> {
+    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<crate::cache::Fetched<T>>> {
         crate::cache::BrickCache::fetch(self, keys)
     }
-    fn make_resident_with(&mut self, keys: &[BrickKey], fetched: Vec<Arc<Brick<T>>>) -> Result<()> {
+    fn make_resident_with(
+        &mut self,
+        keys: &[BrickKey],
+        fetched: Vec<crate::cache::Fetched<T>>,
+    ) -> Result<()> {
         crate::cache::BrickCache::make_resident_with(self, keys, fetched)
     }
     fn arena(&self) -> &[T] {

@@ -3,9 +3,11 @@
 //! thread count (docs/design/brick-seam.md §3, `bricked_equals_in_memory_bit_for_bit`).
 
 use super::*;
+use crate::cache::Fetched;
 use crate::sheets::{Preintegrate, RenderMode, RenderSettings, Rendered, Visibility};
 use crate::slab::{Access, render_slabs, render_slabs_in};
 use crate::{Antialias, BrickGrid, ShadeAt};
+use std::sync::Arc;
 use volsplat_core::glam::DVec3;
 use volsplat_core::phantom::{self, Blob, GaussianBlobs};
 use volsplat_core::source::{BrickSource, InMemory};
@@ -57,13 +59,22 @@ impl<T: Scalar> Resident<T> for Copies<T> {
     fn budget(&self) -> u64 {
         (self.capacity * self.layout.slot_len() * std::mem::size_of::<T>()) as u64
     }
-    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Arc<Brick<T>>>> {
+    fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<crate::cache::Fetched<T>>> {
         Ok(keys
             .iter()
-            .map(|&k| self.source.brick(k))
+            .map(|&k| {
+                self.source.brick(k).map(|b| Fetched {
+                    key: k,
+                    data: b.data.clone(),
+                })
+            })
             .collect::<volsplat_core::Result<_>>()?)
     }
-    fn make_resident_with(&mut self, keys: &[BrickKey], fetched: Vec<Arc<Brick<T>>>) -> Result<()> {
+    fn make_resident_with(
+        &mut self,
+        keys: &[BrickKey],
+        fetched: Vec<crate::cache::Fetched<T>>,
+    ) -> Result<()> {
         assert!(keys.len() <= self.capacity, "more keys than slots");
         self.calls += 1;
         self.fetched += fetched.len();
@@ -74,11 +85,11 @@ impl<T: Scalar> Resident<T> for Copies<T> {
         let len = self.layout.slot_len();
         let d = self.layout.dims();
         for (slot, &key) in keys.iter().enumerate() {
-            let brick = match fetched.iter().find(|b| b.key == key) {
-                Some(b) => b.clone(),
-                None => self.source.brick(key)?,
+            let data = match fetched.iter().find(|b| b.key == key) {
+                Some(b) => b.data.clone(),
+                None => self.source.brick(key)?.data.clone(),
             };
-            self.arena[slot * len..(slot + 1) * len].copy_from_slice(&brick.data);
+            self.arena[slot * len..(slot + 1) * len].copy_from_slice(&data);
             let b = key.b.map(|x| x as usize);
             self.bases[(b[2] * d[1] + b[1]) * d[0] + b[0]] = (slot * len) as u32;
             if let Some((k, at, by)) = self.corrupt
