@@ -78,9 +78,10 @@ fn bits(out: &volsplat::Output) -> Vec<u32> {
     v
 }
 
-/// 160 × 150 × 140 u16 (6.4 MiB, 27 bricks of 64³): a budget of 16 MiB holds all of them, one
-/// of 14 MiB eighteen (so frames evict and read again: a thin slab of rows through a 3 × 3 × 3
-/// grid of bricks meets up to 17 of them), one of 10 MiB thirteen (fewer than some bands meet: bands
+/// 160 × 150 × 140 u16 (6.4 MiB, 27 bricks of 64³ in slots of 0.57 MiB; the arena is 0.64 of
+/// the budget less the skip-block grid): a budget of 16 MiB holds 17 of them, one of 14 MiB
+/// fifteen (so frames evict and read again: a thin slab of rows through a 3 × 3 × 3 grid of
+/// bricks meets up to 17 of them), one of 10 MiB eleven (fewer than some bands meet: bands
 /// march their planes in pieces). Composite (CT-Bone, lit at the samples),
 /// MIP and MinIP, from two eyes in each projection: the same bits as the level read whole.
 #[test]
@@ -136,8 +137,8 @@ fn out_of_core_frames_equal_in_memory_ones_bit_for_bit() {
 }
 
 /// A volume wider than the budget's bricks, seen along its short axis: one plane of one band
-/// of rows crosses a row of 6 bricks, up to two high and two deep (24), and 8 MiB holds 8 to
-/// 11 bricks (decision 0039's least budget is 8), so bands are cut into columns and rows as
+/// of rows crosses a row of 6 bricks, up to two high and two deep (24), and 8 MiB holds 8
+/// bricks (decision 0039's least budget), so bands are cut into columns and rows as
 /// well as planes (a note says so). The picture is still the level read whole, bit for bit, in
 /// composite and MIP, both projections.
 #[test]
