@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use volsplat_core::source::{Brick, BrickKey, BrickLayout, BrickSource, HALO};
 use volsplat_core::{CoreError, NonFiniteSamples, Scalar};
 
-use crate::error::{Result, SplatError, try_filled};
+use crate::error::{Result, SplatError, try_filled, try_zeroed};
 
 /// No slot / no brick.
 const NONE: u32 = u32::MAX;
@@ -201,7 +201,8 @@ fn index_in(dims: [usize; 3], b: [usize; 3]) -> usize {
 
 impl<T: Scalar> BrickCache<T> {
     /// The bricks of `level` of `source`, held in an arena of at most `budget` bytes (the arena
-    /// is allocated whole here, fallibly). Capacity: the slots the budget holds, at most the
+    /// is allocated whole here, fallibly, as zero pages that the system maps when a slot is first
+    /// written). Capacity: the slots the budget holds, at most the
     /// level's brick count, and at most what keeps the arena within `i32::MAX − 8` samples (the
     /// AVX2 gathers' i32 offsets).
     ///
@@ -263,11 +264,7 @@ impl<T: Scalar> BrickCache<T> {
             .as_ref()
             .map_or(0, |a| a.iter().filter(|&&x| !x).count());
         Ok(BrickCache {
-            arena: try_filled(
-                capacity * slot_len + pad,
-                T::from_f64(0.0),
-                "the brick cache's arena",
-            )?,
+            arena: try_zeroed(capacity * slot_len + pad, "the brick cache's arena")?,
             owner: try_filled(capacity, NONE, "the brick cache's slot table")?,
             stamp: try_filled(capacity, 0, "the brick cache's slot table")?,
             slot_of: try_filled(count, NONE, "the brick cache's brick table")?,

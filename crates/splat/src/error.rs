@@ -157,3 +157,78 @@ pub fn try_filled<T: Clone>(n: usize, value: T, what: &'static str) -> Result<Ve
 
 /// Result alias for rendering.
 pub type Result<T> = std::result::Result<T, SplatError>;
+
+/// `n` zero samples of a volume's type, allocated zeroed and fallibly (see
+/// [`try_with_capacity`]): for large buffers that are written before they are read (the brick
+/// cache's arena), the system maps zero pages on first touch, so slots never written cost
+/// neither time nor resident memory (a 1.2 GB arena filled with zeros took 0.3–0.5 s before a
+/// frame could start: BENCHMARKS §36). The five sample types are allocated as themselves
+/// (their all-zero bytes are the value 0); any other `T` falls back to [`try_filled`].
+pub fn try_zeroed<T: volsplat_core::Scalar>(n: usize, what: &'static str) -> Result<Vec<T>> {
+    use std::any::{Any, TypeId};
+    /// `n` zeroed values of `P`, or `None` where the allocation fails. Only for the primitive
+    /// numbers below, whose all-zero bytes are a valid value (0 or +0.0).
+    fn zeroed<P: Copy + 'static>(n: usize) -> Option<Vec<P>> {
+        let layout = std::alloc::Layout::array::<P>(n).ok()?;
+        if layout.size() == 0 {
+            return Some(Vec::new());
+        }
+        // SAFETY: the layout has a non-zero size.
+        let ptr = unsafe { std::alloc::alloc_zeroed(layout) }.cast::<P>();
+        if ptr.is_null() {
+            return None;
+        }
+        // SAFETY: `ptr` comes from the global allocator with `P`'s layout for `n` values
+        // (capacity `n`), and all `n` are initialised: zero bytes, which is a valid `P` for the
+        // primitive numbers this is called with.
+        Some(unsafe { Vec::from_raw_parts(ptr, n, n) })
+    }
+    fn boxed<P: 'static>(v: Option<Vec<P>>) -> Option<Option<Box<dyn Any>>> {
+        Some(v.map(|v| Box::new(v) as Box<dyn Any>))
+    }
+    let t = TypeId::of::<T>();
+    let made = if t == TypeId::of::<u8>() {
+        boxed(zeroed::<u8>(n))
+    } else if t == TypeId::of::<i8>() {
+        boxed(zeroed::<i8>(n))
+    } else if t == TypeId::of::<u16>() {
+        boxed(zeroed::<u16>(n))
+    } else if t == TypeId::of::<i16>() {
+        boxed(zeroed::<i16>(n))
+    } else if t == TypeId::of::<f32>() {
+        boxed(zeroed::<f32>(n))
+    } else {
+        None
+    };
+    match made {
+        // `T` is the type allocated (same TypeId), so the downcast succeeds.
+        Some(Some(v)) => v
+            .downcast::<Vec<T>>()
+            .map(|v| *v)
+            .or_else(|_| try_filled(n, T::from_f64(0.0), what)),
+        Some(None) => Err(SplatError::out_of_memory::<T>(what, n)),
+        None => try_filled(n, T::from_f64(0.0), what),
+    }
+}
+
+#[cfg(test)]
+mod zeroed_tests {
+    use super::*;
+
+    #[test]
+    fn zeroed_buffers_hold_zeros_of_every_sample_type_and_huge_ones_are_errors() {
+        fn check<T: volsplat_core::Scalar>() {
+            let v = try_zeroed::<T>(100_003, "test").unwrap();
+            assert_eq!(v.len(), 100_003);
+            assert!(v.iter().all(|x| x.to_f32() == 0.0 && x.to_f32().is_sign_positive()));
+            assert!(try_zeroed::<T>(0, "test").unwrap().is_empty());
+            let e = try_zeroed::<T>(usize::MAX / 4, "huge").unwrap_err();
+            assert!(matches!(e, SplatError::OutOfMemory { what: "huge", .. }), "{e}");
+        }
+        check::<u8>();
+        check::<i8>();
+        check::<u16>();
+        check::<i16>();
+        check::<f32>();
+    }
+}
