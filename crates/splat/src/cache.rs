@@ -617,10 +617,7 @@ fn read_counted<T: Scalar>(
 ) -> Result<()> {
     source.read_slot(key, slot)?;
     reads.fetch_add(1, Ordering::Relaxed);
-    bytes.fetch_add(
-        std::mem::size_of_val(slot) as u64,
-        Ordering::Relaxed,
-    );
+    bytes.fetch_add(std::mem::size_of_val(slot) as u64, Ordering::Relaxed);
     Ok(())
 }
 

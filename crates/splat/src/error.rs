@@ -220,10 +220,16 @@ mod zeroed_tests {
         fn check<T: volsplat_core::Scalar>() {
             let v = try_zeroed::<T>(100_003, "test").unwrap();
             assert_eq!(v.len(), 100_003);
-            assert!(v.iter().all(|x| x.to_f32() == 0.0 && x.to_f32().is_sign_positive()));
+            assert!(
+                v.iter()
+                    .all(|x| x.to_f32() == 0.0 && x.to_f32().is_sign_positive())
+            );
             assert!(try_zeroed::<T>(0, "test").unwrap().is_empty());
             let e = try_zeroed::<T>(usize::MAX / 4, "huge").unwrap_err();
-            assert!(matches!(e, SplatError::OutOfMemory { what: "huge", .. }), "{e}");
+            assert!(
+                matches!(e, SplatError::OutOfMemory { what: "huge", .. }),
+                "{e}"
+            );
         }
         check::<u8>();
         check::<i8>();

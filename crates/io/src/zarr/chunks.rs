@@ -121,6 +121,16 @@ impl<T: Copy> Faces<T> {
         Faces { boxes, samples }
     }
 
+    /// A whole chunk kept as its own "faces" (every box the chunk): for chunks larger than a
+    /// brick, whose inner pieces serve several bricks ([`super::ZarrSource`]'s reads), so
+    /// that a pass decodes such a chunk about once instead of once per brick meeting it.
+    pub(super) fn whole(chunk: Box3, data: Vec<T>) -> Self {
+        Faces {
+            boxes: [(chunk, 0); 6],
+            samples: data,
+        }
+    }
+
     /// The face holding `piece`, with its box, if one does.
     pub(super) fn find(&self, piece: &Box3) -> Option<(Box3, &[T])> {
         self.boxes
@@ -258,10 +268,12 @@ impl<T: Copy> FaceCache<T> {
     }
 
     /// Chunk `id`'s faces: those held, or those of `decode()` (the chunk's box and samples),
-    /// decoded by one thread while the others asking for the same chunk wait.
+    /// decoded by one thread while the others asking for the same chunk wait; with `whole`,
+    /// the whole chunk is kept ([`Faces::whole`]).
     pub(super) fn faces<E>(
         &self,
         id: ChunkId,
+        whole: bool,
         decode: impl FnOnce() -> Result<(Box3, Vec<T>), E>,
     ) -> Result<Arc<Faces<T>>, E> {
         let slot = self.slot(id);
@@ -277,8 +289,11 @@ impl<T: Copy> FaceCache<T> {
                 return Err(e);
             }
         };
-        let faces = Arc::new(Faces::of(chunk, &data));
-        drop(data);
+        let faces = Arc::new(if whole {
+            Faces::whole(chunk, data)
+        } else {
+            Faces::of(chunk, &data)
+        });
         *held = Some(Arc::clone(&faces));
         drop(held);
         self.charge(id, faces.bytes());
@@ -380,7 +395,7 @@ mod tests {
         let decodes = std::sync::atomic::AtomicUsize::new(0);
         let get = |c: usize| {
             cache
-                .faces::<()>((0, [c, 0, 0]), || {
+                .faces::<()>((0, [c, 0, 0]), false, || {
                     decodes.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     Ok((chunk(c), chunk_data(chunk(c))))
                 })
@@ -403,7 +418,7 @@ mod tests {
         assert_eq!(decodes.load(std::sync::atomic::Ordering::Relaxed), 5);
         assert!(cache.bytes() <= 3 * per);
         // A failed decode leaves nothing behind and is retried.
-        assert!(cache.faces((0, [9, 0, 0]), || Err("bad")).is_err());
+        assert!(cache.faces((0, [9, 0, 0]), false, || Err("bad")).is_err());
         get(9);
         assert_eq!(decodes.load(std::sync::atomic::Ordering::Relaxed), 6);
         // Threads asking for the same chunk at once decode it once.
@@ -414,7 +429,7 @@ mod tests {
                 s.spawn(|| {
                     for c in 0..20 {
                         cache
-                            .faces::<()>((0, [c, 0, 0]), || {
+                            .faces::<()>((0, [c, 0, 0]), false, || {
                                 decodes.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                                 Ok((chunk(c), chunk_data(chunk(c))))
                             })

@@ -248,11 +248,23 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             c.push(hi[a]);
             c
         });
-        let cache = self.faces.as_deref().filter(|c| {
-            // A chunk (a shard, for sharded arrays) decoded whole takes at most 1/8 of it.
-            let bytes = edge.iter().product::<usize>() * std::mem::size_of::<T>();
-            (bytes as u64).saturating_mul(8) <= c.capacity()
-        });
+        // A chunk larger than a brick along some axis serves several bricks' inner pieces: the
+        // cache keeps it whole where it holds the chunks that bricks read in index order (x
+        // fastest) meet before they come back to a chunk: two rows of chunks along x in two
+        // planes (BENCHMARKS §36: fewer thrash and decode more than the faces). Otherwise
+        // chunks leave their faces, where a chunk (a shard, for sharded arrays) decoded whole
+        // takes at most an eighth of the cache.
+        let bytes = (edge.iter().product::<usize>() * std::mem::size_of::<T>()) as u64;
+        let row = self.grids[level].dims[0].div_ceil(edge[0]).max(2) as u64;
+        let large = edge.iter().any(|&e| e > self.layouts[level].size())
+            && self
+                .faces
+                .as_deref()
+                .is_some_and(|c| bytes.saturating_mul(4 * row) <= c.capacity());
+        let cache = self
+            .faces
+            .as_deref()
+            .filter(|c| bytes.saturating_mul(8) <= c.capacity());
         for z in cuts[2].windows(2) {
             for y in cuts[1].windows(2) {
                 for x in cuts[0].windows(2) {
@@ -261,7 +273,7 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
                         hi: [x[1], y[1], z[1]],
                     };
                     let (from, v) = match cache {
-                        Some(c) => self.read_cached(c, level, edge, piece)?,
+                        Some(c) => self.read_cached(c, level, edge, large, piece)?,
                         None => (piece, Held::Own(self.read(level, piece.lo, piece.hi)?)),
                     };
                     copy_box(
@@ -289,14 +301,17 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
     }
 
     /// The samples holding `piece` (inside one chunk of `level`, whose chunks have `edge`
-    /// samples per side), with their box, through the chunk faces cache `cache`: the chunk's
-    /// face that holds the piece where one does (the chunk decoded for its faces if they are
-    /// not held), else the chunk decoded whole, whose faces are then kept.
+    /// samples per side), with their box, through the chunk faces cache `cache`: for `large`
+    /// chunks (larger than a brick) the whole chunk, kept (decoded once while it is held);
+    /// otherwise the chunk's face that holds the piece where one does (the chunk decoded for
+    /// its faces if they are not held), else the chunk decoded whole, whose faces are then
+    /// kept.
     fn read_cached(
         &self,
         cache: &FaceCache<T>,
         level: usize,
         edge: [usize; 3],
+        large: bool,
         piece: Box3,
     ) -> Result<(Box3, Held<T>)> {
         let n = self.grids[level].dims;
@@ -320,11 +335,15 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             }
             Ok((chunk, v))
         };
+        if large {
+            let whole = cache.faces((level, c), true, decode)?;
+            return Ok((chunk, Held::Faces(whole, piece)));
+        }
         let thin = super::chunks::face_boxes(chunk)
             .iter()
             .any(|f| f.contains(&piece));
         if thin {
-            let faces = cache.faces((level, c), decode)?;
+            let faces = cache.faces((level, c), false, decode)?;
             if let Some(b) = faces.find_box(&piece) {
                 return Ok((b, Held::Faces(faces, piece)));
             }
@@ -570,12 +589,16 @@ mod tests {
     /// 16³, bricks of 16³ cells: each halo box meets up to 27 chunks), in index order (x
     /// fastest), in batches of 8 read by `threads` threads, as the brick cache and the scan
     /// read them.
-    fn decodes_of_a_pass(cache: u64, threads: usize) -> (u64, usize) {
+    /// Chunk decodes of a pass over every brick of an 80 × 64 × 80 u16 level (bricks of 16
+    /// cells: 100), in batches of 8 read by `threads` threads, with chunks of `chunk` samples
+    /// and a chunk cache of `cache` bytes; and the level's chunk count.
+    fn decodes_of_a_pass(chunk: usize, cache: u64, threads: usize) -> (u64, usize) {
         let dir = tempfile::tempdir().unwrap();
+        let dims = [80, 64, 80];
         let p = write(
             dir.path(),
-            volume::<u16>([80, 64, 80]).into(),
-            16,
+            volume::<u16>(dims).into(),
+            chunk,
             ZarrVersion::V2,
         );
         let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
@@ -584,6 +607,7 @@ mod tests {
             .with_chunk_cache(cache);
         let all = keys(s.layout(0).unwrap());
         assert_eq!(all.len(), 100);
+        let chunks = dims.iter().map(|d| d.div_ceil(chunk)).product();
         for batch in all.chunks(8) {
             std::thread::scope(|scope| {
                 for t in 0..threads {
@@ -600,25 +624,49 @@ mod tests {
         let before = s.chunk_decodes();
         assert_bricks_equal_whole(&store, &s, 16);
         assert!(s.chunk_decodes() > before);
-        (before, all.len())
+        (before, chunks)
     }
 
     #[test]
     fn a_pass_over_a_level_decodes_each_chunk_at_most_twice_through_the_chunk_cache() {
         // Without the cache: once per brick that meets the chunk (27 for most).
-        let (n, chunks) = decodes_of_a_pass(0, 1);
+        let (n, chunks) = decodes_of_a_pass(16, 0, 1);
         assert!(n >= 8 * chunks as u64, "{n} decodes of {chunks} chunks");
         // With a cache holding three planes of chunks' faces and a row (65 × 4.5 KiB: a
         // brick's halo meets the planes below, at and above it), or all of them, on one
         // thread or four.
         for (cache, threads) in [(320 << 10, 1), (320 << 10, 4), (64 << 20, 4)] {
-            let (n, chunks) = decodes_of_a_pass(cache, threads);
+            let (n, chunks) = decodes_of_a_pass(16, cache, threads);
             assert!(
                 n <= 2 * chunks as u64,
                 "{n} decodes of {chunks} chunks, cache {cache}, {threads} threads"
             );
             assert!(n >= chunks as u64, "{n}");
         }
+    }
+
+    /// Chunks larger than the bricks (32³ chunks, bricks of 16 cells: each chunk holds the
+    /// inner pieces of 8 bricks and the halos of more) are kept whole: a pass decodes each
+    /// about once, instead of once per brick meeting it.
+    #[test]
+    fn chunks_larger_than_bricks_are_decoded_about_once_per_pass() {
+        let (n, chunks) = decodes_of_a_pass(32, 0, 1);
+        assert_eq!(chunks, 18);
+        assert!(n >= 8 * chunks as u64, "{n} decodes of {chunks} chunks");
+        let none = n;
+        // 64 KiB chunks, 3 along x: a cache of 16 holds every chunk (measured: each decoded
+        // once), one of 12 the two rows in two planes that bricks read in order meet; one of
+        // 4 is not used (a chunk may take at most an eighth of the cache).
+        for (cache, threads, most) in [(1 << 20, 1, 2), (1 << 20, 4, 2), (768 << 10, 1, 2)] {
+            let (n, chunks) = decodes_of_a_pass(32, cache, threads);
+            assert!(
+                n <= most * chunks as u64,
+                "{n} decodes of {chunks} chunks, cache {cache}, {threads} threads"
+            );
+            assert!(n >= chunks as u64, "{n}");
+        }
+        let (n, _) = decodes_of_a_pass(32, 256 << 10, 1);
+        assert_eq!(n, none, "a cache of 4 chunks is not used");
     }
 
     #[test]
