@@ -7,7 +7,7 @@
 //! Positions are index space of the level, as in [`volsplat_core::source`]. A brick's *index*
 //! is `(b_k·d_j + b_j)·d_i + b_i` over [`BrickLayout::dims`] `d` ([`BrickCache::index`]).
 //!
-//! Determinism: reads run in parallel (rayon) but results are placed in key order, slots are
+//! Determinism: reads run in parallel (rayon) but results are placed in brick index order, slots are
 //! chosen from the cache's state alone (free slots lowest first, then least recently used,
 //! lowest slot first), so the arena, the bases and the stats do not depend on the thread count.
 
@@ -352,7 +352,10 @@ impl<T: Scalar> BrickCache<T> {
         (self.arena.len() * std::mem::size_of::<T>()) as u64
     }
 
-    /// `keys` checked against the layout, sorted and deduplicated, with their brick indices.
+    /// `keys` checked against the layout, with their brick indices, in index order (x fastest,
+    /// as [`BrickCache::index`]) and deduplicated: the order bricks are read and placed in, so
+    /// that consecutive reads share the store's chunks along x, then y (a row of bricks meets
+    /// the same chunks of its y and z; with 2-D tiles, every brick of a layer the same tiles).
     fn plan(&self, keys: &[BrickKey]) -> Result<Vec<(BrickKey, usize)>> {
         let mut out = keys
             .iter()
@@ -361,7 +364,7 @@ impl<T: Scalar> BrickCache<T> {
         if let Some(allowed) = &self.allowed {
             out.retain(|&(_, i)| allowed[i]);
         }
-        out.sort_unstable();
+        out.sort_unstable_by_key(|&(_, i)| i);
         out.dedup();
         Ok(out)
     }
@@ -392,7 +395,7 @@ impl<T: Scalar> BrickCache<T> {
     }
 
     /// Reads the bricks of `keys` that are not resident (in parallel; duplicates read once),
-    /// without placing them, in key order: for read-ahead on another thread while a frame reads
+    /// without placing them, in index order: for read-ahead on another thread while a frame reads
     /// the arena. Pass them to [`BrickCache::make_resident_with`], which keeps their buffers
     /// for the next call. Errors as [`BrickCache::make_resident`]'s reads.
     pub fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Fetched<T>>> {
@@ -438,7 +441,7 @@ impl<T: Scalar> BrickCache<T> {
     }
 
     /// Makes the bricks of `keys` resident (duplicates count once): reads the missing ones from
-    /// the source (in parallel, placed in key order), each into a free slot or, when none is
+    /// the source (in parallel, placed in index order), each into a free slot or, when none is
     /// left, the slot of the least recently used brick not in `keys`. Bases of evicted bricks
     /// become 0.
     ///
@@ -504,10 +507,8 @@ impl<T: Scalar> BrickCache<T> {
         let mut victims = victims.into_iter().map(|(_, s)| s);
         let mut given: BTreeMap<BrickKey, Fetched<T>> = BTreeMap::new();
         for f in fetched {
-            if missing
-                .binary_search_by_key(&f.key, |&(key, _)| key)
-                .is_ok()
-            {
+            let i = self.layout.check(f.key).map(|b| self.index(b));
+            if i.is_ok_and(|i| missing.binary_search_by_key(&i, |&(_, i)| i).is_ok()) {
                 if let Some(old) = given.insert(f.key, f) {
                     self.give_spare(old.data);
                 }

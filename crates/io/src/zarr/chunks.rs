@@ -131,6 +131,18 @@ impl<T: Copy> Faces<T> {
         }
     }
 
+    /// What the cache keeps of chunk `chunk` decoded as `data`: the whole chunk where `whole`
+    /// is asked for or where its faces would hold as many samples as it (chunks of 1–3 layers
+    /// along an axis, such as 2-D tiles), else its faces.
+    pub(super) fn kept(chunk: Box3, data: Vec<T>, whole: bool) -> Self {
+        let faces: usize = face_boxes(chunk).iter().map(Box3::len).sum();
+        if whole || faces >= chunk.len() {
+            Faces::whole(chunk, data)
+        } else {
+            Faces::of(chunk, &data)
+        }
+    }
+
     /// The face holding `piece`, with its box, if one does.
     pub(super) fn find(&self, piece: &Box3) -> Option<(Box3, &[T])> {
         self.boxes
@@ -289,11 +301,7 @@ impl<T: Copy> FaceCache<T> {
                 return Err(e);
             }
         };
-        let faces = Arc::new(if whole {
-            Faces::whole(chunk, data)
-        } else {
-            Faces::of(chunk, &data)
-        });
+        let faces = Arc::new(Faces::kept(chunk, data, whole));
         *held = Some(Arc::clone(&faces));
         drop(held);
         self.charge(id, faces.bytes());
@@ -310,7 +318,7 @@ impl<T: Copy> FaceCache<T> {
         if held.is_some() {
             return;
         }
-        let faces = Faces::of(chunk, data);
+        let faces = Faces::kept(chunk, data.to_vec(), false);
         let bytes = faces.bytes();
         *held = Some(Arc::new(faces));
         drop(held);
@@ -330,6 +338,44 @@ mod tests {
                 ((b.lo[0] + x) + 1000 * (b.lo[1] + y) + 1_000_000 * (b.lo[2] + z)) as u32
             })
             .collect()
+    }
+
+    /// A chunk whose faces would hold as many samples as it (2-D tiles, 1–3 layers thick) is
+    /// kept whole, and any piece of it is found; a thick chunk keeps its faces.
+    #[test]
+    fn thin_chunks_are_kept_whole() {
+        let tile = Box3 {
+            lo: [0, 0, 5],
+            hi: [64, 32, 6],
+        };
+        let f = Faces::kept(tile, chunk_data(tile), false);
+        assert_eq!(f.bytes(), (tile.len() * 4) as u64);
+        let piece = Box3 {
+            lo: [10, 3, 5],
+            hi: [40, 30, 6],
+        };
+        let (b, v) = f.find(&piece).unwrap();
+        assert_eq!(b, tile);
+        assert_eq!(v, &chunk_data(tile)[..]);
+        let cube = Box3 {
+            lo: [0; 3],
+            hi: [16; 3],
+        };
+        let f = Faces::kept(cube, chunk_data(cube), false);
+        assert!(f.bytes() < (cube.len() * 4) as u64);
+        let inner = Box3 {
+            lo: [4; 3],
+            hi: [12; 3],
+        };
+        assert!(
+            f.find(&inner).is_none(),
+            "a thick chunk's middle is in no face"
+        );
+        assert!(
+            Faces::kept(cube, chunk_data(cube), true)
+                .find(&inner)
+                .is_some()
+        );
     }
 
     #[test]
@@ -390,7 +436,7 @@ mod tests {
             lo: [8 * c, 0, 0],
             hi: [8 * c + 8, 8, 8],
         };
-        let per = Faces::of(chunk(0), &chunk_data(chunk(0))).bytes();
+        let per = Faces::kept(chunk(0), chunk_data(chunk(0)), false).bytes();
         let cache = FaceCache::<u32>::new(3 * per);
         let decodes = std::sync::atomic::AtomicUsize::new(0);
         let get = |c: usize| {

@@ -249,18 +249,19 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             c
         });
         // A chunk larger than a brick along some axis serves several bricks' inner pieces: the
-        // cache keeps it whole where it holds the chunks that bricks read in index order (x
-        // fastest) meet before they come back to a chunk: two rows of chunks along x in two
-        // planes (BENCHMARKS §36: fewer thrash and decode more than the faces). Otherwise
-        // chunks leave their faces, where a chunk (a shard, for sharded arrays) decoded whole
-        // takes at most an eighth of the cache.
+        // cache keeps it whole where it holds the chunks that a row of bricks read in index
+        // order (x fastest) meets, so that the next rows find them (BENCHMARKS §36: fewer
+        // thrash and decode more than the faces). Otherwise chunks leave their faces, where a
+        // chunk (a shard, for sharded arrays) decoded whole takes at most an eighth of the
+        // cache.
         let bytes = (edge.iter().product::<usize>() * std::mem::size_of::<T>()) as u64;
-        let row = self.grids[level].dims[0].div_ceil(edge[0]).max(2) as u64;
-        let large = edge.iter().any(|&e| e > self.layouts[level].size())
+        let layout = &self.layouts[level];
+        let row = row_chunks(self.grids[level].dims, edge, layout.extent());
+        let large = edge.iter().any(|&e| e > layout.size())
             && self
                 .faces
                 .as_deref()
-                .is_some_and(|c| bytes.saturating_mul(4 * row) <= c.capacity());
+                .is_some_and(|c| bytes.saturating_mul(row) <= c.capacity());
         let cache = self
             .faces
             .as_deref()
@@ -400,6 +401,22 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
         }
         Ok(())
     }
+}
+
+/// The chunks (of `edge` samples per side, on a level of `dims` voxels) that a row of bricks
+/// along x meets, each brick's box `extent` voxels per side: every chunk along x, and along y
+/// and z those a box of `extent` voxels can meet (`⌈extent / edge⌉ + 1`, at most the level's).
+fn row_chunks(dims: [usize; 3], edge: [usize; 3], extent: usize) -> u64 {
+    (0..3)
+        .map(|a| {
+            let all = dims[a].div_ceil(edge[a]).max(1);
+            if a == 0 {
+                all
+            } else {
+                (extent.div_ceil(edge[a]) + 1).min(all)
+            }
+        })
+        .product::<usize>() as u64
 }
 
 /// Samples a piece is copied from: a chunk decoded for it, or the faces of a chunk (kept
@@ -655,8 +672,8 @@ mod tests {
         assert!(n >= 8 * chunks as u64, "{n} decodes of {chunks} chunks");
         let none = n;
         // 64 KiB chunks, 3 along x: a cache of 16 holds every chunk (measured: each decoded
-        // once), one of 12 the two rows in two planes that bricks read in order meet; one of
-        // 4 is not used (a chunk may take at most an eighth of the cache).
+        // once), one of 12 the 3 × 2 × 2 chunks a row of bricks meets; one of 4 is not used (a
+        // chunk may take at most an eighth of the cache).
         for (cache, threads, most) in [(1 << 20, 1, 2), (1 << 20, 4, 2), (768 << 10, 1, 2)] {
             let (n, chunks) = decodes_of_a_pass(32, cache, threads);
             assert!(

@@ -232,10 +232,10 @@ fn a_read_error_names_the_brick_and_leaves_the_cache_consistent() {
     let first = [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]].map(key);
     c.make_resident(&first).unwrap();
     let before = c.stats();
-    // The bad brick is the first missing one in key order, alone in its batch (a budget of 4
-    // slots reads one brick at a time): the error comes before any is placed.
+    // The bad brick (index 7) is the first missing one in index order, alone in its batch (a
+    // budget of 4 slots reads one brick at a time): the error comes before any is placed.
     let e = c
-        .make_resident(&[key([0, 0, 0]), bad, key([4, 0, 0])])
+        .make_resident(&[key([0, 0, 0]), bad, key([3, 1, 0])])
         .unwrap_err();
     assert!(
         matches!(
@@ -249,7 +249,7 @@ fn a_read_error_names_the_brick_and_leaves_the_cache_consistent() {
         "{e}"
     );
     assert!(e.to_string().contains("does not decode"), "{e}");
-    assert!(!c.is_resident(bad) && !c.is_resident(key([4, 0, 0])));
+    assert!(!c.is_resident(bad) && !c.is_resident(key([3, 1, 0])));
     // Bricks are read straight into their slots, so the failed batch's one slot was emptied
     // first (the least recently used brick not asked for, lowest slot first: [1, 0, 0]) and
     // stays free; the brick asked for and the others stay resident with their data.
@@ -280,7 +280,7 @@ fn fetched_bricks_are_placed_without_reading_again() {
     assert_eq!(
         fetched.iter().map(|b| b.key).collect::<Vec<_>>(),
         vec![key([1, 0, 0]), key([2, 2, 0])],
-        "only the missing ones, once, in key order"
+        "only the missing ones, once, in index order"
     );
     assert_eq!(c.stats().reads, 3);
     c.make_resident_with(&want, fetched).unwrap();
