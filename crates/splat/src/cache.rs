@@ -7,9 +7,10 @@
 //! Positions are index space of the level, as in [`volsplat_core::source`]. A brick's *index*
 //! is `(b_k·d_j + b_j)·d_i + b_i` over [`BrickLayout::dims`] `d` ([`BrickCache::index`]).
 //!
-//! Determinism: reads run in parallel (rayon) but results are placed in brick index order, slots are
-//! chosen from the cache's state alone (free slots lowest first, then least recently used,
-//! lowest slot first), so the arena, the bases and the stats do not depend on the thread count.
+//! Determinism: reads run in parallel (rayon) but bricks are placed in brick index order,
+//! slots are chosen from the cache's state alone (free slots lowest first, then least recently
+//! used, lowest slot first), so the arena, the bases and the stats do not depend on the thread
+//! count.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -201,10 +202,10 @@ fn index_in(dims: [usize; 3], b: [usize; 3]) -> usize {
 
 impl<T: Scalar> BrickCache<T> {
     /// The bricks of `level` of `source`, held in an arena of at most `budget` bytes (the arena
-    /// is allocated whole here, fallibly, as zero pages that the system maps when a slot is first
-    /// written). Capacity: the slots the budget holds, at most the
-    /// level's brick count, and at most what keeps the arena within `i32::MAX − 8` samples (the
-    /// AVX2 gathers' i32 offsets).
+    /// is allocated whole here, fallibly, as zero pages that the system maps when a slot is
+    /// first written). Capacity: the slots the budget holds, at most the level's brick count,
+    /// and at most what keeps the arena within `i32::MAX − 8` samples (the AVX2 gathers' i32
+    /// offsets).
     ///
     /// Errors: [`SplatError::Budget`] naming the budget and the slot size if it holds no slot;
     /// a level the source lacks ([`SplatError::Core`]); [`SplatError::OutOfMemory`].
@@ -395,9 +396,9 @@ impl<T: Scalar> BrickCache<T> {
     }
 
     /// Reads the bricks of `keys` that are not resident (in parallel; duplicates read once),
-    /// without placing them, in index order: for read-ahead on another thread while a frame reads
-    /// the arena. Pass them to [`BrickCache::make_resident_with`], which keeps their buffers
-    /// for the next call. Errors as [`BrickCache::make_resident`]'s reads.
+    /// without placing them, in index order: for read-ahead on another thread while a frame
+    /// reads the arena. Pass them to [`BrickCache::make_resident_with`], which keeps their
+    /// buffers for the next call. Errors as [`BrickCache::make_resident`]'s reads.
     pub fn fetch(&self, keys: &[BrickKey]) -> Result<Vec<Fetched<T>>> {
         let missing: Vec<BrickKey> = self
             .plan(keys)?
