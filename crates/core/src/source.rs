@@ -384,6 +384,17 @@ pub trait BrickSource<T: Scalar>: Send + Sync {
         Ok(())
     }
 
+    /// Reads a batch of bricks at once, `keys[i]` into `slots[i]` (each `E³`), as
+    /// [`BrickSource::read_slot`] would one by one; `None` where the source has no better way
+    /// than that (the default), and the caller reads them one by one (in parallel). A store
+    /// whose chunks several bricks of the batch share implements it to decode each such chunk
+    /// once for the batch. Errors as [`BrickSource::read_slot`] (naming a brick that needed what
+    /// failed); on error the slots' contents are unspecified.
+    fn read_slots(&self, keys: &[BrickKey], slots: &mut [&mut [T]]) -> Option<Result<()>> {
+        let _ = (keys, slots);
+        None
+    }
+
     /// Zero-copy fast path: the whole level as one in-memory volume, where there is one.
     fn whole(&self, level: usize) -> Result<Option<Arc<Volume<T>>>> {
         let _ = level;

@@ -370,12 +370,6 @@ impl<T: Scalar> BrickCache<T> {
         Ok(out)
     }
 
-    /// Reads brick `key` from the source into `slot` ([`BrickSource::read_slot`]) and counts
-    /// it.
-    fn read_into(&self, key: BrickKey, slot: &mut [T]) -> Result<()> {
-        read_counted(&*self.source, &self.reads, &self.bytes_read, key, slot)
-    }
-
     /// A slot buffer for a brick read ahead: a spare one, or a new one (fallibly).
     fn take_spare(&self, key: BrickKey) -> Result<Box<[T]>> {
         if let Some(b) = lock(&self.spare).pop() {
@@ -412,11 +406,14 @@ impl<T: Scalar> BrickCache<T> {
                 .iter()
                 .map(|&k| self.take_spare(k))
                 .collect::<Result<Vec<_>>>()?;
-            let read = batch
-                .par_iter()
-                .zip(bufs.par_iter_mut())
-                .map(|(&k, data)| self.read_into(k, data))
-                .collect::<Result<Vec<()>>>();
+            let mut dsts: Vec<&mut [T]> = bufs.iter_mut().map(|b| &mut **b).collect();
+            let read = read_batch(
+                &*self.source,
+                (&self.reads, &self.bytes_read),
+                batch,
+                &mut dsts,
+            );
+            drop(dsts);
             if let Err(e) = read {
                 bufs.into_iter().for_each(|b| self.give_spare(b));
                 return Err(e);
@@ -541,40 +538,46 @@ impl<T: Scalar> BrickCache<T> {
             }
             let (source, reads, bytes) = (&*self.source, &self.reads, &self.bytes_read);
             let slot_len = self.slot_len;
-            let done =
-                batch
-                    .par_iter()
-                    .zip(place.into_par_iter())
-                    .zip(taken.into_par_iter())
-                    .map(|((&(key, _), dst), got)| {
-                        let Some(dst) = dst else {
-                            return (Err(key.error("no slot in the arena").into()), None);
-                        };
-                        match got {
-                        Some(f) if f.key == key && f.data.len() == slot_len => {
-                            dst.copy_from_slice(&f.data);
-                            (Ok(()), Some(f.data))
-                        }
-                        Some(f) => (Err(SplatError::Core(key.error(format!(
+            // The bricks read ahead are copied into their slots; the others are read into
+            // theirs, as one batch where the source reads batches (a store's shared chunks
+            // decoded once), else one by one in parallel.
+            let mut failed = None;
+            let mut spares = Vec::new();
+            let mut copies = Vec::new();
+            let mut to_read = Vec::new();
+            for ((&(key, _), dst), got) in batch.iter().zip(place).zip(taken) {
+                match (dst, got) {
+                    (None, got) => {
+                        failed.get_or_insert(key.error("no slot in the arena").into());
+                        spares.extend(got.map(|f| f.data));
+                    }
+                    (Some(dst), Some(f)) if f.key == key && f.data.len() == slot_len => {
+                        copies.push((dst, f.data));
+                    }
+                    (Some(_), Some(f)) => {
+                        failed.get_or_insert(SplatError::Core(key.error(format!(
                             "the brick source served brick {:?} of level {} with {} samples, \
                              where {slot_len} (E³) were expected",
                             f.key.b,
                             f.key.level,
                             f.data.len()
-                        )))), Some(f.data)),
-                        None => (read_counted(source, reads, bytes, key, dst), None),
+                        ))));
+                        spares.push(f.data);
                     }
-                    })
-                    .collect::<Vec<_>>();
-            let mut failed = None;
-            for (r, spare) in done {
-                if let Some(d) = spare {
-                    self.give_spare(d);
+                    (Some(dst), None) => to_read.push((key, dst)),
                 }
-                if let (Err(e), None) = (r, &failed) {
+            }
+            copies
+                .par_iter_mut()
+                .for_each(|(dst, data)| dst.copy_from_slice(data));
+            spares.extend(copies.into_iter().map(|(_, data)| data));
+            if failed.is_none() {
+                let (keys, mut dsts): (Vec<BrickKey>, Vec<&mut [T]>) = to_read.into_iter().unzip();
+                if let Err(e) = read_batch(source, (reads, bytes), &keys, &mut dsts) {
                     failed = Some(e);
                 }
             }
+            spares.into_iter().for_each(|d| self.give_spare(d));
             if let Some(e) = failed {
                 // The batch's slots were emptied above and stay free.
                 return Err(e);
@@ -606,6 +609,33 @@ impl<T: Scalar> BrickCache<T> {
 /// of buffers).
 fn lock<X>(m: &Mutex<X>) -> std::sync::MutexGuard<'_, X> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Reads the bricks `keys` into `slots` (`keys[i]` into `slots[i]`) and counts them in
+/// `reads` and `bytes`: as one batch where `source` reads batches
+/// ([`BrickSource::read_slots`]), else one by one in parallel.
+fn read_batch<T: Scalar>(
+    source: &dyn BrickSource<T>,
+    (reads, bytes): (&AtomicU64, &AtomicU64),
+    keys: &[BrickKey],
+    slots: &mut [&mut [T]],
+) -> Result<()> {
+    if keys.is_empty() {
+        return Ok(());
+    }
+    match source.read_slots(keys, slots) {
+        Some(r) => {
+            r?;
+            reads.fetch_add(keys.len() as u64, Ordering::Relaxed);
+            let b: usize = slots.iter().map(|s| std::mem::size_of_val(&**s)).sum();
+            bytes.fetch_add(b as u64, Ordering::Relaxed);
+            Ok(())
+        }
+        None => keys
+            .par_iter()
+            .zip(slots.par_iter_mut())
+            .try_for_each(|(&k, slot)| read_counted(source, reads, bytes, k, slot)),
+    }
 }
 
 /// Reads brick `key` from `source` into `slot` and counts it in `reads` and `bytes`

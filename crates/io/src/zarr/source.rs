@@ -248,24 +248,7 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             c.push(hi[a]);
             c
         });
-        // A chunk larger than a brick along some axis serves several bricks' inner pieces: the
-        // cache keeps it whole where it holds the chunks that a row of bricks read in index
-        // order (x fastest) meets, so that the next rows find them (BENCHMARKS §36: fewer
-        // thrash and decode more than the faces). Otherwise chunks leave their faces, where a
-        // chunk (a shard, for sharded arrays) decoded whole takes at most an eighth of the
-        // cache.
-        let bytes = (edge.iter().product::<usize>() * std::mem::size_of::<T>()) as u64;
-        let layout = &self.layouts[level];
-        let row = row_chunks(self.grids[level].dims, edge, layout.extent());
-        let large = edge.iter().any(|&e| e > layout.size())
-            && self
-                .faces
-                .as_deref()
-                .is_some_and(|c| bytes.saturating_mul(row) <= c.capacity());
-        let cache = self
-            .faces
-            .as_deref()
-            .filter(|c| bytes.saturating_mul(8) <= c.capacity());
+        let (cache, large) = self.chunk_policy(level, edge);
         for z in cuts[2].windows(2) {
             for y in cuts[1].windows(2) {
                 for x in cuts[0].windows(2) {
@@ -301,12 +284,32 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
         )
     }
 
+    /// How chunks of `level` (of `edge` samples per side) go through the chunk faces cache:
+    /// the cache, where a chunk decoded whole takes at most an eighth of it (a shard, for
+    /// sharded arrays), and whether chunks are kept whole. A chunk larger than a brick along
+    /// some axis serves several bricks' inner pieces: the cache keeps it whole where it holds
+    /// the chunks that a row of bricks read in index order (x fastest) meets, so that the next
+    /// rows find them (BENCHMARKS §36: fewer thrash and decode more than the faces); other
+    /// chunks leave their faces.
+    fn chunk_policy(&self, level: usize, edge: [usize; 3]) -> (Option<&FaceCache<T>>, bool) {
+        let bytes = (edge.iter().product::<usize>() * std::mem::size_of::<T>()) as u64;
+        let layout = &self.layouts[level];
+        let row = row_chunks(self.grids[level].dims, edge, layout.extent());
+        let large = edge.iter().any(|&e| e > layout.size())
+            && self
+                .faces
+                .as_deref()
+                .is_some_and(|c| bytes.saturating_mul(row) <= c.capacity());
+        let cache = self
+            .faces
+            .as_deref()
+            .filter(|c| bytes.saturating_mul(8) <= c.capacity());
+        (cache, large)
+    }
+
     /// The samples holding `piece` (inside one chunk of `level`, whose chunks have `edge`
-    /// samples per side), with their box, through the chunk faces cache `cache`: for `large`
-    /// chunks (larger than a brick) the whole chunk, kept (decoded once while it is held);
-    /// otherwise the chunk's face that holds the piece where one does (the chunk decoded for
-    /// its faces if they are not held), else the chunk decoded whole, whose faces are then
-    /// kept.
+    /// samples per side), with their box, through the chunk faces cache `cache`
+    /// ([`ZarrSource::chunk_for`]).
     fn read_cached(
         &self,
         cache: &FaceCache<T>,
@@ -315,8 +318,40 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
         large: bool,
         piece: Box3,
     ) -> Result<(Box3, Held<T>)> {
-        let n = self.grids[level].dims;
         let c: [usize; 3] = std::array::from_fn(|a| piece.lo[a] / edge[a]);
+        Ok(
+            match self.chunk_for(Some(cache), level, edge, large, c, &[piece])? {
+                Chunk::Faces(f) => {
+                    let b = f.find_box(&piece).ok_or_else(|| {
+                        IoError::invalid_argument(
+                            self.store.path(),
+                            "chunk",
+                            format!("level {level} chunk {c:?}: no face holds {piece:?}"),
+                        )
+                    })?;
+                    (b, Held::Faces(f, piece))
+                }
+                Chunk::Own(b, v) => (b, Held::Own(v)),
+            },
+        )
+    }
+
+    /// What the `pieces` of chunk `c` of `level` (chunks of `edge` samples per side) are
+    /// copied from: with the chunk faces cache `cache`, for `large` chunks (larger than a
+    /// brick) the whole chunk, kept (decoded once while it is held); otherwise the chunk's
+    /// faces where every piece lies in one of them (the chunk decoded for its faces if they
+    /// are not held), else the chunk decoded whole, whose faces are then kept. Without a cache,
+    /// the chunk decoded whole.
+    fn chunk_for(
+        &self,
+        cache: Option<&FaceCache<T>>,
+        level: usize,
+        edge: [usize; 3],
+        large: bool,
+        c: [usize; 3],
+        pieces: &[Box3],
+    ) -> Result<Chunk<T>> {
+        let n = self.grids[level].dims;
         let chunk = Box3 {
             lo: std::array::from_fn(|a| c[a] * edge[a]),
             hi: std::array::from_fn(|a| ((c[a] + 1) * edge[a]).min(n[a])),
@@ -336,22 +371,24 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
             }
             Ok((chunk, v))
         };
+        let Some(cache) = cache else {
+            let (_, v) = decode()?;
+            return Ok(Chunk::Own(chunk, v));
+        };
         if large {
-            let whole = cache.faces((level, c), true, decode)?;
-            return Ok((chunk, Held::Faces(whole, piece)));
+            return Ok(Chunk::Faces(cache.faces((level, c), true, decode)?));
         }
-        let thin = super::chunks::face_boxes(chunk)
-            .iter()
-            .any(|f| f.contains(&piece));
+        let faces = super::chunks::face_boxes(chunk);
+        let thin = pieces.iter().all(|p| faces.iter().any(|f| f.contains(p)));
         if thin {
-            let faces = cache.faces((level, c), false, decode)?;
-            if let Some(b) = faces.find_box(&piece) {
-                return Ok((b, Held::Faces(faces, piece)));
+            let f = cache.faces((level, c), false, decode)?;
+            if pieces.iter().all(|p| f.find_box(p).is_some()) {
+                return Ok(Chunk::Faces(f));
             }
         }
         let (_, v) = decode()?;
         cache.offer((level, c), chunk, &v);
-        Ok((chunk, Held::Own(v)))
+        Ok(Chunk::Own(chunk, v))
     }
 
     /// Replaces the non-finite samples of brick `key`'s slot (float levels) by level
@@ -417,6 +454,23 @@ fn row_chunks(dims: [usize; 3], edge: [usize; 3], extent: usize) -> u64 {
             }
         })
         .product::<usize>() as u64
+}
+
+/// What a chunk's pieces are copied from ([`ZarrSource::chunk_for`]): faces held by the
+/// cache (or the whole chunk kept there), or the chunk decoded (its box and samples).
+enum Chunk<T> {
+    Faces(Arc<super::chunks::Faces<T>>),
+    Own(Box3, Vec<T>),
+}
+
+impl<T: Copy> Chunk<T> {
+    /// The box and samples holding `piece`.
+    fn holding(&self, piece: &Box3) -> Option<(Box3, &[T])> {
+        match self {
+            Chunk::Faces(f) => f.find(piece),
+            Chunk::Own(b, v) => b.contains(piece).then_some((*b, &v[..])),
+        }
+    }
 }
 
 /// Samples a piece is copied from: a chunk decoded for it, or the faces of a chunk (kept
@@ -488,6 +542,113 @@ impl<T: Scalar + ElementOwned> BrickSource<T> for ZarrSource<T> {
         pad_slot(layout, key, slot)?;
         self.replace_non_finite(level, layout, key, slot)
             .map_err(|cause| key.error(format!("{}: {cause}", self.store.path().display())))
+    }
+
+    /// The bricks' halo boxes read chunk by chunk: each chunk that some of the batch's boxes
+    /// meet is decoded (or found in the chunk faces cache) once, and its pieces copied into
+    /// every slot that needs them (chunks in parallel); then each slot is padded and its
+    /// non-finite floats replaced, as [`BrickSource::read_slot`]. `None` for a batch of several
+    /// levels or a level without a 3-D chunk grid.
+    fn read_slots(
+        &self,
+        keys: &[BrickKey],
+        slots: &mut [&mut [T]],
+    ) -> Option<volsplat_core::Result<()>> {
+        let level = usize::from(keys.first()?.level);
+        if keys.iter().any(|k| usize::from(k.level) != level) || keys.len() != slots.len() {
+            return None;
+        }
+        let edge = self.chunk_edges(level)?;
+        if self.chunk_policy(level, edge).1 {
+            return None;
+        }
+        Some(self.read_batch(level, edge, keys, slots))
+    }
+}
+
+impl<T: Scalar + ElementOwned> ZarrSource<T> {
+    /// [`BrickSource::read_slots`] for bricks of one `level` whose chunks have `edge` samples
+    /// per side.
+    fn read_batch(
+        &self,
+        level: usize,
+        edge: [usize; 3],
+        keys: &[BrickKey],
+        slots: &mut [&mut [T]],
+    ) -> volsplat_core::Result<()> {
+        use rayon::prelude::*;
+        use std::collections::BTreeMap;
+        use std::sync::Mutex;
+        let Some(&first) = keys.first() else {
+            return Ok(());
+        };
+        let layout = self.layout_or_error(first)?;
+        let e = layout.extent();
+        // Per brick: the slot's box shifted by H; per chunk met: the (brick, piece) pairs.
+        let mut into = Vec::with_capacity(keys.len());
+        let mut by_chunk: BTreeMap<[usize; 3], Vec<(usize, Box3)>> = BTreeMap::new();
+        for (i, (&key, slot)) in keys.iter().zip(slots.iter()).enumerate() {
+            if slot.len() != layout.slot_len() {
+                return Err(key.error(format!(
+                    "the slot holds {} samples, not E³ = {}",
+                    slot.len(),
+                    layout.slot_len()
+                )));
+            }
+            let b = layout.check(key)?;
+            let halo = layout.halo_voxels(key)?;
+            into.push(Box3 {
+                lo: b.map(|x| x * layout.size()),
+                hi: b.map(|x| x * layout.size() + e),
+            });
+            let c0: [usize; 3] = std::array::from_fn(|a| halo[a].start / edge[a]);
+            let c1: [usize; 3] = std::array::from_fn(|a| (halo[a].end - 1) / edge[a]);
+            for cz in c0[2]..=c1[2] {
+                for cy in c0[1]..=c1[1] {
+                    for cx in c0[0]..=c1[0] {
+                        let c = [cx, cy, cz];
+                        let piece = Box3 {
+                            lo: std::array::from_fn(|a| halo[a].start.max(c[a] * edge[a])),
+                            hi: std::array::from_fn(|a| halo[a].end.min((c[a] + 1) * edge[a])),
+                        };
+                        by_chunk.entry(c).or_default().push((i, piece));
+                    }
+                }
+            }
+        }
+        let (cache, large) = self.chunk_policy(level, edge);
+        let dst: Vec<Mutex<&mut [T]>> = slots.iter_mut().map(|s| Mutex::new(&mut **s)).collect();
+        let chunks: Vec<_> = by_chunk.into_iter().collect();
+        chunks.par_iter().try_for_each(|(c, pieces)| {
+            let boxes: Vec<Box3> = pieces.iter().map(|&(_, p)| p).collect();
+            let name = |e: IoError| keys[pieces[0].0].error(e.to_string());
+            let got = self
+                .chunk_for(cache, level, edge, large, *c, &boxes)
+                .map_err(name)?;
+            for &(i, piece) in pieces {
+                let (from, v) = got.holding(&piece).ok_or_else(|| {
+                    keys[i].error(format!("chunk {c:?} does not hold the piece {piece:?}"))
+                })?;
+                let mut slot = dst[i].lock().unwrap_or_else(|p| p.into_inner());
+                copy_box(
+                    v,
+                    from.shifted(HALO),
+                    &mut slot,
+                    into[i],
+                    piece.shifted(HALO),
+                );
+            }
+            Ok::<(), volsplat_core::CoreError>(())
+        })?;
+        drop(dst);
+        slots
+            .par_iter_mut()
+            .zip(keys.par_iter())
+            .try_for_each(|(slot, &key)| {
+                pad_slot(layout, key, slot)?;
+                self.replace_non_finite(level, layout, key, slot)
+                    .map_err(|cause| key.error(format!("{}: {cause}", self.store.path().display())))
+            })
     }
 }
 
@@ -684,6 +845,43 @@ mod tests {
         }
         let (n, _) = decodes_of_a_pass(32, 256 << 10, 1);
         assert_eq!(n, none, "a cache of 4 chunks is not used");
+    }
+
+    /// A batch read (`read_slots`) gives every brick's slot, as `brick()` does one by one, and
+    /// decodes each chunk the batch meets once (no cache), for chunks smaller than, equal to
+    /// and larger than the bricks.
+    #[test]
+    fn a_batch_read_decodes_each_chunk_once_and_gives_the_bricks_slots() {
+        for chunk in [8, 16, 32] {
+            let dir = tempfile::tempdir().unwrap();
+            let dims = [40, 30, 36];
+            let p = write(
+                dir.path(),
+                volume::<u16>(dims).into(),
+                chunk,
+                ZarrVersion::V2,
+            );
+            let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
+            let s = ZarrSource::<u16>::new(store.clone(), ZarrSelection::default(), 16).unwrap();
+            let l = s.layout(0).unwrap().clone();
+            let all = keys(&l);
+            let mut bufs = vec![vec![0u16; l.slot_len()]; all.len()];
+            let mut slots: Vec<&mut [u16]> = bufs.iter_mut().map(|b| &mut b[..]).collect();
+            let before = s.chunk_decodes();
+            s.read_slots(&all, &mut slots).unwrap().unwrap();
+            let chunks: u64 = dims.iter().map(|d| d.div_ceil(chunk) as u64).product();
+            assert_eq!(s.chunk_decodes() - before, chunks, "chunk {chunk}");
+            for (k, b) in all.iter().zip(&bufs) {
+                assert_eq!(**b, *s.brick(*k).unwrap().data, "chunk {chunk} brick {k:?}");
+            }
+            // A short slot is an error naming the brick.
+            let mut short = [0u16; 5];
+            let e = s
+                .read_slots(&all[..1], &mut [&mut short[..]])
+                .unwrap()
+                .unwrap_err();
+            assert!(e.to_string().contains("slot"), "{e}");
+        }
     }
 
     #[test]
