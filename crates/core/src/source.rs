@@ -249,6 +249,17 @@ impl BrickLayout {
         Some(at)
     }
 
+    /// Errors ([`CoreError::Brick`] for `key`) unless `len` is a slot's `E³` samples.
+    pub fn check_slot_len(&self, key: BrickKey, len: usize) -> Result<()> {
+        if len == self.slot_len() {
+            return Ok(());
+        }
+        Err(key.error(format!(
+            "the slot holds {len} samples, not E³ = {}",
+            self.slot_len()
+        )))
+    }
+
     /// The slot positions per axis whose voxel `B·b − H + l` lies inside the level: the halo
     /// box ([`BrickLayout::halo_voxels`]) in slot positions, `[1, …)` at a low face (brick 0)
     /// and `[…, n + H − B·b)` at a high face; the other positions of an edge brick's slot repeat
@@ -487,13 +498,7 @@ pub fn fill_slot<T: Scalar>(
     slot: &mut [T],
 ) -> Result<()> {
     let b = check_region(layout, key, region, region_lo, region_dims)?;
-    if slot.len() != layout.slot_len() {
-        return Err(key.error(format!(
-            "the slot holds {} samples, not E³ = {}",
-            slot.len(),
-            layout.slot_len()
-        )));
-    }
+    layout.check_slot_len(key, slot.len())?;
     copy_slot(layout, b, region, region_lo, region_dims, slot);
     Ok(())
 }
@@ -546,13 +551,7 @@ fn check_region<T>(
 pub fn pad_slot<T: Copy>(layout: &BrickLayout, key: BrickKey, slot: &mut [T]) -> Result<()> {
     let inner = layout.slot_interior(key)?;
     let e = layout.extent();
-    if slot.len() != layout.slot_len() {
-        return Err(key.error(format!(
-            "the slot holds {} samples, not E³ = {}",
-            slot.len(),
-            layout.slot_len()
-        )));
-    }
+    layout.check_slot_len(key, slot.len())?;
     let [x, y, z] = inner;
     for k in z.clone() {
         for j in y.clone() {

@@ -518,13 +518,7 @@ impl<T: Scalar + ElementOwned> BrickSource<T> for ZarrSource<T> {
     fn read_slot(&self, key: BrickKey, slot: &mut [T]) -> volsplat_core::Result<()> {
         let level = usize::from(key.level);
         let layout = self.layout_or_error(key)?;
-        if slot.len() != layout.slot_len() {
-            return Err(key.error(format!(
-                "the slot holds {} samples, not E³ = {}",
-                slot.len(),
-                layout.slot_len()
-            )));
-        }
+        layout.check_slot_len(key, slot.len())?;
         let halo = layout.halo_voxels(key)?;
         let whole = Box3 {
             lo: halo.clone().map(|r| r.start),
@@ -588,13 +582,7 @@ impl<T: Scalar + ElementOwned> ZarrSource<T> {
         let mut into = Vec::with_capacity(keys.len());
         let mut by_chunk: BTreeMap<[usize; 3], Vec<(usize, Box3)>> = BTreeMap::new();
         for (i, (&key, slot)) in keys.iter().zip(slots.iter()).enumerate() {
-            if slot.len() != layout.slot_len() {
-                return Err(key.error(format!(
-                    "the slot holds {} samples, not E³ = {}",
-                    slot.len(),
-                    layout.slot_len()
-                )));
-            }
+            layout.check_slot_len(key, slot.len())?;
             let b = layout.check(key)?;
             let halo = layout.halo_voxels(key)?;
             into.push(Box3 {
@@ -763,26 +751,23 @@ mod tests {
         }
     }
 
-    /// Decodes of a pass over every brick of level 0 of a 5 × 4 × 5-chunk store (chunks of
-    /// 16³, bricks of 16³ cells: each halo box meets up to 27 chunks), in index order (x
-    /// fastest), in batches of 8 read by `threads` threads, as the brick cache and the scan
-    /// read them.
+    /// A u16 store of `dims` in chunks of `chunk` samples in `dir`, and its source in bricks of
+    /// 16 cells.
+    fn u16_source(dir: &Path, dims: [usize; 3], chunk: usize) -> (Arc<ZarrStore>, ZarrSource<u16>) {
+        let p = write(dir, volume::<u16>(dims).into(), chunk, ZarrVersion::V2);
+        let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
+        let s = ZarrSource::<u16>::new(store.clone(), ZarrSelection::default(), 16).unwrap();
+        (store, s)
+    }
+
     /// Chunk decodes of a pass over every brick of an 80 × 64 × 80 u16 level (bricks of 16
     /// cells: 100), in batches of 8 read by `threads` threads, with chunks of `chunk` samples
     /// and a chunk cache of `cache` bytes; and the level's chunk count.
     fn decodes_of_a_pass(chunk: usize, cache: u64, threads: usize) -> (u64, usize) {
         let dir = tempfile::tempdir().unwrap();
         let dims = [80, 64, 80];
-        let p = write(
-            dir.path(),
-            volume::<u16>(dims).into(),
-            chunk,
-            ZarrVersion::V2,
-        );
-        let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
-        let s = ZarrSource::<u16>::new(store.clone(), ZarrSelection::default(), 16)
-            .unwrap()
-            .with_chunk_cache(cache);
+        let (store, s) = u16_source(dir.path(), dims, chunk);
+        let s = s.with_chunk_cache(cache);
         let all = keys(s.layout(0).unwrap());
         assert_eq!(all.len(), 100);
         let chunks = dims.iter().map(|d| d.div_ceil(chunk)).product();
@@ -855,14 +840,7 @@ mod tests {
         for chunk in [8, 16, 32] {
             let dir = tempfile::tempdir().unwrap();
             let dims = [40, 30, 36];
-            let p = write(
-                dir.path(),
-                volume::<u16>(dims).into(),
-                chunk,
-                ZarrVersion::V2,
-            );
-            let store = Arc::new(ZarrStore::open(&p, &Limits::default()).unwrap());
-            let s = ZarrSource::<u16>::new(store.clone(), ZarrSelection::default(), 16).unwrap();
+            let (_, s) = u16_source(dir.path(), dims, chunk);
             let l = s.layout(0).unwrap().clone();
             let all = keys(&l);
             let mut bufs = vec![vec![0u16; l.slot_len()]; all.len()];
