@@ -834,12 +834,17 @@ mod tests {
 
     /// A batch read (`read_slots`) gives every brick's slot, as `brick()` does one by one, and
     /// decodes each chunk the batch meets once (no cache), for chunks smaller than, equal to
-    /// and larger than the bricks.
+    /// and larger than the bricks, on ordinary levels and on thin ones (axes of one or two
+    /// voxels, where every slot is mostly padding).
     #[test]
     fn a_batch_read_decodes_each_chunk_once_and_gives_the_bricks_slots() {
-        for chunk in [8, 16, 32] {
+        let cases = [8, 16, 32].into_iter().map(|c| (c, [40, 30, 36])).chain([
+            (8, [1, 2, 19]),
+            (16, [17, 1, 33]),
+            (32, [2, 40, 1]),
+        ]);
+        for (chunk, dims) in cases {
             let dir = tempfile::tempdir().unwrap();
-            let dims = [40, 30, 36];
             let (_, s) = u16_source(dir.path(), dims, chunk);
             let l = s.layout(0).unwrap().clone();
             let all = keys(&l);
@@ -848,9 +853,13 @@ mod tests {
             let before = s.chunk_decodes();
             s.read_slots(&all, &mut slots).unwrap().unwrap();
             let chunks: u64 = dims.iter().map(|d| d.div_ceil(chunk) as u64).product();
-            assert_eq!(s.chunk_decodes() - before, chunks, "chunk {chunk}");
+            assert_eq!(s.chunk_decodes() - before, chunks, "chunk {chunk} {dims:?}");
             for (k, b) in all.iter().zip(&bufs) {
-                assert_eq!(**b, *s.brick(*k).unwrap().data, "chunk {chunk} brick {k:?}");
+                assert_eq!(
+                    **b,
+                    *s.brick(*k).unwrap().data,
+                    "chunk {chunk} {dims:?} {k:?}"
+                );
             }
             // A short slot is an error naming the brick.
             let mut short = [0u16; 5];
