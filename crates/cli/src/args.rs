@@ -337,8 +337,9 @@ pub(crate) struct RenderOptions {
     pub antialias: AntialiasChoice,
     /// Visibility: image-aligned slabs classified and shaded per pixel after reconstruction
     /// (`image`), Westover's sheet buffers (`sheet`), composite-every-sample (`every`), or `auto`:
-    /// slabs for composite (shaded at the voxels), MIP and MinIP, sheets for composite shaded at
-    /// the samples and X-ray (docs/decisions/0016, 0019).
+    /// slabs for composite, MIP and MinIP; sheets for X-ray and for composite that needs the
+    /// gradient with tables of more than the density (gradient-magnitude opacity, shading with
+    /// depth cueing) unless `--shade-at samples` (docs/decisions/0016, 0019, 0036).
     #[arg(
         long,
         value_enum,

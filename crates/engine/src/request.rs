@@ -146,13 +146,15 @@ pub enum AntialiasChoice {
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[non_exhaustive]
 pub enum VisibilityChoice {
-    /// Chosen by measurement (decisions 0016 and 0019): image-aligned slabs for composite
-    /// (shaded at the voxels, as VTK shades, where the transfer function depends on the density
-    /// alone), MIP and MinIP; Westover's sheet buffers for composite shaded at the samples
-    /// (`shade_at = samples`) or through gradient-indexed tables, X-ray (exact line integrals),
-    /// successive refinement, the k-contour, an explicit `sheets`/`splat_list` renderer, and
-    /// requests that set a sheet-only option (a kernel other than the Gaussian, subsampling,
-    /// back-to-front order, or the `swan-perpendicular`/`ewa` anti-aliasing rules).
+    /// Chosen by measurement (decisions 0016, 0019 and 0036): image-aligned slabs for composite
+    /// (lit at the samples by default, at the voxels with `shade_at = voxels`), MIP and MinIP;
+    /// Westover's sheet buffers for X-ray (exact line integrals), for composite that needs the
+    /// gradient with tables of more than the density (gradient-magnitude opacity, or shading
+    /// with depth cueing) unless `shade_at = samples` asks the slabs to light the samples,
+    /// successive refinement, the k-contour, an
+    /// explicit `sheets`/`splat_list` renderer, and requests that set a sheet-only option (a
+    /// kernel other than the Gaussian, subsampling, back-to-front order, or the
+    /// `swan-perpendicular`/`ewa` anti-aliasing rules).
     #[default]
     Auto,
     /// Sheet buffers (Westover 1990/91).

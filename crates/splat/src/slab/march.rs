@@ -7,13 +7,14 @@
 use super::avx2::{composite_run_avx2, extreme_row_avx2, sample_run_avx2};
 use super::math::{exp2_neg, trilinear};
 use super::path::boundary_factor;
+use super::reach::{RowReach, row_reach};
 use super::shade::{
     LIGHT_SHIFT, SEGMENT_LIGHT_AT, SEGMENT_SECOND_LIGHT, shade_opacity, shaded_src_two,
     voxel_shaded_src,
 };
 use super::simd_available;
 use super::tables::{FrameTables, PostTable, ShadeTable};
-use super::view::{FRAC, Planes, View, Walk, clip_linear, to_fixed};
+use super::view::{FRAC, Planes, View, Walk, clip_linear};
 use crate::bricks::BrickGrid;
 use crate::error::{Result, SplatError};
 use crate::normals::VoxelShading;
@@ -109,6 +110,9 @@ pub(super) struct Frame<'a> {
     pub(super) depth_scale: f64,
     pub(super) width: usize,
     pub(super) clip: Vec<(DVec3, f64)>,
+    /// Composite: per image row, the planes and pixels that can meet a brick with opacity
+    /// ([`row_reach`]); every plane and pixel for the other modes.
+    pub(super) reach: RowReach,
 }
 
 /// The march of one frame: its [`Frame`] and where the voxels are loaded from (`V`:
@@ -159,9 +163,23 @@ impl<'a> Frame<'a> {
         let dims = grid.dims;
         let composite = settings.mode == RenderMode::Composite;
         let all_active = active.iter().all(|&a| a);
+        let box_hi = planes.geo.dims.map(|n| n as i64 - 1);
+        let reach = if composite {
+            row_reach(
+                &planes.view,
+                box_hi,
+                bricks,
+                (!all_active).then_some(&active[..]),
+                (planes.j0, planes.delta, planes.n_planes),
+                settings.width,
+                settings.height,
+            )
+        } else {
+            RowReach::all(planes.n_planes, settings.width, settings.height)
+        };
         Frame {
             dims,
-            box_hi: planes.geo.dims.map(|n| n as i64 - 1),
+            box_hi,
             max_cell: dims.map(|n| n.max(2) as i64 - 2),
             simd: settings.simd && simd_available() && data_len < i32::MAX as usize,
             grad_to_world: tables.grad_to_world,
@@ -200,6 +218,7 @@ impl<'a> Frame<'a> {
                 .iter()
                 .map(|p| (DVec3::from(p.normal), p.offset))
                 .collect(),
+            reach,
         }
     }
 }
@@ -245,8 +264,11 @@ impl<'a, T: Scalar, V: Voxels<T>> Ctx<'a, T, V> {
     /// Marches the bands of `batch` (band index, its rows' pixels; `band_h` rows a band) in
     /// parallel.
     pub(super) fn run_bands(&self, batch: Vec<(usize, &mut [Rgba])>, band_h: usize) -> Counters {
+        // One job per band: a band's cost is very uneven (empty rows cost nearly nothing), and
+        // rayon's adaptive splitting would otherwise leave runs of bands to one thread.
         batch
             .into_par_iter()
+            .with_max_len(1)
             .map(|(b, rows)| self.band(b * band_h, rows))
             .reduce(Counters::default, Counters::add)
     }
@@ -288,32 +310,7 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// lies in the box the rays cross, `[0, box_hi]` (the voxel centres' box, decision 0023),
     /// checked in fixed point, so no clamping is needed below 0.
     pub(super) fn walk(&self, y: usize, d: f64) -> Walk {
-        let (start, step) = self.view.row(y, d);
-        let mut r = (0, self.width as i64 - 1);
-        for a in 0..3 {
-            r = clip_linear(r, start[a], step[a], 0.0, self.box_hi[a] as f64);
-        }
-        let s = [0, 1, 2].map(|a| to_fixed(start[a]));
-        let st = [0, 1, 2].map(|a| to_fixed(step[a]));
-        let inside = |x: i64| {
-            (0..3).all(|a| {
-                let q = s[a] + x * st[a];
-                q >= 0 && q <= self.box_hi[a] << FRAC
-            })
-        };
-        while r.0 <= r.1 && !inside(r.0) {
-            r.0 += 1;
-        }
-        while r.1 >= r.0 && !inside(r.1) {
-            r.1 -= 1;
-        }
-        Walk {
-            s,
-            st,
-            s32: [0, 1, 2].map(|a| start[a] as f32),
-            st32: [0, 1, 2].map(|a| step[a] as f32),
-            span: r,
-        }
+        self.view.walk(y, d, self.width, self.box_hi)
     }
 
     /// The pixels of row `y` at depth `d` kept by every clipping plane.
@@ -369,16 +366,7 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     /// [`Cells8::fractions`]: super::avx2::sampler::Cells8::fractions
     #[inline(always)]
     pub(super) fn cell_f32(&self, walk: &Walk, x: usize) -> ([usize; 3], [f32; 3]) {
-        let xf = x as f32;
-        let mut c = [0usize; 3];
-        let mut f = [0.0f32; 3];
-        for a in 0..3 {
-            let q = walk.s32[a] + xf * walk.st32[a];
-            let i = (q as i32).clamp(0, self.max_cell[a] as i32);
-            c[a] = i as usize;
-            f[a] = (q - i as f32).clamp(0.0, 1.0);
-        }
-        (c, f)
+        walk.cell_f32(x, self.max_cell)
     }
 
     /// The step from the samples of row `y` on the plane at depth `d` back to the plane before
@@ -467,6 +455,19 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
     ) -> Counters {
         let w = self.width;
         let mut c = Counters::default();
+        // Each row's pixels and planes that can meet a brick with opacity: the others are
+        // skipped (exactly: `super::reach`).
+        let reach = &self.reach.rows[y0..y0 + rows];
+        let mut live: Vec<(i64, i64)> = reach
+            .iter()
+            .map(|r| (r.lo.max(cols.0 as i64), r.hi.min(cols.1 as i64 - 1)))
+            .collect();
+        let first = reach.iter().map(|r| r.first as usize).min().unwrap_or(0);
+        let end = reach.iter().map(|r| r.end as usize).max().unwrap_or(0);
+        let planes = (planes.0.max(first), planes.1.min(end));
+        if planes.0 >= planes.1 || live.iter().all(|l| l.0 > l.1) {
+            return c;
+        }
         let channel = |ch: usize| acc.iter().map(|px| px[ch]).collect::<Vec<f32>>();
         let mut band = BandAcc {
             r: channel(0),
@@ -474,7 +475,6 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
             b: channel(2),
             a: channel(3),
         };
-        let mut live: Vec<(i64, i64)> = vec![(cols.0 as i64, cols.1 as i64 - 1); rows];
         let Carry { prev, stamp, paths } = carry;
         let Paths { kf, din, dout } = self.paths(y0, rows, paths);
         let half = (0.5 * self.delta) as f32;
@@ -489,16 +489,27 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
             for (r, live_r) in live.iter_mut().enumerate() {
                 let y = y0 + r;
                 let o = r * w;
+                if reach[r].done_at(p) {
+                    continue;
+                }
                 let alpha = &band.a[o..o + w];
                 let Some(lw) = shrink_live(live_r, self.cutoff, |x| alpha[x]) else {
                     continue;
                 };
                 any_live = true;
+                if !reach[r].has_plane(p) {
+                    continue;
+                }
+                let (c0, c1) = self.reach.cols(y, p);
+                let (lw0, lw1) = (lw.0.max(c0), lw.1.min(c1));
+                if lw0 > lw1 {
+                    continue;
+                }
                 let walk = self.walk(y, d);
                 let span = self.clip_span(y, d, walk.span);
                 let (lo, hi) = (
-                    span.0.max(lw.0).max(walk.span.0),
-                    span.1.min(lw.1).min(walk.span.1),
+                    span.0.max(lw0).max(walk.span.0),
+                    span.1.min(lw1).min(walk.span.1),
                 );
                 if lo > hi {
                     continue;

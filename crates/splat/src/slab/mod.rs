@@ -95,6 +95,7 @@ mod bricked;
 mod march;
 mod math;
 mod path;
+mod reach;
 mod shade;
 mod supersample;
 mod tables;

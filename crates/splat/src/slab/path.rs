@@ -24,14 +24,26 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
 
     /// The eye depths `d_in` and `d_out` between which the ray of each pixel of the rows
     /// `[y0, y0 + rows)` lies in the box the rays cross (`box_hi`) and on the kept side of
-    /// every clipping plane (`[+∞, −∞]` where it misses).
+    /// every clipping plane (`[+∞, −∞]` where it misses, and outside the row's reach, whose
+    /// pixels are not sampled).
     pub(super) fn ray_extents(&self, y0: usize, rows: usize) -> (Vec<f32>, Vec<f32>) {
         let v = &self.view;
         let mut din = Vec::with_capacity(rows * self.width);
         let mut dout = Vec::with_capacity(rows * self.width);
         let (mut entry_walk, mut exit_walk) = (None, None);
         for y in y0..y0 + rows {
+            // Only the pixels that can meet a brick with opacity are sampled (`super::reach`).
+            let (lo, hi) = self
+                .reach
+                .rows
+                .get(y)
+                .map_or((0, self.width as i64 - 1), |r| (r.lo, r.hi));
             for x in 0..self.width {
+                if (x as i64) < lo || (x as i64) > hi {
+                    din.push(f32::INFINITY);
+                    dout.push(f32::NEG_INFINITY);
+                    continue;
+                }
                 let (u, w) = v.offsets(x as f64, y as f64);
                 // Index and world position at depth d: a + d·b.
                 let (aq, bq, aw, bw) = if v.perspective {

@@ -181,6 +181,39 @@ impl View {
         }
     }
 
+    /// Row `y` of the plane at depth `d` of an image `width` pixels wide, walked in 32.32 fixed
+    /// point through the box `[0, box_hi]` (index space): [`Ctx::walk`], which the march calls.
+    ///
+    /// [`Ctx::walk`]: super::march::Ctx::walk
+    pub(super) fn walk(&self, y: usize, d: f64, width: usize, box_hi: [i64; 3]) -> Walk {
+        let (start, step) = self.row(y, d);
+        let mut r = (0, width as i64 - 1);
+        for a in 0..3 {
+            r = clip_linear(r, start[a], step[a], 0.0, box_hi[a] as f64);
+        }
+        let s = [0, 1, 2].map(|a| to_fixed(start[a]));
+        let st = [0, 1, 2].map(|a| to_fixed(step[a]));
+        let inside = |x: i64| {
+            (0..3).all(|a| {
+                let q = s[a] + x * st[a];
+                q >= 0 && q <= box_hi[a] << FRAC
+            })
+        };
+        while r.0 <= r.1 && !inside(r.0) {
+            r.0 += 1;
+        }
+        while r.1 >= r.0 && !inside(r.1) {
+            r.1 -= 1;
+        }
+        Walk {
+            s,
+            st,
+            s32: [0, 1, 2].map(|a| start[a] as f32),
+            st32: [0, 1, 2].map(|a| step[a] as f32),
+            span: r,
+        }
+    }
+
     /// World position of pixel `(x, 0)`'s point at depth `d` and the world step per pixel along
     /// x (for clipping planes).
     pub(super) fn row_world(&self, y: usize, d: f64) -> (DVec3, DVec3) {
@@ -289,6 +322,27 @@ pub(super) struct Walk {
 }
 
 impl Walk {
+    /// The cell of pixel `x` of the row (clamped to `[0, max_cell]` per axis) and the fractions
+    /// in it, from the row's f32 start and step: [`Ctx::cell_f32`], the scalar twin of
+    /// [`Sampler8::locate`] and [`Cells8::fractions`].
+    ///
+    /// [`Ctx::cell_f32`]: super::march::Ctx::cell_f32
+    /// [`Sampler8::locate`]: super::avx2::sampler::Sampler8::locate
+    /// [`Cells8::fractions`]: super::avx2::sampler::Cells8::fractions
+    #[inline(always)]
+    pub(super) fn cell_f32(&self, x: usize, max_cell: [i64; 3]) -> ([usize; 3], [f32; 3]) {
+        let xf = x as f32;
+        let mut c = [0usize; 3];
+        let mut f = [0.0f32; 3];
+        for a in 0..3 {
+            let q = self.s32[a] + xf * self.st32[a];
+            let i = (q as i32).clamp(0, max_cell[a] as i32);
+            c[a] = i as usize;
+            f[a] = (q - i as f32).clamp(0.0, 1.0);
+        }
+        (c, f)
+    }
+
     /// How many pixels from the one at `q` (index `cell` along axis `a`) on keep their cells in
     /// the same brick along axis `a` (`i64::MAX` if the row does not move along it); `inv` is
     /// `1 / |st[a]|` ([`div_floor`]).

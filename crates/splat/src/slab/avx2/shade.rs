@@ -95,9 +95,13 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
 
     #[inline]
     #[target_feature(enable = "avx2")]
-    unsafe fn scalar_lanes(&self, cells: &Cells8, live: std::arch::x86_64::__m256) -> bool {
+    unsafe fn scalar_lanes(
+        &self,
+        cells: &Cells8,
+        live: std::arch::x86_64::__m256,
+    ) -> std::arch::x86_64::__m256 {
         use std::arch::x86_64::*;
-        _mm256_movemask_ps(_mm256_andnot_ps(self.interior(cells), live)) != 0
+        _mm256_andnot_ps(self.interior(cells), live)
     }
 
     /// The sample from the four central rows (the cell's corners are their voxels x and
