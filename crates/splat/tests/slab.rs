@@ -407,8 +407,9 @@ fn no_popping_across_the_diagonal() {
     );
 }
 
-/// Progress is reported per group of bands (eight bands per thread, at least sixteen) and a
-/// `false` cancels.
+/// Progress is reported per group of bands (the first of eight bands per thread, at least
+/// sixteen; later ones as many as fit in about 100 ms at the first one's pace) and a `false`
+/// cancels.
 #[test]
 fn progress_and_cancellation() {
     let vol = volume(32);
@@ -418,7 +419,7 @@ fn progress_and_cancellation() {
         s.band_height = 4;
         s
     };
-    // One thread: 48 bands of 4 rows in groups of 16.
+    // One thread: 48 bands of 4 rows, the first group of 16.
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
@@ -431,7 +432,14 @@ fn progress_and_cancellation() {
         })
     })
     .unwrap();
-    assert_eq!(calls, vec![(16, 48), (32, 48), (48, 48)]);
+    assert_eq!(calls[0], (16, 48), "{calls:?}");
+    assert_eq!(calls.last(), Some(&(48, 48)), "{calls:?}");
+    assert!(
+        calls
+            .windows(2)
+            .all(|w| w[0].0 < w[1].0 && w[1].0 - w[0].0 >= 16),
+        "{calls:?}"
+    );
     let err = pool
         .install(|| render_slabs(&vol, &cam, &shaded_tables(), &s, None, &mut |_| false))
         .unwrap_err();
@@ -695,9 +703,11 @@ fn shaded_kernel_matches_the_classifier_and_the_reference() {
 
 /// The AVX2 sampler and the scalar one give the same bits, for every sample type (8- and
 /// 16-bit samples are gathered as 32-bit words and masked or sign-extended), unshaded and
-/// shaded at the samples (the kernel gathers each cell's central differences from the volume;
-/// cells on the faces of the grid take the scalar twin inside the same rows) and at the voxels
-/// (direction codes gathered two per word; grey and coloured lights).
+/// shaded at the samples (the kernel gathers each cell's central differences from the volume,
+/// one-sided on the faces of the grid; the grid's first and last cells take the scalar twin
+/// inside the same rows) and at the voxels (direction codes gathered two per word; grey and
+/// coloured lights). Oblique ramps of every sample type, one on a grid of four to six voxels
+/// (every cell on a face), have opacity in every cell, so the faces are drawn.
 #[test]
 fn simd_and_scalar_sampling_agree_bit_for_bit() {
     use volsplat_core::AnyVolume;
@@ -730,10 +740,42 @@ fn simd_and_scalar_sampling_agree_bit_for_bit() {
             )
             .unwrap(),
         ),
-        // An oblique ramp: every cell has opacity, so the faces' cells (the scalar twin's, in
-        // the middle of the kernel's rows) are drawn too.
+        // Oblique ramps: every cell has opacity, so the faces' cells (one-sided differences,
+        // in the middle of the kernel's rows) are drawn too.
         AnyVolume::U8(
             Volume::from_fn(grid.clone(), |i, j, k| (40 + 3 * i + 2 * j + k) as u8).unwrap(),
+        ),
+        AnyVolume::I16(
+            Volume::from_fn(grid.clone(), |i, j, k| {
+                (-900 + 37 * i as i32 + 23 * j as i32 - 11 * k as i32) as i16
+            })
+            .unwrap(),
+        ),
+        AnyVolume::U16(
+            Volume::from_fn(grid.clone(), |i, j, k| {
+                (100 + 90 * i + 50 * j + 70 * k) as u16
+            })
+            .unwrap(),
+        ),
+        AnyVolume::F32(
+            Volume::from_fn(grid.clone(), |i, j, k| {
+                0.5 + 0.02 * i as f32 - 0.013 * j as f32 + 0.017 * k as f32
+            })
+            .unwrap(),
+        ),
+        AnyVolume::I16(
+            Volume::from_fn(
+                volsplat_core::Grid::with_dims([4, 5, 6]).unwrap(),
+                |i, j, k| (100 * i + 60 * j + 30 * k) as i16,
+            )
+            .unwrap(),
+        ),
+        AnyVolume::U8(
+            Volume::from_fn(
+                volsplat_core::Grid::with_dims([6, 4, 5]).unwrap(),
+                |i, j, k| (10 + 40 * i + 20 * j + 9 * k) as u8,
+            )
+            .unwrap(),
         ),
     ];
     for vol in &volumes {
@@ -797,7 +839,8 @@ fn simd_and_scalar_sampling_agree_bit_for_bit() {
             assert_eq!(
                 a.image.pixels(),
                 b.image.pixels(),
-                "{:?} {mode:?} parallel={parallel} shaded={} {shade_at:?} preintegrate={preintegrate}",
+                "{:?} {:?} {mode:?} parallel={parallel} shaded={} {shade_at:?} preintegrate={preintegrate}",
+                vol.grid().dims,
                 vol.scalar_type(),
                 tables.shading.diffuse
             );

@@ -29,8 +29,29 @@ use volsplat_core::{FrameClassifier, SampleInput, Scalar};
 /// caps it further; `docs/decisions/0016-image-aligned-post-classified-slabs.md`).
 const SLAB_BAND_ROWS: usize = 8;
 
-/// Bands per thread between two progress reports of the slabs (the threads meet at each report).
+/// Bands per thread in the first group of a frame's bands, between two progress reports of the
+/// slabs (the threads meet at each report; later groups grow towards [`GROUP_TIME`]).
 const BANDS_PER_THREAD: usize = 8;
+
+/// About how long a later group of bands may take ([`next_group`]): the threads wait for the
+/// slowest band at the end of each group, and a caller hears of progress (and can cancel) only
+/// between groups, so a group is made as long as a progress report can wait. Measured on
+/// Colin27 shaded at 512², 2 threads: one group after the first saved 1.5 % against groups of
+/// 16 bands (`docs/BENCHMARKS.md` §38).
+const GROUP_TIME: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// The size of the group of bands after one of `n` bands (planned as `group`) took `took`: as
+/// many bands as fit in [`GROUP_TIME`] at that rate, never fewer than `group` (bands of uneven
+/// cost do not shrink it) nor more than 2²⁰.
+fn next_group(group: usize, n: usize, took: std::time::Duration) -> usize {
+    let per_band = took.as_secs_f64() / n.max(1) as f64;
+    let fit = if per_band > 0.0 {
+        (GROUP_TIME.as_secs_f64() / per_band).min((1u32 << 20) as f64) as usize
+    } else {
+        1 << 20
+    };
+    fit.max(group)
+}
 
 #[derive(Default, Clone, Copy)]
 pub(super) struct Counters {
@@ -238,7 +259,7 @@ impl<'a, T: Scalar, V: Voxels<T>> Ctx<'a, T, V> {
         let mut acc = vec![self.acc_init(); w * h];
         let band_h = self.band_rows(settings);
         let n_bands = h.div_ceil(band_h);
-        let group = self.group_bands();
+        let mut group = self.group_bands();
         let mut done = 0;
         let mut counters = Counters::default();
         let chunks: Vec<(usize, &mut [Rgba])> = acc.chunks_mut(band_h * w).enumerate().collect();
@@ -246,8 +267,10 @@ impl<'a, T: Scalar, V: Voxels<T>> Ctx<'a, T, V> {
         while chunks.peek().is_some() {
             let batch: Vec<(usize, &mut [Rgba])> = chunks.by_ref().take(group).collect();
             let n = batch.len();
+            let t = std::time::Instant::now();
             counters = counters.add(self.run_bands(batch, band_h));
             done += n;
+            group = next_group(group, n, t.elapsed());
             // The accumulation of finished bands is only visible after the loop (the bands hold
             // it mutably); the callback gets the count.
             if !progress(&Progress {
@@ -647,7 +670,7 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
                     (t.entry(rho), -LIGHT_SHIFT)
                 };
                 let [fa, fb] = light_fractions((row.back_s, row.back_st), x, f, second);
-                let g = [self.gradient_lerp(cell, fa), self.gradient_lerp(cell, fb)];
+                let g = self.gradient_lerp(cell, [fa, fb]);
                 shaded_src_two(t, v, g, k, corrected)
             }
             Post::Voxel(t, vs) => {
@@ -1098,6 +1121,19 @@ fn coarse_to_fine(n: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Later groups hold as many bands as fit in `GROUP_TIME` at the first group's rate, never
+    /// fewer than planned, and a group that took no measurable time does not overflow.
+    #[test]
+    fn groups_grow_to_the_time_a_report_may_wait() {
+        use std::time::Duration;
+        // 16 bands in 10 ms: 0.625 ms a band, 160 in 100 ms.
+        assert_eq!(next_group(16, 16, Duration::from_millis(10)), 160);
+        // Slow bands: never below the planned group.
+        assert_eq!(next_group(16, 16, Duration::from_secs(2)), 16);
+        assert_eq!(next_group(16, 3, Duration::ZERO), 1 << 20);
+        assert_eq!(next_group(16, 0, Duration::from_nanos(1)), 1 << 20);
+    }
 
     #[test]
     fn coarse_to_fine_visits_every_plane_once() {

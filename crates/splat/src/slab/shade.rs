@@ -286,19 +286,20 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
 
     /// The voxels' central differences (one-sided on the faces of the grid, zero along an axis
     /// of one voxel), in data units per index step, interpolated trilinearly in cell `c` at
-    /// fractions `f`: per axis, the same interpolation as [`Ctx::sample_cell`] of the
-    /// differences at the cell's eight corners, each `(ρ(p + e) − ρ(p − e)) · ½` (one-sided:
-    /// `(ρ(p + e) − ρ(p)) · 1`). The scalar twin of [`ShadeSource`]'s gradients (interior cells).
+    /// each of the fractions `fs` (the two lights', decision 0036): per axis, the same
+    /// interpolation as [`Ctx::sample_cell`] of the differences at the cell's eight corners,
+    /// each `(ρ(p + e) − ρ(p − e)) · ½` (one-sided: `(ρ(p + e) − ρ(p)) · 1`), which are read
+    /// once for both. The scalar twin of [`ShadeSource`]'s gradients (interior cells).
     ///
     /// [`ShadeSource`]: super::avx2::shade::ShadeSource
     #[inline(always)]
-    pub(super) fn gradient_lerp(&self, c: [usize; 3], f: [f32; 3]) -> [f32; 3] {
+    pub(super) fn gradient_lerp(&self, c: [usize; 3], fs: [[f32; 3]; 2]) -> [[f32; 3]; 2] {
         let base = self.vox.cell_base(c);
         let [ux, uy, uz] = self.vox.up();
         // Corner k of the cell is (k & 1, k >> 1 & 1, k >> 2) voxels from its lower corner.
         let offs = [0, ux, uy, uy + ux, uz, uz + ux, uz + uy, uz + uy + ux];
-        let mut g = [0.0f32; 3];
-        for (a, out) in g.iter_mut().enumerate() {
+        let mut g = [[0.0f32; 3]; 2];
+        for a in 0..3 {
             if self.dims[a] < 2 {
                 continue;
             }
@@ -307,11 +308,13 @@ impl<T: Scalar, V: Voxels<T>> Ctx<'_, T, V> {
                 let (d, central) = self.difference(base + o, c[a] + (k >> a & 1), a);
                 *dk = d * if central { 0.5 } else { 1.0 };
             }
-            let c00 = lerp(d[0], d[1], f[0]);
-            let c10 = lerp(d[2], d[3], f[0]);
-            let c01 = lerp(d[4], d[5], f[0]);
-            let c11 = lerp(d[6], d[7], f[0]);
-            *out = lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
+            for (out, f) in g.iter_mut().zip(&fs) {
+                let c00 = lerp(d[0], d[1], f[0]);
+                let c10 = lerp(d[2], d[3], f[0]);
+                let c01 = lerp(d[4], d[5], f[0]);
+                let c11 = lerp(d[6], d[7], f[0]);
+                out[a] = lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
+            }
         }
         g
     }

@@ -431,6 +431,10 @@ pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar, V: Voxels<T>>(
                 t,
                 sampler: &sampler,
                 inner_max: ctx.dims.map(|n| _mm256_set1_epi32(n as i32 - 3)),
+                top: ctx.dims.map(|n| _mm256_set1_epi32(n as i32 - 2)),
+                near_end: [0, 1, 2]
+                    .map(|a| _mm256_set1_epi32(ctx.dims[a] as i32 - if a == 0 { 5 } else { 4 })),
+                clamp_hi: _mm256_set1_epi32(neighbour_last::<T>(ctx.vox.data().len())),
                 safe_base: _mm256_set1_epi32(
                     (1 + ctx.vox.stride()[1] + ctx.vox.stride()[2]) as i32,
                 ),
@@ -441,6 +445,19 @@ pub(in crate::slab) unsafe fn composite_run_avx2<T: Scalar, V: Voxels<T>>(
             unsafe { composite_groups_avx2(ctx, walk, &sampler, (a, b), row, (post, &src), c) }
         }
     }
+}
+
+/// The largest index at which a read of two samples ([`Sampler8::gather2`]: one 4-byte word
+/// for 8- and 16-bit samples, two gathers for 32-bit ones) stays inside data of `len` samples
+/// of type `T`: the bound [`ShadeSource`] clamps its face lanes' neighbour rows to.
+fn neighbour_last<T>(len: usize) -> i32 {
+    let bytes = std::mem::size_of::<T>();
+    let last = if bytes < 4 {
+        (len * bytes).saturating_sub(4) / bytes
+    } else {
+        len.saturating_sub(2)
+    };
+    last as i32
 }
 
 /// The sampling and classification of a group of eight samples for [`composite_groups_avx2`].

@@ -15,8 +15,12 @@ use volsplat_core::Scalar;
 /// [`Ctx::gradient_lerp`]'s and [`shaded_src_two`]'s f32 operations. A cell's differences read
 /// the 4×4×4 block around it without its edges: four rows of four voxels along x through the
 /// cell's own four (y, z) corners, and eight rows of two beside them (the rows one before and two
-/// after along y and z). So only interior cells (one voxel from every face) are read here;
-/// lanes on the faces take the scalar twin, whose differences are one-sided there.
+/// after along y and z). On the faces of the grid the twin's differences are one-sided, from
+/// the cell's own corners: lanes there take them from the four central rows (blended in place
+/// of the central ones), and the reads beyond the face land on other voxels of the volume
+/// (their values are dropped; the neighbour rows' indices are clamped into the data). Only the
+/// grid's first cell and the few cells by its last corner, whose reads would pass the data's
+/// ends ([`ShadeSource::end_cells`]), take the scalar twin.
 ///
 /// [`shaded_src_two`]: crate::slab::shade::shaded_src_two
 /// [`Ctx::gradient_lerp`]: crate::slab::march::Ctx::gradient_lerp
@@ -25,8 +29,17 @@ pub(in crate::slab) struct ShadeSource<'a, T> {
     pub(super) sampler: &'a Sampler8<T>,
     /// `n − 3` per axis: the largest interior cell.
     pub(super) inner_max: [std::arch::x86_64::__m256i; 3],
-    /// The linear index of cell (1, 1, 1), read in place of lanes that are not interior (their
-    /// results are dropped).
+    /// `n − 2` per axis: the last cell (on the upper face).
+    pub(super) top: [std::arch::x86_64::__m256i; 3],
+    /// `n − 5, n − 4, n − 4`: cells above these on every axis lie near the data's end
+    /// ([`ShadeSource::end_cells`]).
+    pub(super) near_end: [std::arch::x86_64::__m256i; 3],
+    /// The largest index a neighbour row's read of two samples may start at and stay inside
+    /// the data; face lanes' neighbour rows are clamped to `[0, it]` (every read that is inside
+    /// starts there or before, so the clamp leaves them).
+    pub(super) clamp_hi: std::arch::x86_64::__m256i,
+    /// The linear index of cell (1, 1, 1), read in place of the lanes that take the scalar
+    /// twin (their results are dropped).
     pub(super) safe_base: std::arch::x86_64::__m256i,
     /// [`RowCtx::back_s`], [`RowCtx::back_st`] broadcast: the step back to the plane before,
     /// which places the two lights ([`ShadeSource::light_fractions`]).
@@ -41,6 +54,40 @@ pub(in crate::slab) struct ShadeSource<'a, T> {
 }
 
 impl<T: Scalar> ShadeSource<'_, T> {
+    /// The mask of lanes in the grid's first cell (0 on every axis), whose central rows would
+    /// start before the data, or near its last one (`x ≥ n − 4`, `y, z ≥ n − 3`), where a read
+    /// of the last rows would end after it (an 8-bit pair is read as a 4-byte word: two bytes
+    /// past the pair; clamping that read would move the pair it needs).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn end_cells(&self, cells: &Cells8) -> std::arch::x86_64::__m256 {
+        use std::arch::x86_64::*;
+        let zero = _mm256_setzero_si256();
+        let (mut first, mut last) = (_mm256_set1_epi32(-1), _mm256_set1_epi32(-1));
+        for ax in 0..3 {
+            let c = cells.cell[ax];
+            first = _mm256_and_si256(first, _mm256_cmpeq_epi32(c, zero));
+            last = _mm256_and_si256(last, _mm256_cmpgt_epi32(c, self.near_end[ax]));
+        }
+        _mm256_castsi256_ps(_mm256_or_si256(first, last))
+    }
+
+    /// Per axis, the masks of lanes on the lower face (cell 0) and on the upper face (cell
+    /// `n − 2`).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn faces(
+        cells: &[std::arch::x86_64::__m256i; 3],
+        top: &[std::arch::x86_64::__m256i; 3],
+    ) -> [[std::arch::x86_64::__m256; 3]; 2] {
+        use std::arch::x86_64::*;
+        let zero = _mm256_setzero_si256();
+        [
+            std::array::from_fn(|a| _mm256_castsi256_ps(_mm256_cmpeq_epi32(cells[a], zero))),
+            std::array::from_fn(|a| _mm256_castsi256_ps(_mm256_cmpeq_epi32(cells[a], top[a]))),
+        ]
+    }
+
     /// The mask of lanes whose cell is interior (between 1 and `n − 3` on every axis).
     #[inline]
     #[target_feature(enable = "avx2")]
@@ -91,6 +138,7 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         std::arch::x86_64::__m256i,
         [[[std::arch::x86_64::__m256; 4]; 2]; 2],
         std::arch::x86_64::__m256,
+        Option<[std::arch::x86_64::__m256i; 3]>,
     );
 
     #[inline]
@@ -101,7 +149,7 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         live: std::arch::x86_64::__m256,
     ) -> std::arch::x86_64::__m256 {
         use std::arch::x86_64::*;
-        _mm256_andnot_ps(self.interior(cells), live)
+        _mm256_and_ps(self.end_cells(cells), live)
     }
 
     /// The sample from the four central rows (the cell's corners are their voxels x and
@@ -115,16 +163,23 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         frac: [std::arch::x86_64::__m256; 3],
     ) -> Option<(std::arch::x86_64::__m256, Self::Pre)> {
         use std::arch::x86_64::*;
-        let base = _mm256_blendv_epi8(
-            self.safe_base,
-            base,
-            _mm256_castps_si256(self.interior(cells)),
-        );
+        let any_face = _mm256_movemask_ps(self.interior(cells)) != 0xff;
+        let base = if any_face {
+            _mm256_blendv_epi8(
+                base,
+                self.safe_base,
+                _mm256_castps_si256(self.end_cells(cells)),
+            )
+        } else {
+            base
+        };
         let s = self.sampler;
         let first = _mm256_sub_epi32(base, _mm256_set1_epi32(1));
         let (y1, z1) = (_mm256_add_epi32(first, s.sy), _mm256_add_epi32(first, s.sz));
-        // SAFETY: interior cells (or cell (1, 1, 1)): voxels x − 1 … x + 2 of rows y, y + 1 and
-        // z, z + 1 lie in the volume.
+        // SAFETY: voxels x − 1 … x + 2 of rows y, y + 1 and z, z + 1 lie in the data for every
+        // cell but the grid's first and last, which (with the `end_cells` near the last) read
+        // cell (1, 1, 1) instead (x − 1 and x + 2 may belong to the rows before and after on
+        // the faces: dropped there).
         let c = unsafe {
             [
                 [s.gather4(first), s.gather4(z1)],
@@ -137,7 +192,8 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         let c01 = lerp8(c[0][1][1], c[0][1][2], frac[0]);
         let c11 = lerp8(c[1][1][1], c[1][1][2], frac[0]);
         let rho = lerp8(lerp8(c00, c10, frac[1]), lerp8(c01, c11, frac[1]), frac[2]);
-        Some((rho, (base, c, cells.xf)))
+        let faces = any_face.then_some(cells.cell);
+        Some((rho, (base, c, cells.xf, faces)))
     }
 
     #[inline]
@@ -174,7 +230,7 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
         if _mm256_movemask_ps(contributes) == 0 {
             return ([_mm256_setzero_ps(); 4], contributes);
         }
-        let (base, c, xf) = pre;
+        let (base, c, xf, faces) = pre;
         let s = self.sampler;
         let (sy, sz) = (s.sy, s.sz);
         let (ny, nz) = (_mm256_sub_epi32(*base, sy), _mm256_sub_epi32(*base, sz));
@@ -182,21 +238,29 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
             _mm256_add_epi32(*base, _mm256_add_epi32(sy, sy)),
             _mm256_add_epi32(*base, _mm256_add_epi32(sz, sz)),
         );
-        // SAFETY: as in `sample`; a 4-byte read starting in these rows ends in the data (the
-        // last row read is (y + 2, z + 1) or (y + 1, z + 2), never the grid's last row).
+        // The neighbour rows' first voxels: beyond a face they may fall outside the data, so
+        // where the group has face lanes they are clamped into it (interior lanes' rows lie
+        // well inside: the clamp leaves them).
+        let row = |i: __m256i| match faces {
+            Some(_) => _mm256_min_epi32(_mm256_max_epi32(i, _mm256_setzero_si256()), self.clamp_hi),
+            None => i,
+        };
+        // SAFETY: as in `sample`; a 4-byte read starting in these rows ends in the data (for
+        // interior lanes the last row read is (y + 2, z + 1) or (y + 1, z + 2), never the grid's
+        // last row; face lanes' starts are clamped to `clamp_hi`).
         let (yo, zo) = unsafe {
             (
                 // yo[0][k]: row (y − 1, z + k); yo[1][k]: row (y + 2, z + k); voxels x, x + 1.
                 [
-                    [s.gather2(ny), s.gather2(_mm256_add_epi32(ny, sz))],
-                    [s.gather2(y2), s.gather2(_mm256_add_epi32(y2, sz))],
+                    [s.gather2(row(ny)), s.gather2(row(_mm256_add_epi32(ny, sz)))],
+                    [s.gather2(row(y2)), s.gather2(row(_mm256_add_epi32(y2, sz)))],
                 ],
                 // zo[j][0]: row (y + j, z − 1); zo[j][1]: row (y + j, z + 2).
                 [
-                    [s.gather2(nz), s.gather2(z2)],
+                    [s.gather2(row(nz)), s.gather2(row(z2))],
                     [
-                        s.gather2(_mm256_add_epi32(nz, sy)),
-                        s.gather2(_mm256_add_epi32(z2, sy)),
+                        s.gather2(row(_mm256_add_epi32(nz, sy))),
+                        s.gather2(row(_mm256_add_epi32(z2, sy))),
                     ],
                 ],
             )
@@ -221,6 +285,30 @@ impl<T: Scalar> Source8<T> for ShadeSource<'_, T> {
                     d[0][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(r[dx + 2], r[dx]), half);
                     d[1][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(hi_y, lo_y), half);
                     d[2][dz][dy][dx] = _mm256_mul_ps(_mm256_sub_ps(hi_z, lo_z), half);
+                }
+            }
+        }
+        if let Some(cell) = faces {
+            // On a face the twin's difference at the corner on it is one-sided, `ρ(p + e) − ρ(p)`
+            // forward on the lower face and `ρ(p) − ρ(p − e)` backward on the upper, times 1:
+            // between the cell's own two corners along the axis, for either corner.
+            let [lo, hi] = Self::faces(cell, &self.top);
+            for dy in 0..2 {
+                for dz in 0..2 {
+                    for dx in 0..2 {
+                        let r = &c[dy][dz];
+                        let one = [
+                            _mm256_sub_ps(r[2], r[1]),
+                            _mm256_sub_ps(c[1][dz][dx + 1], c[0][dz][dx + 1]),
+                            _mm256_sub_ps(c[dy][1][dx + 1], c[dy][0][dx + 1]),
+                        ];
+                        let at = [dx, dy, dz];
+                        for ax in 0..3 {
+                            let on = if at[ax] == 0 { lo[ax] } else { hi[ax] };
+                            let e = &mut d[ax][dz][dy][dx];
+                            *e = _mm256_blendv_ps(*e, one[ax], on);
+                        }
+                    }
                 }
             }
         }
