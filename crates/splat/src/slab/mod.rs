@@ -62,14 +62,17 @@
 //! `PostSource`); shaded composite does the same with a table of the classifier's terms before
 //! shading (`ShadeTable`), the cell's central differences gathered from the volume (the 4×4×4
 //! block around the cell without its edges: twelve row reads, four of which also give the
-//! sample) and the lights evaluated as masks (`ShadeSource`, `shade_light8`; cells on the
-//! faces of the grid, whose differences are one-sided, take the scalar twin inside the same
-//! rows); shaded at the voxels ([`ShadeAt::Voxels`], VTK's order, `crate::normals`), it reads
+//! sample) and the lights evaluated as masks (`ShadeSource`, `shade_light8`; on the faces of
+//! the grid the one-sided differences come from the cell's own rows, and only the cells by the
+//! data's two ends take the scalar twin inside the same rows); shaded at the voxels ([`ShadeAt::Voxels`], VTK's order, `crate::normals`), it reads
 //! the cell's eight direction codes (four gathers, two codes per word) and their diffuse and
 //! specular light from the frame's table (one gather per corner: two 16-bit halves per word)
 //! and interpolates the light instead (`VoxelShadeSource`; every cell, faces included);
 //! MIP/MinIP compare against one plane of values (`extreme_row_avx2`). Each group of
 //! eight is first tested against its own cells' bricks, and skipped where none can contribute.
+//! Before that, composite marches only the planes and pixels of each row that can meet a
+//! brick with opacity (`reach`: the active bricks projected into the image once per frame,
+//! decision 0041).
 //! Tables that depend on more than the density (gradient-magnitude or depth indexing, a
 //! modulation that is not a constant) take the per-sample classifier (`Ctx::band_plain`).
 //!
@@ -83,6 +86,7 @@
 //!   code (`Ctx`) that is the scalar twin of every AVX2 kernel;
 //! - `path`: each ray's path through a slab (the perspective path factor, the entry and exit
 //!   depths that shorten its first and last slab);
+//! - `reach`: the planes and pixels of each row that can meet a brick with opacity;
 //! - `tables`: the classification tables (`PostTable`, `ShadeTable`), their pre-integration
 //!   and [`ring_risk`];
 //! - `shade`: shading a sample (at the sample, `shaded_src`, or at the voxels) and the
