@@ -304,6 +304,20 @@ mod tests {
     use volsplat_core::{Grid, Projection, Volume};
     use volsplat_testkit::fixtures::orbit_camera;
 
+    /// The planes of a composite `w × h` frame of `grid` seen by `camera` (one-voxel slabs).
+    fn planes_for(grid: &Grid, camera: &volsplat_core::Camera, w: usize, h: usize) -> Planes {
+        let settings = RenderSettings {
+            width: w,
+            height: h,
+            mode: RenderMode::Composite,
+            visibility: Visibility::ImageAligned,
+            ..Default::default()
+        };
+        let proj = Projection::new(camera, w, h).unwrap();
+        let min_spacing = grid.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
+        Planes::place(&settings, &proj, grid, min_spacing).unwrap()
+    }
+
     /// Every sample the march would take in an active brick (the walk's span of every row of
     /// every plane, each pixel's f32 cell as the march locates it) lies in its row's reach:
     /// the planes and pixels skipped hold none. Orbits of orthographic and perspective views
@@ -354,16 +368,7 @@ mod tests {
                     // The eye inside the volume.
                     camera.dolly(4.0);
                 }
-                let settings = RenderSettings {
-                    width: w,
-                    height: h,
-                    mode: RenderMode::Composite,
-                    visibility: Visibility::ImageAligned,
-                    ..Default::default()
-                };
-                let proj = Projection::new(&camera, w, h).unwrap();
-                let min_spacing = grid.spacing.iter().fold(f64::INFINITY, |m, &s| m.min(s));
-                let planes = Planes::place(&settings, &proj, grid, min_spacing).unwrap();
+                let planes = planes_for(grid, &camera, w, h);
                 let box_hi = planes.geo.dims.map(|n| n as i64 - 1);
                 let max_cell = grid.dims.map(|n| n.max(2) as i64 - 2);
                 for active in &patterns {
@@ -436,15 +441,7 @@ mod tests {
         let mut camera = orbit_camera(&grid, 30.0, 20.0, true);
         camera.zoom(0.3);
         let (w, h) = (80, 60);
-        let settings = RenderSettings {
-            width: w,
-            height: h,
-            mode: RenderMode::Composite,
-            visibility: Visibility::ImageAligned,
-            ..Default::default()
-        };
-        let proj = Projection::new(&camera, w, h).unwrap();
-        let planes = Planes::place(&settings, &proj, &grid, 1.0).unwrap();
+        let planes = planes_for(&grid, &camera, w, h);
         let box_hi = planes.geo.dims.map(|n| n as i64 - 1);
         let reach = row_reach(
             &planes.view,
