@@ -25,6 +25,19 @@ use volsplat_core::glam::{DVec3, Vec3};
 use volsplat_core::image::{Rgba, over_front_to_back};
 use volsplat_core::{FrameClassifier, SampleInput, Scalar};
 
+/// Pixel-planes of a frame per active brick below which [`row_reach`] projects the box alone
+/// instead of each brick ([`bricks_worth_projecting`]).
+const PIXEL_PLANES_PER_BRICK: usize = 256;
+
+/// Whether projecting each of `n_active` bricks into a `width × height` image across
+/// `n_planes` planes can pay (≈ 0.1 µs a brick, about what 256 pixel-planes of the march
+/// cost where nothing is drawn): a preview of a large volume projects only its box (measured:
+/// a 384³ CT-like head at 64², 2.3 ms of reach for a 37 ms frame, decision 0041).
+fn bricks_worth_projecting(n_active: usize, width: usize, height: usize, n_planes: usize) -> bool {
+    let pixel_planes = (width as u128) * (height as u128) * (n_planes as u128);
+    (n_active as u128) * (PIXEL_PLANES_PER_BRICK as u128) <= pixel_planes
+}
+
 /// The most rows of one band of the slabs' parallel decomposition (`RenderSettings::band_height`
 /// caps it further; `docs/decisions/0016-image-aligned-post-classified-slabs.md`).
 const SLAB_BAND_ROWS: usize = 8;
@@ -183,14 +196,17 @@ impl<'a> Frame<'a> {
     ) -> Self {
         let dims = grid.dims;
         let composite = settings.mode == RenderMode::Composite;
-        let all_active = active.iter().all(|&a| a);
+        let n_active = active.iter().filter(|&&a| a).count();
+        let all_active = n_active == active.len();
         let box_hi = planes.geo.dims.map(|n| n as i64 - 1);
+        let per_brick = !all_active
+            && bricks_worth_projecting(n_active, settings.width, settings.height, planes.n_planes);
         let reach = if composite {
             row_reach(
                 &planes.view,
                 box_hi,
                 bricks,
-                (!all_active).then_some(&active[..]),
+                per_brick.then_some(&active[..]),
                 (planes.j0, planes.delta, planes.n_planes),
                 settings.width,
                 settings.height,
@@ -1121,6 +1137,17 @@ fn coarse_to_fine(n: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The bricks are projected one by one only where the frame's pixel-planes outnumber them
+    /// enough: 512² × 441 planes (the CT of §38) with 14,336 active bricks does, a 64² preview of
+    /// 384³ voxels (110,592 bricks) does not.
+    #[test]
+    fn bricks_are_projected_where_it_pays() {
+        assert!(bricks_worth_projecting(14_336, 512, 512, 441));
+        assert!(!bricks_worth_projecting(110_592, 64, 64, 600));
+        assert!(bricks_worth_projecting(0, 1, 1, 0));
+        assert!(!bricks_worth_projecting(usize::MAX, usize::MAX, 1, 1));
+    }
 
     /// Later groups hold as many bands as fit in `GROUP_TIME` at the first group's rate, never
     /// fewer than planned, and a group that took no measurable time does not overflow.
